@@ -1,0 +1,14 @@
+//! Raw ADC words to electrons, the way the founding paper prescribes.
+//!
+//! - [`levels`]: per-line bias from the over-scan (per output) and the frame's dark scale from
+//!   the covered columns.
+//! - [`hot`]: the dark signal of a hot pixel from its own rate and temperature law.
+//! - [`pixel`]: the per-pixel formula, applied only to the pixels the pipeline reads
+//!   (a line span or a star window), with the flags it raises.
+
+pub mod hot;
+pub mod levels;
+pub mod pixel;
+
+pub use levels::{DarkScaleEstimator, LineError, LineLevels};
+pub use pixel::{CalibError, FrameCalibration, FrameConditions, PixelFlags};

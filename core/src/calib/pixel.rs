@@ -1,0 +1,308 @@
+//! The per-pixel calibration, applied lazily: only to the pixels the pipeline reads (a span
+//! of a line being scanned, or a star window), never as a full-frame pass.
+//!
+//! ```text
+//! electrons = ((raw - bias_level - column_bias) * gain_output - dark_rel * dark_scale) * flat_inv
+//! ```
+//! Dark charge does not pass through the photo-response, so it comes off before the flat.
+//! `dark_rel * dark_scale` is the paper's dark pre-calculation: the stored map is relative to
+//! the covered pixels and `dark_scale` is this frame's covered-pixel signal in electrons, so
+//! no temperature is needed for normal pixels. A hot pixel with the `Correct` policy uses its
+//! own law instead ([`super::hot`]); an excluded hot pixel or a telegraph pixel yields 0 e-
+//! and a flag, and must not be used.
+//!
+//! # Fixed-point arithmetic and why it cannot overflow
+//! With the formats of [`crate::units`], for any raw sample and any table or levels value:
+//! - `d = 16 raw - 16 bias - 16 column_bias` (1/16 ADU): |d| < 2^20 + 2^15 < 2^21, i32.
+//! - `s = d * gain_bits` (2^-32 e-): |s| < 2^21 * 2^32 = 2^53, i64; then >> 16 (2^-16 e-),
+//!   truncation error < 2^-16 e-.
+//! - `k = dark_rel_bits * dark_scale_bits << 4` (2^-16 e-): |k| < 2^8 * 2^26 * 2^4 = 2^38.
+//! - `(s - k) * flat_inv_bits` (2^-30 e-): < (2^37 + 2^38) * 2^16 < 2^55, i64.
+//! - rounded >> 24 to I26F6: |result| <= (65535+2048) * 16 + 4 * 2^20) * 4 e- = 21.1 M e-
+//!   = 1.35e9 LSB < 2^31, i32.
+//!
+//! The result differs from the exact value of the same formula (with the table's quantised
+//! values) by at most [`QUANTISATION_E`]. Host property tests check this over the full range.
+//!
+//! # Cost
+//! Per pixel: four table look-ups (column bias, gain, dark, flat), one 32x32->64 multiply,
+//! one 32x32->64 multiply for the dark term, one 64x16 multiply, shifts; defect lists are
+//! searched once per row (binary search), not per pixel.
+
+use super::hot::{HOT_DARK_LIMIT_E, hot_dark_e};
+use super::levels::{LineError, LineLevels, check_len};
+use crate::table::{CalibTable, HotPolicy};
+use crate::units::{BiasAdu, ColumnBiasAdu, DARK_SCALE_LIMIT_E, DarkRel, Electrons, FlatInv, GainEPerAdu, Kelvin};
+use crate::window::Rect;
+
+/// Largest difference between a calibrated pixel and the exact (f64) value of the formula
+/// with the same table values: 1/64 e- of output rounding (1/128) plus the truncation of the
+/// signal term (2^-16 e-) times the inverse flat (< 4).
+pub const QUANTISATION_E: f64 = 1.0 / 128.0 + 4.0 / 65536.0;
+
+bitflags::bitflags! {
+    /// What calibration noticed about a pixel (or, OR-ed, about a span or window).
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub struct PixelFlags: u8 {
+        /// The raw sample is at or above the table's saturation level: its value is a lower
+        /// bound.
+        const SATURATED = 1;
+        /// A hot pixel whose own dark law was subtracted.
+        const HOT_CORRECTED = 2;
+        /// A hot pixel excluded by policy: value 0, do not use.
+        const HOT_EXCLUDED = 4;
+        /// A telegraph (RTS) pixel: always excluded, value 0, do not use.
+        const TELEGRAPH = 8;
+    }
+}
+
+impl PixelFlags {
+    /// True when the pixel's value must not be used.
+    pub fn is_excluded(self) -> bool {
+        self.intersects(Self::HOT_EXCLUDED | Self::TELEGRAPH)
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for PixelFlags {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(f, "PixelFlags({=u8:#x})", self.bits())
+    }
+}
+
+/// Why a span or window could not be calibrated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum CalibError {
+    /// The raw line is unusable.
+    Line(LineError),
+    /// The span or window reaches outside the active area.
+    OutsideActiveArea,
+    /// The raw, levels or output buffers do not match the span or window size.
+    BufferLength,
+}
+
+impl core::fmt::Display for CalibError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Line(e) => write!(f, "{e}"),
+            Self::OutsideActiveArea => f.write_str("span or window outside the active area"),
+            Self::BufferLength => f.write_str("buffer length does not match the span or window"),
+        }
+    }
+}
+
+impl core::error::Error for CalibError {}
+
+impl From<LineError> for CalibError {
+    fn from(e: LineError) -> Self {
+        Self::Line(e)
+    }
+}
+
+/// What the frame's processing knows beyond the table.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrameConditions {
+    /// The covered pixels' mean dark signal (from [`super::DarkScaleEstimator`]), e-;
+    /// clamped to ±[`DARK_SCALE_LIMIT_E`].
+    pub dark_scale_e: Electrons,
+    /// Exposure (integration) time, ms; used only by hot pixels.
+    pub exposure_ms: u32,
+    /// Sensor temperature, K; used only by hot pixels.
+    pub temperature_k: Kelvin,
+}
+
+/// A table together with one frame's conditions: everything needed to calibrate any pixel of
+/// that frame.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameCalibration<'t> {
+    table: CalibTable<'t>,
+    conditions: FrameConditions,
+    dark_scale_bits: i32,
+}
+
+/// `16 * (bias + column_bias)` as i32 (1/16 ADU).
+#[inline(always)]
+pub(crate) fn offset_16ths(bias: BiasAdu, column_bias: ColumnBiasAdu) -> i32 {
+    // bias <= 65535 * 16 < 2^20 (from a u16 median): the cast keeps the value.
+    (bias.to_bits().min(65535 * 16) as i32) + i32::from(column_bias.to_bits())
+}
+
+/// `(raw - offset) * gain` in I26F6 bits, rounded (used for the covered pixels, which have no
+/// flat or dark correction of their own).
+#[inline(always)]
+pub(crate) fn signal_bits(raw: u16, offset_16ths: i32, gain: GainEPerAdu) -> i32 {
+    let d = (i32::from(raw) << 4) - offset_16ths;
+    let s = i64::from(d) * i64::from(gain.to_bits());
+    ((s + (1 << 25)) >> 26) as i32
+}
+
+/// The calibration formula on bits; see the module docs for the bounds.
+#[inline(always)]
+fn pixel_bits(raw: u16, offset_16ths: i32, gain: GainEPerAdu, dark_16: i64, flat: FlatInv) -> i32 {
+    let d = (i32::from(raw) << 4) - offset_16ths;
+    let s = (i64::from(d) * i64::from(gain.to_bits())) >> 16;
+    let e = (s - dark_16) * i64::from(flat.to_bits());
+    ((e + (1 << 23)) >> 24).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+}
+
+/// The regular dark term in 2^-16 e-.
+#[inline(always)]
+fn dark_16ths(rel: DarkRel, dark_scale_bits: i32) -> i64 {
+    (i64::from(rel.to_bits()) * i64::from(dark_scale_bits)) << 4
+}
+
+impl<'t> FrameCalibration<'t> {
+    /// Binds `table` to one frame's conditions.
+    pub fn new(table: CalibTable<'t>, conditions: FrameConditions) -> Self {
+        let lim = DARK_SCALE_LIMIT_E.to_bits();
+        let dark_scale_bits = conditions.dark_scale_e.to_bits().clamp(-lim, lim);
+        Self { table, conditions, dark_scale_bits }
+    }
+
+    /// The table in use.
+    pub fn table(&self) -> &CalibTable<'t> {
+        &self.table
+    }
+
+    /// The frame's conditions (the dark scale as given, before clamping).
+    pub fn conditions(&self) -> &FrameConditions {
+        &self.conditions
+    }
+
+    /// Calibrates active pixels `x0 .. x0 + out_e.len()` of active row `y` from a whole raw
+    /// line and its levels, writing electrons and per-pixel flags; returns the flags OR-ed.
+    pub fn calibrate_span(
+        &self,
+        y: u16,
+        x0: u16,
+        raw_line: &[u16],
+        levels: &LineLevels,
+        out_e: &mut [Electrons],
+        out_flags: &mut [PixelFlags],
+    ) -> Result<PixelFlags, CalibError> {
+        let g = self.table.geometry();
+        check_len(g, raw_line)?;
+        let start = g.raw_col_of_x(usize::from(x0));
+        let raw = raw_line.get(start..start + out_e.len()).ok_or(CalibError::OutsideActiveArea)?;
+        self.calibrate_row(y, x0, raw, levels, out_e, out_flags)
+    }
+
+    /// Calibrates the pixels of `rect` from its raw samples (`raw`, row-major, `rect.len()`
+    /// values) and the levels of each of its rows (`levels[r]` for row `rect.y0 + r`).
+    pub fn calibrate_window(
+        &self,
+        rect: Rect,
+        raw: &[u16],
+        levels: &[LineLevels],
+        out_e: &mut [Electrons],
+        out_flags: &mut [PixelFlags],
+    ) -> Result<PixelFlags, CalibError> {
+        let n = rect.len();
+        if raw.len() != n || out_e.len() != n || out_flags.len() != n || levels.len() != usize::from(rect.height) {
+            return Err(CalibError::BufferLength);
+        }
+        let w = usize::from(rect.width);
+        let mut flags = PixelFlags::empty();
+        if w == 0 {
+            return Ok(flags);
+        }
+        let rows = raw.chunks_exact(w).zip(out_e.chunks_exact_mut(w)).zip(out_flags.chunks_exact_mut(w));
+        for (((raw_row, e_row), f_row), (lv, y)) in rows.zip(levels.iter().zip(rect.y0..)) {
+            flags |= self.calibrate_row(y, rect.x0, raw_row, lv, e_row, f_row)?;
+        }
+        Ok(flags)
+    }
+
+    /// Calibrates one row segment: `raw` holds the samples of active pixels `x0..`.
+    fn calibrate_row(
+        &self,
+        y: u16,
+        x0: u16,
+        raw: &[u16],
+        levels: &LineLevels,
+        out_e: &mut [Electrons],
+        out_flags: &mut [PixelFlags],
+    ) -> Result<PixelFlags, CalibError> {
+        let g = self.table.geometry();
+        let n = raw.len();
+        if out_e.len() != n || out_flags.len() != n {
+            return Err(CalibError::BufferLength);
+        }
+        if y >= g.active_rows || usize::from(x0) + n > usize::from(g.active_cols) {
+            return Err(CalibError::OutsideActiveArea);
+        }
+        let t = &self.table;
+        let sat = t.saturation_adu();
+        let mut flags = PixelFlags::empty();
+        for ((raw, (e, f)), x) in raw.iter().zip(out_e.iter_mut().zip(out_flags.iter_mut())).zip(x0..) {
+            let col = g.raw_col_of_x(usize::from(x));
+            let out = g.output_of_col(col);
+            let offset = offset_16ths(levels.bias(out), t.column_bias(col));
+            let dark = dark_16ths(t.dark_rel(x, y), self.dark_scale_bits);
+            *e = Electrons::from_bits(pixel_bits(*raw, offset, t.gain(out), dark, t.flat_inv(x, y)));
+            *f = if *raw >= sat { PixelFlags::SATURATED } else { PixelFlags::empty() };
+            flags |= *f;
+        }
+        flags |= self.apply_defects(y, x0, raw, levels, out_e, out_flags);
+        Ok(flags)
+    }
+
+    /// Re-does the listed hot and telegraph pixels of a row segment.
+    fn apply_defects(
+        &self,
+        y: u16,
+        x0: u16,
+        raw: &[u16],
+        levels: &LineLevels,
+        out_e: &mut [Electrons],
+        out_flags: &mut [PixelFlags],
+    ) -> PixelFlags {
+        let t = &self.table;
+        let g = t.geometry();
+        let x_end = usize::from(x0) + raw.len();
+        let mut flags = PixelFlags::empty();
+        let hot = t.hot_pixels();
+        for h in (hot.lower_bound(x0, y)..hot.len()).map_while(|i| hot.get(i)) {
+            if h.y != y || usize::from(h.x) >= x_end {
+                break;
+            }
+            let i = usize::from(h.x - x0);
+            let (Some(r), Some(e), Some(f)) = (raw.get(i), out_e.get_mut(i), out_flags.get_mut(i)) else {
+                break;
+            };
+            match h.policy {
+                HotPolicy::Correct => {
+                    let c = self.conditions;
+                    let hot_e = hot_dark_e(&h, t.hot_pixels().reference_temperature_k(), c.temperature_k, c.exposure_ms);
+                    let hot_16 = i64::from(hot_e.min(HOT_DARK_LIMIT_E).to_bits()) << 10;
+                    let col = g.raw_col_of_x(usize::from(h.x));
+                    let out = g.output_of_col(col);
+                    let offset = offset_16ths(levels.bias(out), t.column_bias(col));
+                    *e = Electrons::from_bits(pixel_bits(*r, offset, t.gain(out), hot_16, t.flat_inv(h.x, y)));
+                    *f |= PixelFlags::HOT_CORRECTED;
+                }
+                HotPolicy::Exclude => {
+                    *e = Electrons::ZERO;
+                    *f |= PixelFlags::HOT_EXCLUDED;
+                }
+            }
+            flags |= *f;
+        }
+        let tel = t.telegraph_pixels();
+        for (x, ty) in (tel.lower_bound(x0, y)..tel.len()).map_while(|i| tel.get(i)) {
+            if ty != y || usize::from(x) >= x_end {
+                break;
+            }
+            let i = usize::from(x - x0);
+            if let (Some(e), Some(f)) = (out_e.get_mut(i), out_flags.get_mut(i)) {
+                *e = Electrons::ZERO;
+                *f |= PixelFlags::TELEGRAPH;
+                flags |= *f;
+            }
+        }
+        flags
+    }
+}

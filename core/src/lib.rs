@@ -1,0 +1,23 @@
+//! Star tracker image processing for the e2v CCD47-20, for a Cortex-M7 and the host alike.
+//!
+//! Raw ADC words go in, calibrated electrons, detections and star centroids come out. The
+//! crate is `no_std`, allocates nothing, and returns a typed error or a flag for every bad
+//! input instead of panicking.
+//!
+//! Data flow (each stage a module):
+//! raw readout line/window ([`geometry`]) -> per-line bias and per-frame dark scale
+//! ([`calib::levels`]) -> per-pixel electrons, applied only to the pixels read
+//! ([`calib::pixel`]) with the maps of a calibration table ([`table`]) and the defect lists
+//! ([`calib::defects`]).
+//!
+//! Every fixed-point quantity has its format and range stated in [`units`].
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+#![deny(clippy::panic, clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+
+pub mod calib;
+pub mod geometry;
+pub mod table;
+pub mod units;
+pub mod window;

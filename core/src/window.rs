@@ -1,0 +1,99 @@
+//! A rectangle of calibrated pixels: what detection hands to centroiding.
+//!
+//! Coordinates are active-area coordinates: 0-based, `x` = column, `y` = row, pixel centres at
+//! integers. A window may be clipped by the edge of the active area; the clip is recorded so
+//! that centroiding can flag it.
+
+use crate::units::Electrons;
+
+/// A rectangle of the active area: `x0..x0+width`, `y0..y0+height`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Rect {
+    /// Active column of the left edge.
+    pub x0: u16,
+    /// Active row of the top edge.
+    pub y0: u16,
+    /// Width in pixels.
+    pub width: u16,
+    /// Height in pixels.
+    pub height: u16,
+}
+
+impl Rect {
+    /// Number of pixels.
+    pub const fn len(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    /// True when the rectangle holds no pixel.
+    pub const fn is_empty(&self) -> bool {
+        self.width == 0 || self.height == 0
+    }
+
+    /// True when active pixel (x, y) lies inside.
+    pub const fn contains(&self, x: u16, y: u16) -> bool {
+        x >= self.x0
+            && y >= self.y0
+            && (x - self.x0) < self.width
+            && (y - self.y0) < self.height
+    }
+
+    /// An `n` x `n` square centred on (cx, cy) and clipped to an active area of
+    /// `cols` x `rows`, with a flag telling whether clipping removed any pixel.
+    pub fn centred_clipped(cx: u16, cy: u16, n: u16, cols: u16, rows: u16) -> (Rect, bool) {
+        let half = n / 2;
+        let x0 = cx.saturating_sub(half);
+        let y0 = cy.saturating_sub(half);
+        let x1 = (u32::from(cx) + u32::from(n - half)).min(u32::from(cols)) as u16;
+        let y1 = (u32::from(cy) + u32::from(n - half)).min(u32::from(rows)) as u16;
+        let r = Rect { x0, y0, width: x1.saturating_sub(x0), height: y1.saturating_sub(y0) };
+        let clipped = r.width != n || r.height != n;
+        (r, clipped)
+    }
+}
+
+/// Calibrated pixels of a [`Rect`], row-major, borrowed from the caller's buffer.
+#[derive(Clone, Copy, Debug)]
+pub struct Window<'a> {
+    /// Where the pixels lie on the active area.
+    pub rect: Rect,
+    /// `rect.len()` calibrated values, row-major.
+    pub pixels_e: &'a [Electrons],
+}
+
+impl<'a> Window<'a> {
+    /// Pairs a rectangle with its pixels; `None` when the slice length does not match.
+    pub fn new(rect: Rect, pixels_e: &'a [Electrons]) -> Option<Self> {
+        (pixels_e.len() == rect.len()).then_some(Self { rect, pixels_e })
+    }
+
+    /// The pixel at window-relative (col, row), if inside.
+    pub fn get(&self, col: u16, row: u16) -> Option<Electrons> {
+        if col >= self.rect.width || row >= self.rect.height {
+            return None;
+        }
+        self.pixels_e
+            .get(usize::from(row) * usize::from(self.rect.width) + usize::from(col))
+            .copied()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clipping_at_edges() {
+        let (r, c) = Rect::centred_clipped(0, 0, 5, 1024, 1024);
+        assert_eq!(r, Rect { x0: 0, y0: 0, width: 3, height: 3 });
+        assert!(c);
+        let (r, c) = Rect::centred_clipped(1023, 10, 5, 1024, 1024);
+        assert_eq!(r, Rect { x0: 1021, y0: 8, width: 3, height: 5 });
+        assert!(c);
+        let (r, c) = Rect::centred_clipped(100, 100, 7, 1024, 1024);
+        assert_eq!(r, Rect { x0: 97, y0: 97, width: 7, height: 7 });
+        assert!(!c);
+        assert!(r.contains(103, 97) && !r.contains(104, 97));
+    }
+}

@@ -1,0 +1,1 @@
+//! Host-side support: the simulated sensor and shared test helpers.
