@@ -230,16 +230,50 @@ mod tests {
         assert_eq!(g.output_of_col(g.raw_col_of_x(511)), Output(0));
         assert_eq!(g.output_of_col(g.raw_col_of_x(512)), Output(1));
         assert_eq!(g.overscan_cols(Output(1)), (1064, 1072));
-        assert_eq!(ReadoutGeometry::CCD47_20_SINGLE.output_of_col(1071), Output(0));
+        assert_eq!(
+            ReadoutGeometry::CCD47_20_SINGLE.output_of_col(1071),
+            Output(0)
+        );
     }
 
     #[test]
     fn rejects_bad_geometries() {
         let g = ReadoutGeometry::CCD47_20_DUAL;
-        assert_eq!(ReadoutGeometry { outputs: 3, ..g }.validate(), Err(GeometryError::Outputs));
-        assert_eq!(ReadoutGeometry { overscan_px: 0, ..g }.validate(), Err(GeometryError::NoOverScan));
-        assert_eq!(ReadoutGeometry { active_rows: 2000, ..g }.validate(), Err(GeometryError::EmptyActiveArea));
-        assert_eq!(ReadoutGeometry { active_cols: 9000, ..g }.validate(), Err(GeometryError::TooLarge));
-        assert_eq!(ReadoutGeometry { active_cols: 1023, ..g }.validate(), Err(GeometryError::OddSplit));
+        assert_eq!(
+            ReadoutGeometry { outputs: 3, ..g }.validate(),
+            Err(GeometryError::Outputs)
+        );
+        assert_eq!(
+            ReadoutGeometry {
+                overscan_px: 0,
+                ..g
+            }
+            .validate(),
+            Err(GeometryError::NoOverScan)
+        );
+        assert_eq!(
+            ReadoutGeometry {
+                active_rows: 2000,
+                ..g
+            }
+            .validate(),
+            Err(GeometryError::EmptyActiveArea)
+        );
+        assert_eq!(
+            ReadoutGeometry {
+                active_cols: 9000,
+                ..g
+            }
+            .validate(),
+            Err(GeometryError::TooLarge)
+        );
+        assert_eq!(
+            ReadoutGeometry {
+                active_cols: 1023,
+                ..g
+            }
+            .validate(),
+            Err(GeometryError::OddSplit)
+        );
     }
 }

@@ -33,10 +33,7 @@ impl Rect {
 
     /// True when active pixel (x, y) lies inside.
     pub const fn contains(&self, x: u16, y: u16) -> bool {
-        x >= self.x0
-            && y >= self.y0
-            && (x - self.x0) < self.width
-            && (y - self.y0) < self.height
+        x >= self.x0 && y >= self.y0 && (x - self.x0) < self.width && (y - self.y0) < self.height
     }
 
     /// An `n` x `n` square centred on (cx, cy) and clipped to an active area of
@@ -47,7 +44,12 @@ impl Rect {
         let y0 = cy.saturating_sub(half);
         let x1 = (u32::from(cx) + u32::from(n - half)).min(u32::from(cols)) as u16;
         let y1 = (u32::from(cy) + u32::from(n - half)).min(u32::from(rows)) as u16;
-        let r = Rect { x0, y0, width: x1.saturating_sub(x0), height: y1.saturating_sub(y0) };
+        let r = Rect {
+            x0,
+            y0,
+            width: x1.saturating_sub(x0),
+            height: y1.saturating_sub(y0),
+        };
         let clipped = r.width != n || r.height != n;
         (r, clipped)
     }
@@ -86,13 +88,37 @@ mod tests {
     #[test]
     fn clipping_at_edges() {
         let (r, c) = Rect::centred_clipped(0, 0, 5, 1024, 1024);
-        assert_eq!(r, Rect { x0: 0, y0: 0, width: 3, height: 3 });
+        assert_eq!(
+            r,
+            Rect {
+                x0: 0,
+                y0: 0,
+                width: 3,
+                height: 3
+            }
+        );
         assert!(c);
         let (r, c) = Rect::centred_clipped(1023, 10, 5, 1024, 1024);
-        assert_eq!(r, Rect { x0: 1021, y0: 8, width: 3, height: 5 });
+        assert_eq!(
+            r,
+            Rect {
+                x0: 1021,
+                y0: 8,
+                width: 3,
+                height: 5
+            }
+        );
         assert!(c);
         let (r, c) = Rect::centred_clipped(100, 100, 7, 1024, 1024);
-        assert_eq!(r, Rect { x0: 97, y0: 97, width: 7, height: 7 });
+        assert_eq!(
+            r,
+            Rect {
+                x0: 97,
+                y0: 97,
+                width: 7,
+                height: 7
+            }
+        );
         assert!(!c);
         assert!(r.contains(103, 97) && !r.contains(104, 97));
     }

@@ -41,7 +41,10 @@ impl core::fmt::Display for LineError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::Length { expected, got } => {
-                write!(f, "raw line has {got} samples, the geometry needs {expected}")
+                write!(
+                    f,
+                    "raw line has {got} samples, the geometry needs {expected}"
+                )
             }
         }
     }
@@ -83,10 +86,17 @@ impl LineLevels {
     pub fn measure(geometry: &ReadoutGeometry, raw_line: &[u16]) -> Result<Self, LineError> {
         check_len(geometry, raw_line)?;
         let mut bias_adu = [BiasAdu::ZERO; MAX_OUTPUTS];
-        for (o, slot) in bias_adu.iter_mut().enumerate().take(usize::from(geometry.outputs)) {
+        for (o, slot) in bias_adu
+            .iter_mut()
+            .enumerate()
+            .take(usize::from(geometry.outputs))
+        {
             let mut buf = [0u16; 2 * MAX_STRIP_PX];
             let mut n = 0;
-            let strips = [Some(geometry.overscan_cols(Output(o as u8))), geometry.overscan_cols_extra()];
+            let strips = [
+                Some(geometry.overscan_cols(Output(o as u8))),
+                geometry.overscan_cols_extra(),
+            ];
             for (start, end) in strips.into_iter().flatten() {
                 let take = (end - start).min(MAX_STRIP_PX);
                 for s in raw_line.iter().skip(start).take(take) {
@@ -103,7 +113,10 @@ impl LineLevels {
 
     /// The bias of `output` (0 for an output the geometry does not have).
     pub fn bias(&self, output: Output) -> BiasAdu {
-        self.bias_adu.get(usize::from(output.0)).copied().unwrap_or(BiasAdu::ZERO)
+        self.bias_adu
+            .get(usize::from(output.0))
+            .copied()
+            .unwrap_or(BiasAdu::ZERO)
     }
 }
 
@@ -120,7 +133,10 @@ pub struct DarkScaleEstimator {
 impl DarkScaleEstimator {
     /// An estimator with no line fed yet.
     pub const fn new() -> Self {
-        Self { sum_bits: 0, count: 0 }
+        Self {
+            sum_bits: 0,
+            count: 0,
+        }
     }
 
     /// Adds the covered pixels of one raw line, with that line's levels.
@@ -136,9 +152,12 @@ impl DarkScaleEstimator {
         let mut n = 0;
         for (start, end) in g.covered_cols() {
             for col in start..end.min(start + MAX_STRIP_PX) {
-                let (Some(raw), Some(v)) = (raw_line.get(col), vals.get_mut(n)) else { break };
+                let (Some(raw), Some(v)) = (raw_line.get(col), vals.get_mut(n)) else {
+                    break;
+                };
                 let out = g.output_of_col(col);
-                let offset = crate::calib::pixel::offset_16ths(levels.bias(out), table.column_bias(col));
+                let offset =
+                    crate::calib::pixel::offset_16ths(levels.bias(out), table.column_bias(col));
                 *v = crate::calib::pixel::signal_bits(*raw, offset, table.gain(out));
                 n += 1;
             }

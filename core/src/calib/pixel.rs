@@ -32,7 +32,9 @@
 use super::hot::{HOT_DARK_LIMIT_E, hot_dark_e};
 use super::levels::{LineError, LineLevels, check_len};
 use crate::table::{CalibTable, HotPolicy};
-use crate::units::{BiasAdu, ColumnBiasAdu, DARK_SCALE_LIMIT_E, DarkRel, Electrons, FlatInv, GainEPerAdu, Kelvin};
+use crate::units::{
+    BiasAdu, ColumnBiasAdu, DARK_SCALE_LIMIT_E, DarkRel, Electrons, FlatInv, GainEPerAdu, Kelvin,
+};
 use crate::window::Rect;
 
 /// Largest difference between a calibrated pixel and the exact (f64) value of the formula
@@ -159,7 +161,11 @@ impl<'t> FrameCalibration<'t> {
     pub fn new(table: CalibTable<'t>, conditions: FrameConditions) -> Self {
         let lim = DARK_SCALE_LIMIT_E.to_bits();
         let dark_scale_bits = conditions.dark_scale_e.to_bits().clamp(-lim, lim);
-        Self { table, conditions, dark_scale_bits }
+        Self {
+            table,
+            conditions,
+            dark_scale_bits,
+        }
     }
 
     /// The table in use.
@@ -186,7 +192,9 @@ impl<'t> FrameCalibration<'t> {
         let g = self.table.geometry();
         check_len(g, raw_line)?;
         let start = g.raw_col_of_x(usize::from(x0));
-        let raw = raw_line.get(start..start + out_e.len()).ok_or(CalibError::OutsideActiveArea)?;
+        let raw = raw_line
+            .get(start..start + out_e.len())
+            .ok_or(CalibError::OutsideActiveArea)?;
         self.calibrate_row(y, x0, raw, levels, out_e, out_flags)
     }
 
@@ -201,7 +209,11 @@ impl<'t> FrameCalibration<'t> {
         out_flags: &mut [PixelFlags],
     ) -> Result<PixelFlags, CalibError> {
         let n = rect.len();
-        if raw.len() != n || out_e.len() != n || out_flags.len() != n || levels.len() != usize::from(rect.height) {
+        if raw.len() != n
+            || out_e.len() != n
+            || out_flags.len() != n
+            || levels.len() != usize::from(rect.height)
+        {
             return Err(CalibError::BufferLength);
         }
         let w = usize::from(rect.width);
@@ -209,7 +221,10 @@ impl<'t> FrameCalibration<'t> {
         if w == 0 {
             return Ok(flags);
         }
-        let rows = raw.chunks_exact(w).zip(out_e.chunks_exact_mut(w)).zip(out_flags.chunks_exact_mut(w));
+        let rows = raw
+            .chunks_exact(w)
+            .zip(out_e.chunks_exact_mut(w))
+            .zip(out_flags.chunks_exact_mut(w));
         for (((raw_row, e_row), f_row), (lv, y)) in rows.zip(levels.iter().zip(rect.y0..)) {
             flags |= self.calibrate_row(y, rect.x0, raw_row, lv, e_row, f_row)?;
         }
@@ -237,13 +252,27 @@ impl<'t> FrameCalibration<'t> {
         let t = &self.table;
         let sat = t.saturation_adu();
         let mut flags = PixelFlags::empty();
-        for ((raw, (e, f)), x) in raw.iter().zip(out_e.iter_mut().zip(out_flags.iter_mut())).zip(x0..) {
+        for ((raw, (e, f)), x) in raw
+            .iter()
+            .zip(out_e.iter_mut().zip(out_flags.iter_mut()))
+            .zip(x0..)
+        {
             let col = g.raw_col_of_x(usize::from(x));
             let out = g.output_of_col(col);
             let offset = offset_16ths(levels.bias(out), t.column_bias(col));
             let dark = dark_16ths(t.dark_rel(x, y), self.dark_scale_bits);
-            *e = Electrons::from_bits(pixel_bits(*raw, offset, t.gain(out), dark, t.flat_inv(x, y)));
-            *f = if *raw >= sat { PixelFlags::SATURATED } else { PixelFlags::empty() };
+            *e = Electrons::from_bits(pixel_bits(
+                *raw,
+                offset,
+                t.gain(out),
+                dark,
+                t.flat_inv(x, y),
+            ));
+            *f = if *raw >= sat {
+                PixelFlags::SATURATED
+            } else {
+                PixelFlags::empty()
+            };
             flags |= *f;
         }
         flags |= self.apply_defects(y, x0, raw, levels, out_e, out_flags);
@@ -270,18 +299,30 @@ impl<'t> FrameCalibration<'t> {
                 break;
             }
             let i = usize::from(h.x - x0);
-            let (Some(r), Some(e), Some(f)) = (raw.get(i), out_e.get_mut(i), out_flags.get_mut(i)) else {
+            let (Some(r), Some(e), Some(f)) = (raw.get(i), out_e.get_mut(i), out_flags.get_mut(i))
+            else {
                 break;
             };
             match h.policy {
                 HotPolicy::Correct => {
                     let c = self.conditions;
-                    let hot_e = hot_dark_e(&h, t.hot_pixels().reference_temperature_k(), c.temperature_k, c.exposure_ms);
+                    let hot_e = hot_dark_e(
+                        &h,
+                        t.hot_pixels().reference_temperature_k(),
+                        c.temperature_k,
+                        c.exposure_ms,
+                    );
                     let hot_16 = i64::from(hot_e.min(HOT_DARK_LIMIT_E).to_bits()) << 10;
                     let col = g.raw_col_of_x(usize::from(h.x));
                     let out = g.output_of_col(col);
                     let offset = offset_16ths(levels.bias(out), t.column_bias(col));
-                    *e = Electrons::from_bits(pixel_bits(*r, offset, t.gain(out), hot_16, t.flat_inv(h.x, y)));
+                    *e = Electrons::from_bits(pixel_bits(
+                        *r,
+                        offset,
+                        t.gain(out),
+                        hot_16,
+                        t.flat_inv(h.x, y),
+                    ));
                     *f |= PixelFlags::HOT_CORRECTED;
                 }
                 HotPolicy::Exclude => {

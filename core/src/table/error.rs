@@ -110,12 +110,18 @@ impl core::fmt::Display for TableError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::TooShort { needed, got } => {
-                write!(f, "calibration table too short: {got} bytes, needs {needed}")
+                write!(
+                    f,
+                    "calibration table too short: {got} bytes, needs {needed}"
+                )
             }
             Self::BadMagic => f.write_str("not a calibration table (bad magic)"),
             Self::UnsupportedVersion(v) => write!(f, "calibration table version {v} not supported"),
             Self::LengthMismatch { header, actual } => {
-                write!(f, "calibration table length: header says {header}, have {actual} bytes")
+                write!(
+                    f,
+                    "calibration table length: header says {header}, have {actual} bytes"
+                )
             }
             Self::HeaderCrc => f.write_str("calibration table header CRC mismatch"),
             Self::Reserved => f.write_str("calibration table: reserved field not zero"),
@@ -127,8 +133,12 @@ impl core::fmt::Display for TableError {
             Self::SectionOutOfBounds(k) => {
                 write!(f, "calibration table: {} section out of bounds", k.name())
             }
-            Self::SectionCrc(k) => write!(f, "calibration table: {} section CRC mismatch", k.name()),
-            Self::SectionLength(k) => write!(f, "calibration table: {} section length wrong", k.name()),
+            Self::SectionCrc(k) => {
+                write!(f, "calibration table: {} section CRC mismatch", k.name())
+            }
+            Self::SectionLength(k) => {
+                write!(f, "calibration table: {} section length wrong", k.name())
+            }
             Self::MapFormat(k) => write!(f, "calibration table: {} map header invalid", k.name()),
             Self::OutOfRange { section, index } => write!(
                 f,

@@ -125,7 +125,8 @@ impl<'a> HotList<'a> {
 
     /// The hot pixel at (x, y), if listed.
     pub fn find(&self, x: u16, y: u16) -> Option<HotPixel> {
-        self.get(self.lower_bound(x, y)).filter(|h| h.x == x && h.y == y)
+        self.get(self.lower_bound(x, y))
+            .filter(|h| h.x == x && h.y == y)
     }
 }
 
@@ -202,11 +203,16 @@ impl<'a> CalibTable<'a> {
         let n_sections = rd16(6)?;
         let total = u32_at(head, 8).ok_or(too_short(HEADER_LEN))?;
         if usize::from(n_sections) > MAX_SECTIONS {
-            return Err(TableError::TooManySections(u8::try_from(n_sections).unwrap_or(u8::MAX)));
+            return Err(TableError::TooManySections(
+                u8::try_from(n_sections).unwrap_or(u8::MAX),
+            ));
         }
         let dir_end = HEADER_LEN + DIR_ENTRY_LEN * usize::from(n_sections);
         if total != got || (total as usize) < dir_end {
-            return Err(TableError::LengthMismatch { header: total, actual: got });
+            return Err(TableError::LengthMismatch {
+                header: total,
+                actual: got,
+            });
         }
         let dir = bytes.get(HEADER_LEN..dir_end).ok_or(too_short(dir_end))?;
         let mut digest = CRC.digest();
@@ -243,19 +249,38 @@ impl<'a> CalibTable<'a> {
         }
         let [gains, column_bias, dark, flat, hot, telegraph] = found;
 
-        let gains = parse_gains(gains.ok_or(TableError::MissingSection(SectionKind::Gains))?, &geometry)?;
+        let gains = parse_gains(
+            gains.ok_or(TableError::MissingSection(SectionKind::Gains))?,
+            &geometry,
+        )?;
         if column_bias.is_some_and(|cb| cb.len() != 2 * geometry.line_len()) {
             return Err(TableError::SectionLength(SectionKind::ColumnBias));
         }
-        let dark = dark.map(|d| parse_map(d, SectionKind::DarkRel, &geometry)).transpose()?;
-        let flat = flat.map(|d| parse_map(d, SectionKind::FlatInv, &geometry)).transpose()?;
-        let hot = hot.map(|h| parse_hot(h, &geometry)).transpose()?.unwrap_or_default();
+        let dark = dark
+            .map(|d| parse_map(d, SectionKind::DarkRel, &geometry))
+            .transpose()?;
+        let flat = flat
+            .map(|d| parse_map(d, SectionKind::FlatInv, &geometry))
+            .transpose()?;
+        let hot = hot
+            .map(|h| parse_hot(h, &geometry))
+            .transpose()?
+            .unwrap_or_default();
         let telegraph = telegraph
             .map(|t| parse_telegraph(t, &geometry))
             .transpose()?
             .unwrap_or_default();
 
-        Ok(Self { geometry, saturation_adu, gains, column_bias, dark, flat, hot, telegraph })
+        Ok(Self {
+            geometry,
+            saturation_adu,
+            gains,
+            column_bias,
+            dark,
+            flat,
+            hot,
+            telegraph,
+        })
     }
 
     /// The sensor geometry the table was made for.
@@ -322,9 +347,17 @@ impl<'a> CalibTable<'a> {
     }
 }
 
-fn section<'a>(bytes: &'a [u8], dir: &[u8], i: usize, dir_end: usize) -> Result<Section<'a>, TableError> {
+fn section<'a>(
+    bytes: &'a [u8],
+    dir: &[u8],
+    i: usize,
+    dir_end: usize,
+) -> Result<Section<'a>, TableError> {
     let e = i * DIR_ENTRY_LEN;
-    let bad = TableError::TooShort { needed: dir_end as u32, got: bytes.len() as u32 };
+    let bad = TableError::TooShort {
+        needed: dir_end as u32,
+        got: bytes.len() as u32,
+    };
     let code = u16_at(dir, e).ok_or(bad)?;
     let kind = SectionKind::from_code(code).ok_or(TableError::UnknownSection(code))?;
     if u16_at(dir, e + 2).ok_or(bad)? != 0 {
@@ -333,11 +366,15 @@ fn section<'a>(bytes: &'a [u8], dir: &[u8], i: usize, dir_end: usize) -> Result<
     let off = u32_at(dir, e + 4).ok_or(bad)? as usize;
     let len = u32_at(dir, e + 8).ok_or(bad)? as usize;
     let crc = u32_at(dir, e + 12).ok_or(bad)?;
-    let end = off.checked_add(len).ok_or(TableError::SectionOutOfBounds(kind))?;
+    let end = off
+        .checked_add(len)
+        .ok_or(TableError::SectionOutOfBounds(kind))?;
     if off < dir_end {
         return Err(TableError::SectionOutOfBounds(kind));
     }
-    let s = bytes.get(off..end).ok_or(TableError::SectionOutOfBounds(kind))?;
+    let s = bytes
+        .get(off..end)
+        .ok_or(TableError::SectionOutOfBounds(kind))?;
     if CRC.checksum(s) != crc {
         return Err(TableError::SectionCrc(kind));
     }
@@ -353,14 +390,21 @@ fn parse_gains(b: &[u8], g: &ReadoutGeometry) -> Result<[GainEPerAdu; MAX_OUTPUT
     for (i, slot) in gains.iter_mut().enumerate().take(usize::from(g.outputs)) {
         let bits = u32_at(b, 4 * i).ok_or(TableError::SectionLength(k))?;
         if bits == 0 {
-            return Err(TableError::OutOfRange { section: k, index: i as u32 });
+            return Err(TableError::OutOfRange {
+                section: k,
+                index: i as u32,
+            });
         }
         *slot = GainEPerAdu::from_bits(bits);
     }
     Ok(gains)
 }
 
-fn parse_map<'a>(b: &'a [u8], k: SectionKind, g: &ReadoutGeometry) -> Result<MapView<'a>, TableError> {
+fn parse_map<'a>(
+    b: &'a [u8],
+    k: SectionKind,
+    g: &ReadoutGeometry,
+) -> Result<MapView<'a>, TableError> {
     let tile_log2 = *b.first().ok_or(TableError::SectionLength(k))?;
     let format = *b.get(1).ok_or(TableError::SectionLength(k))?;
     let (want_format, elem_bytes) = match k {
@@ -374,15 +418,24 @@ fn parse_map<'a>(b: &'a [u8], k: SectionKind, g: &ReadoutGeometry) -> Result<Map
     if u16_at(b, 4) != Some(want.tiles_x) || u16_at(b, 6) != Some(want.tiles_y) {
         return Err(TableError::MapFormat(k));
     }
-    let data = b.get(MAP_HEADER_LEN..).ok_or(TableError::SectionLength(k))?;
+    let data = b
+        .get(MAP_HEADER_LEN..)
+        .ok_or(TableError::SectionLength(k))?;
     if data.len() != want.tiles() * elem_bytes {
         return Err(TableError::SectionLength(k));
     }
-    let view = MapView { header: want, elem_bytes, data };
+    let view = MapView {
+        header: want,
+        elem_bytes,
+        data,
+    };
     if k == SectionKind::FlatInv {
         // A zero inverse flat would silently erase a pixel's signal.
         if let Some(i) = (0..want.tiles()).find(|&i| view.tile_bits(i) == Some(0)) {
-            return Err(TableError::OutOfRange { section: k, index: i as u32 });
+            return Err(TableError::OutOfRange {
+                section: k,
+                index: i as u32,
+            });
         }
     }
     Ok(view)
@@ -396,10 +449,16 @@ fn parse_hot<'a>(b: &'a [u8], g: &ReadoutGeometry) -> Result<HotList<'a>, TableE
     if Some(entries.len()) != count.checked_mul(HOT_ENTRY_LEN) {
         return Err(TableError::SectionLength(k));
     }
-    let list = HotList { t_ref_k: RefTemperature::from_bits(t_ref), entries };
+    let list = HotList {
+        t_ref_k: RefTemperature::from_bits(t_ref),
+        entries,
+    };
     let mut prev: Option<(u16, u16)> = None;
     for i in 0..count {
-        let bad = TableError::OutOfRange { section: k, index: i as u32 };
+        let bad = TableError::OutOfRange {
+            section: k,
+            index: i as u32,
+        };
         let h = list.get(i).ok_or(bad)?;
         let reserved = entries.get(i * HOT_ENTRY_LEN + 11).copied();
         if h.x >= g.active_cols
@@ -425,7 +484,10 @@ fn parse_telegraph<'a>(b: &'a [u8], g: &ReadoutGeometry) -> Result<DefectList<'a
     let list = DefectList { entries };
     let mut prev: Option<(u16, u16)> = None;
     for i in 0..count {
-        let bad = TableError::OutOfRange { section: k, index: i as u32 };
+        let bad = TableError::OutOfRange {
+            section: k,
+            index: i as u32,
+        };
         let (x, y) = list.get(i).ok_or(bad)?;
         if x >= g.active_cols || y >= g.active_rows || prev.is_some_and(|p| p >= (y, x)) {
             return Err(bad);

@@ -48,12 +48,18 @@ impl TableSpec<'_> {
         let map_len = |tiles: usize, elem: usize| MAP_HEADER_LEN + tiles * elem;
         [
             Some((SectionKind::Gains, 4 * self.gains.len())),
-            self.column_bias.map(|c| (SectionKind::ColumnBias, 2 * c.len())),
-            self.dark_rel.map(|m| (SectionKind::DarkRel, map_len(m.tiles.len(), 1))),
-            self.flat_inv.map(|m| (SectionKind::FlatInv, map_len(m.tiles.len(), 2))),
-            (!self.hot.is_empty()).then_some((SectionKind::HotPixels, 8 + HOT_ENTRY_LEN * self.hot.len())),
-            (!self.telegraph.is_empty())
-                .then_some((SectionKind::Telegraph, 4 + TELEGRAPH_ENTRY_LEN * self.telegraph.len())),
+            self.column_bias
+                .map(|c| (SectionKind::ColumnBias, 2 * c.len())),
+            self.dark_rel
+                .map(|m| (SectionKind::DarkRel, map_len(m.tiles.len(), 1))),
+            self.flat_inv
+                .map(|m| (SectionKind::FlatInv, map_len(m.tiles.len(), 2))),
+            (!self.hot.is_empty())
+                .then_some((SectionKind::HotPixels, 8 + HOT_ENTRY_LEN * self.hot.len())),
+            (!self.telegraph.is_empty()).then_some((
+                SectionKind::Telegraph,
+                4 + TELEGRAPH_ENTRY_LEN * self.telegraph.len(),
+            )),
         ]
         .into_iter()
         .flatten()
@@ -87,7 +93,9 @@ impl Out<'_> {
 /// produces a table.
 pub fn write_table(spec: &TableSpec<'_>, out: &mut [u8]) -> Result<usize, WriteError> {
     let len = spec.encoded_len();
-    let buf = out.get_mut(..len).ok_or(WriteError::BufferTooSmall { needed: len })?;
+    let buf = out
+        .get_mut(..len)
+        .ok_or(WriteError::BufferTooSmall { needed: len })?;
     let n = spec.sections().count();
     let dir_end = HEADER_LEN + DIR_ENTRY_LEN * n;
 
@@ -99,7 +107,10 @@ pub fn write_table(spec: &TableSpec<'_>, out: &mut [u8]) -> Result<usize, WriteE
         write_section(&mut o, spec, kind);
     }
     for (i, (kind, start, slen)) in entries.iter().take(n).enumerate() {
-        let crc = o.buf.get(*start..start + slen).map_or(0, |s| CRC.checksum(s));
+        let crc = o
+            .buf
+            .get(*start..start + slen)
+            .map_or(0, |s| CRC.checksum(s));
         o.pos = HEADER_LEN + i * DIR_ENTRY_LEN;
         o.put(&(*kind as u16).to_le_bytes());
         o.put(&0u16.to_le_bytes());
@@ -113,7 +124,13 @@ pub fn write_table(spec: &TableSpec<'_>, out: &mut [u8]) -> Result<usize, WriteE
     o.put(&VERSION.to_le_bytes());
     o.put(&(n as u16).to_le_bytes());
     o.put(&(len as u32).to_le_bytes());
-    for v in [g.overscan_px, g.covered_px, g.active_cols, g.active_rows, g.lines] {
+    for v in [
+        g.overscan_px,
+        g.covered_px,
+        g.active_cols,
+        g.active_rows,
+        g.lines,
+    ] {
         o.put(&v.to_le_bytes());
     }
     o.put(&[g.outputs, 0]);
@@ -130,7 +147,10 @@ pub fn write_table(spec: &TableSpec<'_>, out: &mut [u8]) -> Result<usize, WriteE
 fn write_section(o: &mut Out<'_>, spec: &TableSpec<'_>, kind: SectionKind) {
     let g = &spec.geometry;
     match kind {
-        SectionKind::Gains => spec.gains.iter().for_each(|v| o.put(&v.to_bits().to_le_bytes())),
+        SectionKind::Gains => spec
+            .gains
+            .iter()
+            .for_each(|v| o.put(&v.to_bits().to_le_bytes())),
         SectionKind::ColumnBias => spec
             .column_bias
             .unwrap_or(&[])
@@ -145,7 +165,9 @@ fn write_section(o: &mut Out<'_>, spec: &TableSpec<'_>, kind: SectionKind) {
         SectionKind::FlatInv => {
             if let Some(m) = spec.flat_inv {
                 map_header(o, g, m.tile_log2, 2);
-                m.tiles.iter().for_each(|v| o.put(&v.to_bits().to_le_bytes()));
+                m.tiles
+                    .iter()
+                    .for_each(|v| o.put(&v.to_bits().to_le_bytes()));
             }
         }
         SectionKind::HotPixels => {
