@@ -1,1 +1,5 @@
-//! Host-side support: the simulated sensor and shared test helpers.
+//! Host side of the star tracker: the simulated CCD47-20 and what the `startrack` command
+//! and the tests share. The core runs here unchanged, exactly as on the Cortex-M7.
+
+pub mod demo;
+pub mod sim;

@@ -136,20 +136,27 @@ fn ref_covered_e(m: &Maps, line: &[u16], col: usize) -> f64 {
         * gain_f(m, col)
 }
 
-/// Trimmed mean of every covered pixel of `lines` (the estimator's definition, in f64).
+/// Mean of the covered pixels of `lines` within 5 robust sigmas of their line's median (the
+/// estimator's definition, in f64; the values are first rounded to 1/64 e- as the core does).
 fn ref_dark_scale(m: &Maps, lines: &[Vec<u16>]) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
     for line in lines {
-        let mut v: Vec<f64> = G
+        let v: Vec<f64> = G
             .covered_cols()
             .iter()
             .flat_map(|&(s, e)| s..e)
             .map(|c| ref_covered_e(m, line, c))
             .collect();
-        v.sort_by(f64::total_cmp);
-        let t = v.len() / 8;
-        sum += v[t..v.len() - t].iter().sum::<f64>();
-        n += v.len() - 2 * t;
+        // The band is applied in 1/64 e- units, as the core does, so that no sample sits on
+        // a different side of it through rounding alone.
+        let mut v: Vec<i64> = v.into_iter().map(|x| (x * 64.0).round() as i64).collect();
+        v.sort();
+        let k = v.len();
+        let sigma = ((v[3 * k / 4] - v[k / 4]) * 1000 / 1349).max(64);
+        for x in v.iter().filter(|x| (*x - v[k / 2]).abs() <= 5 * sigma) {
+            sum += *x as f64 / 64.0;
+            n += 1;
+        }
     }
     sum / n as f64
 }

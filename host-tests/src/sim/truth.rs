@@ -1,0 +1,109 @@
+//! The simulated sensor's true calibration, encoded as a core calibration table: what a
+//! perfect ground calibration would measure (quantised to the table's formats).
+
+use super::render::Simulator;
+use startrack_core::geometry::Segment;
+use startrack_core::table::{MapSpec, TableSpec, WriteError, write_table};
+use startrack_core::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu, Kelvin};
+
+/// Which of the sensor's corrections the table carries; the others are left out ("no
+/// correction"), which is how the demo shows what each one is worth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TruthSections {
+    /// Per-column bias.
+    pub column_bias: bool,
+    /// Relative dark map.
+    pub dark: bool,
+    /// Inverse flat map.
+    pub flat: bool,
+}
+
+impl TruthSections {
+    /// Every correction.
+    pub const ALL: Self = Self {
+        column_bias: true,
+        dark: true,
+        flat: true,
+    };
+    /// Only the gains (bias from the over-scan and a uniform dark still apply).
+    pub const NONE: Self = Self {
+        column_bias: false,
+        dark: false,
+        flat: false,
+    };
+}
+
+impl Simulator {
+    /// The mean relative dark of the covered pixels: the dark map is normalised to it.
+    pub fn covered_dark_mean(&self) -> f64 {
+        let g = &self.params.geometry;
+        let (mut sum, mut n) = (0.0, 0usize);
+        for line in 0..usize::from(g.lines) {
+            for (s, e) in g.covered_cols() {
+                for col in s..e {
+                    sum += self.dark_rel(col, line);
+                    n += 1;
+                }
+            }
+        }
+        if n == 0 { 1.0 } else { sum / n as f64 }
+    }
+
+    /// Encodes the sensor's true maps as a calibration table (per-pixel maps).
+    pub fn truth_table(&self, sections: TruthSections) -> Result<Vec<u8>, WriteError> {
+        let p = &self.params;
+        let g = p.geometry;
+        let gains: Vec<GainEPerAdu> = (0..g.outputs)
+            .map(|o| GainEPerAdu::saturating_from_num(p.gain_e_per_adu[usize::from(o)]))
+            .collect();
+        let column_bias: Vec<ColumnBiasAdu> = (0..g.line_len())
+            .map(|c| match g.segment(c) {
+                Some(Segment::OverScan) => ColumnBiasAdu::ZERO,
+                _ => ColumnBiasAdu::saturating_from_num(self.column_bias_adu(c)),
+            })
+            .collect();
+        let norm = self.covered_dark_mean();
+        let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+        let dark: Vec<DarkRel> = if sections.dark {
+            (0..rows)
+                .flat_map(|y| (0..cols).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    DarkRel::saturating_from_num(self.dark_rel(g.raw_col_of_x(x), y) / norm)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let flat: Vec<FlatInv> = if sections.flat {
+            (0..rows)
+                .flat_map(|y| (0..cols).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    FlatInv::saturating_from_num(1.0 / self.flat(x, y)).max(FlatInv::DELTA)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let spec = TableSpec {
+            geometry: g,
+            saturation_adu: 65535,
+            gains: &gains,
+            column_bias: sections.column_bias.then_some(&column_bias[..]),
+            dark_rel: sections.dark.then_some(MapSpec {
+                tile_log2: 0,
+                tiles: &dark,
+            }),
+            flat_inv: sections.flat.then_some(MapSpec {
+                tile_log2: 0,
+                tiles: &flat,
+            }),
+            hot_ref_k: Kelvin::from_num(293),
+            hot: &[],
+            telegraph: &[],
+        };
+        let mut buf = vec![0u8; spec.encoded_len()];
+        let n = write_table(&spec, &mut buf)?;
+        buf.truncate(n);
+        Ok(buf)
+    }
+}
