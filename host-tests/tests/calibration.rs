@@ -447,7 +447,7 @@ fn hot_dark_law_accuracy() {
                 policy: HotPolicy::Correct,
             };
             let want = ref_hot_dark(&h, t, 10_000);
-            if want < 1.0 || want > 1.0e6 {
+            if !(1.0..=1.0e6).contains(&want) {
                 continue;
             }
             let got = hot_dark_e(&h, Kelvin::from_num(T_REF), Kelvin::from_num(t), 10_000)

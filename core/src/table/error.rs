@@ -78,7 +78,7 @@ pub enum TableError {
     /// A reserved field is not zero.
     Reserved,
     /// More sections than the format allows.
-    TooManySections(u8),
+    TooManySections(u16),
     /// The geometry in the header is not valid.
     Geometry(crate::geometry::GeometryError),
     /// A directory entry's kind is not known to this version.
@@ -89,6 +89,9 @@ pub enum TableError {
     MissingSection(SectionKind),
     /// A section lies (partly) outside the table or over the header.
     SectionOutOfBounds(SectionKind),
+    /// Sections do not follow the directory back to back: this one leaves a gap before it
+    /// (bytes no CRC covers) or overlaps another, or the last one does not end the table.
+    SectionLayout(SectionKind),
     /// A section's bytes fail their CRC.
     SectionCrc(SectionKind),
     /// A section's length does not match what the geometry or its own count implies.
@@ -133,6 +136,11 @@ impl core::fmt::Display for TableError {
             Self::SectionOutOfBounds(k) => {
                 write!(f, "calibration table: {} section out of bounds", k.name())
             }
+            Self::SectionLayout(k) => write!(
+                f,
+                "calibration table: {} section leaves a gap or overlaps another",
+                k.name()
+            ),
             Self::SectionCrc(k) => {
                 write!(f, "calibration table: {} section CRC mismatch", k.name())
             }

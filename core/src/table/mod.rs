@@ -21,7 +21,8 @@
 //! 28     4     header CRC-32 (ISO-HDLC) of bytes 0..28 followed by the directory
 //! 32   16*n    directory, one entry per section:
 //!              kind u16, reserved u16, offset u32, length u32, CRC-32 of the section u32
-//! ...          sections, each inside the table, in any order, not overlapping the header
+//! ...          sections, back to back from the end of the directory to the end of the table
+//!              (in any order, no gap, no overlap: every byte is under exactly one CRC)
 //! ```
 //!
 //! # Sections

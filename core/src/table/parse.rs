@@ -29,6 +29,7 @@ pub(crate) fn u32_at(b: &[u8], off: usize) -> Option<u32> {
 /// they still return a neutral value rather than panic if called out of range.
 #[derive(Clone, Copy, Debug)]
 pub struct CalibTable<'a> {
+    len: usize,
     geometry: ReadoutGeometry,
     saturation_adu: u16,
     gains: [GainEPerAdu; MAX_OUTPUTS],
@@ -43,6 +44,8 @@ pub struct CalibTable<'a> {
 #[derive(Clone, Copy, Debug)]
 pub struct MapView<'a> {
     header: MapHeader,
+    active_cols: u16,
+    active_rows: u16,
     elem_bytes: usize,
     data: &'a [u8],
 }
@@ -59,8 +62,12 @@ impl<'a> MapView<'a> {
         ty * usize::from(self.header.tiles_x) + tx
     }
 
-    /// The raw element bits at active pixel (x, y), or `None` outside the map.
+    /// The raw element bits at active pixel (x, y), or `None` outside the active area (a
+    /// pixel past the right edge must not read the next row's tile).
     fn bits(&self, x: u16, y: u16) -> Option<u32> {
+        if x >= self.active_cols || y >= self.active_rows {
+            return None;
+        }
         let i = self.tile_index(x, y).checked_mul(self.elem_bytes)?;
         match self.elem_bytes {
             1 => self.data.get(i).map(|b| u32::from(*b)),
@@ -179,6 +186,7 @@ fn lower_bound(len: usize, key: (u16, u16), key_at: impl Fn(usize) -> Option<(u1
 
 struct Section<'a> {
     kind: SectionKind,
+    offset: usize,
     bytes: &'a [u8],
 }
 
@@ -203,9 +211,7 @@ impl<'a> CalibTable<'a> {
         let n_sections = rd16(6)?;
         let total = u32_at(head, 8).ok_or(too_short(HEADER_LEN))?;
         if usize::from(n_sections) > MAX_SECTIONS {
-            return Err(TableError::TooManySections(
-                u8::try_from(n_sections).unwrap_or(u8::MAX),
-            ));
+            return Err(TableError::TooManySections(n_sections));
         }
         let dir_end = HEADER_LEN + DIR_ENTRY_LEN * usize::from(n_sections);
         if total != got || (total as usize) < dir_end {
@@ -237,8 +243,13 @@ impl<'a> CalibTable<'a> {
         let saturation_adu = rd16(24)?;
 
         let mut found: [Option<&'a [u8]>; 6] = [None; 6];
+        // (offset, length, kind) of each section, to prove they cover the table exactly.
+        let mut extents = [(0usize, 0usize, SectionKind::Gains); MAX_SECTIONS];
         for i in 0..usize::from(n_sections) {
             let s = section(bytes, dir, i, dir_end)?;
+            if let Some(e) = extents.get_mut(i) {
+                *e = (s.offset, s.bytes.len(), s.kind);
+            }
             let slot = found
                 .get_mut(s.kind as usize - 1)
                 .ok_or(TableError::UnknownSection(s.kind as u16))?;
@@ -248,6 +259,26 @@ impl<'a> CalibTable<'a> {
             *slot = Some(s.bytes);
         }
         let [gains, column_bias, dark, flat, hot, telegraph] = found;
+        if gains.is_none() {
+            return Err(TableError::MissingSection(SectionKind::Gains));
+        }
+        // Sections follow the directory back to back with no gap or overlap, so that every
+        // byte of the table is under the header CRC or exactly one section CRC.
+        let extents = extents
+            .get_mut(..usize::from(n_sections))
+            .unwrap_or(&mut []);
+        extents.sort_unstable_by_key(|e| e.0);
+        let mut next = dir_end;
+        for (off, len, kind) in extents.iter() {
+            if *off != next {
+                return Err(TableError::SectionLayout(*kind));
+            }
+            next = off + len;
+        }
+        if next != bytes.len() {
+            let last = extents.last().map_or(SectionKind::Gains, |e| e.2);
+            return Err(TableError::SectionLayout(last));
+        }
 
         let gains = parse_gains(
             gains.ok_or(TableError::MissingSection(SectionKind::Gains))?,
@@ -272,6 +303,7 @@ impl<'a> CalibTable<'a> {
             .unwrap_or_default();
 
         Ok(Self {
+            len: bytes.len(),
             geometry,
             saturation_adu,
             gains,
@@ -281,6 +313,32 @@ impl<'a> CalibTable<'a> {
             hot,
             telegraph,
         })
+    }
+
+    /// Checks a table stored at the start of a larger region (a flash sector): the length
+    /// comes from the table's own header, and the bytes after it are ignored. Errors as
+    /// [`Self::parse`]; a stated length past the region is a [`TableError::LengthMismatch`].
+    pub fn parse_prefix(region: &'a [u8]) -> Result<Self, TableError> {
+        if region.get(..4).is_some_and(|m| m != &MAGIC[..]) {
+            return Err(TableError::BadMagic);
+        }
+        let got = u32::try_from(region.len()).unwrap_or(u32::MAX);
+        let stated = u32_at(region, 8).ok_or(TableError::TooShort {
+            needed: HEADER_LEN as u32,
+            got,
+        })?;
+        let bytes = region
+            .get(..stated as usize)
+            .ok_or(TableError::LengthMismatch {
+                header: stated,
+                actual: got,
+            })?;
+        Self::parse(bytes)
+    }
+
+    /// The table's size in bytes.
+    pub fn len_bytes(&self) -> usize {
+        self.len
     }
 
     /// The sensor geometry the table was made for.
@@ -378,7 +436,11 @@ fn section<'a>(
     if CRC.checksum(s) != crc {
         return Err(TableError::SectionCrc(kind));
     }
-    Ok(Section { kind, bytes: s })
+    Ok(Section {
+        kind,
+        offset: off,
+        bytes: s,
+    })
 }
 
 fn parse_gains(b: &[u8], g: &ReadoutGeometry) -> Result<[GainEPerAdu; MAX_OUTPUTS], TableError> {
@@ -426,6 +488,8 @@ fn parse_map<'a>(
     }
     let view = MapView {
         header: want,
+        active_cols: g.active_cols,
+        active_rows: g.active_rows,
         elem_bytes,
         data,
     };
