@@ -1,0 +1,73 @@
+//! The raw line buffers and their zero-copy hand-off from readout to processing.
+//!
+//! Two line buffers (ping-pong) circulate between the readout task and the processing task
+//! by ownership: a buffer is a `&'static mut LineBuf` that travels through two channels,
+//!
+//! ```text
+//!   FREE ──> readout (DMA fills it) ──> FILLED ──> process (reads it) ──> FREE
+//! ```
+//!
+//! so while processing works on one line the DMA fills the other, no line is ever copied,
+//! and the borrow checker guarantees that the CPU never reads a buffer the DMA is writing.
+//!
+//! Placement: the buffers are ordinary statics, so they go to `.bss`, which `memory.x` puts
+//! in RAM = the AXI SRAM at 0x2400_0000. Every DMA master (DMA1/DMA2/MDMA) reaches the AXI
+//! SRAM; the DTCM at 0x2000_0000 would not be reachable, which is why nothing here uses a
+//! `link_section`. The data cache is left disabled (neither cortex-m-rt nor embassy-stm32
+//! enables it), so DMA writes are seen by the CPU without cache maintenance; whoever enables
+//! the D-cache must invalidate a buffer before reading it or make this region non-cacheable
+//! through the MPU.
+
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use startrack_core::geometry::ReadoutGeometry;
+use static_cell::ConstStaticCell;
+
+/// The readout mode of this firmware: the CCD47-20 read through both outputs.
+pub const GEOMETRY: ReadoutGeometry = ReadoutGeometry::CCD47_20_DUAL;
+
+/// Samples per raw line (1072 for the CCD47-20).
+pub const LINE_LEN: usize = GEOMETRY.line_len();
+
+/// Number of line buffers: two, one being filled while the other is processed.
+pub const BUFFERS: usize = 2;
+
+/// One raw line: 16-bit ADC samples in physical column order.
+pub type LineBuf = [u16; LINE_LEN];
+
+/// A filled line on its way to processing.
+pub struct RawLine {
+    /// Frame number since boot (wraps).
+    pub frame: u32,
+    /// Raw line index within the frame, 0-based (`0..GEOMETRY.lines`).
+    pub line: u16,
+    /// The samples; the buffer goes back to [`FREE`] once processed.
+    pub samples: &'static mut LineBuf,
+}
+
+/// The line buffers themselves, zero-initialised in `.bss` (AXI SRAM, DMA-reachable).
+static BUFS: ConstStaticCell<[LineBuf; BUFFERS]> = ConstStaticCell::new([[0; LINE_LEN]; BUFFERS]);
+
+/// Buffers ready to be filled by the readout DMA.
+pub static FREE: Channel<CriticalSectionRawMutex, &'static mut LineBuf, BUFFERS> = Channel::new();
+
+/// Filled lines waiting for processing, oldest first.
+pub static FILLED: Channel<CriticalSectionRawMutex, RawLine, BUFFERS> = Channel::new();
+
+/// Why the buffer pool could not be set up.
+#[derive(Clone, Copy, Debug, defmt::Format)]
+pub enum PoolError {
+    /// [`init`] was called twice.
+    AlreadyInitialised,
+    /// The free channel refused a buffer (cannot happen: it holds [`BUFFERS`]).
+    FreeChannelFull,
+}
+
+/// Puts every line buffer in [`FREE`]. Call once, before the readout task starts.
+pub fn init() -> Result<(), PoolError> {
+    let bufs = BUFS.try_take().ok_or(PoolError::AlreadyInitialised)?;
+    for buf in bufs.iter_mut() {
+        FREE.try_send(buf).map_err(|_| PoolError::FreeChannelFull)?;
+    }
+    Ok(())
+}
