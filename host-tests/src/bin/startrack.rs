@@ -25,6 +25,19 @@ enum Command {
         #[arg(long, default_value_t = 12)]
         stars: usize,
     },
+    /// Write the simulated sensor's true calibration as a table file (for bring-up on a board:
+    /// flash it into the CALIB sector, see the README).
+    Table {
+        /// Output file.
+        #[arg(long)]
+        out: std::path::PathBuf,
+        /// Seed of the simulated sensor.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Map tiles of 2^N pixels; 3 (8x8) fits the 128 KB CALIB sector.
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(0..=10))]
+        tile_log2: u8,
+    },
 }
 
 fn main() -> ExitCode {
@@ -40,5 +53,35 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        Command::Table {
+            out,
+            seed,
+            tile_log2,
+        } => {
+            let params = startrack_host::sim::SensorParams {
+                seed,
+                ..Default::default()
+            };
+            let sim = startrack_host::sim::Simulator::new(params, Vec::new());
+            let sections = startrack_host::sim::truth::TruthSections::ALL;
+            let written = sim
+                .truth_table_tiled(sections, tile_log2)
+                .map_err(|e| e.to_string())
+                .and_then(|t| {
+                    std::fs::write(&out, &t)
+                        .map(|()| t.len())
+                        .map_err(|e| e.to_string())
+                });
+            match written {
+                Ok(n) => {
+                    println!("wrote {} ({n} bytes)", out.display());
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("startrack table: {}: {e}", out.display());
+                    ExitCode::FAILURE
+                }
+            }
+        }
     }
 }

@@ -3,7 +3,7 @@
 
 use super::render::Simulator;
 use startrack_core::geometry::Segment;
-use startrack_core::table::{MapSpec, TableSpec, WriteError, write_table};
+use startrack_core::table::{MapHeader, MapSpec, TableSpec, WriteError, write_table};
 use startrack_core::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu, Kelvin};
 
 /// Which of the sensor's corrections the table carries; the others are left out ("no
@@ -49,8 +49,19 @@ impl Simulator {
         if n == 0 { 1.0 } else { sum / n as f64 }
     }
 
-    /// Encodes the sensor's true maps as a calibration table (per-pixel maps).
+    /// Encodes the sensor's true maps as a calibration table with per-pixel maps.
     pub fn truth_table(&self, sections: TruthSections) -> Result<Vec<u8>, WriteError> {
+        self.truth_table_tiled(sections, 0)
+    }
+
+    /// Encodes the sensor's true maps as a calibration table, each map averaged over square
+    /// tiles of `2^tile_log2` pixels (0: per pixel). Tiles lose the pixel-to-pixel part of
+    /// DSNU and PRNU: they are the reduced form for internal flash, not a full correction.
+    pub fn truth_table_tiled(
+        &self,
+        sections: TruthSections,
+        tile_log2: u8,
+    ) -> Result<Vec<u8>, WriteError> {
         let p = &self.params;
         let g = p.geometry;
         let gains: Vec<GainEPerAdu> = (0..g.outputs)
@@ -64,22 +75,35 @@ impl Simulator {
             .collect();
         let norm = self.covered_dark_mean();
         let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
-        let dark: Vec<DarkRel> = if sections.dark {
-            (0..rows)
-                .flat_map(|y| (0..cols).map(move |x| (x, y)))
-                .map(|(x, y)| {
-                    DarkRel::saturating_from_num(self.dark_rel(g.raw_col_of_x(x), y) / norm)
+        let header = MapHeader::for_area(g.active_cols, g.active_rows, tile_log2);
+        // The mean of `f` over each tile, row-major, clipped at the active area's edges.
+        let tiled = |f: &dyn Fn(usize, usize) -> f64| -> Vec<f64> {
+            let t = 1usize << tile_log2;
+            let (tx, ty) = (usize::from(header.tiles_x), usize::from(header.tiles_y));
+            (0..ty * tx)
+                .map(|i| {
+                    let (x0, y0) = ((i % tx) * t, (i / tx) * t);
+                    let (x1, y1) = ((x0 + t).min(cols), (y0 + t).min(rows));
+                    let sum: f64 = (y0..y1)
+                        .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+                        .map(|(x, y)| f(x, y))
+                        .sum();
+                    sum / ((x1 - x0) * (y1 - y0)) as f64
                 })
+                .collect()
+        };
+        let dark: Vec<DarkRel> = if sections.dark {
+            tiled(&|x, y| self.dark_rel(g.raw_col_of_x(x), y) / norm)
+                .into_iter()
+                .map(DarkRel::saturating_from_num)
                 .collect()
         } else {
             Vec::new()
         };
         let flat: Vec<FlatInv> = if sections.flat {
-            (0..rows)
-                .flat_map(|y| (0..cols).map(move |x| (x, y)))
-                .map(|(x, y)| {
-                    FlatInv::saturating_from_num(1.0 / self.flat(x, y)).max(FlatInv::DELTA)
-                })
+            tiled(&|x, y| 1.0 / self.flat(x, y))
+                .into_iter()
+                .map(|v| FlatInv::saturating_from_num(v).max(FlatInv::DELTA))
                 .collect()
         } else {
             Vec::new()
@@ -90,11 +114,11 @@ impl Simulator {
             gains: &gains,
             column_bias: sections.column_bias.then_some(&column_bias[..]),
             dark_rel: sections.dark.then_some(MapSpec {
-                tile_log2: 0,
+                tile_log2,
                 tiles: &dark,
             }),
             flat_inv: sections.flat.then_some(MapSpec {
-                tile_log2: 0,
+                tile_log2,
                 tiles: &flat,
             }),
             hot_ref_k: Kelvin::from_num(293),
