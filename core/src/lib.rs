@@ -22,6 +22,7 @@
 )]
 
 pub mod calib;
+pub mod detect;
 pub mod geometry;
 pub mod table;
 pub mod units;

@@ -1,0 +1,438 @@
+//! Connected-component labelling of above-threshold pixels, one line at a time, and the
+//! bounded candidate list.
+//!
+//! Each line is cut into runs of consecutive pixels above the threshold. A run joins every
+//! blob with a run on the previous line that touches it (8-connectivity: overlapping or
+//! diagonally adjacent); a run that joins two blobs merges them. A blob that gets no run on
+//! a line is complete: its SNR is measured and, above the minimum, it becomes a candidate.
+//! State: the previous and current lines' runs ([`MAX_RUNS`] each) and at most
+//! [`MAX_OPEN`] open blobs; when either is full, pixels are dropped and counted, and the
+//! affected candidates are flagged.
+//!
+//! Candidates live in a `heapless::Vec` of capacity `N`. When it is full, a new candidate
+//! replaces the faintest one if it is brighter; either way one candidate is lost and
+//! counted in [`LineDetector::dropped`]: the list always holds the `N` brightest.
+//!
+//! Blob positions are flux-weighted means of the blob's pixels: a seed for the centroid
+//! methods, not a measurement.
+
+use super::background::Background;
+use super::{DetectConfig, DetectError};
+use crate::calib::PixelFlags;
+use crate::units::Electrons;
+
+/// Most runs kept per line.
+pub const MAX_RUNS: usize = 256;
+/// Most blobs open at once.
+pub const MAX_OPEN: usize = 128;
+
+bitflags::bitflags! {
+    /// What detection noticed about a candidate.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub struct DetectionFlags: u8 {
+        /// A pixel of the blob is saturated: flux is a lower bound, position biased.
+        const SATURATED = 1;
+        /// The blob touches the edge of the active area: its window will be clipped.
+        const EDGE = 2;
+        /// Probably a close pair: two branches with peaks at least 3 px apart met, or the
+        /// flux-weighted mean lies at least 1.5 px from the brightest pixel.
+        const BLENDED = 4;
+        /// SNR between the minimum and the low-SNR level of the configuration.
+        const LOW_SNR = 8;
+        /// Some of the blob's pixels were dropped because a run or blob table was full.
+        const TRUNCATED = 16;
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for DetectionFlags {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(f, "DetectionFlags({=u8:#x})", self.bits())
+    }
+}
+
+/// A star candidate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Detection {
+    /// Flux-weighted column of the blob, px (active coordinates).
+    pub x_px: f32,
+    /// Flux-weighted row of the blob, px.
+    pub y_px: f32,
+    /// Column of the brightest pixel.
+    pub peak_x: u16,
+    /// Row of the brightest pixel.
+    pub peak_y: u16,
+    /// Background-subtracted signal of the blob's pixels, e-.
+    pub flux_e: f32,
+    /// Pixels in the blob.
+    pub pixels: u32,
+    /// Measured SNR, eq. 8: flux / sqrt(flux + sum of the pixels' noise variances).
+    pub snr: f32,
+    /// Flags.
+    pub flags: DetectionFlags,
+}
+
+/// True when pixel `x` belongs to a blob: above the local threshold, or saturated, and not a
+/// listed hot or telegraph pixel.
+fn above(bg: &Background, k: f32, pixels_e: &[Electrons], flags: &[PixelFlags], x: usize) -> bool {
+    let (Some(e), Some(f)) = (pixels_e.get(x), flags.get(x)) else {
+        return false;
+    };
+    if f.is_excluded() || f.contains(PixelFlags::HOT_CORRECTED) {
+        return false;
+    }
+    let l = bg.at(x);
+    let thr = i64::from(l.bg_bits) + (k * l.sigma_bits as f32) as i64;
+    f.contains(PixelFlags::SATURATED) || i64::from(e.to_bits()) > thr
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    x0: u16,
+    x1: u16,
+    blob: u16,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Blob {
+    open: bool,
+    /// Index of the blob this one was merged into (itself for a root).
+    parent: u16,
+    last_y: u16,
+    pixels: u32,
+    sum_w_e: f32,
+    sum_wx: f32,
+    sum_wy: f32,
+    var_e2: f32,
+    /// Largest (value - background) / sigma of the blob's pixels.
+    peak_sigmas: f32,
+    peak_bits: i32,
+    peak_x: u16,
+    peak_y: u16,
+    x_min: u16,
+    x_max: u16,
+    y_min: u16,
+    flags: DetectionFlags,
+}
+
+/// The streaming detector: feed it calibrated lines in row order with [`Self::push_line`],
+/// then call [`Self::finish`]; `N` is the candidate list's capacity.
+#[derive(Clone, Debug)]
+pub struct LineDetector<const N: usize> {
+    config: DetectConfig,
+    width: u16,
+    rows: u16,
+    background: Background,
+    prev: heapless::Vec<Run, MAX_RUNS>,
+    cur: heapless::Vec<Run, MAX_RUNS>,
+    blobs: [Blob; MAX_OPEN],
+    next_y: u16,
+    candidates: heapless::Vec<Detection, N>,
+    dropped: u32,
+    dropped_pixels: u32,
+}
+
+impl<const N: usize> LineDetector<N> {
+    /// A detector for an active area of `width` x `rows` pixels.
+    pub fn new(config: DetectConfig, width: u16, rows: u16) -> Self {
+        Self {
+            config,
+            width,
+            rows,
+            background: Background::new(usize::from(width)),
+            prev: heapless::Vec::new(),
+            cur: heapless::Vec::new(),
+            blobs: [Blob::default(); MAX_OPEN],
+            next_y: 0,
+            candidates: heapless::Vec::new(),
+            dropped: 0,
+            dropped_pixels: 0,
+        }
+    }
+
+    /// The candidates found so far (complete after [`Self::finish`]), in no order.
+    pub fn candidates(&self) -> &[Detection] {
+        &self.candidates
+    }
+
+    /// Candidates lost because the list was full.
+    pub fn dropped(&self) -> u32 {
+        self.dropped
+    }
+
+    /// Above-threshold pixels dropped because a run or blob table was full.
+    pub fn dropped_pixels(&self) -> u32 {
+        self.dropped_pixels
+    }
+
+    /// Takes calibrated active row `y` (all `width` pixels and their flags).
+    pub fn push_line(
+        &mut self,
+        y: u16,
+        pixels_e: &[Electrons],
+        flags: &[PixelFlags],
+    ) -> Result<(), DetectError> {
+        if pixels_e.len() != usize::from(self.width) || flags.len() != pixels_e.len() {
+            return Err(DetectError::LineLength);
+        }
+        if y < self.next_y {
+            return Err(DetectError::RowOrder);
+        }
+        if y > self.next_y {
+            // Skipped rows break connectivity: close everything open.
+            self.close_all_before(y);
+            self.prev.clear();
+        }
+        if !self.background.is_primed() {
+            self.background.update(pixels_e, flags);
+        }
+        self.cur.clear();
+        let k = self.config.pixel_sigmas;
+        let mut x = 0usize;
+        let w = usize::from(self.width);
+        while x < w {
+            if !above(&self.background, k, pixels_e, flags, x) {
+                x += 1;
+                continue;
+            }
+            let x0 = x;
+            while x + 1 < w && above(&self.background, k, pixels_e, flags, x + 1) {
+                x += 1;
+            }
+            self.add_run(y, x0 as u16, x as u16, pixels_e, flags);
+            x += 1;
+        }
+        // Runs of this line point at roots; merged blobs are released.
+        for i in 0..self.cur.len() {
+            if let Some(r) = self.cur.get(i).map(|r| r.blob) {
+                let root = self.find(r);
+                if let Some(run) = self.cur.get_mut(i) {
+                    run.blob = root;
+                }
+            }
+        }
+        for i in 0..MAX_OPEN {
+            let Some(b) = self.blobs.get(i).copied() else {
+                continue;
+            };
+            if b.open
+                && usize::from(b.parent) != i
+                && let Some(s) = self.blobs.get_mut(i)
+            {
+                s.open = false;
+            }
+        }
+        self.close_all_before(y);
+        core::mem::swap(&mut self.prev, &mut self.cur);
+        self.background.update(pixels_e, flags);
+        self.next_y = y.saturating_add(1);
+        Ok(())
+    }
+
+    /// Completes every open blob: call after the last line.
+    pub fn finish(&mut self) {
+        self.close_all_before(u16::MAX);
+        self.prev.clear();
+    }
+
+    fn find(&self, mut i: u16) -> u16 {
+        // Parents always point to an open root within MAX_OPEN steps.
+        for _ in 0..MAX_OPEN {
+            match self.blobs.get(usize::from(i)) {
+                Some(b) if b.parent != i => i = b.parent,
+                _ => break,
+            }
+        }
+        i
+    }
+
+    fn add_run(&mut self, y: u16, x0: u16, x1: u16, pixels_e: &[Electrons], flags: &[PixelFlags]) {
+        let mut blob: Option<u16> = None;
+        let touching: heapless::Vec<u16, MAX_RUNS> = self
+            .prev
+            .iter()
+            .filter(|p| p.x0 <= x1.saturating_add(1) && p.x1.saturating_add(1) >= x0)
+            .map(|p| p.blob)
+            .collect();
+        for b in touching {
+            let r = self.find(b);
+            match blob {
+                None => blob = Some(r),
+                Some(into) if into != r => self.merge(r, into),
+                _ => {}
+            }
+        }
+        let id = match blob {
+            Some(id) => id,
+            None => match self.blobs.iter().position(|b| !b.open) {
+                Some(free) => {
+                    let id = free as u16;
+                    if let Some(b) = self.blobs.get_mut(free) {
+                        *b = Blob {
+                            open: true,
+                            parent: id,
+                            peak_bits: i32::MIN,
+                            x_min: u16::MAX,
+                            y_min: y,
+                            ..Blob::default()
+                        };
+                    }
+                    id
+                }
+                None => {
+                    self.dropped_pixels += u32::from(x1 - x0) + 1;
+                    return;
+                }
+            },
+        };
+        if self.cur.push(Run { x0, x1, blob: id }).is_err() {
+            self.dropped_pixels += u32::from(x1 - x0) + 1;
+            if let Some(b) = self.blobs.get_mut(usize::from(id)) {
+                b.flags |= DetectionFlags::TRUNCATED;
+            }
+        }
+        let bg = &self.background;
+        let Some(b) = self.blobs.get_mut(usize::from(id)) else {
+            return;
+        };
+        b.last_y = y;
+        for x in x0..=x1 {
+            let (Some(e), Some(f)) = (pixels_e.get(usize::from(x)), flags.get(usize::from(x)))
+            else {
+                continue;
+            };
+            let l = bg.at(usize::from(x));
+            let w_bits = e.to_bits().saturating_sub(l.bg_bits);
+            let w = w_bits as f32 / 64.0;
+            let sigma = l.sigma_bits as f32 / 64.0;
+            b.pixels += 1;
+            b.sum_w_e += w;
+            b.sum_wx += w * f32::from(x);
+            b.sum_wy += w * f32::from(y);
+            b.var_e2 += sigma * sigma;
+            b.peak_sigmas = b.peak_sigmas.max(w / sigma.max(1.0 / 64.0));
+            if e.to_bits() > b.peak_bits {
+                b.peak_bits = e.to_bits();
+                b.peak_x = x;
+                b.peak_y = y;
+            }
+            if f.contains(PixelFlags::SATURATED) {
+                b.flags |= DetectionFlags::SATURATED;
+            }
+        }
+        b.x_min = b.x_min.min(x0);
+        b.x_max = b.x_max.max(x1);
+    }
+
+    /// Merges root `from` into root `into`.
+    fn merge(&mut self, from: u16, into: u16) {
+        let (Some(a), Some(b)) = (
+            self.blobs.get(usize::from(from)).copied(),
+            self.blobs.get(usize::from(into)).copied(),
+        ) else {
+            return;
+        };
+        let apart = a.peak_x.abs_diff(b.peak_x).max(a.peak_y.abs_diff(b.peak_y)) >= 3;
+        let Some(t) = self.blobs.get_mut(usize::from(into)) else {
+            return;
+        };
+        if apart && a.pixels > 1 && b.pixels > 1 {
+            t.flags |= DetectionFlags::BLENDED;
+        }
+        t.pixels += a.pixels;
+        t.sum_w_e += a.sum_w_e;
+        t.sum_wx += a.sum_wx;
+        t.sum_wy += a.sum_wy;
+        t.var_e2 += a.var_e2;
+        t.peak_sigmas = t.peak_sigmas.max(a.peak_sigmas);
+        if a.peak_bits > t.peak_bits {
+            (t.peak_bits, t.peak_x, t.peak_y) = (a.peak_bits, a.peak_x, a.peak_y);
+        }
+        t.x_min = t.x_min.min(a.x_min);
+        t.x_max = t.x_max.max(a.x_max);
+        t.y_min = t.y_min.min(a.y_min);
+        t.last_y = t.last_y.max(a.last_y);
+        t.flags |= a.flags;
+        if let Some(f) = self.blobs.get_mut(usize::from(from)) {
+            f.parent = into;
+        }
+    }
+
+    /// Completes the open root blobs whose last run is on a row before `y`.
+    fn close_all_before(&mut self, y: u16) {
+        for i in 0..MAX_OPEN {
+            let Some(b) = self.blobs.get(i).copied() else {
+                continue;
+            };
+            if b.open && usize::from(b.parent) == i && b.last_y < y {
+                if let Some(s) = self.blobs.get_mut(i) {
+                    s.open = false;
+                }
+                self.complete(&b);
+            }
+        }
+    }
+
+    fn complete(&mut self, b: &Blob) {
+        let saturated = b.flags.contains(DetectionFlags::SATURATED);
+        if !saturated
+            && (b.pixels < self.config.min_pixels || b.peak_sigmas <= self.config.peak_sigmas)
+        {
+            return;
+        }
+        let s = b.sum_w_e;
+        let snr = s / libm::sqrtf(s.max(0.0) + b.var_e2).max(f32::MIN_POSITIVE);
+        if snr.is_nan() || snr <= self.config.min_snr {
+            return;
+        }
+        let (x, y) = if s > 0.0 {
+            (b.sum_wx / s, b.sum_wy / s)
+        } else {
+            (f32::from(b.peak_x), f32::from(b.peak_y))
+        };
+        let mut flags = b.flags;
+        if (x - f32::from(b.peak_x))
+            .abs()
+            .max((y - f32::from(b.peak_y)).abs())
+            >= 1.5
+        {
+            flags |= DetectionFlags::BLENDED;
+        }
+        if snr < self.config.low_snr {
+            flags |= DetectionFlags::LOW_SNR;
+        }
+        if b.x_min == 0
+            || b.x_max.saturating_add(1) >= self.width
+            || b.y_min == 0
+            || b.last_y.saturating_add(1) >= self.rows
+        {
+            flags |= DetectionFlags::EDGE;
+        }
+        let d = Detection {
+            x_px: x.clamp(f32::from(b.x_min), f32::from(b.x_max)),
+            y_px: y.clamp(f32::from(b.y_min), f32::from(b.last_y)),
+            peak_x: b.peak_x,
+            peak_y: b.peak_y,
+            flux_e: s,
+            pixels: b.pixels,
+            snr,
+            flags,
+        };
+        if let Err(d) = self.candidates.push(d) {
+            self.dropped += 1;
+            let faintest = self
+                .candidates
+                .iter()
+                .enumerate()
+                .min_by(|a, b| a.1.flux_e.total_cmp(&b.1.flux_e))
+                .map(|(i, c)| (i, c.flux_e));
+            if let Some((i, f)) = faintest
+                && d.flux_e > f
+                && let Some(slot) = self.candidates.get_mut(i)
+            {
+                *slot = d;
+            }
+        }
+    }
+}
