@@ -182,6 +182,51 @@ fn flags_edges_pairs_and_saturation() {
         at(102.0)
     );
     assert!(at(180.0).flags.contains(DetectionFlags::SATURATED));
+    assert!(
+        !at(180.0).flags.contains(DetectionFlags::BLENDED),
+        "{:?}",
+        at(180.0)
+    );
+}
+
+/// Close pairs that merge into one blob are flagged blended, at any orientation and flux
+/// ratio down to 1:3; isolated stars across widths and SNR are not.
+#[test]
+fn close_pairs_are_flagged_blended_and_single_stars_are_not() {
+    for (i, (dx, dy)) in [(4.0, 0.0), (0.0, 4.5), (3.5, 3.0), (5.0, 2.5)]
+        .into_iter()
+        .enumerate()
+    {
+        let lines = synthetic(
+            &[(100.0, 60.0, 30_000.0), (100.0 + dx, 60.0 + dy, 10_000.0)],
+            10 + i as u64,
+        );
+        let d = run::<16>(&lines, &|_, _| PixelFlags::empty());
+        assert_eq!(d.candidates().len(), 1, "({dx},{dy}): {:?}", d.candidates());
+        assert!(
+            d.candidates()[0].flags.contains(DetectionFlags::BLENDED),
+            "({dx},{dy}): {:?}",
+            d.candidates()
+        );
+    }
+    let singles: Vec<(f64, f64, f64)> = (0..12)
+        .map(|i| {
+            (
+                15.0 + 19.3 * f64::from(i),
+                30.0 + 6.1 * f64::from(i),
+                300.0 * 2f64.powi(i % 6),
+            )
+        })
+        .collect();
+    for seed in 0..5 {
+        let d = run::<16>(&synthetic(&singles, 20 + seed), &|_, _| PixelFlags::empty());
+        for c in d.candidates() {
+            assert!(
+                !c.flags.contains(DetectionFlags::BLENDED),
+                "seed {seed}: {c:?}"
+            );
+        }
+    }
 }
 
 #[test]

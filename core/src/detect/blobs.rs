@@ -13,7 +13,7 @@
 //! replaces the faintest one if it is brighter; either way one candidate is lost and
 //! counted in [`LineDetector::dropped`]: the list always holds the `N` brightest.
 //!
-//! Blob positions are flux-weighted means of the blob's pixels: a seed for the centroid
+//! Blob positions are means of the blob's pixels weighted by their positive signal: a seed for the centroid
 //! methods, not a measurement.
 
 use super::background::Background;
@@ -35,7 +35,7 @@ bitflags::bitflags! {
         /// The blob touches the edge of the active area: its window will be clipped.
         const EDGE = 2;
         /// Probably a close pair: two branches with peaks at least 3 px apart met, or the
-        /// flux-weighted mean lies at least 1.5 px from the brightest pixel.
+        /// blob is elongated (covariance eigenvalues l1 > 2 l2 and l1 - l2 > 1 px^2).
         const BLENDED = 4;
         /// SNR between the minimum and the low-SNR level of the configuration.
         const LOW_SNR = 8;
@@ -95,6 +95,51 @@ struct Run {
 }
 
 #[derive(Clone, Copy, Debug, Default)]
+struct Moments {
+    w: f32,
+    x: f32,
+    y: f32,
+    xx: f32,
+    yy: f32,
+    xy: f32,
+}
+
+impl Moments {
+    fn add(&mut self, w: f32, dx: f32, dy: f32) {
+        self.w += w;
+        self.x += w * dx;
+        self.y += w * dy;
+        self.xx += w * dx * dx;
+        self.yy += w * dy * dy;
+        self.xy += w * dx * dy;
+    }
+
+    /// Adds `o`, whose coordinates are relative to a point (`sx`, `sy`) from ours.
+    fn add_shifted(&mut self, o: &Moments, sx: f32, sy: f32) {
+        self.w += o.w;
+        self.x += o.x + sx * o.w;
+        self.y += o.y + sy * o.w;
+        self.xx += o.xx + 2.0 * sx * o.x + sx * sx * o.w;
+        self.yy += o.yy + 2.0 * sy * o.y + sy * sy * o.w;
+        self.xy += o.xy + sx * o.y + sy * o.x + sx * sy * o.w;
+    }
+
+    /// Mean (relative) and the covariance's eigenvalues (larger first), px and px^2.
+    fn shape(&self) -> Option<((f32, f32), (f32, f32))> {
+        if self.w <= 0.0 {
+            return None;
+        }
+        let (mx, my) = (self.x / self.w, self.y / self.w);
+        let cxx = self.xx / self.w - mx * mx;
+        let cyy = self.yy / self.w - my * my;
+        let cxy = self.xy / self.w - mx * my;
+        let half_tr = 0.5 * (cxx + cyy);
+        let disc = libm::sqrtf((0.25 * (cxx - cyy) * (cxx - cyy) + cxy * cxy).max(0.0));
+        Some(((mx, my), (half_tr + disc, half_tr - disc)))
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default)]
 struct Blob {
     open: bool,
     /// Index of the blob this one was merged into (itself for a root).
@@ -102,8 +147,11 @@ struct Blob {
     last_y: u16,
     pixels: u32,
     sum_w_e: f32,
-    sum_wx: f32,
-    sum_wy: f32,
+    /// Position moments with weights max(w, 0), coordinates relative to (ref_x, ref_y) so
+    /// that f32 keeps its precision: sums of w, w dx, w dy, w dx^2, w dy^2, w dx dy.
+    moments: Moments,
+    ref_x: u16,
+    ref_y: u16,
     var_e2: f32,
     /// Largest (value - background) / sigma of the blob's pixels.
     peak_sigmas: f32,
@@ -274,6 +322,8 @@ impl<const N: usize> LineDetector<N> {
                             parent: id,
                             peak_bits: i32::MIN,
                             x_min: u16::MAX,
+                            ref_x: x0,
+                            ref_y: y,
                             y_min: y,
                             ..Blob::default()
                         };
@@ -308,8 +358,11 @@ impl<const N: usize> LineDetector<N> {
             let sigma = l.sigma_bits as f32 / 64.0;
             b.pixels += 1;
             b.sum_w_e += w;
-            b.sum_wx += w * f32::from(x);
-            b.sum_wy += w * f32::from(y);
+            let (dx, dy) = (
+                f32::from(x) - f32::from(b.ref_x),
+                f32::from(y) - f32::from(b.ref_y),
+            );
+            b.moments.add(w.max(0.0), dx, dy);
             b.var_e2 += sigma * sigma;
             b.peak_sigmas = b.peak_sigmas.max(w / sigma.max(1.0 / 64.0));
             if e.to_bits() > b.peak_bits {
@@ -342,8 +395,11 @@ impl<const N: usize> LineDetector<N> {
         }
         t.pixels += a.pixels;
         t.sum_w_e += a.sum_w_e;
-        t.sum_wx += a.sum_wx;
-        t.sum_wy += a.sum_wy;
+        let (sx, sy) = (
+            f32::from(a.ref_x) - f32::from(t.ref_x),
+            f32::from(a.ref_y) - f32::from(t.ref_y),
+        );
+        t.moments.add_shifted(&a.moments, sx, sy);
         t.var_e2 += a.var_e2;
         t.peak_sigmas = t.peak_sigmas.max(a.peak_sigmas);
         if a.peak_bits > t.peak_bits {
@@ -386,19 +442,19 @@ impl<const N: usize> LineDetector<N> {
         if snr.is_nan() || snr <= self.config.min_snr {
             return;
         }
-        let (x, y) = if s > 0.0 {
-            (b.sum_wx / s, b.sum_wy / s)
-        } else {
-            (f32::from(b.peak_x), f32::from(b.peak_y))
-        };
         let mut flags = b.flags;
-        if (x - f32::from(b.peak_x))
-            .abs()
-            .max((y - f32::from(b.peak_y)).abs())
-            >= 1.5
-        {
-            flags |= DetectionFlags::BLENDED;
-        }
+        let (x, y) = match b.moments.shape() {
+            Some(((mx, my), (l1, l2))) => {
+                // A single star is round to within noise; a pair is elongated along the line
+                // joining it (its variance grows by f (1 - f) d^2 for fluxes f, 1 - f and
+                // separation d).
+                if l1 > 2.0 * l2 && l1 - l2 > 1.0 {
+                    flags |= DetectionFlags::BLENDED;
+                }
+                (f32::from(b.ref_x) + mx, f32::from(b.ref_y) + my)
+            }
+            None => (f32::from(b.peak_x), f32::from(b.peak_y)),
+        };
         if snr < self.config.low_snr {
             flags |= DetectionFlags::LOW_SNR;
         }
