@@ -6,7 +6,10 @@
 //! 1. bias of each output from the line's over-scan ([`LineLevels::measure`]);
 //! 2. the line's covered columns into the frame's [`DarkScaleEstimator`];
 //! 3. for an active row, its 1024 pixels to electrons ([`FrameCalibration::calibrate_span`])
-//!    into a buffer owned by this task.
+//!    into a buffer owned by this task;
+//! 4. the calibrated row into the frame's streaming star detector ([`LineDetector`]), whose
+//!    candidates (at most [`MAX_STARS`], the brightest kept) are reported when the frame
+//!    ends.
 //!
 //! Without a table (none in flash, or rejected) the firmware runs *uncalibrated*: the bias is
 //! still measured and the summary reports the active pixels' mean above bias in ADU; no
@@ -21,8 +24,8 @@
 //! table's hot-pixel reference temperature, and the exposure as one frame period of the
 //! timer-paced readout. They affect only hot pixels with the `Correct` policy.
 //!
-//! The calibrated row is not used further yet (no detection or centroiding on the target);
-//! only its summary leaves the task.
+//! Centroiding of the candidates is not done on the target yet (issue 3); their detection
+//! positions and SNR leave the task in the frame report.
 
 use crate::lines::{FILLED, FREE, GEOMETRY, LineBuf};
 use crate::readout::LINE_PERIOD;
@@ -31,6 +34,7 @@ use fixed::types::I28F4;
 use startrack_core::calib::{
     DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
 };
+use startrack_core::detect::{DetectConfig, LineDetector};
 use startrack_core::geometry::MAX_OUTPUTS;
 use startrack_core::table::CalibTable;
 use startrack_core::units::{BiasAdu, Electrons};
@@ -41,7 +45,11 @@ const ACTIVE_COLS: usize = GEOMETRY.active_cols as usize;
 /// Exposure assumed for the hot-pixel law: one frame period of the timer-paced readout.
 const EXPOSURE_MS: u32 = (GEOMETRY.lines as u64 * LINE_PERIOD.as_millis()) as u32;
 
-/// The processing state: the table, the dark-scale estimate and the output row.
+/// Most star candidates kept per frame.
+pub const MAX_STARS: usize = 32;
+
+/// The processing state: the table, the dark-scale estimate, the output row and the
+/// frame's detector.
 pub struct Processor {
     table: Option<CalibTable<'static>>,
     /// The frame whose lines are being accumulated, and how many of its lines were seen.
@@ -52,11 +60,12 @@ pub struct Processor {
     prev_dark_scale: Option<Electrons>,
     electrons: [Electrons; ACTIVE_COLS],
     flags: [PixelFlags; ACTIVE_COLS],
+    detector: LineDetector<MAX_STARS>,
 }
 
 impl Processor {
     /// A processor that calibrates with `table`, or runs uncalibrated without one.
-    pub const fn new(table: Option<CalibTable<'static>>) -> Self {
+    pub fn new(table: Option<CalibTable<'static>>) -> Self {
         Self {
             table,
             frame: None,
@@ -65,7 +74,16 @@ impl Processor {
             prev_dark_scale: None,
             electrons: [Electrons::ZERO; ACTIVE_COLS],
             flags: [PixelFlags::empty(); ACTIVE_COLS],
+            detector: Self::new_detector(),
         }
+    }
+
+    fn new_detector() -> LineDetector<MAX_STARS> {
+        LineDetector::new(
+            DetectConfig::default(),
+            GEOMETRY.active_cols,
+            GEOMETRY.active_rows,
+        )
     }
 
     /// Closes the previous frame when `frame` starts a new one.
@@ -76,6 +94,8 @@ impl Processor {
         if let Some(done) = self.frame {
             let estimate = self.estimator.estimate();
             telemetry::report_frame(done, self.lines_in_frame, estimate);
+            self.detector.finish();
+            telemetry::report_detections(done, self.detector.candidates(), self.detector.dropped());
             if estimate.is_some() {
                 self.prev_dark_scale = estimate;
             }
@@ -83,6 +103,7 @@ impl Processor {
         self.frame = Some(frame);
         self.lines_in_frame = 0;
         self.estimator = DarkScaleEstimator::new();
+        self.detector = Self::new_detector();
     }
 
     /// Processes raw line `line` of frame `frame`.
@@ -151,6 +172,9 @@ impl Processor {
                 return LineOutcome::Failed;
             }
         };
+        if let Err(e) = self.detector.push_line(line, &self.electrons, &self.flags) {
+            defmt::error!("process: detection, line {}: {}", line, e);
+        }
         let (mut sum, mut used, mut saturated) = (0i64, 0i64, 0u16);
         for (e, f) in self.electrons.iter().zip(self.flags.iter()) {
             if !f.is_excluded() {

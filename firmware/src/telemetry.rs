@@ -7,6 +7,7 @@
 
 use fixed::types::I28F4;
 use startrack_core::calib::PixelFlags;
+use startrack_core::detect::Detection;
 use startrack_core::geometry::MAX_OUTPUTS;
 use startrack_core::units::{BiasAdu, Electrons};
 
@@ -69,4 +70,18 @@ pub fn report_frame(frame: u32, lines: u16, dark_scale_e: Option<Electrons>) {
         lines,
         dark_scale_e
     );
+}
+
+/// Logs a frame's star candidates (position, flux, SNR, flags) and how many were lost
+/// because the list was full.
+pub fn report_detections(frame: u32, stars: &[Detection], dropped: u32) {
+    defmt::info!(
+        "frame {} stars: {} candidates, {} dropped",
+        frame,
+        stars.len(),
+        dropped
+    );
+    for s in stars {
+        defmt::info!("frame {} star {}", frame, s);
+    }
 }
