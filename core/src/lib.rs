@@ -22,6 +22,7 @@
 )]
 
 pub mod calib;
+pub mod centroid;
 pub mod detect;
 pub mod geometry;
 pub mod table;

@@ -1,0 +1,104 @@
+//! Accuracy of the core's f32 functions (`centroid::math`) against f64, over their useful
+//! ranges, and a self-check of the f64 erf used by the PSF reference.
+//!
+//! `-- --nocapture` prints the measured worst errors (quoted in the module docs).
+
+#[path = "common/psf.rs"]
+mod psf;
+
+use startrack_core::centroid::math;
+
+/// Log-spaced and linear samples of [lo, hi].
+fn samples(lo: f64, hi: f64, n: usize) -> impl Iterator<Item = f64> {
+    (0..=n).map(move |i| lo + (hi - lo) * i as f64 / n as f64)
+}
+
+#[test]
+fn sqrt_relative_error() {
+    let mut worst: f64 = 0.0;
+    for e in samples(-120.0, 120.0, 200_000) {
+        let x = 2f64.powf(e) as f32;
+        let got = f64::from(math::sqrt(x));
+        let want = f64::from(x).sqrt();
+        worst = worst.max((got / want - 1.0).abs());
+    }
+    eprintln!("sqrt: worst relative error {worst:.2e}");
+    assert!(worst < 2.5e-7);
+    assert_eq!(math::sqrt(-1.0), 0.0);
+    assert_eq!(math::sqrt(f32::NAN), 0.0);
+    assert_eq!(math::sqrt(0.0), 0.0);
+    assert!(math::sqrt(f32::INFINITY).is_finite());
+}
+
+#[test]
+fn exp_relative_error() {
+    let mut worst: f64 = 0.0;
+    for x in samples(-87.0, 88.0, 400_000) {
+        let x = x as f32;
+        let got = f64::from(math::exp(x));
+        let want = f64::from(x).exp();
+        worst = worst.max((got / want - 1.0).abs());
+    }
+    eprintln!("exp: worst relative error {worst:.2e}");
+    assert!(worst < 5e-7);
+    assert_eq!(math::exp(-1000.0), 0.0);
+    assert_eq!(math::exp(f32::NAN), 0.0);
+    assert!(math::exp(1000.0).is_finite() && math::exp(f32::INFINITY).is_finite());
+}
+
+#[test]
+fn ln_absolute_error() {
+    let mut worst: f64 = 0.0;
+    for e in samples(-140.0, 127.0, 400_000) {
+        let x = 2f64.powf(e) as f32;
+        if x == 0.0 {
+            continue;
+        }
+        let got = f64::from(math::ln(x));
+        let want = f64::from(x).ln();
+        // Absolute near 1, relative (f32 rounding of the result) far from it.
+        worst = worst.max((got - want).abs() / (1.0 + want.abs()));
+    }
+    eprintln!("ln: worst error {worst:.2e} x (1 + |ln x|)");
+    assert!(worst < 2e-7, "{worst}");
+    for bad in [0.0, -1.0, f32::NAN] {
+        assert!(math::ln(bad).is_finite());
+    }
+    assert!(math::ln(f32::INFINITY).is_finite());
+}
+
+#[test]
+fn erfc_and_pixel_fraction() {
+    // The f64 reference itself: known values and continuity at the series/fraction switch.
+    assert!((psf::erf(1.0) - 0.842_700_792_949_714_9).abs() < 1e-14);
+    assert!((psf::erf(0.5) - 0.520_499_877_813_046_5).abs() < 1e-14);
+    assert!((psf::erfc(3.0) / 2.209_049_699_858_544e-5 - 1.0).abs() < 1e-12);
+    assert!((psf::erfc(2.5 - 1e-12) - psf::erfc(2.5)).abs() < 1e-13);
+
+    let mut worst: f64 = 0.0;
+    for x in samples(-6.0, 6.0, 120_000) {
+        let got = f64::from(math::erfc(x as f32));
+        let want = if x >= 0.0 {
+            psf::erfc(f64::from(x as f32))
+        } else {
+            2.0 - psf::erfc(-f64::from(x as f32))
+        };
+        worst = worst.max((got - want).abs());
+    }
+    eprintln!("erfc: worst absolute error {worst:.2e}");
+    assert!(worst < 6e-7);
+    assert!(math::erfc(f32::NAN).is_finite());
+
+    let mut worst: f64 = 0.0;
+    for s in [0.2, 0.28, 0.5, 1.0, 1.7] {
+        for c in samples(-0.5, 0.5, 100) {
+            for i in -8..=8 {
+                let got = f64::from(math::pixel_fraction(i as f32, c as f32, s as f32));
+                let want = psf::pixel_frac(f64::from(i), f64::from(c as f32), f64::from(s as f32));
+                worst = worst.max((got - want).abs());
+            }
+        }
+    }
+    eprintln!("pixel_fraction: worst absolute error {worst:.2e} (of the unit flux)");
+    assert!(worst < 6e-7);
+}

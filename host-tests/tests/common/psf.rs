@@ -1,0 +1,290 @@
+//! f64 references for the centroid tests: the paper's pixel-integrated Gaussian PSF (eq. 3 and
+//! 5), reference centroids (CoG power 1 and 2, 3-point quadratic fits, Gaussian-windowed
+//! centroid), the Cramer-Rao bound, and a seeded Gaussian noise source.
+//!
+//! Self-contained (no `libm`): erf/erfc are a Taylor series below |x| = 2.5 and a continued
+//! fraction above, both good to ~1e-14, checked in `centroid_math`.
+#![allow(dead_code)]
+
+use startrack_core::units::Electrons;
+
+/// Gaussian sigma per unit of the paper's `a` (radius holding 80 % of the signal): sqrt(0.31).
+pub fn sigma_of_a(a: f64) -> f64 {
+    0.31f64.sqrt() * a
+}
+
+/// erf(x) to ~1e-14.
+pub fn erf(x: f64) -> f64 {
+    if x.abs() < 2.5 {
+        // 2/sqrt(pi) sum (-1)^n x^(2n+1) / (n! (2n+1))
+        let x2 = x * x;
+        let (mut term, mut sum) = (x, x);
+        for n in 1..200 {
+            term *= -x2 / n as f64;
+            let t = term / (2 * n + 1) as f64;
+            sum += t;
+            if t.abs() < 1e-17 * sum.abs() {
+                break;
+            }
+        }
+        sum * 2.0 / std::f64::consts::PI.sqrt()
+    } else {
+        x.signum() * (1.0 - erfc(x.abs()))
+    }
+}
+
+/// erfc(x) to ~1e-14 relative in the tail.
+pub fn erfc(x: f64) -> f64 {
+    if x < 2.5 {
+        return 1.0 - erf(x);
+    }
+    // erfc(x) = exp(-x^2)/sqrt(pi) / (x + (1/2)/(x + 1/(x + (3/2)/(x + ...))))
+    let mut t = x;
+    for k in (1..=200).rev() {
+        t = x + (k as f64 / 2.0) / t;
+    }
+    (-x * x).exp() / std::f64::consts::PI.sqrt() / t
+}
+
+/// Standard normal CDF.
+pub fn norm_cdf(z: f64) -> f64 {
+    0.5 * erfc(-z / std::f64::consts::SQRT_2)
+}
+
+/// Fraction of a unit-flux 1-D Gaussian (centre `c`, sigma `s`) falling in the pixel centred at
+/// integer `i` (eq. 3): Phi((i + 1/2 - c)/s) - Phi((i - 1/2 - c)/s), computed on the side of
+/// the tail for precision.
+pub fn pixel_frac(i: f64, c: f64, s: f64) -> f64 {
+    let (lo, hi) = ((i - 0.5 - c) / s, (i + 0.5 - c) / s);
+    if lo > 0.0 {
+        norm_cdf(-lo) - norm_cdf(-hi)
+    } else {
+        norm_cdf(hi) - norm_cdf(lo)
+    }
+}
+
+/// A star in active-area coordinates.
+#[derive(Clone, Copy, Debug)]
+pub struct Star {
+    pub x: f64,
+    pub y: f64,
+    /// Gaussian sigma, px.
+    pub sigma: f64,
+    /// Total signal, e-.
+    pub flux: f64,
+}
+
+/// Window geometry in active-area pixels.
+#[derive(Clone, Copy, Debug)]
+pub struct Win {
+    pub x0: u16,
+    pub y0: u16,
+    pub w: u16,
+    pub h: u16,
+}
+
+impl Win {
+    pub fn rect(&self) -> startrack_core::window::Rect {
+        startrack_core::window::Rect {
+            x0: self.x0,
+            y0: self.y0,
+            width: self.w,
+            height: self.h,
+        }
+    }
+
+    /// A square of side n whose centre pixel is (cx, cy).
+    pub fn centred(cx: u16, cy: u16, n: u16) -> Self {
+        Self {
+            x0: cx - n / 2,
+            y0: cy - n / 2,
+            w: n,
+            h: n,
+        }
+    }
+}
+
+/// Noise-free pixel means (row-major) of `star` on a flat `background`, e-.
+pub fn render(win: Win, star: Star, background: f64) -> Vec<f64> {
+    let px: Vec<f64> = (0..win.w)
+        .map(|c| pixel_frac(f64::from(win.x0 + c), star.x, star.sigma))
+        .collect();
+    let py: Vec<f64> = (0..win.h)
+        .map(|r| pixel_frac(f64::from(win.y0 + r), star.y, star.sigma))
+        .collect();
+    py.iter()
+        .flat_map(|fy| px.iter().map(move |fx| background + star.flux * fx * fy))
+        .collect()
+}
+
+pub fn to_electrons(v: &[f64]) -> Vec<Electrons> {
+    v.iter()
+        .map(|&x| Electrons::from_num(x.clamp(-33_554_431.0, 33_554_431.0)))
+        .collect()
+}
+
+/// Back to f64 (so references see exactly the quantised values the core sees).
+pub fn to_f64(v: &[Electrons]) -> Vec<f64> {
+    v.iter().map(|e| e.to_num::<f64>()).collect()
+}
+
+/// Index of the brightest value (first on ties), as (col, row).
+pub fn peak(v: &[f64], w: u16) -> (u16, u16) {
+    let mut best = 0;
+    for (i, x) in v.iter().enumerate() {
+        if *x > v[best] {
+            best = i;
+        }
+    }
+    (
+        (best % usize::from(w)) as u16,
+        (best / usize::from(w)) as u16,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+/// Reference CoG (window-relative) of the box of half-size `half` around `anchor` (clipped),
+/// on `v - bg`. Power 2 uses `F^2 - F - var_bg` like the core (noise-unbiased weights);
+/// `unbiased = false` gives the plain `F^2` of eq. 6.
+pub fn ref_cog(
+    v: &[f64],
+    w: u16,
+    h: u16,
+    anchor: (u16, u16),
+    half: u16,
+    power: u8,
+    bg: f64,
+    var_bg: f64,
+    unbiased: bool,
+) -> Option<(f64, f64)> {
+    let c0 = anchor.0.saturating_sub(half);
+    let c1 = (anchor.0 + half).min(w - 1);
+    let r0 = anchor.1.saturating_sub(half);
+    let r1 = (anchor.1 + half).min(h - 1);
+    let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
+    for r in r0..=r1 {
+        for c in c0..=c1 {
+            let f = v[usize::from(r) * usize::from(w) + usize::from(c)] - bg;
+            let wt = match (power, unbiased) {
+                (1, _) => f,
+                (_, true) => f * f - f - var_bg,
+                (_, false) => f * f,
+            };
+            s += wt;
+            sx += wt * f64::from(c);
+            sy += wt * f64::from(r);
+        }
+    }
+    (s > 0.0).then(|| (sx / s, sy / s))
+}
+
+/// Reference 3-point fit of one axis: vertex offset of a parabola through (-1, a), (0, b),
+/// (1, c); with `log`, through the logarithms (a Gaussian's exact peak).
+pub fn ref_quad3(a: f64, b: f64, c: f64, log: bool) -> f64 {
+    let (a, b, c) = if log {
+        (a.ln(), b.ln(), c.ln())
+    } else {
+        (a, b, c)
+    };
+    0.5 * (a - c) / (a - 2.0 * b + c)
+}
+
+/// Reference Gaussian-windowed centroid (the fixed point of the XWIN iteration) on `v - bg`,
+/// window-relative, from `start`, `iters` iterations of gain `gain` (1 is slow but safe).
+pub fn ref_iwc(
+    v: &[f64],
+    w: u16,
+    bg: f64,
+    start: (f64, f64),
+    sw: f64,
+    iters: usize,
+    gain: f64,
+) -> (f64, f64) {
+    let (mut x, mut y) = start;
+    for _ in 0..iters {
+        let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for (i, val) in v.iter().enumerate() {
+            let c = (i % usize::from(w)) as f64;
+            let r = (i / usize::from(w)) as f64;
+            let wt = (-((c - x).powi(2) + (r - y).powi(2)) / (2.0 * sw * sw)).exp();
+            let f = val - bg;
+            s += wt * f;
+            sx += wt * f * (c - x);
+            sy += wt * f * (r - y);
+        }
+        x += gain * sx / s;
+        y += gain * sy / s;
+    }
+    (x, y)
+}
+
+/// Cramer-Rao bound on x for the pixelated Gaussian in `win` (accuracy-theory.md), px.
+pub fn crlb_x(win: Win, star: Star, background: f64, read_noise: f64) -> f64 {
+    let phi = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let mut fisher = 0.0;
+    for r in 0..win.h {
+        let yi = f64::from(win.y0 + r);
+        let py = pixel_frac(yi, star.y, star.sigma);
+        for c in 0..win.w {
+            let xi = f64::from(win.x0 + c);
+            let px = pixel_frac(xi, star.x, star.sigma);
+            let dpx = (phi((xi - 0.5 - star.x) / star.sigma)
+                - phi((xi + 0.5 - star.x) / star.sigma))
+                / star.sigma;
+            let mu = star.flux * px * py + background;
+            let d = star.flux * dpx * py;
+            fisher += d * d / (mu + read_noise * read_noise);
+        }
+    }
+    1.0 / fisher.sqrt()
+}
+
+/// Seeded splitmix64 with Box-Muller normals: deterministic and dependency-free.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in (0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        ((self.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+
+    pub fn normal(&mut self) -> f64 {
+        let (u1, u2) = (self.uniform(), self.uniform());
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    }
+}
+
+/// `mean` plus Gaussian noise of variance `max(signal, 0) + var_bg` (shot noise of the star
+/// and of the background, read noise), per pixel; `bg` is the background part of `mean`.
+pub fn add_noise(mean: &[f64], bg: f64, var_bg: f64, rng: &mut Rng) -> Vec<f64> {
+    mean.iter()
+        .map(|&m| m + ((m - bg).max(0.0) + var_bg).sqrt() * rng.normal())
+        .collect()
+}
+
+/// Mean and standard deviation.
+pub fn mean_std(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
+    (m, var.sqrt())
+}
+
+/// Flux in an n x n box giving `snr` by eq. 8 with per-pixel background variance `var_bg`.
+pub fn flux_for_snr(snr: f64, n: f64, var_bg: f64) -> f64 {
+    // S^2 = snr^2 (S + n^2 var_bg)
+    let k = snr * snr;
+    0.5 * (k + (k * k + 4.0 * k * n * n * var_bg).sqrt())
+}
