@@ -39,7 +39,7 @@
 //! - `erfc` by Abramowitz & Stegun 7.1.26 (error 5e-7 of the flux per pixel) limits the
 //!   noise-free accuracy to ~1e-5 px.
 
-use super::cog::{CogPower, cog_in_box};
+use super::cog::{cog_start, usable_sigma_px};
 use super::{
     Background, Centroid, CentroidFlags, CentroidInput, MAX_SIDE, Measured, Prepared, math,
 };
@@ -240,27 +240,11 @@ fn variance(l: &Mat4, d: &[f32; 4], i: usize) -> f32 {
 
 /// The Gaussian fit of `input` (see the module docs).
 pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid {
-    let p = match Prepared::new(input, params.background) {
-        Ok(p) => p,
+    let (p, start, mut extra) = match cog_start(input, params.background, params.start_box) {
+        Ok(s) => s,
         Err(c) => return c,
     };
-    let Some((pc, pr)) = p.peak() else {
-        return p.degenerate(CentroidFlags::empty());
-    };
-    let (bx, clipped) = p.box_around(pc, pr, params.start_box);
-    let mut extra = if clipped {
-        CentroidFlags::EDGE_CLIPPED
-    } else {
-        CentroidFlags::empty()
-    };
-    let Some(start) = cog_in_box(&p, bx, (pc, pr), CogPower::One) else {
-        return p.degenerate(extra);
-    };
-    let s = if params.psf_sigma_px.is_finite() {
-        params.psf_sigma_px.max(0.1)
-    } else {
-        1.0
-    };
+    let s = usable_sigma_px(params.psf_sigma_px);
     let whole = super::PixelBox {
         col0: 0,
         row0: 0,

@@ -44,8 +44,8 @@
 //! - `s_w` much wider than the star: noisier (more background in the weights), still unbiased.
 //! - Blends: the window follows the brighter star but the fainter one pulls it.
 
-use super::cog::{CogPower, cog_in_box};
-use super::{Background, Centroid, CentroidFlags, CentroidInput, Measured, Prepared, math};
+use super::cog::{cog_start, usable_sigma_px};
+use super::{Background, Centroid, CentroidFlags, CentroidInput, Measured, math};
 
 /// Parameters of [`iwc`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -87,27 +87,11 @@ struct Sums {
 
 /// The Gaussian-windowed centroid of `input` (see the module docs).
 pub fn iwc(input: &CentroidInput<'_>, params: &IwcParams) -> Centroid {
-    let p = match Prepared::new(input, params.background) {
-        Ok(p) => p,
+    let (p, start, mut extra) = match cog_start(input, params.background, params.start_box) {
+        Ok(s) => s,
         Err(c) => return c,
     };
-    let Some((pc, pr)) = p.peak() else {
-        return p.degenerate(CentroidFlags::empty());
-    };
-    let (bx, clipped) = p.box_around(pc, pr, params.start_box);
-    let mut extra = if clipped {
-        CentroidFlags::EDGE_CLIPPED
-    } else {
-        CentroidFlags::empty()
-    };
-    let Some(start) = cog_in_box(&p, bx, (pc, pr), CogPower::One) else {
-        return p.degenerate(extra);
-    };
-    let sw = if params.weight_sigma_px.is_finite() {
-        params.weight_sigma_px.max(0.1)
-    } else {
-        1.0
-    };
+    let sw = usable_sigma_px(params.weight_sigma_px);
     let k = -0.5 / (sw * sw);
     let whole = super::PixelBox {
         col0: 0,
