@@ -8,8 +8,14 @@ fn full_calibration_leaves_only_noise() {
     // Every star of the field is bright enough to be found, and nothing else is: one pair
     // of this field, 5.2 px apart, is found as one detection flagged blended.
     assert_eq!(
-        (r.stars.len(), r.in_blends, r.missed, r.false_detections),
-        (39, 1, 0, 0)
+        (
+            r.stars.len(),
+            r.in_blends,
+            r.missed,
+            r.false_detections,
+            r.dropped
+        ),
+        (39, 1, 0, 0, 0)
     );
     // 40 windows of 49 pixels: the chi^2 per pixel of pure noise has a standard deviation of
     // sqrt(2 / 1960) = 0.032, so 0.85..1.15 is a 4.7-sigma band.
