@@ -341,3 +341,125 @@ proptest! {
         }
     }
 }
+
+/// Every method with its usual parameters on `input`.
+fn usual_methods(
+    input: &CentroidInput<'_>,
+    background: Background,
+    sigma: f32,
+) -> Vec<(&'static str, Centroid)> {
+    vec![
+        (
+            "cog 1",
+            cog(
+                input,
+                &CogParams {
+                    power: CogPower::One,
+                    box_side: 9,
+                    anchor: Anchor::Peak,
+                    background,
+                },
+            ),
+        ),
+        (
+            "cog 2",
+            cog(
+                input,
+                &CogParams {
+                    power: CogPower::Two,
+                    box_side: 9,
+                    anchor: Anchor::Peak,
+                    background,
+                },
+            ),
+        ),
+        (
+            "quadratic",
+            quadratic(
+                input,
+                &QuadraticParams {
+                    kind: QuadraticKind::Gaussian,
+                    background,
+                },
+            ),
+        ),
+        (
+            "iwc",
+            iwc(
+                input,
+                &IwcParams {
+                    background,
+                    ..IwcParams::new(sigma)
+                },
+            ),
+        ),
+        (
+            "gauss fit",
+            gauss_fit(
+                input,
+                &GaussFitParams {
+                    background,
+                    ..GaussFitParams::new(sigma)
+                },
+            ),
+        ),
+    ]
+}
+
+#[test]
+fn every_method_at_the_calibrated_maximum() {
+    // A star whose peak pixel is at the top of the calibrated range, on the most negative
+    // background: pixel - background reaches 2^26 e-, power-2 sums and normal equations their
+    // largest values. Each method must give what it gives for the same star 1000 times fainter
+    // (its own systematic error aside).
+    let win = Win::centred(300, 400, 9);
+    let sigma = sigma_of_a(1.5);
+    let (bg, peak) = (-33_554_000.0, 33_554_000.0);
+    let frac0 = psf::pixel_frac(300.0, 300.2, sigma) * psf::pixel_frac(400.0, 399.9, sigma);
+    let star = Star {
+        x: 300.2,
+        y: 399.9,
+        sigma,
+        flux: (peak - bg) / frac0,
+    };
+    let e = to_electrons(&render(win, star, bg));
+    let faint = to_electrons(&render(
+        win,
+        Star {
+            flux: star.flux * 1e-3,
+            ..star
+        },
+        0.0,
+    ));
+    let given = |level_e: f64| Background::Given {
+        level_e: level_e as f32,
+        variance_e2: 0.0,
+    };
+    let bright = usual_methods(
+        &CentroidInput::new(Window::new(win.rect(), &e).unwrap()),
+        given(bg),
+        sigma as f32,
+    );
+    let faint = usual_methods(
+        &CentroidInput::new(Window::new(win.rect(), &faint).unwrap()),
+        given(0.0),
+        sigma as f32,
+    );
+    for ((name, c), (_, f)) in bright.into_iter().zip(faint) {
+        check(win.rect(), name, &c);
+        let bad = CentroidFlags::DEGENERATE | CentroidFlags::NOT_CONVERGED | CentroidFlags::CLAMPED;
+        assert!(
+            !c.flags.intersects(bad) && !f.flags.intersects(bad),
+            "{name}: {c:?} {f:?}"
+        );
+        assert!(
+            (c.x_px - f.x_px).abs() < 1e-3 && (c.y_px - f.y_px).abs() < 1e-3,
+            "{name}: {c:?} vs {f:?}"
+        );
+        let err = (f64::from(c.x_px) - star.x)
+            .abs()
+            .max((f64::from(c.y_px) - star.y).abs());
+        assert!(err < 0.01, "{name}: {c:?}");
+        assert!(c.snr > 1000.0, "{name}: {c:?}");
+    }
+}
