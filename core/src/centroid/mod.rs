@@ -215,12 +215,16 @@ pub(crate) struct Prepared<'a> {
 /// The window's centre pixel as a degenerate centroid.
 pub(crate) fn degenerate(window: &Window<'_>, flags: CentroidFlags) -> Centroid {
     let r = window.rect;
-    let cx = f32::from(r.x0) + f32::from(r.width.saturating_sub(1) / 2);
-    let cy = f32::from(r.y0) + f32::from(r.height.saturating_sub(1) / 2);
-    let half = f32::from(r.width.max(r.height)) * 0.5;
+    degenerate_in(r.x0, r.y0, r.width, r.height, flags)
+}
+
+/// The centre pixel of the `width` x `height` rectangle at (`x0`, `y0`) as a degenerate
+/// centroid, with an error of half the rectangle's larger side.
+fn degenerate_in(x0: u16, y0: u16, width: u16, height: u16, flags: CentroidFlags) -> Centroid {
+    let half = f32::from(width.max(height)) * 0.5;
     Centroid {
-        x_px: cx,
-        y_px: cy,
+        x_px: f32::from(x0) + f32::from(width.saturating_sub(1) / 2),
+        y_px: f32::from(y0) + f32::from(height.saturating_sub(1) / 2),
         flux_e: 0.0,
         snr: 0.0,
         sigma_x_px: half,
@@ -432,18 +436,13 @@ impl<'a> Prepared<'a> {
 
     /// The degenerate centroid of this window, with the flags gathered so far plus `extra`.
     pub(crate) fn degenerate(&self, extra: CentroidFlags) -> Centroid {
-        let cx = f32::from(self.x0) + f32::from((self.width - 1) / 2);
-        let cy = f32::from(self.y0) + f32::from((self.height - 1) / 2);
-        let half = f32::from(self.width.max(self.height)) * 0.5;
-        Centroid {
-            x_px: cx,
-            y_px: cy,
-            flux_e: 0.0,
-            snr: 0.0,
-            sigma_x_px: half,
-            sigma_y_px: half,
-            flags: self.flags | extra | CentroidFlags::DEGENERATE,
-        }
+        degenerate_in(
+            self.x0,
+            self.y0,
+            self.width,
+            self.height,
+            self.flags | extra,
+        )
     }
 
     /// Builds the output from a window-relative measurement: clamps the position to the
