@@ -1,28 +1,29 @@
 //! The end-to-end demo on the simulated sensor: simulate a CCD47-20 frame of a star field,
-//! stream it line by line through the core's level measurement, calibrate a window around
-//! each star, and compare with the simulator's truth.
-//!
-//! Stars are found by the core's streaming detector on the calibrated lines; each detected
-//! star's window is centred on its brightest pixel, as on the MCU.
+//! run it through the host pipeline ([`crate::pipeline`], the same path as
+//! `startrack process`: over-scan levels, covered-column dark scale, streaming calibration
+//! and detection, a centroid on a window at each candidate) and compare with the simulator's
+//! truth: calibrated electrons (chi^2 per pixel, with full calibration and with gains and
+//! over-scan only) and centroid positions (RMS error against the reported sigmas).
 
+use crate::pipeline::{self, FrameLevels, Method, PipelineConfig, StarRow};
 use crate::sim::truth::TruthSections;
 use crate::sim::{SensorParams, Simulator, Star};
 use rand::{RngExt, SeedableRng};
-use startrack_core::calib::{
-    DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
-};
-use startrack_core::detect::{DetectConfig, Detection, DetectionFlags, LineDetector};
+use startrack_core::calib::{FrameCalibration, PixelFlags};
+use startrack_core::detect::{Detection, DetectionFlags};
 use startrack_core::table::CalibTable;
-use startrack_core::units::{Electrons, Kelvin};
 use startrack_core::window::Rect;
 
 /// Window side, px.
-pub const WINDOW_PX: u16 = 7;
-/// Candidate list capacity on the host (the firmware keeps 32): room for any demo field, so
-/// that a miss is a detection miss, not a full list; losses are still counted.
-pub const MAX_CANDIDATES: usize = 1024;
+pub const WINDOW_PX: u16 = pipeline::DEFAULT_WINDOW_PX;
+/// Candidate list capacity on the host.
+pub const MAX_CANDIDATES: usize = pipeline::MAX_CANDIDATES;
 /// A detection within this distance of a simulated star is that star, px.
 pub const MATCH_PX: f64 = 2.0;
+/// The demo's centroid method: the near-optimal Gauss fit.
+pub const METHOD: Method = Method::GaussFit;
+/// The fit's PSF sigma, px: `sqrt(0.31) a` at the middle of the field's a = 0.8..2.0 px.
+pub const PSF_SIGMA_PX: f32 = 0.78;
 
 /// What the demo measured for one star.
 #[derive(Clone, Debug)]
@@ -31,6 +32,8 @@ pub struct StarReport {
     pub star: Star,
     /// What the detector found there.
     pub detection: Detection,
+    /// The pipeline's output row for it (centroid, window, flags).
+    pub row: StarRow,
     /// The window calibrated around it.
     pub rect: Rect,
     /// True star electrons in the window (before the flat: what calibration must recover).
@@ -45,6 +48,22 @@ pub struct StarReport {
     pub chi2_gains_only: f64,
     /// Flags raised by calibration.
     pub flags: PixelFlags,
+}
+
+impl StarReport {
+    /// Centroid minus true position (x, y), px.
+    pub fn error_px(&self) -> (f64, f64) {
+        (
+            f64::from(self.row.centroid.x_px) - self.star.x_px,
+            f64::from(self.row.centroid.y_px) - self.star.y_px,
+        )
+    }
+
+    /// True when the centroid carries no flag that voids its position or sigma (blended,
+    /// saturated, degenerate, clamped, not converged, excluded pixel, clipped).
+    pub fn clean(&self) -> bool {
+        self.row.flags == 0
+    }
 }
 
 /// What the demo measured.
@@ -86,6 +105,41 @@ impl DemoReport {
             .sum();
         sum / self.pixels as f64
     }
+
+    /// Stars with an unflagged centroid.
+    pub fn clean_stars(&self) -> impl Iterator<Item = &StarReport> {
+        self.stars.iter().filter(|s| s.clean())
+    }
+
+    /// RMS over unflagged stars of the centroid error per axis, px.
+    pub fn centroid_rms_px(&self) -> f64 {
+        let (sum, n) = self.clean_stars().fold((0.0, 0usize), |(a, n), s| {
+            let (ex, ey) = s.error_px();
+            (a + ex * ex + ey * ey, n + 2)
+        });
+        if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
+    }
+
+    /// RMS over the same stars of the reported sigmas, px: what the error should be.
+    pub fn reported_sigma_rms_px(&self) -> f64 {
+        let (sum, n) = self.clean_stars().fold((0.0, 0usize), |(a, n), s| {
+            let c = &s.row.centroid;
+            let (sx, sy) = (f64::from(c.sigma_x_px), f64::from(c.sigma_y_px));
+            (a + sx * sx + sy * sy, n + 2)
+        });
+        if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
+    }
+
+    /// Sum over unflagged stars and both axes of (error / reported sigma)^2, and its number
+    /// of terms: chi^2 with that many degrees of freedom when the sigmas are right.
+    pub fn centroid_chi2(&self) -> (f64, usize) {
+        self.clean_stars().fold((0.0, 0), |(a, n), s| {
+            let (ex, ey) = s.error_px();
+            let c = &s.row.centroid;
+            let (sx, sy) = (f64::from(c.sigma_x_px), f64::from(c.sigma_y_px));
+            (a + (ex / sx).powi(2) + (ey / sy).powi(2), n + 2)
+        })
+    }
 }
 
 /// A seeded star field kept clear of the edges.
@@ -101,6 +155,16 @@ pub fn star_field(seed: u64, n: usize, params: &SensorParams) -> Vec<Star> {
             a_px: r.random_range(0.8..2.0),
         })
         .collect()
+}
+
+/// The whole raw frame of `sim`, row-major.
+pub fn render_frame(sim: &Simulator) -> Vec<u16> {
+    let g = sim.params.geometry;
+    let mut raw = vec![0u16; usize::from(g.lines) * g.line_len()];
+    for (y, line) in raw.chunks_exact_mut(g.line_len()).enumerate() {
+        sim.render_line(y, line);
+    }
+    raw
 }
 
 /// Runs the demo: `n_stars` stars on the default sensor with `seed`.
@@ -120,77 +184,49 @@ pub fn run(seed: u64, n_stars: usize) -> Result<DemoReport, String> {
         .map_err(|e| e.to_string())?;
     let full = CalibTable::parse(&full).map_err(|e| e.to_string())?;
     let bare = CalibTable::parse(&bare).map_err(|e| e.to_string())?;
+    let raw = render_frame(&sim);
 
-    // Scan pass: every line streams through the level measurement, as on the MCU.
-    let mut line = vec![0u16; g.line_len()];
-    let mut levels = Vec::with_capacity(usize::from(g.lines));
-    let mut raw_lines = Vec::with_capacity(usize::from(g.lines));
-    let (mut est_full, mut est_bare) = (DarkScaleEstimator::new(), DarkScaleEstimator::new());
+    let config = PipelineConfig {
+        method: METHOD,
+        psf_sigma_px: PSF_SIGMA_PX,
+        window_px: WINDOW_PX,
+        ..PipelineConfig::default()
+    };
+    let result = pipeline::process(full, &raw, &config).map_err(|e| e.to_string())?;
+    // The same frame with gains and over-scan only, to show what the maps are worth.
+    let bare_levels: FrameLevels =
+        pipeline::measure_levels(&bare, &raw).map_err(|e| e.to_string())?;
+    let cal_full = FrameCalibration::new(full, result.conditions);
+    let cal_bare = FrameCalibration::new(bare, pipeline::conditions(&bare_levels, &config));
+
     let mut bias_sum = [0.0; 2];
-    for y in 0..usize::from(g.lines) {
-        sim.render_line(y, &mut line);
-        let lv = LineLevels::measure(&g, &line).map_err(|e| e.to_string())?;
-        est_full
-            .add_line(&full, &line, &lv)
-            .map_err(|e| e.to_string())?;
-        est_bare
-            .add_line(&bare, &line, &lv)
-            .map_err(|e| e.to_string())?;
+    for lv in &result.levels.lines {
         for (s, b) in bias_sum.iter_mut().zip(lv.bias_adu) {
             *s += b.to_num::<f64>();
         }
-        levels.push(lv);
-        raw_lines.push(line.clone());
     }
-    let cond = |est: &DarkScaleEstimator| FrameConditions {
-        dark_scale_e: est.estimate().unwrap_or(Electrons::ZERO),
-        exposure_ms: 1000,
-        temperature_k: Kelvin::from_num(293),
-    };
-    let cal_full = FrameCalibration::new(full, cond(&est_full));
-    let cal_bare = FrameCalibration::new(bare, cond(&est_bare));
-
-    // Detection pass: each active line calibrated and streamed through the detector. (The
-    // dark scale is this frame's, measured above; the firmware uses the previous frame's.)
-    let mut detector =
-        LineDetector::<MAX_CANDIDATES>::new(DetectConfig::default(), g.active_cols, g.active_rows);
-    let mut e_line = vec![Electrons::ZERO; usize::from(g.active_cols)];
-    let mut f_line = vec![PixelFlags::empty(); e_line.len()];
-    for (y, (raw, lv)) in raw_lines
-        .iter()
-        .zip(&levels)
-        .enumerate()
-        .take(usize::from(g.active_rows))
-    {
-        cal_full
-            .calibrate_span(y as u16, 0, raw, lv, &mut e_line, &mut f_line)
-            .map_err(|e| e.to_string())?;
-        detector
-            .push_line(y as u16, &e_line, &f_line)
-            .map_err(|e| e.to_string())?;
-    }
-    detector.finish();
     let near = |d: &Detection, s: &Star| {
         (f64::from(d.x_px) - s.x_px).hypot(f64::from(d.y_px) - s.y_px) < MATCH_PX
     };
-    let false_detections = detector
-        .candidates()
+    let false_detections = result
+        .stars
         .iter()
-        .filter(|d| !stars.iter().any(|s| near(d, s)))
+        .filter(|r| !stars.iter().any(|s| near(&r.detection, s)))
         .count();
 
     let mut reports = Vec::new();
     let mut pixels = 0;
     let (mut missed, mut in_blends) = (0, 0);
     for star in &stars {
-        let Some(det) = detector
-            .candidates()
+        let Some(row) = result
+            .stars
             .iter()
-            .find(|d| near(d, star))
+            .find(|r| near(&r.detection, star))
             .copied()
         else {
             // A star merged with a neighbour into one flagged blob is accounted for.
-            let blend = detector.candidates().iter().any(|d| {
+            let blend = result.stars.iter().any(|r| {
+                let d = &r.detection;
                 d.flags.contains(DetectionFlags::BLENDED)
                     && (f64::from(d.x_px) - star.x_px).hypot(f64::from(d.y_px) - star.y_px)
                         < 3.0 * MATCH_PX
@@ -202,26 +238,15 @@ pub fn run(seed: u64, n_stars: usize) -> Result<DemoReport, String> {
             }
             continue;
         };
-        let (rect, _) = Rect::centred_clipped(
-            det.peak_x,
-            det.peak_y,
-            WINDOW_PX,
-            g.active_cols,
-            g.active_rows,
-        );
-        let raw = sim.render_window(rect);
-        let lv = &levels[usize::from(rect.y0)..usize::from(rect.y0 + rect.height)];
-        let calibrate = |cal: &FrameCalibration<'_>| {
-            let mut e = vec![Electrons::ZERO; rect.len()];
-            let mut f = vec![PixelFlags::empty(); rect.len()];
-            cal.calibrate_window(rect, &raw, lv, &mut e, &mut f)
-                .map(|flags| (e, flags))
-        };
-        let (e_full, flags) = calibrate(&cal_full).map_err(|e| e.to_string())?;
-        let (e_bare, _) = calibrate(&cal_bare).map_err(|e| e.to_string())?;
+        let rect = row.rect;
+        let (e_full, _, flags) = pipeline::calibrate_window(&cal_full, &raw, &result.levels, rect)
+            .map_err(|e| e.to_string())?;
+        let (e_bare, _, _) = pipeline::calibrate_window(&cal_bare, &raw, &bare_levels, rect)
+            .map_err(|e| e.to_string())?;
         let mut r = StarReport {
             star: *star,
-            detection: det,
+            detection: row.detection,
+            row,
             rect,
             true_flux_e: 0.0,
             flux_e: 0.0,
@@ -247,14 +272,14 @@ pub fn run(seed: u64, n_stars: usize) -> Result<DemoReport, String> {
     }
     Ok(DemoReport {
         stars: reports,
-        dark_scale_e: est_full.estimate().map_or(0.0, |v| v.to_num()),
+        dark_scale_e: result.levels.dark_scale_e.map_or(0.0, |v| v.to_num()),
         true_dark_scale_e: params.dark_mean_e * sim.covered_dark_mean(),
         mean_bias_adu: bias_sum.map(|s| s / f64::from(g.lines)),
         pixels,
         missed,
         in_blends,
         false_detections,
-        dropped: detector.dropped(),
+        dropped: result.dropped,
     })
 }
 
@@ -328,5 +353,13 @@ pub fn print(report: &DemoReport) {
         "chi2 per pixel against truth: full calibration {:.3} (1.0 = noise only), gains and over-scan only {:.3}",
         report.chi2_per_pixel(false),
         report.chi2_per_pixel(true)
+    );
+    let (chi2, dof) = report.centroid_chi2();
+    println!(
+        "centroids ({METHOD:?}, psf sigma {PSF_SIGMA_PX} px, {WINDOW_PX}x{WINDOW_PX}) on {} unflagged stars: RMS error {:.4} px per axis, reported sigma RMS {:.4} px, chi2/dof {:.2}",
+        report.clean_stars().count(),
+        report.centroid_rms_px(),
+        report.reported_sigma_rms_px(),
+        if dof == 0 { 0.0 } else { chi2 / dof as f64 }
     );
 }

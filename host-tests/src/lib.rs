@@ -3,4 +3,5 @@
 
 pub mod demo;
 pub mod fits;
+pub mod pipeline;
 pub mod sim;

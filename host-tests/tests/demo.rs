@@ -45,3 +45,29 @@ fn reruns_print_identical_numbers() {
         assert_eq!((x.flux_e, x.chi2), (y.flux_e, y.chi2));
     }
 }
+
+/// The demo's centroids against the simulator's truth, judged by their own reported sigmas:
+/// if each error is normal with the reported sigma, the sum of (error / sigma)^2 over `k`
+/// axis measurements is chi^2 with k degrees of freedom (mean k, standard deviation
+/// sqrt(2k)). A 5-sigma band on chi^2 / k is then 1 ± 5 sqrt(2 / k): errors much larger than
+/// reported (a bias, a wrong window, a lost pixel offset) or sigmas far too large both fail.
+#[test]
+fn centroid_errors_match_the_reported_sigmas() {
+    let r = startrack_host::demo::run(7, 40).expect("demo runs");
+    let (chi2, k) = r.centroid_chi2();
+    // Blends and flagged windows are left out; most of the field must remain.
+    assert!(k >= 2 * 30, "only {} unflagged stars", k / 2);
+    let band = 5.0 * (2.0 / k as f64).sqrt();
+    let per_dof = chi2 / k as f64;
+    assert!(
+        (1.0 - band..1.0 + band).contains(&per_dof),
+        "centroid chi2/dof {per_dof:.3} outside 1 ± {band:.3} on {k} axes"
+    );
+    // The same in RMS terms: the RMS error stays within the RMS of the reported sigmas
+    // inflated by the same 5-sigma allowance on a mean of squares.
+    let (rms, sigma) = (r.centroid_rms_px(), r.reported_sigma_rms_px());
+    assert!(
+        rms <= sigma * (1.0 + band).sqrt(),
+        "RMS error {rms:.4} px against reported sigma RMS {sigma:.4} px"
+    );
+}
