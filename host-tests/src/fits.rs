@@ -349,20 +349,7 @@ pub fn read_map(path: &Path, keys: &[&str]) -> Result<MapF32, FitsError> {
             col: i % cols,
         });
     }
-    let mut found = Vec::new();
-    for k in keys {
-        // A missing keyword is absent, not an error; one that is there must be a number.
-        let present: Result<String, _> = hdu.read_key(&mut fits, k);
-        if present.is_err() {
-            continue;
-        }
-        let v: f64 = hdu.read_key(&mut fits, k).map_err(|e| FitsError::Keyword {
-            path: path.to_path_buf(),
-            key: (*k).to_string(),
-            msg: e.to_string(),
-        })?;
-        found.push(((*k).to_string(), v));
-    }
+    let found = keys_in(&mut fits, &hdu, path, keys)?;
     Ok(MapF32 {
         rows,
         cols,
@@ -405,4 +392,34 @@ pub fn write_map(path: &Path, map: &MapF32) -> Result<(), FitsError> {
         hdu.write_key(&mut fits, k, *v).map_err(cfitsio(path))?;
     }
     Ok(())
+}
+
+/// Reads those of the numeric keywords `keys` that the primary header of `path` holds.
+pub fn read_keys(path: &Path, keys: &[&str]) -> Result<Vec<(String, f64)>, FitsError> {
+    let mut fits = open(path)?;
+    let hdu = fits.primary_hdu().map_err(cfitsio(path))?;
+    keys_in(&mut fits, &hdu, path, keys)
+}
+
+fn keys_in(
+    fits: &mut FitsFile,
+    hdu: &fitsio::hdu::FitsHdu,
+    path: &Path,
+    keys: &[&str],
+) -> Result<Vec<(String, f64)>, FitsError> {
+    let mut found = Vec::new();
+    for k in keys {
+        // A missing keyword is absent, not an error; one that is there must be a number.
+        let present: Result<String, _> = hdu.read_key(fits, k);
+        if present.is_err() {
+            continue;
+        }
+        let v: f64 = hdu.read_key(fits, k).map_err(|e| FitsError::Keyword {
+            path: path.to_path_buf(),
+            key: (*k).to_string(),
+            msg: e.to_string(),
+        })?;
+        found.push(((*k).to_string(), v));
+    }
+    Ok(found)
 }

@@ -38,11 +38,55 @@ enum Command {
         #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(0..=10))]
         tile_log2: u8,
     },
+    /// Find and centroid the stars of a raw frame (FITS) with a calibration table; CSV out.
+    Process(startrack_host::cli::process::ProcessArgs),
+    /// Calibration tables from calibration maps.
+    #[command(subcommand)]
+    Calib(CalibCommand),
+    /// Write a simulated raw frame, its star truth and the true calibration maps to a folder.
+    Simulate(startrack_host::cli::simulate::SimulateArgs),
+}
+
+#[derive(Subcommand)]
+enum CalibCommand {
+    /// Build a table from bias, dark and flat FITS maps, gains and a hot-pixel CSV.
+    Build(startrack_host::cli::calib_build::CalibBuildArgs),
+}
+
+/// Prints `startrack NAME: error` on one line and fails.
+fn fail(name: &str, e: &dyn std::fmt::Display) -> ExitCode {
+    eprintln!("startrack {name}: {e}");
+    ExitCode::FAILURE
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Process(args) => match startrack_host::cli::process::run(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => fail("process", &e),
+        },
+        Command::Calib(CalibCommand::Build(args)) => {
+            match startrack_host::cli::calib_build::run(&args) {
+                Ok(_) => ExitCode::SUCCESS,
+                Err(e) => fail("calib build", &e),
+            }
+        }
+        Command::Simulate(args) => match startrack_host::cli::simulate::run(&args) {
+            Ok(files) => {
+                println!(
+                    "wrote {}, {}, {}, {}, {}, {}",
+                    files.frame.display(),
+                    files.truth.display(),
+                    files.bias.display(),
+                    files.dark.display(),
+                    files.flat.display(),
+                    files.hot.display()
+                );
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail("simulate", &e),
+        },
         Command::Demo { seed, stars } => match startrack_host::demo::run(seed, stars) {
             Ok(report) => {
                 startrack_host::demo::print(&report);

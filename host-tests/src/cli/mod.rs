@@ -1,0 +1,99 @@
+//! The `startrack` subcommands that read and write user files: one module per subcommand,
+//! each with its clap `Args` struct and a `run` that returns a typed [`CliError`] (the binary
+//! prints it as one line and exits non-zero; nothing here panics on bad input).
+
+pub mod calib_build;
+pub mod process;
+pub mod simulate;
+
+use crate::fits::FitsError;
+use crate::pipeline::PipelineError;
+use startrack_core::table::{TableError, WriteError};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Why a subcommand failed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CliError {
+    /// A file could not be read or written.
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        msg: String,
+    },
+    /// A FITS input was unusable.
+    Fits(FitsError),
+    /// The calibration table is corrupt or of another format.
+    Table {
+        /// The file.
+        path: PathBuf,
+        /// What the parser found.
+        err: TableError,
+    },
+    /// The table could not be encoded.
+    TableWrite(WriteError),
+    /// The pipeline rejected the frame.
+    Pipeline(PipelineError),
+    /// A line of a CSV input is malformed.
+    Csv {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        msg: String,
+    },
+    /// An option's value or a combination of inputs is unusable.
+    Usage(String),
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Io { path, msg } => write!(f, "{}: {msg}", path.display()),
+            Self::Fits(e) => write!(f, "{e}"),
+            Self::Table { path, err } => {
+                write!(
+                    f,
+                    "{}: not a usable calibration table: {err}",
+                    path.display()
+                )
+            }
+            Self::TableWrite(e) => write!(f, "cannot encode the table: {e}"),
+            Self::Pipeline(e) => write!(f, "{e}"),
+            Self::Csv { path, line, msg } => write!(f, "{}:{line}: {msg}", path.display()),
+            Self::Usage(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for CliError {}
+
+impl From<FitsError> for CliError {
+    fn from(e: FitsError) -> Self {
+        Self::Fits(e)
+    }
+}
+
+impl From<PipelineError> for CliError {
+    fn from(e: PipelineError) -> Self {
+        Self::Pipeline(e)
+    }
+}
+
+/// Reads a whole file.
+pub fn read_file(path: &Path) -> Result<Vec<u8>, CliError> {
+    std::fs::read(path).map_err(|e| CliError::Io {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    })
+}
+
+/// Writes a whole file.
+pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
+    std::fs::write(path, bytes).map_err(|e| CliError::Io {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    })
+}

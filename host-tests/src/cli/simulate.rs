@@ -1,0 +1,172 @@
+//! `startrack simulate --out DIR`: a simulated CCD47-20 frame and everything needed to run
+//! and judge the pipeline on it, as user files:
+//!
+//! | file | contents |
+//! |---|---|
+//! | `frame.fits` | raw readout, BITPIX 16 + BZERO 32768, 1033 x 1072, `EXPTIME` s, `CCDTEMP` K |
+//! | `truth.csv` | `x_px,y_px,signal_e,a_px`: the simulated stars, active-area px |
+//! | `bias.fits` | true bias, ADU, full readout (`GAIN1`, `GAIN2` keywords, e-/ADU) |
+//! | `dark.fits` | true relative dark, full readout, covered columns' mean = 1 |
+//! | `flat.fits` | true flat (relative response), active area |
+//! | `hot.csv` | `col,row,dark_e` (the simulated sensor has none yet: header only) |
+//!
+//! The maps are the sensor's truth (noise-free), the inputs of `startrack calib build`.
+
+use super::{CliError, write_file};
+use crate::demo::{render_frame, star_field};
+use crate::fits::{MapF32, RawFrame, write_map, write_raw_frame};
+use crate::sim::{SensorParams, Simulator};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Options of `startrack simulate`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct SimulateArgs {
+    /// Output directory (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed of the sensor's fixed patterns, the star field and the noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Number of stars (signal 5e3 to 2e5 e-, 80 % radius 0.8 to 2 px, 20 px from the edges).
+    #[arg(long, default_value_t = 12)]
+    pub stars: usize,
+    /// Mean dark charge of a covered pixel in the exposure, e-.
+    #[arg(long, default_value_t = 250.0)]
+    pub dark_e: f64,
+    /// Read noise, e- rms.
+    #[arg(long, default_value_t = 5.0)]
+    pub read_noise_e: f64,
+    /// Dark signal non-uniformity (relative sigma).
+    #[arg(long, default_value_t = 0.1)]
+    pub dsnu: f64,
+    /// Photo-response non-uniformity (relative sigma).
+    #[arg(long, default_value_t = 0.02)]
+    pub prnu: f64,
+}
+
+/// The files `simulate` writes, in `dir`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SimFiles {
+    /// Raw frame.
+    pub frame: PathBuf,
+    /// Star truth.
+    pub truth: PathBuf,
+    /// Bias map.
+    pub bias: PathBuf,
+    /// Relative dark map.
+    pub dark: PathBuf,
+    /// Flat.
+    pub flat: PathBuf,
+    /// Hot pixel list.
+    pub hot: PathBuf,
+}
+
+impl SimFiles {
+    /// The file names in `dir`.
+    pub fn in_dir(dir: &Path) -> Self {
+        Self {
+            frame: dir.join("frame.fits"),
+            truth: dir.join("truth.csv"),
+            bias: dir.join("bias.fits"),
+            dark: dir.join("dark.fits"),
+            flat: dir.join("flat.fits"),
+            hot: dir.join("hot.csv"),
+        }
+    }
+}
+
+/// The sensor parameters of `args`.
+pub fn params(args: &SimulateArgs) -> Result<SensorParams, CliError> {
+    let checks = [
+        ("--dark-e", args.dark_e),
+        ("--read-noise-e", args.read_noise_e),
+        ("--dsnu", args.dsnu),
+        ("--prnu", args.prnu),
+    ];
+    if let Some((name, v)) = checks.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
+        return Err(CliError::Usage(format!("{name} {v}: must be 0 or more")));
+    }
+    Ok(SensorParams {
+        seed: args.seed,
+        dark_mean_e: args.dark_e,
+        read_noise_e: args.read_noise_e,
+        dsnu: args.dsnu,
+        prnu: args.prnu,
+        ..SensorParams::default()
+    })
+}
+
+/// Runs `startrack simulate`.
+pub fn run(args: &SimulateArgs) -> Result<SimFiles, CliError> {
+    let p = params(args)?;
+    let g = p.geometry;
+    std::fs::create_dir_all(&args.out).map_err(|e| CliError::Io {
+        path: args.out.clone(),
+        msg: e.to_string(),
+    })?;
+    let files = SimFiles::in_dir(&args.out);
+    let stars = star_field(args.seed, args.stars, &p);
+    let sim = Simulator::new(p.clone(), stars.clone());
+    let (lines, len) = (usize::from(g.lines), g.line_len());
+    let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+    let gains = vec![
+        ("GAIN1".to_string(), p.gain_e_per_adu[0]),
+        ("GAIN2".to_string(), p.gain_e_per_adu[1]),
+    ];
+
+    let frame = RawFrame {
+        lines,
+        cols: len,
+        data_adu: render_frame(&sim),
+    };
+    write_raw_frame(
+        &files.frame,
+        &frame,
+        &[("EXPTIME", 1.0), ("CCDTEMP", 293.0)],
+    )?;
+
+    let mut truth = String::from("x_px,y_px,signal_e,a_px\n");
+    for s in &stars {
+        let _ = writeln!(
+            truth,
+            "{:.6},{:.6},{:.3},{:.6}",
+            s.x_px, s.y_px, s.signal_e, s.a_px
+        );
+    }
+    write_file(&files.truth, truth.as_bytes())?;
+
+    let full = |f: &dyn Fn(usize, usize) -> f64| -> Vec<f32> {
+        (0..lines)
+            .flat_map(|l| (0..len).map(move |c| (c, l)))
+            .map(|(c, l)| f(c, l) as f32)
+            .collect()
+    };
+    let bias = MapF32 {
+        rows: lines,
+        cols: len,
+        data: full(&|c, _| p.bias_adu[usize::from(g.output_of_col(c).0)] + sim.column_bias_adu(c)),
+        keys: gains.clone(),
+    };
+    write_map(&files.bias, &bias)?;
+    let norm = sim.covered_dark_mean();
+    let dark = MapF32 {
+        rows: lines,
+        cols: len,
+        data: full(&|c, l| sim.dark_rel(c, l) / norm),
+        keys: gains.clone(),
+    };
+    write_map(&files.dark, &dark)?;
+    let flat = MapF32 {
+        rows,
+        cols,
+        data: (0..rows)
+            .flat_map(|y| (0..cols).map(move |x| (x, y)))
+            .map(|(x, y)| sim.flat(x, y) as f32)
+            .collect(),
+        keys: gains,
+    };
+    write_map(&files.flat, &flat)?;
+    write_file(&files.hot, b"col,row,dark_e\n")?;
+    Ok(files)
+}
