@@ -126,7 +126,8 @@ impl fmt::Display for PipelineError {
 
 impl std::error::Error for PipelineError {}
 
-/// The `flags` column's bits: (bit number, source, meaning). Bit numbers are stable.
+/// The `flags` column's bits: (bit number, source: detection, centroid or calibration, meaning).
+/// Bit numbers are stable.
 pub const FLAG_BITS: [(u32, &str, &str); 14] = [
     (0, "detection", "saturated pixel in the blob"),
     (1, "detection", "blob touches the active area's edge"),
@@ -155,7 +156,7 @@ pub const FLAG_BITS: [(u32, &str, &str); 14] = [
     (15, "centroid", "position clamped to the window"),
     (
         16,
-        "centroid",
+        "calibration",
         "window holds a hot pixel corrected by its own dark law",
     ),
 ];
