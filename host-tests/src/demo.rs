@@ -323,8 +323,8 @@ pub fn print(report: &DemoReport) {
         "true_x",
         "true_y",
         "a_px",
-        "det_x",
-        "det_y",
+        "cen_x",
+        "cen_y",
         "snr",
         "true_e",
         "calib_e",
@@ -335,13 +335,13 @@ pub fn print(report: &DemoReport) {
     for s in &report.stars {
         let n = s.rect.len() as f64;
         println!(
-            "{:>8.2} {:>8.2} {:>5.2} {:>8.2} {:>8.2} {:>6.0} {:>10.0} {:>10.0} {:>8.2} {:>12.0} {:>8.2}",
+            "{:>8.3} {:>8.3} {:>5.2} {:>8.3} {:>8.3} {:>6.0} {:>10.0} {:>10.0} {:>8.2} {:>12.0} {:>8.2}",
             s.star.x_px,
             s.star.y_px,
             s.star.a_px,
-            s.detection.x_px,
-            s.detection.y_px,
-            s.detection.snr,
+            s.row.centroid.x_px,
+            s.row.centroid.y_px,
+            s.row.centroid.snr,
             s.true_flux_e,
             s.flux_e,
             s.chi2 / n,
