@@ -2,4 +2,5 @@
 //! and the tests share. The core runs here unchanged, exactly as on the Cortex-M7.
 
 pub mod demo;
+pub mod pixcorr;
 pub mod sim;
