@@ -252,6 +252,11 @@ impl<'a> PixCorr<'a> {
         self.header
     }
 
+    /// The stored knots: little-endian i16, I1F15 px.
+    pub fn knot_bytes(&self) -> &'a [u8] {
+        self.knots
+    }
+
     /// Stored knot `k` in px (0 outside).
     fn stored(&self, k: isize) -> f32 {
         let bits = usize::try_from(k)
