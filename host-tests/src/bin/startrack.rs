@@ -38,11 +38,23 @@ enum Command {
         #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(0..=10))]
         tile_log2: u8,
     },
+    /// Every centroid method's RMS error over the Cramer-Rao bound, by Monte Carlo (markdown).
+    Accuracy(startrack_host::cli::accuracy::AccuracyArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Accuracy(args) => match startrack_host::cli::accuracy::run(&args) {
+            Ok(table) => {
+                print!("{table}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("startrack accuracy: {e}");
+                ExitCode::FAILURE
+            }
+        },
         Command::Demo { seed, stars } => match startrack_host::demo::run(seed, stars) {
             Ok(report) => {
                 startrack_host::demo::print(&report);

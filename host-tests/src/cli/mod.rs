@@ -1,0 +1,4 @@
+//! The `startrack` subcommands: one module per subcommand, each with its clap `Args` struct
+//! and a `run`.
+
+pub mod accuracy;
