@@ -1,8 +1,10 @@
 //! Host side of the star tracker: the simulated CCD47-20 and what the `startrack` command
 //! and the tests share. The core runs here unchanged, exactly as on the Cortex-M7.
 
+pub mod accuracy;
 pub mod cli;
 pub mod demo;
 pub mod fits;
 pub mod pipeline;
+pub mod pixcorr;
 pub mod sim;
