@@ -1,8 +1,9 @@
 //! Star tracker firmware for the e2v CCD47-20 on an STM32H743ZI (NUCLEO-H743ZI).
 //!
 //! What runs: clocks at 480 MHz, the calibration table check ([`calib_store`]), the line
-//! readout by SPI DMA into ping-pong buffers ([`readout`], [`lines`]) and the per-line
-//! calibration and summary ([`process`], [`telemetry`]).
+//! readout by SPI DMA into ping-pong buffers ([`readout`], [`lines`]), the per-line
+//! calibration and summary ([`process`], [`telemetry`]), and the stars: detection, windows
+//! and centroids in acquisition and tracking modes ([`stars`]).
 //!
 //! Boundary, honestly: there is no CCD clock sequencer yet, so no CCD is driven; lines are
 //! SPI bursts paced by a timer (see [`readout`]). The defmt log is the only telemetry.
@@ -13,6 +14,7 @@ mod calib_store;
 mod lines;
 mod process;
 mod readout;
+mod stars;
 mod telemetry;
 
 use defmt_rtt as _;
@@ -104,6 +106,14 @@ async fn main(spawner: Spawner) {
     let cs = Output::new(p.PD14, Level::High, Speed::VeryHigh);
     let adc = readout::AdcLink::new(spi, cs);
 
-    spawn_or_log(spawner, "process", process::process_task(table));
+    let Some((ring, capture)) = stars::take_buffers() else {
+        defmt::error!("star buffers already taken");
+        return;
+    };
+    spawn_or_log(
+        spawner,
+        "process",
+        process::process_task(table, ring, capture),
+    );
     spawn_or_log(spawner, "readout", readout::readout_task(adc));
 }

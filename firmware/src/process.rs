@@ -7,9 +7,12 @@
 //! 2. the line's covered columns into the frame's [`DarkScaleEstimator`];
 //! 3. for an active row, its 1024 pixels to electrons ([`FrameCalibration::calibrate_span`])
 //!    into a buffer owned by this task;
-//! 4. the calibrated row into the frame's streaming star detector ([`LineDetector`]), whose
-//!    candidates (at most [`MAX_STARS`], the brightest kept) are reported when the frame
-//!    ends.
+//! 4. the calibrated row and its raw line into the star pipeline ([`crate::stars`]): the
+//!    streaming detector, the raw-line ring, and a centroid per star when its window's last
+//!    row has streamed. In a tracking frame, steps 3-4 are replaced by copying the rows of
+//!    the predicted windows, which are calibrated, checked and centroided on their own.
+//!    The frame's stars (at most [`crate::stars::MAX_STARS`], the brightest kept) are
+//!    reported when the frame ends.
 //!
 //! Without a table (none in flash, or rejected) the firmware runs *uncalibrated*: the bias is
 //! still measured and the summary reports the active pixels' mean above bias in ADU; no
@@ -24,17 +27,16 @@
 //! table's hot-pixel reference temperature, and the exposure as one frame period of the
 //! timer-paced readout. They affect only hot pixels with the `Correct` policy.
 //!
-//! Centroiding of the candidates is not done on the target yet (issue 3); their detection
-//! positions and SNR leave the task in the frame report.
+//! The dark scale of a tracking frame still comes from every line's covered columns.
 
 use crate::lines::{FILLED, FREE, GEOMETRY, LineBuf};
 use crate::readout::LINE_PERIOD;
+use crate::stars::{Capture, Mode, Ring, StarPipeline};
 use crate::telemetry::{self, LineOutcome, LineSummary};
 use fixed::types::I28F4;
 use startrack_core::calib::{
     DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
 };
-use startrack_core::detect::{DetectConfig, LineDetector};
 use startrack_core::geometry::MAX_OUTPUTS;
 use startrack_core::table::CalibTable;
 use startrack_core::units::{BiasAdu, Electrons};
@@ -45,11 +47,8 @@ const ACTIVE_COLS: usize = GEOMETRY.active_cols as usize;
 /// Exposure assumed for the hot-pixel law: one frame period of the timer-paced readout.
 const EXPOSURE_MS: u32 = (GEOMETRY.lines as u64 * LINE_PERIOD.as_millis()) as u32;
 
-/// Most star candidates kept per frame.
-pub const MAX_STARS: usize = 32;
-
 /// The processing state: the table, the dark-scale estimate, the output row and the
-/// frame's detector.
+/// star pipeline.
 pub struct Processor {
     table: Option<CalibTable<'static>>,
     /// The frame whose lines are being accumulated, and how many of its lines were seen.
@@ -60,12 +59,14 @@ pub struct Processor {
     prev_dark_scale: Option<Electrons>,
     electrons: [Electrons; ACTIVE_COLS],
     flags: [PixelFlags; ACTIVE_COLS],
-    detector: LineDetector<MAX_STARS>,
+    /// The conditions the current frame's rows were calibrated with.
+    conditions: Option<FrameConditions>,
+    stars: StarPipeline,
 }
 
 impl Processor {
     /// A processor that calibrates with `table`, or runs uncalibrated without one.
-    pub fn new(table: Option<CalibTable<'static>>) -> Self {
+    pub fn new(table: Option<CalibTable<'static>>, stars: StarPipeline) -> Self {
         Self {
             table,
             frame: None,
@@ -74,16 +75,9 @@ impl Processor {
             prev_dark_scale: None,
             electrons: [Electrons::ZERO; ACTIVE_COLS],
             flags: [PixelFlags::empty(); ACTIVE_COLS],
-            detector: Self::new_detector(),
+            conditions: None,
+            stars,
         }
-    }
-
-    fn new_detector() -> LineDetector<MAX_STARS> {
-        LineDetector::new(
-            DetectConfig::default(),
-            GEOMETRY.active_cols,
-            GEOMETRY.active_rows,
-        )
     }
 
     /// Closes the previous frame when `frame` starts a new one.
@@ -94,8 +88,13 @@ impl Processor {
         if let Some(done) = self.frame {
             let estimate = self.estimator.estimate();
             telemetry::report_frame(done, self.lines_in_frame, estimate);
-            self.detector.finish();
-            telemetry::report_detections(done, self.detector.candidates(), self.detector.dropped());
+            let calibration = self
+                .table
+                .zip(self.conditions)
+                .map(|(t, c)| FrameCalibration::new(t, c));
+            let mode = self.stars.mode();
+            let (stars, stats) = self.stars.end_frame(calibration.as_ref());
+            telemetry::report_stars(done, mode, stars, &stats);
             if estimate.is_some() {
                 self.prev_dark_scale = estimate;
             }
@@ -103,7 +102,8 @@ impl Processor {
         self.frame = Some(frame);
         self.lines_in_frame = 0;
         self.estimator = DarkScaleEstimator::new();
-        self.detector = Self::new_detector();
+        self.conditions = None;
+        self.stars.start_frame();
     }
 
     /// Processes raw line `line` of frame `frame`.
@@ -158,6 +158,16 @@ impl Processor {
             temperature_k: table.hot_pixels().reference_temperature_k(),
         };
         let calibration = FrameCalibration::new(*table, conditions);
+        self.conditions = Some(conditions);
+        if self.stars.mode() == Mode::Tracking {
+            let windows_done = self
+                .stars
+                .tracking_line(&calibration, line, samples, levels);
+            return LineOutcome::Tracked {
+                dark_scale_e,
+                windows_done,
+            };
+        }
         let flags = match calibration.calibrate_span(
             line,
             0,
@@ -172,9 +182,14 @@ impl Processor {
                 return LineOutcome::Failed;
             }
         };
-        if let Err(e) = self.detector.push_line(line, &self.electrons, &self.flags) {
-            defmt::error!("process: detection, line {}: {}", line, e);
-        }
+        self.stars.acquisition_line(
+            &calibration,
+            line,
+            samples,
+            levels,
+            &self.electrons,
+            &self.flags,
+        );
         let (mut sum, mut used, mut saturated) = (0i64, 0i64, 0u16);
         for (e, f) in self.electrons.iter().zip(self.flags.iter()) {
             if !f.is_excluded() {
@@ -222,8 +237,13 @@ fn mean_bits(sum: i64, n: i64) -> i32 {
 /// The processing task: each filled line is processed, its buffer goes straight back to
 /// the readout, and every [`telemetry::LINE_SUMMARY_EVERY`]th line's summary is logged.
 #[embassy_executor::task]
-pub async fn process_task(table: Option<CalibTable<'static>>) -> ! {
-    let mut processor = Processor::new(table);
+pub async fn process_task(
+    table: Option<CalibTable<'static>>,
+    ring: &'static mut Ring,
+    capture: &'static mut Capture,
+) -> ! {
+    // Built here rather than passed in, so that the task's state holds one pipeline.
+    let mut processor = Processor::new(table, StarPipeline::new(ring, capture));
     loop {
         let raw = FILLED.receive().await;
         let summary = processor.process(raw.frame, raw.line, raw.samples);

@@ -5,9 +5,9 @@
 //! that are reported and the rate at which line summaries are logged, so that a real link
 //! can later send the same records.
 
+use crate::stars::{FrameStats, Mode, StarRecord};
 use fixed::types::I28F4;
 use startrack_core::calib::PixelFlags;
-use startrack_core::detect::Detection;
 use startrack_core::geometry::MAX_OUTPUTS;
 use startrack_core::units::{BiasAdu, Electrons};
 
@@ -37,6 +37,13 @@ pub enum LineOutcome {
     Uncalibrated {
         /// Mean of the row's active samples minus their output's bias, ADU.
         mean_above_bias_adu: I28F4,
+    },
+    /// An active row of a tracking frame: only the rows of the stars' windows were copied.
+    Tracked {
+        /// The dark scale the windows are calibrated with, electrons.
+        dark_scale_e: Electrons,
+        /// Windows whose last row this was (calibrated, checked and centroided).
+        windows_done: u8,
     },
     /// A line that holds no active row (store-section rows read after the image).
     NotActive,
@@ -72,16 +79,29 @@ pub fn report_frame(frame: u32, lines: u16, dark_scale_e: Option<Electrons>) {
     );
 }
 
-/// Logs a frame's star candidates (position, flux, SNR, flags) and how many were lost
-/// because the list was full.
-pub fn report_detections(frame: u32, stars: &[Detection], dropped: u32) {
+/// Logs a frame's stars: one summary record (mode, counts, losses), then one record per star
+/// (position, flux, SNR, position errors, flags; see [`StarRecord`] for the flag layout).
+pub fn report_stars(frame: u32, mode: Mode, stars: &[StarRecord], stats: &FrameStats) {
+    let centroids = stars.iter().filter(|s| s.is_centroid()).count();
     defmt::info!(
-        "frame {} stars: {} candidates, {} dropped",
+        "frame {} {}: {} stars ({} centroids), {}",
         frame,
+        mode,
         stars.len(),
-        dropped
+        centroids,
+        stats
     );
     for s in stars {
-        defmt::info!("frame {} star {}", frame, s);
+        defmt::info!(
+            "frame {} star x {=f32} px y {=f32} px flux {=f32} e- snr {=f32} sigma {=f32}/{=f32} px flags {=u32:#x}",
+            frame,
+            s.x_px,
+            s.y_px,
+            s.flux_e,
+            s.snr,
+            s.sigma_x_px,
+            s.sigma_y_px,
+            s.flags
+        );
     }
 }

@@ -316,9 +316,77 @@ proptest! {
             d.push_line(y, &e, &f).unwrap();
         }
         d.finish();
+        // Overflow policy: a loss is only counted when the list is full.
+        prop_assert!(d.candidates().len() <= 8);
+        prop_assert!(d.dropped() == 0 || d.candidates().len() == 8);
         for c in d.candidates() {
             prop_assert!(c.x_px.is_finite() && c.y_px.is_finite() && c.snr.is_finite() && c.flux_e.is_finite());
             prop_assert!(c.x_px >= 0.0 && c.x_px <= f32::from(w - 1) && c.y_px >= 0.0 && c.y_px <= f32::from(h - 1));
+        }
+    }
+}
+
+/// `push_line_closed` reports each kept candidate once, on the line that completed it (a
+/// line after the blob's rows), and `finish_closed` the rest: together, the final list.
+#[test]
+fn closed_candidates_are_reported_once_when_their_blob_ends() {
+    let stars: Vec<(f64, f64, f64)> = (0..10)
+        .map(|i| {
+            (
+                20.0 + 22.0 * f64::from(i),
+                20.0 + 9.0 * f64::from(i),
+                2000.0 * f64::from(i + 1),
+            )
+        })
+        .collect();
+    let lines = synthetic(&stars, 3);
+    let flags = vec![PixelFlags::empty(); usize::from(W)];
+    for capacity_limited in [false, true] {
+        let mut d16 = LineDetector::<16>::new(DetectConfig::default(), W, H);
+        let mut d4 = LineDetector::<4>::new(DetectConfig::default(), W, H);
+        let mut reported = Vec::new();
+        for (y, l) in lines.iter().enumerate() {
+            let y = y as u16;
+            if capacity_limited {
+                let mut closed = Default::default();
+                d4.push_line_closed(y, l, &flags, &mut closed).unwrap();
+                reported.extend(closed.iter().map(|c| (y, *c)));
+            } else {
+                let mut closed = Default::default();
+                d16.push_line_closed(y, l, &flags, &mut closed).unwrap();
+                reported.extend(closed.iter().map(|c| (y, *c)));
+            }
+        }
+        let finals: Vec<_> = if capacity_limited {
+            let mut closed = Default::default();
+            d4.finish_closed(&mut closed);
+            reported.extend(closed.iter().map(|c| (H, *c)));
+            d4.candidates().to_vec()
+        } else {
+            let mut closed = Default::default();
+            d16.finish_closed(&mut closed);
+            reported.extend(closed.iter().map(|c| (H, *c)));
+            d16.candidates().to_vec()
+        };
+        for (y, c) in &reported {
+            assert!(
+                c.peak_y < *y,
+                "reported at {y} before its peak row {}",
+                c.peak_y
+            );
+        }
+        // Every final candidate was reported exactly once.
+        for f in &finals {
+            assert_eq!(reported.iter().filter(|(_, c)| c == f).count(), 1, "{f:?}");
+        }
+        if capacity_limited {
+            // Brighter candidates that replaced fainter ones were reported too, and those
+            // replaced later are not in the final list: more reports than final entries.
+            assert!(reported.len() >= finals.len());
+            assert_eq!(finals.len(), 4);
+        } else {
+            assert_eq!(reported.len(), 10);
+            assert_eq!(finals.len(), 10);
         }
     }
 }

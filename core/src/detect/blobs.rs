@@ -492,3 +492,46 @@ impl<const N: usize> LineDetector<N> {
         }
     }
 }
+
+/// Reporting the candidates a line completed (acquisition centroiding in the firmware): kept
+/// apart from the detector's internals, it compares the candidate list before and after.
+impl<const N: usize> LineDetector<N> {
+    /// [`Self::push_line`], then writes into `closed` the candidates that this line
+    /// completed and the list kept (a new candidate, or one that replaced a fainter one);
+    /// a candidate the full list refused is not reported (it is counted in
+    /// [`Self::dropped`]). Cost: a copy of the candidate list per line.
+    pub fn push_line_closed(
+        &mut self,
+        y: u16,
+        pixels_e: &[Electrons],
+        flags: &[PixelFlags],
+        closed: &mut heapless::Vec<Detection, N>,
+    ) -> Result<(), DetectError> {
+        let before = self.candidates.clone();
+        closed.clear();
+        self.push_line(y, pixels_e, flags)?;
+        self.changed_since(&before, closed);
+        Ok(())
+    }
+
+    /// [`Self::finish`], reporting the candidates it completed like [`Self::push_line_closed`].
+    pub fn finish_closed(&mut self, closed: &mut heapless::Vec<Detection, N>) {
+        let before = self.candidates.clone();
+        closed.clear();
+        self.finish();
+        self.changed_since(&before, closed);
+    }
+
+    fn changed_since(
+        &self,
+        before: &heapless::Vec<Detection, N>,
+        closed: &mut heapless::Vec<Detection, N>,
+    ) {
+        for (i, c) in self.candidates.iter().enumerate() {
+            if before.get(i) != Some(c) {
+                // `closed` has the list's capacity, so this cannot fail.
+                let _ = closed.push(*c);
+            }
+        }
+    }
+}

@@ -6,6 +6,11 @@
 //!   already seen (robust to stars: lower-half quantiles).
 //! - [`blobs`]: connected above-threshold pixels (8-connectivity) grouped into blobs, and
 //!   the candidate list with its overflow policy.
+//! - [`track`]: tracking mode, one window predicted from the last frame: is the star there?
+//!   Background and noise from the window's border, the same eq. 8 SNR test.
+//! - [`capture`]: copies the raw pixels of a list of windows (tracking) out of the streamed
+//!   lines, and keeps a ring of the last raw lines (acquisition) so that a blob's window can
+//!   be calibrated and centroided when the blob closes.
 //!
 //! Thresholds work with hysteresis: pixels above 2.5 local sigmas form blobs, and a blob
 //! counts only with a peak above 5 sigmas and at least 2 pixels (see [`DetectConfig`]).
@@ -17,8 +22,12 @@
 
 pub mod background;
 pub mod blobs;
+pub mod capture;
+pub mod track;
 
 pub use blobs::{Detection, DetectionFlags, LineDetector};
+pub use capture::{CaptureError, LineRing, RingError, WindowCapture};
+pub use track::{TrackConfig, TrackFlags, TrackResult, track_detect};
 
 /// Detection settings.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,0 +1,508 @@
+//! Stars per frame: detection, windows, calibration and centroids, in two modes.
+//!
+//! - **Acquisition** (no prior knowledge): every active row is calibrated whole and streamed
+//!   into the core's [`LineDetector`]; the raw line and its levels also go into a ring of the
+//!   last [`RING_LINES`] lines ([`Ring`], in `.bss` = AXI SRAM). When the detector closes a
+//!   blob ([`LineDetector::push_line_closed`]), an [`ACQ_WINDOW_PX`]-square window around its
+//!   peak waits until its last row has streamed, is copied from the ring, calibrated
+//!   ([`FrameCalibration::calibrate_window`]) and centroided (CoG power 1, a
+//!   [`COG_BOX_PX`] box, background from the window's perimeter median). A window whose
+//!   top rows already left the ring (a blob taller than the ring allows) is reported with
+//!   [`flags::RING_LOST`] and the detector's own position.
+//! - **Tracking** (after a frame with at least [`MIN_TRACK_STARS`] centroids): the next frame
+//!   reads only [`TRACK_WINDOW_PX`]-square windows centred on the last frame's stars
+//!   ([`Capture`]: each window's rows are copied as the lines pass). When a window's last row
+//!   arrives it is calibrated, the core's [`track_detect`] decides whether the star is still
+//!   there (border background, eq. 8 SNR > 3, spike test), and a detected star is centroided
+//!   as in acquisition. Full lines are not calibrated. With fewer than [`MIN_TRACK_STARS`]
+//!   stars found, or every [`REACQUIRE_EVERY`] frames (to pick up stars entering the
+//!   field), the next frame is an acquisition frame.
+//!
+//! Memory: the ring 16 x 1072 x 2 = 34 KB, the capture list 32 x ~600 B = 19 KB, one window's
+//! scratch buffers (15 x 15 pixels), the detector and the star lists: ~60 KB of the AXI SRAM.
+//! Cost per acquisition line: a 2 KB copy into the ring and the candidate list's copy
+//! (32 x 28 B); per star: a 9x9 window copy, its calibration and a CoG (a few thousand
+//! operations). Per tracking line: a row test per window and the rows that fall in windows.
+
+use crate::lines::{GEOMETRY, LINE_LEN, LineBuf};
+use startrack_core::calib::{FrameCalibration, LineLevels, PixelFlags};
+use startrack_core::centroid::cog::{CogParams, CogPower, cog};
+use startrack_core::centroid::{CentroidFlags, CentroidInput};
+use startrack_core::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
+use startrack_core::detect::{
+    DetectConfig, Detection, LineDetector, LineRing, TrackConfig, WindowCapture, track_detect,
+};
+use startrack_core::units::{BiasAdu, Electrons};
+use startrack_core::window::{Rect, Window};
+use static_cell::StaticCell;
+
+/// Raw lines kept for acquisition windows: a 9-row window completes at most a few rows
+/// after its blob closes, so 16 leaves room for blobs up to ~8 rows below their peak.
+pub const RING_LINES: usize = 16;
+/// Side of an acquisition window (the CoG box plus a one-pixel perimeter).
+pub const ACQ_WINDOW_PX: u16 = 9;
+/// Side of a tracking window: the acquisition window plus a pixel of motion on each side.
+pub const TRACK_WINDOW_PX: u16 = 11;
+/// Side of the centre-of-gravity box (power 1).
+pub const COG_BOX_PX: u8 = 7;
+/// Most stars per frame (candidates, windows and reported stars).
+pub const MAX_STARS: usize = 32;
+/// Fewest centroided stars for the next frame to be a tracking frame.
+pub const MIN_TRACK_STARS: usize = 3;
+/// Every this many frames in a row of tracking, one acquisition frame.
+pub const REACQUIRE_EVERY: u32 = 16;
+
+/// The raw-line ring of acquisition.
+pub type Ring = LineRing<RING_LINES, LINE_LEN>;
+/// The window list of tracking.
+pub type Capture = WindowCapture<MAX_STARS>;
+
+/// The ring, in `.bss` (AXI SRAM); filled by the CPU from the DMA'd line buffer after the
+/// hand-off, so no DMA ever writes it. Initialised at run time: a const initialiser with
+/// the geometry's non-zero fields would put the whole 34 KB in `.data`, i.e. also in flash.
+static RING: StaticCell<Ring> = StaticCell::new();
+/// The tracking window list, in `.bss`, initialised at run time for the same reason.
+static CAPTURE: StaticCell<Capture> = StaticCell::new();
+
+/// The ring and the window list; `None` when taken before.
+pub fn take_buffers() -> Option<(&'static mut Ring, &'static mut Capture)> {
+    let ring = RING.try_init(LineRing::new(GEOMETRY.first_active_col()))?;
+    let capture = CAPTURE.try_init(WindowCapture::new(GEOMETRY))?;
+    Some((ring, capture))
+}
+
+/// Flags the pipeline adds to a star record (bits 24..31 of [`StarRecord::flags`]).
+pub mod flags {
+    /// The window's top rows had left the raw-line ring: position and flux are the
+    /// detector's, not a centroid.
+    pub const RING_LOST: u8 = 1;
+    /// The window could not be calibrated (the error was logged): position and flux are
+    /// the detector's.
+    pub const CALIB_FAILED: u8 = 2;
+    /// Found in tracking mode (detection flags are then [`TrackFlags`] bits).
+    ///
+    /// [`TrackFlags`]: startrack_core::detect::TrackFlags
+    pub const TRACKED: u8 = 4;
+}
+
+/// The frame's mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum Mode {
+    /// Full-frame detection.
+    Acquisition,
+    /// Windows around the last frame's stars.
+    Tracking,
+}
+
+/// One star as reported.
+#[derive(Clone, Copy, Debug, defmt::Format)]
+pub struct StarRecord {
+    /// Column, px (active area, pixel centres at integers).
+    pub x_px: f32,
+    /// Row, px.
+    pub y_px: f32,
+    /// Background-subtracted flux in the CoG box, e-.
+    pub flux_e: f32,
+    /// SNR (eq. 8 with the measured noise).
+    pub snr: f32,
+    /// Estimated 1-sigma error of `x_px`, px.
+    pub sigma_x_px: f32,
+    /// Estimated 1-sigma error of `y_px`, px.
+    pub sigma_y_px: f32,
+    /// Bits 0..15: [`CentroidFlags`]; 16..23: the detector's `DetectionFlags` (acquisition)
+    /// or `TrackFlags` (tracking); 24..31: [`flags`].
+    pub flags: u32,
+}
+
+impl StarRecord {
+    /// True when the position is a centroid that may be used for attitude.
+    pub fn is_centroid(&self) -> bool {
+        let pipeline = (self.flags >> 24) as u8;
+        let centroid = CentroidFlags::from_bits_truncate(self.flags as u16);
+        pipeline & (flags::RING_LOST | flags::CALIB_FAILED) == 0
+            && !centroid.contains(CentroidFlags::DEGENERATE)
+    }
+}
+
+/// What a frame produced besides its stars.
+#[derive(Clone, Copy, Debug, Default, defmt::Format)]
+pub struct FrameStats {
+    /// Candidates the detector's full list lost (acquisition).
+    pub candidates_dropped: u32,
+    /// Windows that could not wait for their rows: the pending list was full.
+    pub windows_dropped: u16,
+    /// Windows whose rows had left the ring.
+    pub ring_lost: u16,
+    /// Tracking windows placed.
+    pub track_windows: u16,
+    /// Tracking windows without a star (or with missing rows).
+    pub track_lost: u16,
+    /// Stars not reported because the star list was full (the brightest are kept).
+    pub stars_dropped: u16,
+}
+
+/// A closed blob waiting for its window's last row.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    rect: Rect,
+    clipped: bool,
+    detection: Detection,
+}
+
+/// Scratch buffers for one window.
+struct Scratch {
+    raw: [u16; CAPTURE_MAX_PX],
+    levels: [LineLevels; CAPTURE_MAX_SIDE as usize],
+    electrons: [Electrons; CAPTURE_MAX_PX],
+    flags: [PixelFlags; CAPTURE_MAX_PX],
+}
+
+/// The per-frame star pipeline.
+pub struct StarPipeline {
+    mode: Mode,
+    next_mode: Mode,
+    tracking_frames: u32,
+    detector: LineDetector<MAX_STARS>,
+    closed: heapless::Vec<Detection, MAX_STARS>,
+    pending: heapless::Vec<Pending, MAX_STARS>,
+    ring: &'static mut Ring,
+    capture: &'static mut Capture,
+    stars: heapless::Vec<StarRecord, MAX_STARS>,
+    prev_stars: heapless::Vec<StarRecord, MAX_STARS>,
+    stats: FrameStats,
+    scratch: Scratch,
+}
+
+fn new_detector() -> LineDetector<MAX_STARS> {
+    LineDetector::new(
+        DetectConfig::default(),
+        GEOMETRY.active_cols,
+        GEOMETRY.active_rows,
+    )
+}
+
+/// Nearest pixel of a position, inside the active area.
+fn pixel_of(v: f32, size: u16) -> u16 {
+    let v = if v.is_finite() { v + 0.5 } else { 0.0 };
+    (v.max(0.0) as u32).min(u32::from(size.saturating_sub(1))) as u16
+}
+
+impl StarPipeline {
+    /// A pipeline that starts in acquisition, with its ring and window list (statics).
+    pub fn new(ring: &'static mut Ring, capture: &'static mut Capture) -> Self {
+        Self {
+            mode: Mode::Acquisition,
+            next_mode: Mode::Acquisition,
+            tracking_frames: 0,
+            detector: new_detector(),
+            closed: heapless::Vec::new(),
+            pending: heapless::Vec::new(),
+            ring,
+            capture,
+            stars: heapless::Vec::new(),
+            prev_stars: heapless::Vec::new(),
+            stats: FrameStats::default(),
+            scratch: Scratch {
+                raw: [0; CAPTURE_MAX_PX],
+                levels: [LineLevels {
+                    bias_adu: [BiasAdu::ZERO; startrack_core::geometry::MAX_OUTPUTS],
+                }; CAPTURE_MAX_SIDE as usize],
+                electrons: [Electrons::ZERO; CAPTURE_MAX_PX],
+                flags: [PixelFlags::empty(); CAPTURE_MAX_PX],
+            },
+        }
+    }
+
+    /// The current frame's mode.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Starts a frame in the mode decided at the end of the last one.
+    pub fn start_frame(&mut self) {
+        self.mode = self.next_mode;
+        self.stars.clear();
+        self.pending.clear();
+        self.stats = FrameStats::default();
+        match self.mode {
+            Mode::Acquisition => {
+                self.detector = new_detector();
+                self.ring.clear();
+            }
+            Mode::Tracking => {
+                self.capture.reset();
+                for s in self.prev_stars.iter() {
+                    let (rect, clipped) = Rect::centred_clipped(
+                        pixel_of(s.x_px, GEOMETRY.active_cols),
+                        pixel_of(s.y_px, GEOMETRY.active_rows),
+                        TRACK_WINDOW_PX,
+                        GEOMETRY.active_cols,
+                        GEOMETRY.active_rows,
+                    );
+                    match self.capture.add(rect, clipped) {
+                        Ok(_) => self.stats.track_windows += 1,
+                        Err(e) => defmt::warn!("stars: tracking window refused: {}", e),
+                    }
+                }
+            }
+        }
+    }
+
+    /// An acquisition row: `electrons`/`flags` is the calibrated row `y`, `samples` its raw
+    /// line.
+    pub fn acquisition_line(
+        &mut self,
+        calibration: &FrameCalibration<'_>,
+        y: u16,
+        samples: &LineBuf,
+        levels: &LineLevels,
+        electrons: &[Electrons],
+        flags: &[PixelFlags],
+    ) {
+        if let Err(e) = self.ring.push(y, samples, levels) {
+            defmt::error!("stars: ring, line {}: {}", y, e);
+        }
+        match self
+            .detector
+            .push_line_closed(y, electrons, flags, &mut self.closed)
+        {
+            Ok(()) => self.queue_closed(),
+            Err(e) => defmt::error!("stars: detection, line {}: {}", y, e),
+        }
+        self.serve_pending(calibration, Some(y));
+    }
+
+    /// A tracking row: copies the windows' pixels and measures the windows it completes.
+    pub fn tracking_line(
+        &mut self,
+        calibration: &FrameCalibration<'_>,
+        y: u16,
+        samples: &LineBuf,
+        levels: &LineLevels,
+    ) -> u8 {
+        match self.capture.push_line(y, samples, levels) {
+            Ok(done) => {
+                let mut n = 0u8;
+                for i in done {
+                    self.measure_tracked(calibration, i);
+                    n = n.saturating_add(1);
+                }
+                n
+            }
+            Err(e) => {
+                defmt::error!("stars: capture, line {}: {}", y, e);
+                0
+            }
+        }
+    }
+
+    /// Ends the frame: completes what is open, decides the next mode, and returns the
+    /// frame's stars and statistics.
+    pub fn end_frame(
+        &mut self,
+        calibration: Option<&FrameCalibration<'_>>,
+    ) -> (&[StarRecord], FrameStats) {
+        match (self.mode, calibration) {
+            (Mode::Acquisition, Some(c)) => {
+                self.detector.finish_closed(&mut self.closed);
+                self.queue_closed();
+                self.serve_pending(c, None);
+                self.stats.candidates_dropped = self.detector.dropped();
+            }
+            (Mode::Tracking, Some(c)) => {
+                for i in self.capture.finish() {
+                    self.measure_tracked(c, i);
+                }
+            }
+            (_, None) => {}
+        }
+        let usable = self.stars.iter().filter(|s| s.is_centroid()).count();
+        let reacquire = self.mode == Mode::Tracking && self.tracking_frames + 1 >= REACQUIRE_EVERY;
+        self.next_mode = if usable < MIN_TRACK_STARS || reacquire {
+            Mode::Acquisition
+        } else {
+            Mode::Tracking
+        };
+        self.tracking_frames = match self.mode {
+            Mode::Tracking => self.tracking_frames + 1,
+            Mode::Acquisition => 0,
+        };
+        self.prev_stars.clear();
+        for s in self.stars.iter().filter(|s| s.is_centroid()) {
+            // Same capacity: cannot fail.
+            let _ = self.prev_stars.push(*s);
+        }
+        (&self.stars, self.stats)
+    }
+
+    /// Moves the candidates the last line closed into the pending list.
+    fn queue_closed(&mut self) {
+        for d in self.closed.iter() {
+            let (rect, clipped) = Rect::centred_clipped(
+                d.peak_x,
+                d.peak_y,
+                ACQ_WINDOW_PX,
+                GEOMETRY.active_cols,
+                GEOMETRY.active_rows,
+            );
+            let p = Pending {
+                rect,
+                clipped,
+                detection: *d,
+            };
+            if self.pending.push(p).is_err() {
+                self.stats.windows_dropped = self.stats.windows_dropped.saturating_add(1);
+            }
+        }
+    }
+
+    /// Measures the pending windows whose last row has streamed (all of them when `y` is
+    /// `None`, at the end of the frame).
+    fn serve_pending(&mut self, calibration: &FrameCalibration<'_>, y: Option<u16>) {
+        let mut i = 0;
+        while let Some(p) = self.pending.get(i).copied() {
+            let last = p.rect.y0.saturating_add(p.rect.height).saturating_sub(1);
+            if y.is_some_and(|y| y < last) {
+                i += 1;
+                continue;
+            }
+            self.pending.swap_remove(i);
+            self.measure_acquired(calibration, &p);
+        }
+    }
+
+    fn measure_acquired(&mut self, calibration: &FrameCalibration<'_>, p: &Pending) {
+        let rect = p.rect;
+        let n = rect.len();
+        let det_flags = u32::from(p.detection.flags.bits()) << 16;
+        let s = &mut self.scratch;
+        let (Some(raw), Some(levels)) = (
+            s.raw.get_mut(..n),
+            s.levels.get_mut(..usize::from(rect.height)),
+        ) else {
+            return;
+        };
+        let pipeline = match self.ring.copy_window(rect, raw, levels) {
+            Ok(()) => match Self::calibrate(calibration, s, rect)
+                .then(|| Self::centroid(s, rect, p.clipped))
+                .flatten()
+            {
+                Some(mut r) => {
+                    r.flags |= det_flags;
+                    self.push_star(r);
+                    return;
+                }
+                None => flags::CALIB_FAILED,
+            },
+            Err(e) => {
+                defmt::warn!("stars: window at ({}, {}): {}", rect.x0, rect.y0, e);
+                self.stats.ring_lost = self.stats.ring_lost.saturating_add(1);
+                flags::RING_LOST
+            }
+        };
+        let d = &p.detection;
+        let half = f32::from(ACQ_WINDOW_PX) / 2.0;
+        self.push_star(StarRecord {
+            x_px: d.x_px,
+            y_px: d.y_px,
+            flux_e: d.flux_e,
+            snr: d.snr,
+            sigma_x_px: half,
+            sigma_y_px: half,
+            flags: det_flags | (u32::from(pipeline) << 24),
+        });
+    }
+
+    fn measure_tracked(&mut self, calibration: &FrameCalibration<'_>, i: usize) {
+        let Some(w) = self.capture.window(i) else {
+            return;
+        };
+        let (rect, clipped) = (w.rect, w.clipped);
+        let n = rect.len();
+        let s = &mut self.scratch;
+        let copied = match (
+            s.raw.get_mut(..n),
+            s.levels.get_mut(..usize::from(rect.height)),
+        ) {
+            (Some(raw), Some(levels)) if !w.missing_rows => {
+                raw.copy_from_slice(w.raw);
+                levels.copy_from_slice(w.levels);
+                true
+            }
+            _ => false,
+        };
+        if !copied || !Self::calibrate(calibration, s, rect) {
+            self.stats.track_lost = self.stats.track_lost.saturating_add(1);
+            return;
+        }
+        let verdict = match (s.electrons.get(..n), s.flags.get(..n)) {
+            (Some(e), Some(f)) => Window::new(rect, e)
+                .map(|window| track_detect(&window, f, clipped, &TrackConfig::default())),
+            _ => None,
+        };
+        match (verdict, Self::centroid(s, rect, clipped)) {
+            (Some(v), Some(mut r)) if v.detected => {
+                r.flags |= (u32::from(v.flags.bits()) << 16) | (u32::from(flags::TRACKED) << 24);
+                self.push_star(r);
+            }
+            _ => self.stats.track_lost = self.stats.track_lost.saturating_add(1),
+        }
+    }
+
+    /// Calibrates the window held in `s.raw`/`s.levels` into `s.electrons`/`s.flags`.
+    fn calibrate(calibration: &FrameCalibration<'_>, s: &mut Scratch, rect: Rect) -> bool {
+        let n = rect.len();
+        let (Some(raw), Some(levels), Some(e), Some(f)) = (
+            s.raw.get(..n),
+            s.levels.get(..usize::from(rect.height)),
+            s.electrons.get_mut(..n),
+            s.flags.get_mut(..n),
+        ) else {
+            return false;
+        };
+        match calibration.calibrate_window(rect, raw, levels, e, f) {
+            Ok(_) => true,
+            Err(err) => {
+                defmt::error!("stars: window calibration: {}", err);
+                false
+            }
+        }
+    }
+
+    /// The CoG of the calibrated window in `s.electrons`/`s.flags`.
+    fn centroid(s: &Scratch, rect: Rect, clipped: bool) -> Option<StarRecord> {
+        let n = rect.len();
+        let input = CentroidInput::new(Window::new(rect, s.electrons.get(..n)?)?)
+            .with_pixel_flags(s.flags.get(..n)?)
+            .with_clipped(clipped);
+        let c = cog(&input, &CogParams::new(CogPower::One, COG_BOX_PX));
+        Some(StarRecord {
+            x_px: c.x_px,
+            y_px: c.y_px,
+            flux_e: c.flux_e,
+            snr: c.snr,
+            sigma_x_px: c.sigma_x_px,
+            sigma_y_px: c.sigma_y_px,
+            flags: u32::from(c.flags.bits()),
+        })
+    }
+
+    /// Adds a star; when the list is full the faintest is replaced by a brighter one.
+    fn push_star(&mut self, r: StarRecord) {
+        if let Err(r) = self.stars.push(r) {
+            self.stats.stars_dropped = self.stats.stars_dropped.saturating_add(1);
+            let faintest = self
+                .stars
+                .iter()
+                .enumerate()
+                .min_by(|a, b| a.1.flux_e.total_cmp(&b.1.flux_e))
+                .map(|(i, s)| (i, s.flux_e));
+            if let Some((i, f)) = faintest
+                && r.flux_e > f
+                && let Some(slot) = self.stars.get_mut(i)
+            {
+                *slot = r;
+            }
+        }
+    }
+}
