@@ -1,5 +1,7 @@
 //! Host side of the star tracker: the simulated CCD47-20 and what the `startrack` command
 //! and the tests share. The core runs here unchanged, exactly as on the Cortex-M7.
 
+pub mod cli;
 pub mod demo;
+pub mod figures;
 pub mod sim;

@@ -38,11 +38,14 @@ enum Command {
         #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(0..=10))]
         tile_log2: u8,
     },
+    /// The founding paper's Figures 1-6 (CSV with parameters, PNG) from the core's code.
+    Figures(startrack_host::cli::figures::Args),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Figures(args) => startrack_host::cli::figures::run(&args),
         Command::Demo { seed, stars } => match startrack_host::demo::run(seed, stars) {
             Ok(report) => {
                 startrack_host::demo::print(&report);
