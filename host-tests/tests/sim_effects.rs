@@ -434,3 +434,80 @@ fn measured_flat_map_recovers_the_prnu() {
     );
     assert!(rms < 0.02 / 5.0);
 }
+
+#[test]
+fn truth_table_hot_pixels_are_corrected_by_the_core() {
+    use startrack_core::calib::{
+        DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
+    };
+    use startrack_core::table::CalibTable;
+    use startrack_core::units::{Electrons, Kelvin};
+    use startrack_host::sim::truth::TruthSections;
+    let params = SensorParams {
+        noise: false,
+        prnu: 0.0,
+        column_bias_sigma_adu: 0.0,
+        effects: Effects {
+            temperature_k: 301.0,
+            hot: Some(HotPixels {
+                fraction: 0.01,
+                rate_min_e_per_s: 200.0,
+                rate_max_e_per_s: 20_000.0,
+                reference_k: 293.0,
+                doubling_k: 9.0,
+                exposure_s: 0.5,
+            }),
+            ..Effects::default()
+        },
+        ..SensorParams::default()
+    };
+    let sim = Simulator::new(params, Vec::new());
+    let g = sim.params.geometry;
+    let bytes = sim.truth_table(TruthSections::ALL).unwrap();
+    let table = CalibTable::parse(&bytes).unwrap();
+    assert_eq!(table.hot_pixels().len(), sim.hot_pixels_truth().len());
+    let mut line = vec![0u16; g.line_len()];
+    let mut est = DarkScaleEstimator::new();
+    for y in 0..usize::from(g.lines) {
+        sim.render_reference_line(y, &mut line);
+        let lv = LineLevels::measure(&g, &line).unwrap();
+        est.add_line(&table, &line, &lv).unwrap();
+    }
+    let cal = FrameCalibration::new(
+        table,
+        FrameConditions {
+            dark_scale_e: est.estimate().unwrap(),
+            exposure_ms: 500,
+            temperature_k: Kelvin::from_num(301),
+        },
+    );
+    let rect = Rect {
+        x0: 300,
+        y0: 300,
+        width: 64,
+        height: 64,
+    };
+    let raw = sim.render_window(rect);
+    let levels: Vec<LineLevels> = (300..364)
+        .map(|y| {
+            sim.render_reference_line(y, &mut line);
+            LineLevels::measure(&g, &line).unwrap()
+        })
+        .collect();
+    let mut e = vec![Electrons::ZERO; rect.len()];
+    let mut f = vec![PixelFlags::empty(); rect.len()];
+    cal.calibrate_window(rect, &raw, &levels, &mut e, &mut f)
+        .unwrap();
+    let hot_in_window = sim
+        .hot_pixels_truth()
+        .iter()
+        .filter(|h| rect.contains(h.x, h.y))
+        .count();
+    assert!(hot_in_window > 10, "{hot_in_window}");
+    // Noise-free: every pixel, hot or not, calibrates to ~0 e-. The bound: ADC rounding
+    // (gain / 2 = 0.8 e-), the dark map's 1/64 step x 250 e- / 2 (2 e-), the rate's U16F16
+    // and the doubling's U8F8 rounding (1/512 K over 9 K: 0.05 % of up to 15 ke-, 8 e-).
+    for v in &e {
+        assert!(v.to_num::<f64>().abs() < 11.0, "{v}");
+    }
+}

@@ -148,7 +148,9 @@ pub struct DarkLaw {
 
 /// Hot pixels: each pixel (active or covered) is hot with probability `fraction`, with a
 /// rate drawn log-uniformly in `rate_min..rate_max` e-/s at `reference_k`, doubling every
-/// `doubling_k` (its own law, not the regular dark's), over `exposure_s`.
+/// `doubling_k` (its own law, not the regular dark's), over `exposure_s`. A hot pixel's dark
+/// is its own law alone (it replaces the regular dark), as the core's hot-pixel correction
+/// assumes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HotPixels {
     /// Probability that a pixel is hot.

@@ -111,8 +111,8 @@ impl Simulator {
     }
 
     /// Expected dark electrons of raw element (`col`, `line`) in this frame before CTI: the
-    /// regular dark (with its temperature law), a hot pixel's own dark and a telegraph
-    /// pixel's level (0 on the over-scan, which has no pixel behind it).
+    /// regular dark (with its temperature law) or, for a hot pixel, its own dark; plus a
+    /// telegraph pixel's level (0 on the over-scan, which has no pixel behind it).
     pub fn expected_dark_e(&self, col: usize, line: usize) -> f64 {
         match self.params.geometry.segment(col) {
             Some(Segment::Active | Segment::Covered) => {
@@ -121,8 +121,10 @@ impl Simulator {
                 if e.dark_law.is_some() {
                     d *= self.dark_law_factor();
                 }
-                if e.hot.is_some() {
-                    d += self.hot_dark_e(col, line);
+                if e.hot.is_some() && self.hot_rate_e_per_s(col, line).is_some() {
+                    // A hot pixel's own generation replaces the regular dark (the core's
+                    // `Correct` policy subtracts only the hot law).
+                    d = self.hot_dark_e(col, line);
                 }
                 if e.telegraph.is_some() {
                     d += self.telegraph_e(col, line);
