@@ -80,13 +80,16 @@ pub fn write_rms_figure(
     )?;
     let series: Vec<plot::Series> = WINDOWS
         .iter()
-        .map(|&w| plot::Series {
-            label: format!("{w}x{w}"),
-            points: rows
-                .iter()
-                .filter(|r| r.window == w && r.rms_px > 0.0)
-                .map(|r| (r.a_px, r.rms_px))
-                .collect(),
+        .enumerate()
+        .map(|(i, &w)| {
+            plot::Series::solid(
+                format!("{w}x{w} box"),
+                rows.iter()
+                    .filter(|r| r.window == w && r.rms_px > 0.0)
+                    .map(|r| (r.a_px, r.rms_px))
+                    .collect(),
+                i,
+            )
         })
         .collect();
     plot::lines(

@@ -84,13 +84,16 @@ pub fn write_shift_figure(
     )?;
     let series: Vec<plot::Series> = a_values
         .iter()
-        .map(|&a| plot::Series {
-            label: format!("a = {a} px"),
-            points: rows
-                .iter()
-                .filter(|r| r.a_px == a)
-                .map(|r| (r.true_x_px, r.shift_px))
-                .collect(),
+        .enumerate()
+        .map(|(i, &a)| {
+            plot::Series::solid(
+                format!("a = {a} px"),
+                rows.iter()
+                    .filter(|r| r.a_px == a)
+                    .map(|r| (r.true_x_px, r.shift_px))
+                    .collect(),
+                i,
+            )
         })
         .collect();
     plot::lines(

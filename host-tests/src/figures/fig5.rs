@@ -439,18 +439,21 @@ pub fn write(out: &Path, res: &Fig5Result, written: &mut Written) -> Result<(), 
         &lines,
         written,
     )?;
+    // Colour: SNR and power; solid: the paper's perimeter; dashed: our precalc.
     let mut series = Vec::new();
     for method in [Method::Perimeter, Method::Precalc] {
-        for &snr0 in &res.params.snr0 {
+        for (si, &snr0) in res.params.snr0.iter().enumerate() {
             for power in [1u8, 2] {
                 series.push(plot::Series {
-                    label: format!("SNR {snr0} pow {power} {}", method.name()),
+                    label: format!("SNR {snr0}, pow {power}, {}", method.name()),
                     points: res
                         .points
                         .iter()
                         .filter(|q| q.method == method && q.snr0 == snr0 && q.power == power)
                         .map(|q| (q.dsnu, q.rms_px))
                         .collect(),
+                    color: 2 * si + usize::from(power - 1),
+                    dashed: method == Method::Precalc,
                 });
             }
         }

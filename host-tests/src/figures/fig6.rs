@@ -33,16 +33,19 @@ pub fn write(out: &Path, res: &Fig5Result, written: &mut Written) -> Result<(), 
         &lines,
         written,
     )?;
+    // Colour: SNR; solid: the paper's perimeter; dashed: our precalc.
     let mut series = Vec::new();
     for method in [Method::Perimeter, Method::Precalc] {
-        for &snr0 in &res.params.snr0 {
+        for (si, &snr0) in res.params.snr0.iter().enumerate() {
             series.push(plot::Series {
-                label: format!("SNR {snr0} {}", method.name()),
+                label: format!("SNR {snr0}, {}", method.name()),
                 points: pts
                     .iter()
                     .filter(|q| q.method == method && q.snr0 == snr0)
                     .map(|q| (q.dsnu, q.detect_rate))
                     .collect(),
+                color: si,
+                dashed: method == Method::Precalc,
             });
         }
     }

@@ -25,6 +25,38 @@ pub struct Series {
     pub label: String,
     /// (x, y) points in data units.
     pub points: Vec<(f64, f64)>,
+    /// Colour: an index into a fixed palette of distinct colours.
+    pub color: usize,
+    /// Dashed line (e.g. a second method in the same colour).
+    pub dashed: bool,
+}
+
+impl Series {
+    /// A solid curve in colour `color`.
+    pub fn solid(label: String, points: Vec<(f64, f64)>, color: usize) -> Self {
+        Self {
+            label,
+            points,
+            color,
+            dashed: false,
+        }
+    }
+}
+
+/// Distinct colours that read on white.
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(0x1f, 0x77, 0xb4),
+    RGBColor(0xd6, 0x27, 0x28),
+    RGBColor(0x2c, 0xa0, 0x2c),
+    RGBColor(0xff, 0x7f, 0x0e),
+    RGBColor(0x94, 0x67, 0xbd),
+    RGBColor(0x8c, 0x56, 0x4b),
+    RGBColor(0xe3, 0x77, 0xc2),
+    RGBColor(0x17, 0xbe, 0xcf),
+];
+
+fn color_of(i: usize) -> RGBColor {
+    PALETTE.get(i % PALETTE.len()).copied().unwrap_or(BLACK)
 }
 
 /// A chart's texts and axes.
@@ -73,7 +105,7 @@ fn tr(v: f64, log: bool) -> Option<f64> {
 
 fn tick_label(v: f64, log: bool) -> String {
     let x = if log { 10f64.powf(v) } else { v };
-    if x == 0.0 {
+    if x.abs() < 1e-9 {
         "0".into()
     } else if x.abs() >= 0.01 && x.abs() < 1000.0 {
         let s = format!("{x:.3}");
@@ -134,10 +166,11 @@ fn draw(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), String> {
     let (x0, x1) = pad(x0, x1);
     let (y0, y1) = pad(y0, y1);
     let e = |e: &dyn std::fmt::Display| e.to_string();
-    let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
+    let root = BitMapBackend::new(path, (1150, 620)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(&x))?;
-    let mut c = ChartBuilder::on(&root)
-        .caption(&chart.title, ("sans-serif", 22))
+    let (left, right) = root.split_horizontally(880);
+    let mut c = ChartBuilder::on(&left)
+        .caption(&chart.title, ("sans-serif", 21))
         .margin(12)
         .x_label_area_size(45)
         .y_label_area_size(70)
@@ -151,26 +184,44 @@ fn draw(path: &Path, chart: &Chart, series: &[Series]) -> Result<(), String> {
         .y_label_formatter(&|v| tick_label(*v, ly))
         .draw()
         .map_err(|x| e(&x))?;
-    for (i, (s, p)) in series.iter().zip(&pts).enumerate() {
-        let color = Palette99::pick(i).to_rgba();
-        c.draw_series(LineSeries::new(p.iter().copied(), color.stroke_width(2)))
-            .map_err(|x| e(&x))?
-            .label(&s.label)
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
-        c.draw_series(
-            p.iter()
-                .map(|&(x, y)| Circle::new((x, y), 2, color.filled())),
-        )
-        .map_err(|x| e(&x))?;
+    for (s, p) in series.iter().zip(&pts) {
+        let style = color_of(s.color).stroke_width(2);
+        if s.dashed {
+            c.draw_series(DashedLineSeries::new(p.iter().copied(), 8, 5, style))
+                .map_err(|x| e(&x))?;
+        } else {
+            c.draw_series(LineSeries::new(p.iter().copied(), style))
+                .map_err(|x| e(&x))?;
+            c.draw_series(
+                p.iter()
+                    .map(|&(x, y)| Circle::new((x, y), 2, color_of(s.color).filled())),
+            )
+            .map_err(|x| e(&x))?;
+        }
     }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|x| e(&x))?;
+    // The legend, in its own panel so that it never hides a curve.
+    let font = ("sans-serif", 15).into_font().color(&BLACK);
+    for (i, s) in series.iter().enumerate() {
+        let y = 60 + 24 * i as i32;
+        let style = color_of(s.color).stroke_width(2);
+        if s.dashed {
+            for k in 0..3 {
+                right
+                    .draw(&PathElement::new(
+                        vec![(10 + 11 * k, y), (17 + 11 * k, y)],
+                        style,
+                    ))
+                    .map_err(|x| e(&x))?;
+            }
+        } else {
+            right
+                .draw(&PathElement::new(vec![(10, y), (40, y)], style))
+                .map_err(|x| e(&x))?;
+        }
+        right
+            .draw(&Text::new(s.label.clone(), (48, y - 8), font.clone()))
+            .map_err(|x| e(&x))?;
+    }
     root.present().map_err(|x| e(&x))?;
     Ok(())
 }
