@@ -4,6 +4,7 @@
 pub mod accuracy;
 pub mod cli;
 pub mod demo;
+pub mod figures;
 pub mod fits;
 pub mod pipeline;
 pub mod pixcorr;

@@ -10,13 +10,18 @@
 //! (paper eq. 3 and 5) with Poisson photon noise, dark charge with DSNU collected by active
 //! and covered pixels alike (Poisson), PRNU on the photon signal only, bias per output plus a
 //! per-column pattern, output gains, Gaussian read noise, full-well clipping, 16-bit ADC
-//! rounding and saturation.
+//! rounding and saturation. Optional, in [`effects`]: defocus or coma PSFs, a dark
+//! temperature law, hot pixels with their own law, telegraph pixels, cosmic rays and CTI
+//! trails. [`measured`] gives calibration maps measured from simulated dark and flat frames.
 
+pub mod effects;
+pub mod measured;
 pub mod params;
 pub mod psf;
 pub mod render;
 pub mod rng;
 pub mod truth;
 
+pub use effects::Effects;
 pub use params::{SensorParams, Star};
 pub use render::Simulator;

@@ -1,5 +1,6 @@
 //! What the simulated sensor and scene are made of.
 
+use super::effects::Effects;
 use startrack_core::geometry::ReadoutGeometry;
 
 /// A star: position in active-area pixels (centres at integers), total signal in electrons,
@@ -42,6 +43,12 @@ pub struct SensorParams {
     pub full_well_e: f64,
     /// Add shot and read noise (off: the expected value, rounded to ADU).
     pub noise: bool,
+    /// Uniform illumination (sky background, or a flat-field lamp), e- per active pixel
+    /// before the flat; 0 by default.
+    pub sky_e: f64,
+    /// Optional physics (non-Gaussian PSF, temperature laws, hot and telegraph pixels,
+    /// cosmic rays, CTI): all off by default.
+    pub effects: Effects,
 }
 
 impl Default for SensorParams {
@@ -58,6 +65,8 @@ impl Default for SensorParams {
             prnu: 0.02,
             full_well_e: 100_000.0,
             noise: true,
+            sky_e: 0.0,
+            effects: Effects::default(),
         }
     }
 }

@@ -1,5 +1,6 @@
 //! Raw samples of the simulated sensor, computed on demand.
 
+use super::effects::PsfShape;
 use super::params::{SensorParams, Star};
 use super::psf::{pixel_fraction, sigma_of_a};
 use super::rng::{FIXED, Purpose, stream};
@@ -74,6 +75,29 @@ impl Simulator {
     /// Expected star electrons in active pixel (`x`, `y`) before the flat.
     pub fn star_e(&self, x: usize, y: usize) -> f64 {
         let (xf, yf) = (x as f64, y as f64);
+        let shape = self.params.effects.psf;
+        if shape != PsfShape::Gaussian {
+            return self
+                .stars
+                .iter()
+                .map(|s| {
+                    shape
+                        .parts(s.a_px)
+                        .iter()
+                        .filter_map(|q| {
+                            let (cx, cy) = (s.x_px + q.dx_px, s.y_px + q.dy_px);
+                            let reach = 8.0 * q.sigma_px + 1.0;
+                            ((xf - cx).abs() < reach && (yf - cy).abs() < reach).then(|| {
+                                s.signal_e
+                                    * q.weight
+                                    * pixel_fraction(xf, cx, q.sigma_px)
+                                    * pixel_fraction(yf, cy, q.sigma_px)
+                            })
+                        })
+                        .sum::<f64>()
+                })
+                .sum();
+        }
         self.stars
             .iter()
             .filter_map(|s| {
@@ -86,15 +110,63 @@ impl Simulator {
             .sum()
     }
 
+    /// Expected dark electrons of raw element (`col`, `line`) in this frame before CTI: the
+    /// regular dark (with its temperature law) or, for a hot pixel, its own dark; plus a
+    /// telegraph pixel's level (0 on the over-scan, which has no pixel behind it).
+    pub fn expected_dark_e(&self, col: usize, line: usize) -> f64 {
+        match self.params.geometry.segment(col) {
+            Some(Segment::Active | Segment::Covered) => {
+                let e = &self.params.effects;
+                let mut d = self.params.dark_mean_e * self.dark_rel(col, line);
+                if e.dark_law.is_some() {
+                    d *= self.dark_law_factor();
+                }
+                if e.hot.is_some() && self.hot_rate_e_per_s(col, line).is_some() {
+                    // A hot pixel's own generation replaces the regular dark (the core's
+                    // `Correct` policy subtracts only the hot law).
+                    d = self.hot_dark_e(col, line);
+                }
+                if e.telegraph.is_some() {
+                    d += self.telegraph_e(col, line);
+                }
+                d
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// Expected (light, dark) electrons of raw element (`col`, `line`) after CTI, before
+    /// shot noise; cosmic-ray charge ([`Self::cosmic_e`]) comes on top.
+    pub fn expected_e(&self, col: usize, line: usize) -> (f64, f64) {
+        let Some(cti) = self.params.effects.cti else {
+            return self.expected_parts_e(col, line);
+        };
+        let f = cti.fraction.clamp(0.0, 1.0);
+        let (l0, d0) = self.expected_parts_e(col, line);
+        let (mut light, mut dark) = ((1.0 - f) * l0, (1.0 - f) * d0);
+        for (k, w) in cti.weights().iter().enumerate() {
+            let Some(src) = line.checked_sub(k + 1) else {
+                break;
+            };
+            let (l, d) = self.expected_parts_e(col, src);
+            light += f * w * l;
+            dark += f * w * d;
+        }
+        (light, dark)
+    }
+
     /// Expected electrons collected by raw element (`col`, `line`): star light through the
     /// flat plus dark charge (what a perfect calibration recovers is the star part).
     fn expected_parts_e(&self, col: usize, line: usize) -> (f64, f64) {
         let g = &self.params.geometry;
-        let dark = self.params.dark_mean_e * self.dark_rel(col, line);
+        let dark = self.expected_dark_e(col, line);
         match g.segment(col) {
             Some(Segment::Active) if line < usize::from(g.active_rows) => {
                 let x = col - g.first_active_col();
-                (self.star_e(x, line) * self.flat(x, line), dark)
+                (
+                    (self.star_e(x, line) + self.params.sky_e) * self.flat(x, line),
+                    dark,
+                )
             }
             Some(Segment::Active | Segment::Covered) => (0.0, dark),
             _ => (0.0, 0.0),
@@ -108,7 +180,7 @@ impl Simulator {
         if col >= g.line_len() || line >= usize::from(g.lines) {
             return 0;
         }
-        let (light, dark) = self.expected_parts_e(col, line);
+        let (light, dark) = self.expected_e(col, line);
         let (mut e, read) = if p.noise {
             let s = |purpose| stream(p.seed, self.frame, col, line, purpose);
             (
@@ -118,6 +190,9 @@ impl Simulator {
         } else {
             (light + dark, 0.0)
         };
+        if p.effects.cosmics.is_some() {
+            e += self.cosmic_e(col, line);
+        }
         e = e.min(p.full_well_e);
         let out = usize::from(g.output_of_col(col).0);
         let adu = p.bias_adu[out] + self.column_bias_adu(col) + (e + read) / p.gain_e_per_adu[out];

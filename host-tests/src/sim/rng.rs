@@ -20,6 +20,10 @@ pub enum Purpose {
     Prnu = 4,
     /// Fixed pattern: column bias.
     ColumnBias = 5,
+    /// Fixed defects (hot and telegraph pixels), several draws in order.
+    Defect = 6,
+    /// Per-frame events (cosmic-ray hit, telegraph state), several draws in order.
+    Event = 7,
 }
 
 /// Streams are numbered `pixel * PURPOSES + purpose`.

@@ -2,9 +2,12 @@
 //! perfect ground calibration would measure (quantised to the table's formats).
 
 use super::render::Simulator;
+use fixed::types::U8F8;
 use startrack_core::geometry::Segment;
-use startrack_core::table::{MapHeader, MapSpec, TableSpec, WriteError, write_table};
-use startrack_core::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu, Kelvin};
+use startrack_core::table::{
+    HotPixel, HotPolicy, MapHeader, MapSpec, TableSpec, WriteError, write_table,
+};
+use startrack_core::units::{ColumnBiasAdu, DarkRel, ERatePerS, FlatInv, GainEPerAdu, Kelvin};
 
 /// Which of the sensor's corrections the table carries; the others are left out ("no
 /// correction"), which is how the demo shows what each one is worth.
@@ -108,6 +111,7 @@ impl Simulator {
         } else {
             Vec::new()
         };
+        let (hot, telegraph) = (self.hot_pixels_truth(), self.telegraph_truth());
         let spec = TableSpec {
             geometry: g,
             saturation_adu: 65535,
@@ -120,6 +124,109 @@ impl Simulator {
             flat_inv: sections.flat.then_some(MapSpec {
                 tile_log2,
                 tiles: &flat,
+            }),
+            hot_ref_k: self.hot_reference_k(),
+            hot: &hot,
+            telegraph: &telegraph,
+        };
+        let mut buf = vec![0u8; spec.encoded_len()];
+        let n = write_table(&spec, &mut buf)?;
+        buf.truncate(n);
+        Ok(buf)
+    }
+
+    /// Reference temperature of the hot-pixel rates (293 K when hot pixels are off).
+    pub fn hot_reference_k(&self) -> Kelvin {
+        self.params.effects.hot.map_or(Kelvin::from_num(293), |h| {
+            Kelvin::saturating_from_num(h.reference_k)
+        })
+    }
+
+    /// The true hot pixels of the active area, sorted by (y, x), with the `Correct` policy
+    /// (empty when hot pixels are off). Scans every active pixel once.
+    pub fn hot_pixels_truth(&self) -> Vec<HotPixel> {
+        let Some(h) = self.params.effects.hot else {
+            return Vec::new();
+        };
+        let g = self.params.geometry;
+        let mut out = Vec::new();
+        for y in 0..g.active_rows {
+            for x in 0..g.active_cols {
+                let col = g.raw_col_of_x(usize::from(x));
+                if let Some(rate) = self.hot_rate_e_per_s(col, usize::from(y)) {
+                    out.push(HotPixel {
+                        x,
+                        y,
+                        rate_e_per_s: ERatePerS::saturating_from_num(rate),
+                        doubling_k: U8F8::saturating_from_num(h.doubling_k),
+                        policy: HotPolicy::Correct,
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// The true telegraph pixels of the active area (x, y), sorted by (y, x) (empty when
+    /// telegraph pixels are off).
+    pub fn telegraph_truth(&self) -> Vec<(u16, u16)> {
+        if self.params.effects.telegraph.is_none() {
+            return Vec::new();
+        }
+        let g = self.params.geometry;
+        let mut out = Vec::new();
+        for y in 0..g.active_rows {
+            for x in 0..g.active_cols {
+                let col = g.raw_col_of_x(usize::from(x));
+                if self.telegraph_step_e(col, usize::from(y)).is_some() {
+                    out.push((x, y));
+                }
+            }
+        }
+        out
+    }
+}
+
+impl Simulator {
+    /// A per-pixel calibration table with the given maps (active area, row-major) instead of
+    /// the truth: e.g. the maps of [`super::measured`]. `None` leaves a map out ("no
+    /// correction"); gains and, when `column_bias`, the true column bias are included.
+    pub fn table_from_maps(
+        &self,
+        column_bias: bool,
+        dark_rel: Option<&[f64]>,
+        flat_inv: Option<&[f64]>,
+    ) -> Result<Vec<u8>, WriteError> {
+        let p = &self.params;
+        let g = p.geometry;
+        let gains: Vec<GainEPerAdu> = (0..g.outputs)
+            .map(|o| GainEPerAdu::saturating_from_num(p.gain_e_per_adu[usize::from(o)]))
+            .collect();
+        let bias: Vec<ColumnBiasAdu> = (0..g.line_len())
+            .map(|c| match g.segment(c) {
+                Some(Segment::OverScan) => ColumnBiasAdu::ZERO,
+                _ => ColumnBiasAdu::saturating_from_num(self.column_bias_adu(c)),
+            })
+            .collect();
+        let dark: Option<Vec<DarkRel>> =
+            dark_rel.map(|m| m.iter().map(|v| DarkRel::saturating_from_num(*v)).collect());
+        let flat: Option<Vec<FlatInv>> = flat_inv.map(|m| {
+            m.iter()
+                .map(|v| FlatInv::saturating_from_num(*v).max(FlatInv::DELTA))
+                .collect()
+        });
+        let spec = TableSpec {
+            geometry: g,
+            saturation_adu: 65535,
+            gains: &gains,
+            column_bias: column_bias.then_some(&bias[..]),
+            dark_rel: dark.as_deref().map(|tiles| MapSpec {
+                tile_log2: 0,
+                tiles,
+            }),
+            flat_inv: flat.as_deref().map(|tiles| MapSpec {
+                tile_log2: 0,
+                tiles,
             }),
             hot_ref_k: Kelvin::from_num(293),
             hot: &[],
