@@ -58,11 +58,21 @@ fn build_args(f: &SimFiles, out: PathBuf, psf_a_px: Option<String>) -> CalibBuil
 }
 
 fn process(frame: &Path, table: &Path, method: Method, psf_a_px: Option<f32>) -> FrameResult {
+    process_window(frame, table, method, psf_a_px, 7)
+}
+
+fn process_window(
+    frame: &Path,
+    table: &Path,
+    method: Method,
+    psf_a_px: Option<f32>,
+    window: u16,
+) -> FrameResult {
     measure(&ProcessArgs {
         frame: frame.to_path_buf(),
         calib: table.to_path_buf(),
         method,
-        window: 7,
+        window,
         psf_sigma: None,
         psf_a_px,
         exposure_s: None,
@@ -164,6 +174,15 @@ fn calib_build_adds_the_curves_and_reports_them() {
     );
     let plain = std::fs::read(&s.without).unwrap();
     assert!(CalibTable::parse(&plain).unwrap().pixcorr().is_empty());
+    // The firmware's CoG (power 1, box 7, median perimeter; firmware/src/stars.rs) finds
+    // its curve in a table built with the default boxes.
+    let fw = t.pixcorr().find(
+        startrack_core::centroid::cog::CogPower::One,
+        7,
+        startrack_core::centroid::pixcorr::PixCorrBackground::PerimeterMedian,
+        1.2,
+    );
+    assert!(fw.is_some());
     // The frame carries the width for `process`.
     let keys = startrack_host::fits::read_keys(&s.files.frame, &["PSFA"]).unwrap();
     assert_eq!(keys, vec![("PSFA".to_string(), A_PX)]);
@@ -180,12 +199,13 @@ fn cog_with_the_tables_curve_beats_the_plain_cog_and_matches_its_sigma() {
     let s = setup();
     let truth = truth(&s.files.truth);
     assert!(truth.iter().all(|t| t.2 == A_PX));
-    for method in [Method::Cog1, Method::Cog2] {
+    // Window 7 (box 5) is `process`'s default; window 9 (box 7) the firmware's CoG.
+    for (method, window) in [(Method::Cog1, 7), (Method::Cog2, 7), (Method::Cog1, 9)] {
         // No width option: `process` reads PSFA from the frame.
-        let corrected = process(&s.files.frame, &s.with_curves, method, None);
-        let plain = process(&s.files.frame, &s.without, method, None);
+        let corrected = process_window(&s.files.frame, &s.with_curves, method, None, window);
+        let plain = process_window(&s.files.frame, &s.without, method, None, window);
         let h = corrected.pixcorr.expect("a curve was applied");
-        assert_eq!(h.box_side, 5);
+        assert_eq!(u16::from(h.box_side), window - 2);
         assert!(plain.pixcorr.is_none());
         assert!(
             corrected
@@ -219,7 +239,7 @@ fn cog_with_the_tables_curve_beats_the_plain_cog_and_matches_its_sigma() {
         let per_dof = chi2 / n;
         let band = 1.2f64.powi(2) + 4.0 * (2.0 / n).sqrt();
         eprintln!(
-            "{method:?}, a {A_PX} px, box 5: RMS error {:.4} px corrected, {:.4} px plain over {} axes; mean u^2 - c^2 {mean:.3e} (SE {se:.1e}); corrected chi2/dof {per_dof:.3} (limit {band:.3})",
+            "{method:?}, a {A_PX} px, window {window}: RMS error {:.4} px corrected, {:.4} px plain over {} axes; mean u^2 - c^2 {mean:.3e} (SE {se:.1e}); corrected chi2/dof {per_dof:.3} (limit {band:.3})",
             (sc / n).sqrt(),
             (sp / n).sqrt(),
             n
@@ -321,4 +341,14 @@ fn the_binary_reports_curves_built_and_used() {
         "1,x",
     ]);
     assert!(!ok && stderr.contains("--psf-a-px"), "{stderr}");
+    let (ok, _, stderr) = run(&[
+        "process",
+        s.files.frame.to_str().unwrap(),
+        "--calib",
+        s.with_curves.to_str().unwrap(),
+        "--psf-a-px",
+        "0",
+    ]);
+    assert!(!ok && stderr.lines().count() == 1, "{stderr}");
+    assert!(stderr.contains("PSF sigma"), "{stderr}");
 }
