@@ -18,6 +18,15 @@
 //!   stars found, or every [`REACQUIRE_EVERY`] frames (to pick up stars entering the
 //!   field), the next frame is an acquisition frame.
 //!
+//! - **Pixel-phase correction**: both modes apply the calibration table's curve
+//!   ([`startrack_core::centroid::pixcorr`], section 7) for the CoG's power 1, its
+//!   [`COG_BOX_PX`] box and the median-perimeter background (`startrack calib build
+//!   --psf-a-px A` builds it, box 7 by default): of several widths, the one nearest
+//!   [`PSF_A_PX`]. The table is this camera's, so its widths are the optics'; the nominal
+//!   width only chooses among them. Without such a curve the plain CoG is reported and
+//!   [`flags::UNCORRECTED`] says so. Cost per star: a scan of at most 16 curve headers and
+//!   a few tens of flops per axis.
+//!
 //! Memory: the ring 16 x 1072 x 2 = 34 KB, the capture list 32 x ~600 B = 19 KB, one window's
 //! scratch buffers (15 x 15 pixels), the detector and the star lists: ~60 KB of the AXI SRAM.
 //! Cost per acquisition line: a 2 KB copy into the ring and the candidate list's copy
@@ -27,6 +36,7 @@
 use crate::lines::{GEOMETRY, LINE_LEN, LineBuf};
 use startrack_core::calib::{FrameCalibration, LineLevels, PixelFlags};
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
+use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::centroid::{CentroidFlags, CentroidInput};
 use startrack_core::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
 use startrack_core::detect::{
@@ -45,6 +55,9 @@ pub const ACQ_WINDOW_PX: u16 = 9;
 pub const TRACK_WINDOW_PX: u16 = 11;
 /// Side of the centre-of-gravity box (power 1).
 pub const COG_BOX_PX: u8 = 7;
+/// The optics' nominal PSF 80 %-energy radius, px: picks the nearest of the table's
+/// pixel-phase curves when it holds several widths for the CoG's box.
+pub const PSF_A_PX: f32 = 1.2;
 /// Most stars per frame (candidates, windows and reported stars).
 pub const MAX_STARS: usize = 32;
 /// Fewest centroided stars for the next frame to be a tracking frame.
@@ -83,6 +96,20 @@ pub mod flags {
     ///
     /// [`TrackFlags`]: startrack_core::detect::TrackFlags
     pub const TRACKED: u8 = 4;
+    /// The table has no pixel-phase curve for the CoG (power 1, box
+    /// [`super::COG_BOX_PX`], median perimeter): the position is the plain CoG's, with its
+    /// pixelisation bias (up to a few hundredths of a pixel for a narrow PSF).
+    pub const UNCORRECTED: u8 = 8;
+}
+
+/// The table's pixel-phase curve for the firmware's CoG, if it has one.
+pub fn cog_curve<'t>(calibration: &FrameCalibration<'t>) -> Option<PixCorr<'t>> {
+    calibration.table().pixcorr().find(
+        CogPower::One,
+        COG_BOX_PX,
+        PixCorrBackground::PerimeterMedian,
+        PSF_A_PX,
+    )
 }
 
 /// The frame's mode.
@@ -384,7 +411,7 @@ impl StarPipeline {
         };
         let pipeline = match self.ring.copy_window(rect, raw, levels) {
             Ok(()) => match Self::calibrate(calibration, s, rect)
-                .then(|| Self::centroid(s, rect, p.clipped))
+                .then(|| Self::centroid(calibration, s, rect, p.clipped))
                 .flatten()
             {
                 Some(mut r) => {
@@ -440,7 +467,7 @@ impl StarPipeline {
                 .map(|window| track_detect(&window, f, clipped, &TrackConfig::default())),
             _ => None,
         };
-        match (verdict, Self::centroid(s, rect, clipped)) {
+        match (verdict, Self::centroid(calibration, s, rect, clipped)) {
             (Some(v), Some(mut r)) if v.detected => {
                 r.flags |= (u32::from(v.flags.bits()) << 16) | (u32::from(flags::TRACKED) << 24);
                 self.push_star(r);
@@ -469,13 +496,23 @@ impl StarPipeline {
         }
     }
 
-    /// The CoG of the calibrated window in `s.electrons`/`s.flags`.
-    fn centroid(s: &Scratch, rect: Rect, clipped: bool) -> Option<StarRecord> {
+    /// The CoG of the calibrated window in `s.electrons`/`s.flags`, corrected with the
+    /// table's pixel-phase curve when it has one (else flagged [`flags::UNCORRECTED`]).
+    fn centroid(
+        calibration: &FrameCalibration<'_>,
+        s: &Scratch,
+        rect: Rect,
+        clipped: bool,
+    ) -> Option<StarRecord> {
         let n = rect.len();
         let input = CentroidInput::new(Window::new(rect, s.electrons.get(..n)?)?)
             .with_pixel_flags(s.flags.get(..n)?)
             .with_clipped(clipped);
         let c = cog(&input, &CogParams::new(CogPower::One, COG_BOX_PX));
+        let (c, pipeline) = match cog_curve(calibration) {
+            Some(curve) => (curve.apply(c), 0),
+            None => (c, flags::UNCORRECTED),
+        };
         Some(StarRecord {
             x_px: c.x_px,
             y_px: c.y_px,
@@ -483,7 +520,7 @@ impl StarPipeline {
             snr: c.snr,
             sigma_x_px: c.sigma_x_px,
             sigma_y_px: c.sigma_y_px,
-            flags: u32::from(c.flags.bits()),
+            flags: u32::from(c.flags.bits()) | (u32::from(pipeline) << 24),
         })
     }
 

@@ -15,6 +15,15 @@
 //! Cost: one pass over the frame (levels, calibration and detection of 1033 x 1072 samples)
 //! plus one window per star; the frame is held in memory (2.2 MB), the core's state is not.
 //!
+//! 5. Methods `cog1` and `cog2` then apply the table's pixel-phase correction
+//!    ([`startrack_core::centroid::pixcorr`], section 7) for their power, box (`window - 2`),
+//!    median-perimeter background and the PSF's 80 %-energy radius `a = psf_sigma_px /
+//!    sqrt(0.31)`: the curve of that power, box and background whose `a` is nearest, if it
+//!    is within [`PIXCORR_A_TOLERANCE`] (relative) of the configured `a` ([`select_curve`]).
+//!    Without such a curve the CoG is reported uncorrected and flag bit [`UNCORRECTED_BIT`]
+//!    says so: a user who asked for a CoG never gets an uncorrected one silently. The other
+//!    methods have no pixelisation bias to correct and never set it.
+//!
 //! Output rows are [`StarRow`]s, written as CSV by [`write_csv`]:
 //! `x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags`, active-area coordinates (0-based,
 //! pixel centres at integers). `flags` is the bitmask of [`FLAG_BITS`] (stable bit numbers,
@@ -27,6 +36,7 @@ use startrack_core::calib::{
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::iwc::{IwcParams, iwc};
+use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground, PixCorrSet};
 use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput, MAX_SIDE};
 use startrack_core::detect::{DetectConfig, DetectError, Detection, DetectionFlags, LineDetector};
@@ -128,7 +138,7 @@ impl std::error::Error for PipelineError {}
 
 /// The `flags` column's bits: (bit number, source: detection, centroid or calibration, meaning).
 /// Bit numbers are stable.
-pub const FLAG_BITS: [(u32, &str, &str); 14] = [
+pub const FLAG_BITS: [(u32, &str, &str); 15] = [
     (0, "detection", "saturated pixel in the blob"),
     (1, "detection", "blob touches the active area's edge"),
     (2, "detection", "blended: probably a close pair"),
@@ -159,6 +169,11 @@ pub const FLAG_BITS: [(u32, &str, &str); 14] = [
         "calibration",
         "window holds a hot pixel corrected by its own dark law",
     ),
+    (
+        17,
+        "pipeline",
+        "cog1/cog2 without a pixel-phase curve for its power, box and PSF width: uncorrected",
+    ),
 ];
 
 const DETECTION_MAP: [(DetectionFlags, u32); 5] = [
@@ -182,6 +197,51 @@ const CENTROID_MAP: [(CentroidFlags, u32); 8] = [
 
 /// Bit of [`FLAG_BITS`] set when a window holds a corrected hot pixel.
 pub const HOT_CORRECTED_BIT: u32 = 16;
+
+/// Bit of [`FLAG_BITS`] set on a `cog1`/`cog2` star when the table has no matching
+/// pixel-phase curve (the position is the plain CoG's).
+pub const UNCORRECTED_BIT: u32 = 17;
+
+/// Largest relative difference between a curve's PSF width `a` and the configured one for
+/// the curve to be used. A curve for another width leaves a residual proportional to the
+/// difference of the two curves; 10 % keeps a 5x5 curve's residual well under its own
+/// size at the widths the builder accepts (a stated rule, not a measured optimum).
+pub const PIXCORR_A_TOLERANCE: f32 = 0.1;
+
+/// The 80 %-energy radius of a Gaussian PSF of sigma `sigma_px`: `a = sigma / sqrt(0.31)`.
+pub fn a_of_sigma(sigma_px: f32) -> f32 {
+    sigma_px / 0.31f32.sqrt()
+}
+
+/// The Gaussian sigma of a PSF of 80 %-energy radius `a_px`: `sqrt(0.31) a`.
+pub fn sigma_of_a(a_px: f32) -> f32 {
+    0.31f32.sqrt() * a_px
+}
+
+/// The CoG power and box side of a method that uses a pixel-phase curve (`None` for the
+/// others), with windows of `window_px`.
+pub fn corrected_cog(method: Method, window_px: u16) -> Option<(CogPower, u8)> {
+    let inner = u8::try_from(window_px.saturating_sub(2).max(1)).unwrap_or(u8::MAX);
+    match method {
+        Method::Cog1 => Some((CogPower::One, inner)),
+        Method::Cog2 => Some((CogPower::Two, inner)),
+        _ => None,
+    }
+}
+
+/// The pixel-phase curve `config` uses from `curves`: for [`corrected_cog`]'s power and box,
+/// the median-perimeter background, and the `a` nearest the configured one if within
+/// [`PIXCORR_A_TOLERANCE`]. `None` for a method without correction or when none matches.
+pub fn select_curve<'a>(curves: &PixCorrSet<'a>, config: &PipelineConfig) -> Option<PixCorr<'a>> {
+    let (power, box_side) = corrected_cog(config.method, config.window_px)?;
+    let a = a_of_sigma(config.psf_sigma_px);
+    curves
+        .find(power, box_side, PixCorrBackground::PerimeterMedian, a)
+        .filter(|c| {
+            let ca = c.header().a_px.to_num::<f32>();
+            a.is_finite() && a > 0.0 && (ca - a).abs() <= PIXCORR_A_TOLERANCE * a
+        })
+}
 
 /// The output bitmask of a star's detection, centroid and window calibration flags.
 pub fn flags_bitmask(d: DetectionFlags, c: CentroidFlags, p: PixelFlags) -> u32 {
@@ -237,6 +297,9 @@ pub struct FrameResult {
     pub conditions: FrameConditions,
     /// Candidates lost because the list was full.
     pub dropped: u32,
+    /// The pixel-phase curve applied to every centroid (`None`: no correction, either
+    /// because the method needs none or because no curve matched; see [`UNCORRECTED_BIT`]).
+    pub pixcorr: Option<startrack_core::centroid::pixcorr::CurveHeader>,
 }
 
 /// Measures every line's bias and the frame's dark scale. `raw` holds the frame row-major
@@ -355,6 +418,8 @@ pub fn process(
     let levels = measure_levels(&table, raw)?;
     let cond = conditions(&levels, config);
     let cal = FrameCalibration::new(table, cond);
+    let curve = select_curve(&table.pixcorr(), config);
+    let uncorrected = corrected_cog(config.method, n).is_some() && curve.is_none();
 
     let mut detector =
         LineDetector::<MAX_CANDIDATES>::new(config.detect, g.active_cols, g.active_rows);
@@ -391,12 +456,17 @@ pub fn process(
             ),
             None => return Err(PipelineError::Calib(CalibError::BufferLength)),
         };
+        let c = curve.map_or(c, |k| k.apply(c));
+        let mut flags = flags_bitmask(det.flags, c.flags, pixel_flags);
+        if uncorrected {
+            flags |= 1 << UNCORRECTED_BIT;
+        }
         stars.push(StarRow {
             detection: *det,
             rect,
             centroid: c,
             pixel_flags,
-            flags: flags_bitmask(det.flags, c.flags, pixel_flags),
+            flags,
         });
     }
     Ok(FrameResult {
@@ -404,6 +474,7 @@ pub fn process(
         levels,
         conditions: cond,
         dropped: detector.dropped(),
+        pixcorr: curve.map(|k| k.header()),
     })
 }
 

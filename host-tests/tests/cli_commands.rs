@@ -25,6 +25,7 @@ fn simulate(dir: &Path, seed: u64, stars: usize) -> SimFiles {
         read_noise_e: 5.0,
         dsnu: 0.1,
         prnu: 0.02,
+        psf_a_px: None,
     })
     .expect("simulate")
 }
@@ -43,6 +44,9 @@ fn build_args(f: &SimFiles, out: PathBuf) -> CalibBuildArgs {
         hot_exclude_above_e: 10_000.0,
         tile_log2: 0,
         saturation_adu: 65535,
+        psf_a_px: None,
+        pixcorr_boxes: "5,7".into(),
+        pixcorr_powers: "1,2".into(),
     }
 }
 
@@ -52,7 +56,8 @@ fn process_args(frame: &Path, table: &Path) -> ProcessArgs {
         calib: table.to_path_buf(),
         method: Method::GaussFit,
         window: 7,
-        psf_sigma: 0.78,
+        psf_sigma: Some(0.78),
+        psf_a_px: None,
         exposure_s: None,
         temperature_k: None,
         out: None,
@@ -153,6 +158,7 @@ fn calib_build_recovers_the_true_table_to_one_lsb() {
         read_noise_e: 5.0,
         dsnu: 0.1,
         prnu: 0.02,
+        psf_a_px: None,
     })
     .unwrap();
     let sim = Simulator::new(params, Vec::new());

@@ -28,12 +28,23 @@
 //!   than corrected (their shot noise outweighs the correction). Pixels outside the active
 //!   area are skipped and counted (the table lists active pixels only).
 //!
+//! - Pixel-phase correction (`--psf-a-px A[,A2..]`, the PSF's 80 %-energy radius) ->
+//!   **pixel-phase curves** (section 7, [`crate::pixcorr`]): one 33-knot curve per width,
+//!   per CoG box in `--pixcorr-boxes` (default 5 and 7: `startrack process`'s default 7 px
+//!   window and the firmware's 9 px one) and per power in `--pixcorr-powers` (default 1,2),
+//!   all for the median-perimeter background both use. A combination the builder refuses
+//!   (CoG not invertible, or the wings reach the perimeter) is reported and skipped; at
+//!   most 16 curves fit the section.
+//!
 //! A missing map gives no section and is reported ("no dark map: no dark correction").
 //! Geometry: the CCD47-20 read through both outputs.
 
 use super::{CliError, write_file};
 use crate::fits::{MapF32, read_map_shaped};
+use crate::pixcorr::{Curve, CurveSpec, build_curve, write_table_with_curves};
 use fixed::types::U8F8;
+use startrack_core::centroid::cog::CogPower;
+use startrack_core::centroid::pixcorr::PixCorrBackground;
 use startrack_core::geometry::{Output, ReadoutGeometry, Segment};
 use startrack_core::table::{
     HotPixel, HotPolicy, MAX_TILE_LOG2, MapHeader, MapSpec, TableSpec, write_table,
@@ -81,6 +92,112 @@ pub struct CalibBuildArgs {
     /// Raw samples at or above this are flagged saturated, ADU.
     #[arg(long, default_value_t = 65535)]
     pub saturation_adu: u16,
+    /// PSF 80 %-energy radii, px, "A[,A2..]": adds pixel-phase correction curves for them.
+    #[arg(long)]
+    pub psf_a_px: Option<String>,
+    /// CoG box sides the curves are built for, "5,7" (odd, 3..=29; window = box + 2).
+    #[arg(long, default_value = "5,7")]
+    pub pixcorr_boxes: String,
+    /// CoG powers the curves are built for, "1,2".
+    #[arg(long, default_value = "1,2")]
+    pub pixcorr_powers: String,
+}
+
+/// Knots per pixel-phase curve (74 bytes each).
+pub const PIXCORR_KNOTS: u8 = 33;
+
+/// Most curves the pixel-phase section holds.
+pub const MAX_CURVES: usize = 16;
+
+/// A comma-separated list of numbers of option `name`.
+fn parse_list<T: std::str::FromStr>(name: &str, s: &str) -> Result<Vec<T>, CliError>
+where
+    T::Err: std::fmt::Display,
+{
+    s.split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<T>()
+                .map_err(|e| CliError::Usage(format!("{name} {s}: {e}")))
+        })
+        .collect()
+}
+
+/// The pixel-phase curves of `args` (empty without `--psf-a-px`) and one note per curve
+/// built or refused.
+pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String>), CliError> {
+    let Some(list) = &args.psf_a_px else {
+        return Ok((
+            Vec::new(),
+            vec![
+                "no --psf-a-px: no pixel-phase correction (cog1/cog2 are flagged uncorrected)"
+                    .into(),
+            ],
+        ));
+    };
+    let widths: Vec<f64> = parse_list("--psf-a-px", list)?;
+    if let Some(a) = widths
+        .iter()
+        .find(|a| !(a.is_finite() && (0.1..=50.0).contains(*a)))
+    {
+        return Err(CliError::Usage(format!(
+            "--psf-a-px {a}: must be 0.1 to 50 px"
+        )));
+    }
+    let boxes: Vec<u8> = parse_list("--pixcorr-boxes", &args.pixcorr_boxes)?;
+    if let Some(b) = boxes
+        .iter()
+        .find(|b| !(3..=29).contains(*b) || b.is_multiple_of(2))
+    {
+        return Err(CliError::Usage(format!(
+            "--pixcorr-boxes: box {b} must be odd, 3 to 29"
+        )));
+    }
+    let powers = parse_list::<u8>("--pixcorr-powers", &args.pixcorr_powers)?
+        .into_iter()
+        .map(|p| match p {
+            1 => Ok(CogPower::One),
+            2 => Ok(CogPower::Two),
+            _ => Err(CliError::Usage(format!(
+                "--pixcorr-powers: power {p} must be 1 or 2"
+            ))),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut curves = Vec::new();
+    let mut notes = Vec::new();
+    for &a_px in &widths {
+        for &box_side in &boxes {
+            for &power in &powers {
+                let spec = CurveSpec {
+                    a_px,
+                    box_side,
+                    power,
+                    background: PixCorrBackground::PerimeterMedian,
+                    knots: PIXCORR_KNOTS,
+                };
+                let p = if power == CogPower::One { 1 } else { 2 };
+                match build_curve(&spec) {
+                    Ok(c) => {
+                        notes.push(format!(
+                            "pixel-phase curve: a {a_px} px, box {box_side}, power {p}, median perimeter background (largest correction {:.4} px)",
+                            c.knots_px.iter().fold(0.0f64, |m, k| m.max(k.abs()))
+                        ));
+                        curves.push(c);
+                    }
+                    Err(e) => notes.push(format!(
+                        "no pixel-phase curve for a {a_px} px, box {box_side}, power {p}: {e}"
+                    )),
+                }
+            }
+        }
+    }
+    if curves.len() > MAX_CURVES {
+        return Err(CliError::Usage(format!(
+            "{} pixel-phase curves: the table holds at most {MAX_CURVES} (fewer widths, boxes or powers)",
+            curves.len()
+        )));
+    }
+    Ok((curves, notes))
 }
 
 /// What `calib build` did, for the report.
@@ -515,9 +632,17 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
         hot: &hot,
         telegraph: &[],
     };
-    let mut buf = vec![0u8; spec.encoded_len()];
-    let n = write_table(&spec, &mut buf).map_err(CliError::TableWrite)?;
-    buf.truncate(n);
+    let (curves, curve_notes) = curves_from_args(args)?;
+    notes.extend(curve_notes);
+    let buf = if curves.is_empty() {
+        let mut buf = vec![0u8; spec.encoded_len()];
+        let n = write_table(&spec, &mut buf).map_err(CliError::TableWrite)?;
+        buf.truncate(n);
+        buf
+    } else {
+        write_table_with_curves(&spec, &curves).map_err(CliError::TableWrite)?
+    };
+    let n = buf.len();
     Ok((buf, BuildReport { bytes: n, notes }))
 }
 

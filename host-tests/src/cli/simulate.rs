@@ -3,7 +3,7 @@
 //!
 //! | file | contents |
 //! |---|---|
-//! | `frame.fits` | raw readout, BITPIX 16 + BZERO 32768, 1033 x 1072, `EXPTIME` s, `CCDTEMP` K |
+//! | `frame.fits` | raw readout, BITPIX 16 + BZERO 32768, 1033 x 1072, `EXPTIME` s, `CCDTEMP` K, and `PSFA` px with `--psf-a-px` |
 //! | `truth.csv` | `x_px,y_px,signal_e,a_px`: the simulated stars, active-area px |
 //! | `bias.fits` | true bias, ADU, full readout (`GAIN1`, `GAIN2` keywords, e-/ADU) |
 //! | `dark.fits` | true relative dark, full readout, covered columns' mean = 1 |
@@ -11,6 +11,9 @@
 //! | `hot.csv` | `col,row,dark_e` (the simulated sensor has none yet: header only) |
 //!
 //! The maps are the sensor's truth (noise-free), the inputs of `startrack calib build`.
+//! With `--psf-a-px A` every star has the 80 %-energy radius `A` (else each its own, 0.8 to
+//! 2 px) and the frame's `PSFA` keyword says so: `startrack calib build --psf-a-px A` then
+//! builds the pixel-phase curves that `startrack process --method cog1` picks for it.
 
 use super::{CliError, write_file};
 use crate::demo::{render_frame, star_field};
@@ -43,6 +46,9 @@ pub struct SimulateArgs {
     /// Photo-response non-uniformity (relative sigma).
     #[arg(long, default_value_t = 0.02)]
     pub prnu: f64,
+    /// One PSF 80 %-energy radius for every star, px (0.3 to 10; written as `PSFA`).
+    #[arg(long)]
+    pub psf_a_px: Option<f64>,
 }
 
 /// The files `simulate` writes, in `dir`.
@@ -106,7 +112,19 @@ pub fn run(args: &SimulateArgs) -> Result<SimFiles, CliError> {
         msg: e.to_string(),
     })?;
     let files = SimFiles::in_dir(&args.out);
-    let stars = star_field(args.seed, args.stars, &p);
+    if let Some(a) = args.psf_a_px
+        && !(a.is_finite() && (0.3..=10.0).contains(&a))
+    {
+        return Err(CliError::Usage(format!(
+            "--psf-a-px {a}: must be 0.3 to 10 px"
+        )));
+    }
+    let mut stars = star_field(args.seed, args.stars, &p);
+    if let Some(a) = args.psf_a_px {
+        for s in &mut stars {
+            s.a_px = a;
+        }
+    }
     let sim = Simulator::new(p.clone(), stars.clone());
     let (lines, len) = (usize::from(g.lines), g.line_len());
     let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
@@ -120,11 +138,11 @@ pub fn run(args: &SimulateArgs) -> Result<SimFiles, CliError> {
         cols: len,
         data_adu: render_frame(&sim),
     };
-    write_raw_frame(
-        &files.frame,
-        &frame,
-        &[("EXPTIME", 1.0), ("CCDTEMP", 293.0)],
-    )?;
+    let mut keys = vec![("EXPTIME", 1.0), ("CCDTEMP", 293.0)];
+    if let Some(a) = args.psf_a_px {
+        keys.push(("PSFA", a));
+    }
+    write_raw_frame(&files.frame, &frame, &keys)?;
 
     let mut truth = String::from("x_px,y_px,signal_e,a_px\n");
     for s in &stars {
