@@ -25,9 +25,12 @@
 //! values) by at most [`QUANTISATION_E`]. Host property tests check this over the full range.
 //!
 //! # Cost
-//! Per pixel: four table look-ups (column bias, gain, dark, flat), one 32x32->64 multiply,
-//! one 32x32->64 multiply for the dark term, one 64x16 multiply, shifts; defect lists are
-//! searched once per row (binary search), not per pixel.
+//! A row segment is cut into runs that share the output amplifier, the dark tile and the
+//! flat tile (8 pixels with the 8x8-tiled table); the bias, gain, dark term and inverse
+//! flat are looked up once per run. Per pixel: the column-bias look-up, one 32x32->64
+//! multiply, one 64x16 multiply, shifts, the clamp and the saturation test. Defect lists are
+//! searched once per row (binary search), not per pixel. Measured by `cargo m7-bench`
+//! (`line_calibrate`, `window_calibrate`; README, "Cortex-M7 cost").
 
 use super::hot::{HOT_DARK_LIMIT_E, hot_dark_e};
 use super::levels::{LineError, LineLevels, check_len};
@@ -156,6 +159,24 @@ fn dark_16ths(rel: DarkRel, dark_scale_bits: i32) -> i64 {
     (i64::from(rel.to_bits()) * i64::from(dark_scale_bits)) << 4
 }
 
+/// End (exclusive) of the run starting at active column `x`: the next dark or flat tile
+/// boundary, the output split, or `end`, whichever comes first; always `> x` when `x < end`.
+#[inline(always)]
+fn run_end(x: u32, end: u32, dark_log2: Option<u8>, flat_log2: Option<u8>, split: u32) -> u32 {
+    // x < 2^16 and tile_log2 <= 16, so the next boundary is below 2^17.
+    let next = |l: Option<u8>| {
+        l.map_or(end, |l| {
+            let l = u32::from(l.min(16));
+            ((x >> l) + 1) << l
+        })
+    };
+    let mut stop = end.min(next(dark_log2)).min(next(flat_log2));
+    if x < split {
+        stop = stop.min(split);
+    }
+    stop
+}
+
 impl<'t> FrameCalibration<'t> {
     /// Binds `table` to one frame's conditions.
     pub fn new(table: CalibTable<'t>, conditions: FrameConditions) -> Self {
@@ -252,28 +273,50 @@ impl<'t> FrameCalibration<'t> {
         let t = &self.table;
         let sat = t.saturation_adu();
         let mut flags = PixelFlags::empty();
-        for ((raw, (e, f)), x) in raw
-            .iter()
-            .zip(out_e.iter_mut().zip(out_flags.iter_mut()))
-            .zip(x0..)
-        {
-            let col = g.raw_col_of_x(usize::from(x));
-            let out = g.output_of_col(col);
-            let offset = offset_16ths(levels.bias(out), t.column_bias(col));
-            let dark = dark_16ths(t.dark_rel(x, y), self.dark_scale_bits);
-            *e = Electrons::from_bits(pixel_bits(
-                *raw,
-                offset,
-                t.gain(out),
-                dark,
-                t.flat_inv(x, y),
-            ));
-            *f = if *raw >= sat {
-                PixelFlags::SATURATED
-            } else {
-                PixelFlags::empty()
+        // Runs of pixels that share the output, the dark tile and the flat tile: their
+        // look-ups are made once per run, only the column bias once per pixel.
+        let end = u32::from(x0) + n as u32;
+        let dark_log2 = t.dark_map().map(|m| m.header().tile_log2);
+        let flat_log2 = t.flat_map().map(|m| m.header().tile_log2);
+        // First active column read by output 1 (none with one output).
+        let split = if g.outputs == 2 {
+            (g.line_len() / 2).saturating_sub(g.first_active_col()) as u32
+        } else {
+            u32::MAX
+        };
+        let mut x = u32::from(x0);
+        while x < end {
+            let stop = run_end(x, end, dark_log2, flat_log2, split);
+            // x < end <= active_cols <= 8192: fits u16.
+            let xu = x as u16;
+            let col0 = g.raw_col_of_x(x as usize);
+            let out = g.output_of_col(col0);
+            let bias16 = offset_16ths(levels.bias(out), ColumnBiasAdu::ZERO);
+            let gain = t.gain(out);
+            let dark = dark_16ths(t.dark_rel(xu, y), self.dark_scale_bits);
+            let flat = t.flat_inv(xu, y);
+            let (i0, i1) = (
+                (x - u32::from(x0)) as usize,
+                (stop - u32::from(x0)) as usize,
+            );
+            let (Some(r), Some(e), Some(f)) = (
+                raw.get(i0..i1),
+                out_e.get_mut(i0..i1),
+                out_flags.get_mut(i0..i1),
+            ) else {
+                break;
             };
-            flags |= *f;
+            for (col, (raw, (e, f))) in (col0..).zip(r.iter().zip(e.iter_mut().zip(f.iter_mut()))) {
+                let offset = bias16 + i32::from(t.column_bias(col).to_bits());
+                *e = Electrons::from_bits(pixel_bits(*raw, offset, gain, dark, flat));
+                *f = if *raw >= sat {
+                    PixelFlags::SATURATED
+                } else {
+                    PixelFlags::empty()
+                };
+                flags |= *f;
+            }
+            x = stop;
         }
         flags |= self.apply_defects(y, x0, raw, levels, out_e, out_flags);
         Ok(flags)
