@@ -246,16 +246,23 @@ fn sanitize_var(v: f32) -> f32 {
     if v.is_finite() && v > 0.0 { v } else { 0.0 }
 }
 
-/// Median of a non-empty sorted slice, in bits (mean of the middle two for an even length).
-fn median_sorted(v: &[i64]) -> i64 {
+/// The two middle order statistics of a non-empty slice, `(v[(n-1)/2], v[n/2])` of the
+/// sorted order (equal for an odd length), found by selection (`select_nth_unstable`,
+/// introselect: O(n) on average, no full sort), reordering `v`.
+fn middle_pair<T: Ord + Copy>(v: &mut [T]) -> Option<(T, T)> {
     let n = v.len();
-    let hi = v.get(n / 2).copied().unwrap_or(0);
-    if n.is_multiple_of(2) {
-        let lo = v.get(n / 2 - 1).copied().unwrap_or(hi);
-        (lo + hi).div_euclid(2)
+    if n == 0 {
+        return None;
+    }
+    let (left, hi, _) = v.select_nth_unstable(n / 2);
+    let hi = *hi;
+    // For an even length the lower middle value is the largest of the left part.
+    let lo = if n.is_multiple_of(2) {
+        left.iter().copied().max().unwrap_or(hi)
     } else {
         hi
-    }
+    };
+    Some((lo, hi))
 }
 
 impl<'a> Prepared<'a> {
@@ -381,23 +388,25 @@ impl<'a> Prepared<'a> {
     }
 
     fn perimeter_median(&self) -> Option<BackgroundEstimate> {
-        let mut buf = [0i64; MAX_PERIMETER];
+        // Pixel bits are `Electrons` (i32), so the buffer holds i32 (cheaper to compare on
+        // the M7 than i64); deviations from the median can reach 2^32, so they are u32.
+        let mut buf = [0i32; MAX_PERIMETER];
         let mut n = 0usize;
         for (slot, b) in buf.iter_mut().zip(self.perimeter()) {
-            *slot = b;
+            *slot = i32::try_from(b).unwrap_or(if b < 0 { i32::MIN } else { i32::MAX });
             n += 1;
         }
         let v = buf.get_mut(..n)?;
-        if v.is_empty() {
-            return None;
+        let (lo, hi) = middle_pair(v)?;
+        // Mean of the middle two, rounded towards minus infinity.
+        let med = (i64::from(lo) + i64::from(hi)).div_euclid(2);
+        let mut dev = [0u32; MAX_PERIMETER];
+        for (d, x) in dev.iter_mut().zip(v.iter()) {
+            *d = u32::try_from((i64::from(*x) - med).unsigned_abs()).unwrap_or(u32::MAX);
         }
-        v.sort_unstable();
-        let med = median_sorted(v);
-        for x in v.iter_mut() {
-            *x = (*x - med).abs();
-        }
-        v.sort_unstable();
-        let mad = median_sorted(v) as f32 / 64.0 * 1.4826;
+        let (dlo, dhi) = middle_pair(dev.get_mut(..n)?)?;
+        let mad_bits = (u64::from(dlo) + u64::from(dhi)) / 2;
+        let mad = mad_bits as f32 / 64.0 * 1.4826;
         let var = if n > 1 { sanitize_var(mad * mad) } else { 0.0 };
         let level_var = var * core::f32::consts::FRAC_PI_2 / n as f32;
         Some(BackgroundEstimate {
