@@ -73,18 +73,29 @@ pub struct Detection {
     pub flags: DetectionFlags,
 }
 
+/// The join threshold of a block, I26F6 bits: `background + k sigma` (the one formula both
+/// the calibrated scan and the raw pre-filter of [`super::prefilter`] use).
+#[inline(always)]
+pub(crate) fn threshold_bits(l: super::background::BlockLevel, k: f32) -> i64 {
+    i64::from(l.bg_bits) + (k * l.sigma_bits as f32) as i64
+}
+
 /// True when pixel `x` belongs to a blob: above the local threshold, or saturated, and not a
 /// listed hot or telegraph pixel.
-fn above(bg: &Background, k: f32, pixels_e: &[Electrons], flags: &[PixelFlags], x: usize) -> bool {
+pub(crate) fn above(
+    bg: &Background,
+    k: f32,
+    pixels_e: &[Electrons],
+    flags: &[PixelFlags],
+    x: usize,
+) -> bool {
     let (Some(e), Some(f)) = (pixels_e.get(x), flags.get(x)) else {
         return false;
     };
     if f.is_excluded() || f.contains(PixelFlags::HOT_CORRECTED) {
         return false;
     }
-    let l = bg.at(x);
-    let thr = i64::from(l.bg_bits) + (k * l.sigma_bits as f32) as i64;
-    f.contains(PixelFlags::SATURATED) || i64::from(e.to_bits()) > thr
+    f.contains(PixelFlags::SATURATED) || i64::from(e.to_bits()) > threshold_bits(bg.at(x), k)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -179,6 +190,8 @@ pub struct LineDetector<const N: usize> {
     candidates: heapless::Vec<Detection, N>,
     dropped: u32,
     dropped_pixels: u32,
+    /// The background is updated on rows `y` with `y % bg_stride == 0` (1: every row).
+    bg_stride: u16,
 }
 
 impl<const N: usize> LineDetector<N> {
@@ -196,7 +209,33 @@ impl<const N: usize> LineDetector<N> {
             candidates: heapless::Vec::new(),
             dropped: 0,
             dropped_pixels: 0,
+            bg_stride: 1,
         }
+    }
+
+    /// Updates the background only on rows `y` with `y % lines == 0` (and on the first row
+    /// pushed), instead of on every row (0 counts as 1). The raw pre-filter
+    /// ([`super::prefilter::ScanDetector`]) calibrates whole lines only on those rows; a
+    /// detector with the same stride fed every calibrated line finds exactly the same
+    /// candidates.
+    pub fn with_background_stride(mut self, lines: u16) -> Self {
+        self.bg_stride = lines.max(1);
+        self
+    }
+
+    /// True when row `y`'s pixels update the background (every pixel of it is then needed).
+    pub fn background_due(&self, y: u16) -> bool {
+        !self.background.is_primed() || y.is_multiple_of(self.bg_stride)
+    }
+
+    /// The running background and noise estimate.
+    pub fn background(&self) -> &Background {
+        &self.background
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DetectConfig {
+        &self.config
     }
 
     /// The candidates found so far (complete after [`Self::finish`]), in no order.
@@ -224,18 +263,11 @@ impl<const N: usize> LineDetector<N> {
         if pixels_e.len() != usize::from(self.width) || flags.len() != pixels_e.len() {
             return Err(DetectError::LineLength);
         }
-        if y < self.next_y {
-            return Err(DetectError::RowOrder);
-        }
-        if y > self.next_y {
-            // Skipped rows break connectivity: close everything open.
-            self.close_all_before(y);
-            self.prev.clear();
-        }
+        let due = self.background_due(y);
+        self.begin_line(y)?;
         if !self.background.is_primed() {
             self.background.update(pixels_e, flags);
         }
-        self.cur.clear();
         let k = self.config.pixel_sigmas;
         let mut x = 0usize;
         let w = usize::from(self.width);
@@ -251,6 +283,29 @@ impl<const N: usize> LineDetector<N> {
             self.add_run(y, x0 as u16, x as u16, pixels_e, flags);
             x += 1;
         }
+        self.end_line(y);
+        if due {
+            self.background.update(pixels_e, flags);
+        }
+        Ok(())
+    }
+
+    /// Starts row `y`: checks the order, closes everything when rows were skipped.
+    pub(crate) fn begin_line(&mut self, y: u16) -> Result<(), DetectError> {
+        if y < self.next_y {
+            return Err(DetectError::RowOrder);
+        }
+        if y > self.next_y {
+            // Skipped rows break connectivity: close everything open.
+            self.close_all_before(y);
+            self.prev.clear();
+        }
+        self.cur.clear();
+        Ok(())
+    }
+
+    /// Ends row `y` after its runs were added (without the background update).
+    pub(crate) fn end_line(&mut self, y: u16) {
         // Runs of this line point at roots; merged blobs are released.
         for i in 0..self.cur.len() {
             if let Some(r) = self.cur.get(i).map(|r| r.blob) {
@@ -273,9 +328,7 @@ impl<const N: usize> LineDetector<N> {
         }
         self.close_all_before(y);
         core::mem::swap(&mut self.prev, &mut self.cur);
-        self.background.update(pixels_e, flags);
         self.next_y = y.saturating_add(1);
-        Ok(())
     }
 
     /// Completes every open blob: call after the last line.
@@ -295,7 +348,16 @@ impl<const N: usize> LineDetector<N> {
         i
     }
 
-    fn add_run(&mut self, y: u16, x0: u16, x1: u16, pixels_e: &[Electrons], flags: &[PixelFlags]) {
+    /// Adds the run `x0..=x1` of row `y` (every pixel of it above the threshold; only its
+    /// pixels are read from `pixels_e` and `flags`).
+    pub(crate) fn add_run(
+        &mut self,
+        y: u16,
+        x0: u16,
+        x1: u16,
+        pixels_e: &[Electrons],
+        flags: &[PixelFlags],
+    ) {
         let mut blob: Option<u16> = None;
         let touching: heapless::Vec<u16, MAX_RUNS> = self
             .prev

@@ -17,8 +17,10 @@
 
 pub mod background;
 pub mod blobs;
+pub mod prefilter;
 
 pub use blobs::{Detection, DetectionFlags, LineDetector};
+pub use prefilter::{ScanDetector, ScanError};
 
 /// Detection settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
