@@ -16,9 +16,10 @@
 //!
 //! The scan then reads the raw active samples in chunks of [`CHUNK_PX`]: `OR` of `R - raw`
 //! over the chunk (3 instructions a pixel: load, subtract, or) is negative exactly when one
-//! sample exceeds `R`. In such a chunk only the pixels from the first to the last sample above
-//! `R` are calibrated (`FrameCalibration::calibrate_span`, defects included) and thresholded
-//! exactly as [`LineDetector::push_line`] does. Pixels of
+//! sample exceeds `R`. In such a chunk only the samples above `R` are calibrated (by the
+//! regular formula, bit for bit as `FrameCalibration::calibrate_span`; on a row where the
+//! table lists a hot or telegraph pixel, by `calibrate_span` itself, defects included) and
+//! thresholded exactly as [`LineDetector::push_line`] does. Pixels of
 //! the other chunks are provably not above the threshold (hot, telegraph and saturated
 //! pixels included: `R` is below the saturation level, and listed defects never join a
 //! blob), so **the candidates are exactly those of a [`LineDetector`] with the same
@@ -43,7 +44,8 @@
 //! pays with tiled maps (the 8x8 table of internal flash), where the dark and flat are
 //! constant over the chunk's two tiles.
 
-use super::blobs::{above, threshold_bits};
+use super::background::MAX_BLOCKS;
+use super::blobs::above_thr;
 use super::{DetectConfig, DetectError, Detection, LineDetector};
 use crate::calib::pixel::{dark_16ths, pixel_bits_d as pixel_bits};
 use crate::calib::{CalibError, FrameCalibration, LineLevels, PixelFlags};
@@ -118,6 +120,9 @@ pub struct ScanDetector<'t, const N: usize> {
     /// Tile row (`y >> tile_log2` of both maps) the bounds were computed for, and whether the
     /// background changed since.
     bounds_key: Option<(u32, u32)>,
+    /// Each block's join threshold, valid until the background changes.
+    thr: [i64; MAX_BLOCKS],
+    thr_valid: bool,
     calibrated_px: u32,
 }
 
@@ -156,6 +161,8 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             flags: [PixelFlags::empty(); MAX_SCAN_PX],
             chunks,
             bounds_key: None,
+            thr: [0; MAX_BLOCKS],
+            thr_valid: false,
             calibrated_px: 0,
         }
     }
@@ -198,8 +205,9 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             self.cal.calibrate_span(y, 0, raw_line, levels, e, f)?;
             self.calibrated_px += w as u32;
             self.det.push_line(y, e, f)?;
-            // The background changed: the bounds must be recomputed.
+            // The background changed: the thresholds and bounds must be recomputed.
             self.bounds_key = None;
+            self.thr_valid = false;
             return Ok(());
         }
         let g = *self.cal.table().geometry();
@@ -221,6 +229,12 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         // The open run's start, carried across chunks.
         let mut run: Option<usize> = None;
         let sat = self.cal.table().saturation_adu();
+        let defects = self.cal.row_has_defects(y);
+        if !self.thr_valid {
+            self.thr = self.det.background().thresholds(k);
+            self.thr_valid = true;
+        }
+        let thr = self.thr;
         for (c, (chunk, bound)) in active.chunks(CHUNK_PX).zip(self.chunks.iter()).enumerate() {
             let x0 = c * CHUNK_PX;
             if !chunk_passes(chunk, raw_threshold(bound, levels, sat)) {
@@ -230,21 +244,36 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
                 }
                 continue;
             }
-            // Only the samples from the first to the last one above R can be above the
-            // threshold: calibrate that sub-span, the rest of the chunk is quiet.
             let r = raw_threshold(bound, levels, sat);
-            let first = chunk.iter().position(|&v| i32::from(v) > r).unwrap_or(0);
-            let last = chunk.iter().rposition(|&v| i32::from(v) > r).unwrap_or(0);
-            let (a, b) = (x0 + first, x0 + last + 1);
-            let (Some(ce), Some(cf)) = (self.e.get_mut(a..b), self.flags.get_mut(a..b)) else {
-                continue;
-            };
-            self.cal
-                .calibrate_span(y, a as u16, raw_line, levels, ce, cf)?;
-            self.calibrated_px += (b - a) as u32;
-            for x in x0..x0 + chunk.len() {
-                let up =
-                    x >= a && x < b && above(self.det.background(), k, &self.e, &self.flags, x);
+            if defects {
+                // A row with listed defects: the whole exact path, from the first to the last
+                // sample above R (the others are quiet).
+                let first = chunk.iter().position(|&v| i32::from(v) > r).unwrap_or(0);
+                let last = chunk.iter().rposition(|&v| i32::from(v) > r).unwrap_or(0);
+                let (a, b) = (x0 + first, x0 + last + 1);
+                let (Some(ce), Some(cf)) = (self.e.get_mut(a..b), self.flags.get_mut(a..b)) else {
+                    continue;
+                };
+                self.cal
+                    .calibrate_span(y, a as u16, raw_line, levels, ce, cf)?;
+                self.calibrated_px += (b - a) as u32;
+            } else {
+                // No defect on the row: only the samples above R, one by one.
+                for (x, &v) in (x0..).zip(chunk.iter()) {
+                    if i32::from(v) > r
+                        && let (Some(e), Some(f)) = (self.e.get_mut(x), self.flags.get_mut(x))
+                    {
+                        (*e, *f) = self.cal.calibrate_regular(x as u16, y, v, levels);
+                        self.calibrated_px += 1;
+                    }
+                }
+            }
+            for (x, &v) in (x0..).zip(chunk.iter()) {
+                let t = thr
+                    .get(self.det.background().block_of(x))
+                    .copied()
+                    .unwrap_or(i64::MAX);
+                let up = i32::from(v) > r && above_thr(t, &self.e, &self.flags, x);
                 match (up, run) {
                     (true, None) => run = Some(x),
                     (false, Some(s)) => {
@@ -274,7 +303,14 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             return;
         }
         self.bounds_key = Some(key);
-        let k = self.det.config().pixel_sigmas;
+        if !self.thr_valid {
+            self.thr = self
+                .det
+                .background()
+                .thresholds(self.det.config().pixel_sigmas);
+            self.thr_valid = true;
+        }
+        let thr = self.thr;
         let ds = self.cal.dark_scale_bits();
         let width = self.width;
         for (c, bound) in self.chunks.iter_mut().enumerate() {
@@ -301,7 +337,10 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
                 .map(|x| t.flat_inv(x as u16, y))
                 .max()
                 .unwrap_or(FlatInv::ONE);
-            let thr = threshold_bits(self.det.background().at(x0), k);
+            let thr = thr
+                .get(self.det.background().block_of(x0))
+                .copied()
+                .unwrap_or(i64::MAX);
             let gain = t.gain(crate::geometry::Output(out));
             bound.d_max = largest_quiet_d(thr, gain, dark_min, flat_max);
         }
@@ -326,8 +365,13 @@ fn raw_threshold(bound: &ChunkBound, levels: &LineLevels, sat: u16) -> i32 {
 /// i32, so the difference is exact), and OR keeps the sign bit.
 #[inline(always)]
 fn chunk_passes(chunk: &[u16], r: i32) -> bool {
+    // A whole chunk as an array: fully unrolled, ldrh / sub / orr per sample on the M7. A
+    // short last chunk always passes (it is calibrated).
+    let Ok(a) = <&[u16; CHUNK_PX]>::try_from(chunk) else {
+        return true;
+    };
     let mut acc = 0i32;
-    for &s in chunk {
+    for &s in a {
         acc |= r - i32::from(s);
     }
     acc < 0
