@@ -228,7 +228,7 @@ impl<'t> FrameCalibration<'t> {
         let raw = raw_line
             .get(start..start + out_e.len())
             .ok_or(CalibError::OutsideActiveArea)?;
-        self.calibrate_row(y, x0, raw, levels, out_e, out_flags)
+        self.calibrate_row((y, x0), raw, levels, out_e, out_flags, true)
     }
 
     /// Calibrates the pixels of `rect` from its raw samples (`raw`, row-major, `rect.len()`
@@ -254,12 +254,14 @@ impl<'t> FrameCalibration<'t> {
         if w == 0 {
             return Ok(flags);
         }
+        // One search of the defect lists for the whole window instead of one per row.
+        let defects = self.rows_have_defects(rect.y0, rect.y0.saturating_add(rect.height));
         let rows = raw
             .chunks_exact(w)
             .zip(out_e.chunks_exact_mut(w))
             .zip(out_flags.chunks_exact_mut(w));
         for (((raw_row, e_row), f_row), (lv, y)) in rows.zip(levels.iter().zip(rect.y0..)) {
-            flags |= self.calibrate_row(y, rect.x0, raw_row, lv, e_row, f_row)?;
+            flags |= self.calibrate_row((y, rect.x0), raw_row, lv, e_row, f_row, defects)?;
         }
         Ok(flags)
     }
@@ -293,23 +295,30 @@ impl<'t> FrameCalibration<'t> {
 
     /// True when the table lists a hot or telegraph pixel on active row `y`.
     pub(crate) fn row_has_defects(&self, y: u16) -> bool {
-        let hot = self.table.hot_pixels();
-        let tel = self.table.telegraph_pixels();
-        hot.get(hot.lower_bound(0, y)).is_some_and(|h| h.y == y)
-            || tel
-                .get(tel.lower_bound(0, y))
-                .is_some_and(|(_, ty)| ty == y)
+        self.rows_have_defects(y, y.saturating_add(1))
     }
 
-    /// Calibrates one row segment: `raw` holds the samples of active pixels `x0..`.
+    /// True when the table lists a hot or telegraph pixel on a row of `y0..y1`: the first
+    /// entry at or after (0, y0) in (y, x) order is on a row before `y1`.
+    fn rows_have_defects(&self, y0: u16, y1: u16) -> bool {
+        let hot = self.table.hot_pixels();
+        let tel = self.table.telegraph_pixels();
+        hot.get(hot.lower_bound(0, y0)).is_some_and(|h| h.y < y1)
+            || tel
+                .get(tel.lower_bound(0, y0))
+                .is_some_and(|(_, ty)| ty < y1)
+    }
+
+    /// Calibrates one row segment: `raw` holds the samples of active pixels `x0..`; the
+    /// defect lists are applied unless the caller knows the row has none (`defects` false).
     fn calibrate_row(
         &self,
-        y: u16,
-        x0: u16,
+        (y, x0): (u16, u16),
         raw: &[u16],
         levels: &LineLevels,
         out_e: &mut [Electrons],
         out_flags: &mut [PixelFlags],
+        defects: bool,
     ) -> Result<PixelFlags, CalibError> {
         let g = self.table.geometry();
         let n = raw.len();
@@ -367,7 +376,9 @@ impl<'t> FrameCalibration<'t> {
             }
             x = stop;
         }
-        flags |= self.apply_defects(y, x0, raw, levels, out_e, out_flags);
+        if defects {
+            flags |= self.apply_defects(y, x0, raw, levels, out_e, out_flags);
+        }
         Ok(flags)
     }
 
