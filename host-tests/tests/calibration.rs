@@ -343,6 +343,32 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// Any sub-span (any start, any length, across tile and output boundaries) calibrates to
+    /// the same bits as those pixels of the whole line, which `check_frame` compares to f64:
+    /// the per-run hoisting of the look-ups in `calibrate_span` starts runs anywhere.
+    #[test]
+    fn sub_spans_equal_whole_line(m in maps(), lines in raw_lines(), y in 0u16..6, x0 in 0u16..10, w in 1u16..=10) {
+        let w = w.min(10 - x0);
+        let bytes = encode(&m, 60000);
+        let table = CalibTable::parse(&bytes).unwrap();
+        let cal = FrameCalibration::new(table, FrameConditions {
+            dark_scale_e: Electrons::from_num(-37.25), exposure_ms: 1000, temperature_k: Kelvin::from_num(260) });
+        let line = &lines[y as usize];
+        let lv = LineLevels::measure(&G, line).unwrap();
+        let mut e = vec![Electrons::ZERO; 10];
+        let mut f = vec![PixelFlags::empty(); 10];
+        cal.calibrate_span(y, 0, line, &lv, &mut e, &mut f).unwrap();
+        let mut se = vec![Electrons::ZERO; w as usize];
+        let mut sf = vec![PixelFlags::empty(); w as usize];
+        cal.calibrate_span(y, x0, line, &lv, &mut se, &mut sf).unwrap();
+        prop_assert_eq!(&e[x0 as usize..(x0 + w) as usize], &se[..]);
+        prop_assert_eq!(&f[x0 as usize..(x0 + w) as usize], &sf[..]);
+    }
+}
+
 /// Maps at their limits in every combination with raw lines at 0 and 65535: no overflow, and
 /// still within the quantisation of the f64 reference.
 #[test]

@@ -25,9 +25,12 @@
 //! values) by at most [`QUANTISATION_E`]. Host property tests check this over the full range.
 //!
 //! # Cost
-//! Per pixel: four table look-ups (column bias, gain, dark, flat), one 32x32->64 multiply,
-//! one 32x32->64 multiply for the dark term, one 64x16 multiply, shifts; defect lists are
-//! searched once per row (binary search), not per pixel.
+//! A row segment is cut into runs that share the output amplifier, the dark tile and the
+//! flat tile (8 pixels with the 8x8-tiled table); the bias, gain, dark term and inverse
+//! flat are looked up once per run. Per pixel: the column-bias look-up, one 32x32->64
+//! multiply, one 64x16 multiply, shifts, the clamp and the saturation test. Defect lists are
+//! searched once per row (binary search), not per pixel. Measured by `cargo m7-bench`
+//! (`line_calibrate`, `window_calibrate`; README, "Cortex-M7 cost").
 
 use super::hot::{HOT_DARK_LIMIT_E, hot_dark_e};
 use super::levels::{LineError, LineLevels, check_len};
@@ -144,7 +147,14 @@ pub(crate) fn signal_bits(raw: u16, offset_16ths: i32, gain: GainEPerAdu) -> i32
 /// The calibration formula on bits; see the module docs for the bounds.
 #[inline(always)]
 fn pixel_bits(raw: u16, offset_16ths: i32, gain: GainEPerAdu, dark_16: i64, flat: FlatInv) -> i32 {
-    let d = (i32::from(raw) << 4) - offset_16ths;
+    pixel_bits_d((i32::from(raw) << 4) - offset_16ths, gain, dark_16, flat)
+}
+
+/// The calibration formula from `d = 16 raw - offset` (1/16 ADU, |d| < 2^21): monotone
+/// non-decreasing in `d` (positive gain and inverse flat, floor shifts, clamp), which the
+/// raw pre-filter of `detect::prefilter` relies on.
+#[inline(always)]
+pub(crate) fn pixel_bits_d(d: i32, gain: GainEPerAdu, dark_16: i64, flat: FlatInv) -> i32 {
     let s = (i64::from(d) * i64::from(gain.to_bits())) >> 16;
     let e = (s - dark_16) * i64::from(flat.to_bits());
     ((e + (1 << 23)) >> 24).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
@@ -152,8 +162,26 @@ fn pixel_bits(raw: u16, offset_16ths: i32, gain: GainEPerAdu, dark_16: i64, flat
 
 /// The regular dark term in 2^-16 e-.
 #[inline(always)]
-fn dark_16ths(rel: DarkRel, dark_scale_bits: i32) -> i64 {
+pub(crate) fn dark_16ths(rel: DarkRel, dark_scale_bits: i32) -> i64 {
     (i64::from(rel.to_bits()) * i64::from(dark_scale_bits)) << 4
+}
+
+/// End (exclusive) of the run starting at active column `x`: the next dark or flat tile
+/// boundary, the output split, or `end`, whichever comes first; always `> x` when `x < end`.
+#[inline(always)]
+fn run_end(x: u32, end: u32, dark_log2: Option<u8>, flat_log2: Option<u8>, split: u32) -> u32 {
+    // x < 2^16 and tile_log2 <= 16, so the next boundary is below 2^17.
+    let next = |l: Option<u8>| {
+        l.map_or(end, |l| {
+            let l = u32::from(l.min(16));
+            ((x >> l) + 1) << l
+        })
+    };
+    let mut stop = end.min(next(dark_log2)).min(next(flat_log2));
+    if x < split {
+        stop = stop.min(split);
+    }
+    stop
 }
 
 impl<'t> FrameCalibration<'t> {
@@ -166,6 +194,11 @@ impl<'t> FrameCalibration<'t> {
             conditions,
             dark_scale_bits,
         }
+    }
+
+    /// The dark scale in use, I26F6 bits (clamped to ±`DARK_SCALE_LIMIT_E`).
+    pub(crate) fn dark_scale_bits(&self) -> i32 {
+        self.dark_scale_bits
     }
 
     /// The table in use.
@@ -195,7 +228,7 @@ impl<'t> FrameCalibration<'t> {
         let raw = raw_line
             .get(start..start + out_e.len())
             .ok_or(CalibError::OutsideActiveArea)?;
-        self.calibrate_row(y, x0, raw, levels, out_e, out_flags)
+        self.calibrate_row((y, x0), raw, levels, out_e, out_flags, true)
     }
 
     /// Calibrates the pixels of `rect` from its raw samples (`raw`, row-major, `rect.len()`
@@ -221,25 +254,71 @@ impl<'t> FrameCalibration<'t> {
         if w == 0 {
             return Ok(flags);
         }
+        // One search of the defect lists for the whole window instead of one per row.
+        let defects = self.rows_have_defects(rect.y0, rect.y0.saturating_add(rect.height));
         let rows = raw
             .chunks_exact(w)
             .zip(out_e.chunks_exact_mut(w))
             .zip(out_flags.chunks_exact_mut(w));
         for (((raw_row, e_row), f_row), (lv, y)) in rows.zip(levels.iter().zip(rect.y0..)) {
-            flags |= self.calibrate_row(y, rect.x0, raw_row, lv, e_row, f_row)?;
+            flags |= self.calibrate_row((y, rect.x0), raw_row, lv, e_row, f_row, defects)?;
         }
         Ok(flags)
     }
 
-    /// Calibrates one row segment: `raw` holds the samples of active pixels `x0..`.
+    /// One pixel by the regular formula, without the defect lists: the same bits and flags
+    /// as `calibrate_span` gives a pixel of a row where [`Self::row_has_defects`] is false
+    /// (same look-ups, same [`pixel_bits`]). Active (x, y) is not checked: outside the area
+    /// the maps read as neutral. Cost: four look-ups and the formula, no per-call set-up.
+    #[inline]
+    pub(crate) fn calibrate_regular(
+        &self,
+        x: u16,
+        y: u16,
+        raw: u16,
+        levels: &LineLevels,
+    ) -> (Electrons, PixelFlags) {
+        let t = &self.table;
+        let g = t.geometry();
+        let col = g.raw_col_of_x(usize::from(x));
+        let out = g.output_of_col(col);
+        let offset = offset_16ths(levels.bias(out), t.column_bias(col));
+        let dark = dark_16ths(t.dark_rel(x, y), self.dark_scale_bits);
+        let e = pixel_bits(raw, offset, t.gain(out), dark, t.flat_inv(x, y));
+        let f = if raw >= t.saturation_adu() {
+            PixelFlags::SATURATED
+        } else {
+            PixelFlags::empty()
+        };
+        (Electrons::from_bits(e), f)
+    }
+
+    /// True when the table lists a hot or telegraph pixel on active row `y`.
+    pub(crate) fn row_has_defects(&self, y: u16) -> bool {
+        self.rows_have_defects(y, y.saturating_add(1))
+    }
+
+    /// True when the table lists a hot or telegraph pixel on a row of `y0..y1`: the first
+    /// entry at or after (0, y0) in (y, x) order is on a row before `y1`.
+    fn rows_have_defects(&self, y0: u16, y1: u16) -> bool {
+        let hot = self.table.hot_pixels();
+        let tel = self.table.telegraph_pixels();
+        hot.get(hot.lower_bound(0, y0)).is_some_and(|h| h.y < y1)
+            || tel
+                .get(tel.lower_bound(0, y0))
+                .is_some_and(|(_, ty)| ty < y1)
+    }
+
+    /// Calibrates one row segment: `raw` holds the samples of active pixels `x0..`; the
+    /// defect lists are applied unless the caller knows the row has none (`defects` false).
     fn calibrate_row(
         &self,
-        y: u16,
-        x0: u16,
+        (y, x0): (u16, u16),
         raw: &[u16],
         levels: &LineLevels,
         out_e: &mut [Electrons],
         out_flags: &mut [PixelFlags],
+        defects: bool,
     ) -> Result<PixelFlags, CalibError> {
         let g = self.table.geometry();
         let n = raw.len();
@@ -252,30 +331,54 @@ impl<'t> FrameCalibration<'t> {
         let t = &self.table;
         let sat = t.saturation_adu();
         let mut flags = PixelFlags::empty();
-        for ((raw, (e, f)), x) in raw
-            .iter()
-            .zip(out_e.iter_mut().zip(out_flags.iter_mut()))
-            .zip(x0..)
-        {
-            let col = g.raw_col_of_x(usize::from(x));
-            let out = g.output_of_col(col);
-            let offset = offset_16ths(levels.bias(out), t.column_bias(col));
-            let dark = dark_16ths(t.dark_rel(x, y), self.dark_scale_bits);
-            *e = Electrons::from_bits(pixel_bits(
-                *raw,
-                offset,
-                t.gain(out),
-                dark,
-                t.flat_inv(x, y),
-            ));
-            *f = if *raw >= sat {
-                PixelFlags::SATURATED
-            } else {
-                PixelFlags::empty()
+        // Runs of pixels that share the output, the dark tile and the flat tile: their
+        // look-ups are made once per run, only the column bias once per pixel.
+        let end = u32::from(x0) + n as u32;
+        let dark_log2 = t.dark_map().map(|m| m.header().tile_log2);
+        let flat_log2 = t.flat_map().map(|m| m.header().tile_log2);
+        // First active column read by output 1 (none with one output).
+        let split = if g.outputs == 2 {
+            (g.line_len() / 2).saturating_sub(g.first_active_col()) as u32
+        } else {
+            u32::MAX
+        };
+        let mut x = u32::from(x0);
+        while x < end {
+            let stop = run_end(x, end, dark_log2, flat_log2, split);
+            // x < end <= active_cols <= 8192: fits u16.
+            let xu = x as u16;
+            let col0 = g.raw_col_of_x(x as usize);
+            let out = g.output_of_col(col0);
+            let bias16 = offset_16ths(levels.bias(out), ColumnBiasAdu::ZERO);
+            let gain = t.gain(out);
+            let dark = dark_16ths(t.dark_rel(xu, y), self.dark_scale_bits);
+            let flat = t.flat_inv(xu, y);
+            let (i0, i1) = (
+                (x - u32::from(x0)) as usize,
+                (stop - u32::from(x0)) as usize,
+            );
+            let (Some(r), Some(e), Some(f)) = (
+                raw.get(i0..i1),
+                out_e.get_mut(i0..i1),
+                out_flags.get_mut(i0..i1),
+            ) else {
+                break;
             };
-            flags |= *f;
+            for (col, (raw, (e, f))) in (col0..).zip(r.iter().zip(e.iter_mut().zip(f.iter_mut()))) {
+                let offset = bias16 + i32::from(t.column_bias(col).to_bits());
+                *e = Electrons::from_bits(pixel_bits(*raw, offset, gain, dark, flat));
+                *f = if *raw >= sat {
+                    PixelFlags::SATURATED
+                } else {
+                    PixelFlags::empty()
+                };
+                flags |= *f;
+            }
+            x = stop;
         }
-        flags |= self.apply_defects(y, x0, raw, levels, out_e, out_flags);
+        if defects {
+            flags |= self.apply_defects(y, x0, raw, levels, out_e, out_flags);
+        }
         Ok(flags)
     }
 

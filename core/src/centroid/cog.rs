@@ -207,7 +207,7 @@ pub(crate) fn cog_in_box(
             CogPower::One => (f, v, 1.0),
             CogPower::Two => {
                 let w = f * f - (f + var_bg + var_level);
-                (w, (4.0 * w.max(0.0) + 2.0 * v) * v, 2.0 * f - 1.0)
+                (w, (4.0 * super::pos(w) + 2.0 * v) * v, 2.0 * f - 1.0)
             }
         };
         let dx = f32::from(col) - f32::from(anchor.0);

@@ -73,17 +73,23 @@ pub struct Detection {
     pub flags: DetectionFlags,
 }
 
-/// True when pixel `x` belongs to a blob: above the local threshold, or saturated, and not a
-/// listed hot or telegraph pixel.
-fn above(bg: &Background, k: f32, pixels_e: &[Electrons], flags: &[PixelFlags], x: usize) -> bool {
+/// The join threshold of a block, I26F6 bits: `background + k sigma` (the one formula both
+/// the calibrated scan and the raw pre-filter of [`super::prefilter`] use).
+#[inline(always)]
+pub(crate) fn threshold_bits(l: super::background::BlockLevel, k: f32) -> i64 {
+    i64::from(l.bg_bits) + (k * l.sigma_bits as f32) as i64
+}
+
+/// True when pixel `x` belongs to a blob: above its block's threshold `thr`
+/// ([`threshold_bits`]), or saturated, and not a listed hot or telegraph pixel.
+#[inline(always)]
+pub(crate) fn above_thr(thr: i64, pixels_e: &[Electrons], flags: &[PixelFlags], x: usize) -> bool {
     let (Some(e), Some(f)) = (pixels_e.get(x), flags.get(x)) else {
         return false;
     };
     if f.is_excluded() || f.contains(PixelFlags::HOT_CORRECTED) {
         return false;
     }
-    let l = bg.at(x);
-    let thr = i64::from(l.bg_bits) + (k * l.sigma_bits as f32) as i64;
     f.contains(PixelFlags::SATURATED) || i64::from(e.to_bits()) > thr
 }
 
@@ -172,13 +178,19 @@ pub struct LineDetector<const N: usize> {
     width: u16,
     rows: u16,
     background: Background,
-    prev: heapless::Vec<Run, MAX_RUNS>,
-    cur: heapless::Vec<Run, MAX_RUNS>,
+    /// The previous and the current line's runs; `cur_ix` tells which is current, so that
+    /// ending a line flips a flag instead of swapping two 1.5 KB vectors.
+    runs: [heapless::Vec<Run, MAX_RUNS>; 2],
+    cur_ix: bool,
     blobs: [Blob; MAX_OPEN],
     next_y: u16,
     candidates: heapless::Vec<Detection, N>,
     dropped: u32,
     dropped_pixels: u32,
+    /// The background is updated on rows `y` with `y % bg_stride == 0` (1: every row).
+    bg_stride: u16,
+    /// Every open blob has an index below this (the per-row loops stop there).
+    open_end: usize,
 }
 
 impl<const N: usize> LineDetector<N> {
@@ -189,14 +201,41 @@ impl<const N: usize> LineDetector<N> {
             width,
             rows,
             background: Background::new(usize::from(width)),
-            prev: heapless::Vec::new(),
-            cur: heapless::Vec::new(),
+            runs: [heapless::Vec::new(), heapless::Vec::new()],
+            cur_ix: false,
             blobs: [Blob::default(); MAX_OPEN],
             next_y: 0,
             candidates: heapless::Vec::new(),
             dropped: 0,
             dropped_pixels: 0,
+            bg_stride: 1,
+            open_end: 0,
         }
+    }
+
+    /// Updates the background only on rows `y` with `y % lines == 0` (and on the first row
+    /// pushed), instead of on every row (0 counts as 1). The raw pre-filter
+    /// ([`super::prefilter::ScanDetector`]) calibrates whole lines only on those rows; a
+    /// detector with the same stride fed every calibrated line finds exactly the same
+    /// candidates.
+    pub fn with_background_stride(mut self, lines: u16) -> Self {
+        self.bg_stride = lines.max(1);
+        self
+    }
+
+    /// True when row `y`'s pixels update the background (every pixel of it is then needed).
+    pub fn background_due(&self, y: u16) -> bool {
+        !self.background.is_primed() || y.is_multiple_of(self.bg_stride)
+    }
+
+    /// The running background and noise estimate.
+    pub fn background(&self) -> &Background {
+        &self.background
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DetectConfig {
+        &self.config
     }
 
     /// The candidates found so far (complete after [`Self::finish`]), in no order.
@@ -224,64 +263,100 @@ impl<const N: usize> LineDetector<N> {
         if pixels_e.len() != usize::from(self.width) || flags.len() != pixels_e.len() {
             return Err(DetectError::LineLength);
         }
+        let due = self.background_due(y);
+        self.begin_line(y)?;
+        if !self.background.is_primed() {
+            self.background.update(pixels_e, flags);
+        }
+        let thr = self.background.thresholds(self.config.pixel_sigmas);
+        let last_block = self.background.block_of(usize::MAX);
+        let up = |x: usize| {
+            // The block of x, as `Background::block_of`.
+            let b = (x / super::background::BLOCK_PX).min(last_block);
+            let t = thr.get(b).copied().unwrap_or(i64::MAX);
+            above_thr(t, pixels_e, flags, x)
+        };
+        let mut x = 0usize;
+        let w = usize::from(self.width);
+        while x < w {
+            if !up(x) {
+                x += 1;
+                continue;
+            }
+            let x0 = x;
+            while x + 1 < w && up(x + 1) {
+                x += 1;
+            }
+            self.add_run(y, x0 as u16, x as u16, pixels_e, flags);
+            x += 1;
+        }
+        self.end_line(y);
+        if due {
+            self.background.update(pixels_e, flags);
+        }
+        Ok(())
+    }
+
+    /// Starts row `y`: checks the order, closes everything when rows were skipped.
+    pub(crate) fn begin_line(&mut self, y: u16) -> Result<(), DetectError> {
         if y < self.next_y {
             return Err(DetectError::RowOrder);
         }
         if y > self.next_y {
             // Skipped rows break connectivity: close everything open.
             self.close_all_before(y);
-            self.prev.clear();
+            self.prev_runs_mut().clear();
         }
-        if !self.background.is_primed() {
-            self.background.update(pixels_e, flags);
-        }
-        self.cur.clear();
-        let k = self.config.pixel_sigmas;
-        let mut x = 0usize;
-        let w = usize::from(self.width);
-        while x < w {
-            if !above(&self.background, k, pixels_e, flags, x) {
-                x += 1;
-                continue;
-            }
-            let x0 = x;
-            while x + 1 < w && above(&self.background, k, pixels_e, flags, x + 1) {
-                x += 1;
-            }
-            self.add_run(y, x0 as u16, x as u16, pixels_e, flags);
-            x += 1;
-        }
+        self.cur_runs_mut().clear();
+        Ok(())
+    }
+
+    /// Ends row `y` after its runs were added (without the background update).
+    pub(crate) fn end_line(&mut self, y: u16) {
         // Runs of this line point at roots; merged blobs are released.
-        for i in 0..self.cur.len() {
-            if let Some(r) = self.cur.get(i).map(|r| r.blob) {
+        for i in 0..self.cur_runs().len() {
+            if let Some(r) = self.cur_runs().get(i).map(|r| r.blob) {
                 let root = self.find(r);
-                if let Some(run) = self.cur.get_mut(i) {
+                if let Some(run) = self.cur_runs_mut().get_mut(i) {
                     run.blob = root;
                 }
             }
         }
-        for i in 0..MAX_OPEN {
-            let Some(b) = self.blobs.get(i).copied() else {
-                continue;
-            };
-            if b.open
-                && usize::from(b.parent) != i
-                && let Some(s) = self.blobs.get_mut(i)
-            {
-                s.open = false;
+        let end = self.open_end;
+        for (i, b) in self.blobs.iter_mut().enumerate().take(end) {
+            if b.open && usize::from(b.parent) != i {
+                b.open = false;
             }
         }
         self.close_all_before(y);
-        core::mem::swap(&mut self.prev, &mut self.cur);
-        self.background.update(pixels_e, flags);
+        self.cur_ix = !self.cur_ix;
         self.next_y = y.saturating_add(1);
-        Ok(())
     }
 
     /// Completes every open blob: call after the last line.
     pub fn finish(&mut self) {
         self.close_all_before(u16::MAX);
-        self.prev.clear();
+        self.prev_runs_mut().clear();
+    }
+
+    fn prev_runs(&self) -> &heapless::Vec<Run, MAX_RUNS> {
+        let [a, b] = &self.runs;
+        if self.cur_ix { a } else { b }
+    }
+
+    fn prev_runs_mut(&mut self) -> &mut heapless::Vec<Run, MAX_RUNS> {
+        let [a, b] = &mut self.runs;
+        if self.cur_ix { a } else { b }
+    }
+
+    fn cur_runs(&self) -> &heapless::Vec<Run, MAX_RUNS> {
+        let [a, b] = &self.runs;
+        if self.cur_ix { b } else { a }
+    }
+
+    fn cur_runs_mut(&mut self) -> &mut heapless::Vec<Run, MAX_RUNS> {
+        let [a, b] = &mut self.runs;
+        if self.cur_ix { b } else { a }
     }
 
     fn find(&self, mut i: u16) -> u16 {
@@ -295,10 +370,19 @@ impl<const N: usize> LineDetector<N> {
         i
     }
 
-    fn add_run(&mut self, y: u16, x0: u16, x1: u16, pixels_e: &[Electrons], flags: &[PixelFlags]) {
+    /// Adds the run `x0..=x1` of row `y` (every pixel of it above the threshold; only its
+    /// pixels are read from `pixels_e` and `flags`).
+    pub(crate) fn add_run(
+        &mut self,
+        y: u16,
+        x0: u16,
+        x1: u16,
+        pixels_e: &[Electrons],
+        flags: &[PixelFlags],
+    ) {
         let mut blob: Option<u16> = None;
         let touching: heapless::Vec<u16, MAX_RUNS> = self
-            .prev
+            .prev_runs()
             .iter()
             .filter(|p| p.x0 <= x1.saturating_add(1) && p.x1.saturating_add(1) >= x0)
             .map(|p| p.blob)
@@ -316,6 +400,7 @@ impl<const N: usize> LineDetector<N> {
             None => match self.blobs.iter().position(|b| !b.open) {
                 Some(free) => {
                     let id = free as u16;
+                    self.open_end = self.open_end.max(free + 1);
                     if let Some(b) = self.blobs.get_mut(free) {
                         *b = Blob {
                             open: true,
@@ -336,7 +421,7 @@ impl<const N: usize> LineDetector<N> {
                 }
             },
         };
-        if self.cur.push(Run { x0, x1, blob: id }).is_err() {
+        if self.cur_runs_mut().push(Run { x0, x1, blob: id }).is_err() {
             self.dropped_pixels += u32::from(x1 - x0) + 1;
             if let Some(b) = self.blobs.get_mut(usize::from(id)) {
                 b.flags |= DetectionFlags::TRUNCATED;
@@ -417,16 +502,25 @@ impl<const N: usize> LineDetector<N> {
 
     /// Completes the open root blobs whose last run is on a row before `y`.
     fn close_all_before(&mut self, y: u16) {
-        for i in 0..MAX_OPEN {
-            let Some(b) = self.blobs.get(i).copied() else {
+        for i in 0..self.open_end {
+            // Test in place: copying every 70-byte blob per row cost ~6 instructions per
+            // pixel of the scan on the M7.
+            let done = self
+                .blobs
+                .get(i)
+                .is_some_and(|b| b.open && usize::from(b.parent) == i && b.last_y < y);
+            if !done {
                 continue;
-            };
-            if b.open && usize::from(b.parent) == i && b.last_y < y {
-                if let Some(s) = self.blobs.get_mut(i) {
-                    s.open = false;
-                }
+            }
+            if let Some(s) = self.blobs.get_mut(i) {
+                s.open = false;
+                let b = *s;
                 self.complete(&b);
             }
+        }
+        // Every open blob lies below `open_end`: shrink it past the closed ones.
+        while self.open_end > 0 && self.blobs.get(self.open_end - 1).is_some_and(|b| !b.open) {
+            self.open_end -= 1;
         }
     }
 

@@ -8,6 +8,8 @@
 //!   the candidate list with its overflow policy.
 //! - [`track`]: tracking mode, one window predicted from the last frame: is the star there?
 //!   Background and noise from the window's border, the same eq. 8 SNR test.
+//! - [`prefilter`]: the raw-domain pre-filtered scan ([`ScanDetector`]): quiet pixels are
+//!   compared in raw ADU against a per-tile level and never calibrated.
 //! - [`capture`]: copies the raw pixels of a list of windows (tracking) out of the streamed
 //!   lines, and keeps a ring of the last raw lines (acquisition) so that a blob's window can
 //!   be calibrated and centroided when the blob closes.
@@ -23,10 +25,12 @@
 pub mod background;
 pub mod blobs;
 pub mod capture;
+pub mod prefilter;
 pub mod track;
 
 pub use blobs::{Detection, DetectionFlags, LineDetector};
 pub use capture::{CaptureError, LineRing, RingError, WindowCapture};
+pub use prefilter::{ScanDetector, ScanError};
 pub use track::{TrackConfig, TrackFlags, TrackResult, track_detect};
 
 /// Detection settings.

@@ -28,6 +28,7 @@ use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::iwc::{IwcParams, iwc};
 use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
 use startrack_core::centroid::{Background, CentroidInput};
+use startrack_core::detect::{DetectConfig, ScanDetector};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::{
     CalibTable, HotPixel, HotPolicy, MapHeader, MapSpec, TableSpec, write_table,
@@ -288,9 +289,50 @@ fn raw_line(y: usize, star: (usize, usize), rng: &mut Lcg, out: &mut [u16; RAW_C
     }
 }
 
+/// Raw line of active row `y` for the scan: bias, near-Gaussian noise (sum of four uniform
+/// 0..=15 ADU draws: sigma 9.2 ADU, a tail like a Gaussian's to 3.5 sigma, so the 2.5-sigma
+/// join threshold passes ~0.6 % of the samples as real noise does) and the stars of `stars`.
+fn raw_line_noisy(y: usize, stars: &[(usize, usize)], rng: &mut Lcg, out: &mut [u16; RAW_COLS]) {
+    let first_active = usize::from(G.overscan_px + G.covered_px);
+    for (col, v) in out.iter_mut().enumerate() {
+        // The LCG's top bits: its low bits have short periods (bits 8..11 repeat every 4096
+        // draws, about one line), which made correlated noise peaks.
+        let mut s = BIAS_ADU + (0..4).map(|_| rng.next() >> 20).sum::<u32>();
+        if col >= first_active && col < first_active + ACTIVE {
+            let x = col - first_active;
+            for star in stars {
+                let (dx, dy) = (x.abs_diff(star.0), y.abs_diff(star.1));
+                if dx <= 3 && dy <= 3 {
+                    s += STAR_PEAK_ADU * PSF_1000[3 + dx] / 1000 * PSF_1000[3 + dy] / 1000;
+                }
+            }
+        }
+        *v = s.min(65_535) as u16;
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 
 const LINES: usize = 16;
+/// Rows of the streaming scan bench (two background rows at stride 64).
+const SCAN_LINES: usize = 128;
+/// Background stride of the scan bench: whole lines are calibrated every this many rows.
+const SCAN_BG_STRIDE: u16 = 64;
+/// Stars in the scan bench's rows.
+const SCAN_STARS: [(usize, usize); 10] = [
+    (40, 10),
+    (150, 20),
+    (300, 33),
+    (420, 47),
+    (512, 60),
+    (600, 70),
+    (700, 85),
+    (800, 95),
+    (900, 110),
+    (1000, 120),
+];
+/// Windows of the tracking-frame bench (issue 5: 30 stars).
+const TRACK_STARS: usize = 30;
 const WINDOW_REPS: usize = 32;
 
 fn main() -> ! {
@@ -421,6 +463,116 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
     row(out, "line_calibrate", "pixel", t_span, n * ACTIVE as u64);
     row(out, "line_levels_measure", "line", t_levels, n);
     row(out, "dark_scale_add_line", "line", t_dark, n);
+
+    // Streaming scan: calibrate-and-detect with the raw pre-filter over SCAN_LINES
+    // consecutive rows with stars (levels measured outside the timing, their own stage).
+    {
+        let mut scan = ScanDetector::<64>::new(cal, DetectConfig::default(), SCAN_BG_STRIDE);
+        let (mut t_scan, mut t_bg_rows) = (0u64, 0u64);
+        let mut r = Ok(());
+        for y in 0..SCAN_LINES {
+            raw_line_noisy(y, &SCAN_STARS, &mut rng, &mut raw);
+            let levels = LineLevels::measure(&G, &raw).map_err(|_| "levels")?;
+            let t = measure(overhead, || {
+                r = scan.push_raw_line(y as u16, black_box(&raw), &levels);
+            });
+            t_scan += t;
+            if scan.detector().background_due(y as u16) || y == 0 {
+                t_bg_rows += t;
+            }
+            r.map_err(|_| "push_raw_line failed")?;
+        }
+        t_scan += measure(overhead, || scan.finish());
+        let found = scan.candidates().len();
+        if found != SCAN_STARS.len() {
+            let _ = writeln!(out, "# scan found {found} of {} stars", SCAN_STARS.len());
+            for c in scan.candidates() {
+                let _ = writeln!(
+                    out,
+                    "# {} {} {} {} {:?}",
+                    c.x_px, c.y_px, c.flux_e, c.pixels, c.flags
+                );
+            }
+            return Err("scan_detect did not find exactly the stars");
+        }
+        let _ = writeln!(
+            out,
+            "# scan_detect: {} of {} pixels calibrated, {} candidates; background rows \
+             (calibrated whole) {} % of the time",
+            scan.calibrated_px(),
+            SCAN_LINES * ACTIVE,
+            found,
+            t_bg_rows * 100 / t_scan.max(1)
+        );
+        row(
+            out,
+            "scan_detect",
+            "pixel",
+            t_scan,
+            (SCAN_LINES * ACTIVE) as u64,
+        );
+    }
+
+    // Tracking frame: TRACK_STARS 7x7 windows calibrated and centroided with the default
+    // method (CoG power 1 in the 7x7 box, perimeter-median background).
+    {
+        let mut wraw = [[0u16; 49]; TRACK_STARS];
+        let mut wlevels = [[LineLevels::measure(&G, &raw).map_err(|_| "levels")?; 7]; TRACK_STARS];
+        let mut rects = [Rect {
+            x0: 0,
+            y0: 0,
+            width: 7,
+            height: 7,
+        }; TRACK_STARS];
+        let mut line = [0u16; RAW_COLS];
+        for (i, ((w, lv), rect)) in wraw
+            .iter_mut()
+            .zip(wlevels.iter_mut())
+            .zip(rects.iter_mut())
+            .enumerate()
+        {
+            let (sx, sy) = (40 + 31 * i, 50 + 29 * i);
+            *rect = Rect {
+                x0: (sx - 3) as u16,
+                y0: (sy - 3) as u16,
+                width: 7,
+                height: 7,
+            };
+            let first = G.raw_col_of_x(sx - 3);
+            for (r, l) in lv.iter_mut().enumerate() {
+                raw_line_noisy(sy - 3 + r, &[(sx, sy)], &mut rng, &mut line);
+                *l = LineLevels::measure(&G, &line).map_err(|_| "levels")?;
+                w[7 * r..7 * r + 7].copy_from_slice(&line[first..first + 7]);
+            }
+        }
+        let mut ok = true;
+        let mut sum = 0.0f32;
+        let t_track = measure(overhead, || {
+            for ((w, lv), rect) in wraw.iter().zip(wlevels.iter()).zip(rects.iter()) {
+                let mut we = [Electrons::ZERO; 49];
+                let mut wf = [PixelFlags::empty(); 49];
+                if cal
+                    .calibrate_window(*rect, black_box(w), lv, &mut we, &mut wf)
+                    .is_err()
+                {
+                    ok = false;
+                }
+                match Window::new(*rect, &we) {
+                    Some(win) => {
+                        let input = CentroidInput::new(win).with_pixel_flags(&wf);
+                        let c = cog(&input, &CogParams::new(CogPower::One, 7));
+                        sum += c.x_px + c.y_px;
+                    }
+                    None => ok = false,
+                }
+            }
+        });
+        black_box(sum);
+        if !ok {
+            return Err("tracking_frame failed");
+        }
+        row(out, "tracking_frame", "frame_30_stars", t_track, 1);
+    }
 
     // Star windows: 7x7 around a star, calibrated from its 7 raw lines, then centroided.
     let mut t_window = 0u64;

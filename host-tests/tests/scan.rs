@@ -1,0 +1,326 @@
+//! The raw pre-filtered scan (`detect::prefilter::ScanDetector`) against the calibrated path
+//! (`LineDetector` fed every calibrated line, same background stride): the candidates must be
+//! identical, bit for bit, on simulated CCD47-20 frames, including maps with a large spread
+//! of dark, flat and column bias; and the scan must calibrate only a small part of a quiet
+//! frame (otherwise it is no faster).
+
+use startrack_core::calib::{
+    DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
+};
+use startrack_core::detect::{DetectConfig, LineDetector, ScanDetector};
+use startrack_core::table::CalibTable;
+use startrack_core::units::{Electrons, Kelvin};
+use startrack_host::sim::truth::TruthSections;
+use startrack_host::sim::{SensorParams, Simulator};
+
+struct Frame {
+    table: Vec<u8>,
+    lines: Vec<(Vec<u16>, LineLevels)>,
+    dark_scale_e: Electrons,
+    params: SensorParams,
+}
+
+fn frame(params: SensorParams, n_stars: usize, tile_log2: u8) -> Frame {
+    let stars = startrack_host::demo::star_field(params.seed, n_stars, &params);
+    let sim = Simulator::new(params.clone(), stars);
+    let g = params.geometry;
+    let table = sim
+        .truth_table_tiled(TruthSections::ALL, tile_log2)
+        .unwrap();
+    let parsed = CalibTable::parse(&table).unwrap();
+    let mut lines = Vec::new();
+    let mut est = DarkScaleEstimator::new();
+    let mut line = vec![0u16; g.line_len()];
+    for y in 0..usize::from(g.lines) {
+        sim.render_line(y, &mut line);
+        let lv = LineLevels::measure(&g, &line).unwrap();
+        est.add_line(&parsed, &line, &lv).unwrap();
+        lines.push((line.clone(), lv));
+    }
+    Frame {
+        table,
+        lines,
+        dark_scale_e: est.estimate().unwrap(),
+        params,
+    }
+}
+
+/// Runs both paths; returns (reference candidates, scan candidates, calibrated fraction).
+fn both(f: &Frame, stride: u16) -> (LineDetector<256>, ScanDetector<'_, 256>, f64) {
+    let g = f.params.geometry;
+    let table = CalibTable::parse(&f.table).unwrap();
+    let cal = FrameCalibration::new(
+        table,
+        FrameConditions {
+            dark_scale_e: f.dark_scale_e,
+            exposure_ms: 1000,
+            temperature_k: Kelvin::from_num(293),
+        },
+    );
+    let mut reference =
+        LineDetector::<256>::new(DetectConfig::default(), g.active_cols, g.active_rows)
+            .with_background_stride(stride);
+    let mut scan = ScanDetector::<256>::new(cal, DetectConfig::default(), stride);
+    let mut e = vec![Electrons::ZERO; usize::from(g.active_cols)];
+    let mut fl = vec![PixelFlags::empty(); e.len()];
+    for (y, (raw, lv)) in f.lines.iter().enumerate().take(usize::from(g.active_rows)) {
+        cal.calibrate_span(y as u16, 0, raw, lv, &mut e, &mut fl)
+            .unwrap();
+        reference.push_line(y as u16, &e, &fl).unwrap();
+        scan.push_raw_line(y as u16, raw, lv).unwrap();
+    }
+    reference.finish();
+    scan.finish();
+    let total = f64::from(g.active_cols) * f64::from(g.active_rows);
+    let frac = f64::from(scan.calibrated_px()) / total;
+    (reference, scan, frac)
+}
+
+fn sorted(c: &[startrack_core::detect::Detection]) -> Vec<startrack_core::detect::Detection> {
+    let mut v = c.to_vec();
+    v.sort_by_key(|a| (a.peak_y, a.peak_x));
+    v
+}
+
+#[test]
+fn scan_equals_calibrated_path_on_simulated_frames() {
+    for (seed, stride) in [(3u64, 1u16), (5, 8), (7, 64)] {
+        let f = frame(
+            SensorParams {
+                seed,
+                ..SensorParams::default()
+            },
+            60,
+            3,
+        );
+        let (reference, scan, frac) = both(&f, stride);
+        assert!(
+            reference.candidates().len() >= 40,
+            "seed {seed}: only {} candidates",
+            reference.candidates().len()
+        );
+        assert_eq!(
+            sorted(reference.candidates()),
+            sorted(scan.candidates()),
+            "seed {seed} stride {stride}"
+        );
+        assert_eq!(reference.dropped(), scan.detector().dropped());
+        assert_eq!(reference.dropped_pixels(), scan.detector().dropped_pixels());
+        println!(
+            "seed {seed} stride {stride}: {} candidates, {:.2} % of the pixels calibrated",
+            scan.candidates().len(),
+            100.0 * frac
+        );
+        // The background rows alone are 1/stride of the frame (1.6 % at 64); the pre-filter
+        // passes the star pixels and the ~1 % of noise samples above 2.5 sigma, with the
+        // spans between them.
+        if stride == 64 {
+            assert!(frac < 0.10, "calibrated {frac}");
+        }
+    }
+}
+
+#[test]
+fn scan_equals_calibrated_path_with_large_map_spread() {
+    // Per-pixel maps with strong dark non-uniformity, flat variation and column bias: the
+    // chunk bounds are loose, most chunks go to the exact path, and the result must not
+    // change.
+    let f = frame(
+        SensorParams {
+            seed: 9,
+            dsnu: 0.5,
+            prnu: 0.05,
+            column_bias_sigma_adu: 40.0,
+            dark_mean_e: 400.0,
+            ..SensorParams::default()
+        },
+        40,
+        0,
+    );
+    let (reference, scan, frac) = both(&f, 16);
+    assert_eq!(sorted(reference.candidates()), sorted(scan.candidates()));
+    println!(
+        "large spread: {:.2} % of the pixels calibrated",
+        100.0 * frac
+    );
+}
+
+mod random_tables {
+    //! Random tables (any gain, flat, dark, column bias, tile size, hot and telegraph pixels,
+    //! saturation, either sign of the dark scale) on random frames with bright spots: the
+    //! pre-filter's bound must hold for all of them, so the candidates stay identical.
+
+    use super::*;
+    use fixed::types::{U8F8, U16F16};
+    use proptest::prelude::*;
+    use startrack_core::geometry::ReadoutGeometry;
+    use startrack_core::table::{HotPixel, HotPolicy, MapHeader, MapSpec, TableSpec, write_table};
+    use startrack_core::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu};
+
+    /// 40 x 24 active, two outputs split at column 20 (inside a 16-pixel chunk).
+    const G: ReadoutGeometry = ReadoutGeometry {
+        overscan_px: 4,
+        covered_px: 3,
+        active_cols: 40,
+        active_rows: 24,
+        lines: 24,
+        outputs: 2,
+    };
+
+    #[allow(clippy::too_many_arguments)]
+    fn check(
+        tile_log2: u8,
+        gains: [u32; 2],
+        column_bias: Vec<i16>,
+        dark: Vec<u8>,
+        flat: Vec<u16>,
+        hot: Vec<(u16, u16, bool)>,
+        spots: Vec<(u16, u16, u16)>,
+        noise: Vec<u16>,
+        sat: u16,
+        dark_scale_bits: i32,
+        stride: u16,
+        uniform: bool,
+    ) -> Result<(), TestCaseError> {
+        // Uniform maps make the pre-filter's bound tight (within its 1/2 ADU margin), so a
+        // bound that is too high shows; random maps test it under any spread.
+        let (column_bias, dark, flat) = if uniform {
+            (
+                vec![column_bias[0]; column_bias.len()],
+                vec![dark[0]],
+                vec![flat[0]],
+            )
+        } else {
+            (column_bias, dark, flat)
+        };
+        let n_tiles = MapHeader::for_area(G.active_cols, G.active_rows, tile_log2).tiles();
+        let gains: Vec<GainEPerAdu> = gains.iter().map(|&g| GainEPerAdu::from_bits(g)).collect();
+        let cb: Vec<ColumnBiasAdu> = column_bias
+            .iter()
+            .map(|&b| ColumnBiasAdu::from_bits(b))
+            .collect();
+        let dark: Vec<DarkRel> = dark
+            .iter()
+            .cycle()
+            .take(n_tiles)
+            .map(|&d| DarkRel::from_bits(d))
+            .collect();
+        let flat: Vec<FlatInv> = flat
+            .iter()
+            .cycle()
+            .take(n_tiles)
+            .map(|&f| FlatInv::from_bits(f))
+            .collect();
+        let mut hot: Vec<HotPixel> = hot
+            .iter()
+            .map(|&(x, y, ex)| HotPixel {
+                x,
+                y,
+                rate_e_per_s: U16F16::from_num(50),
+                doubling_k: U8F8::from_num(6),
+                policy: if ex {
+                    HotPolicy::Exclude
+                } else {
+                    HotPolicy::Correct
+                },
+            })
+            .collect();
+        hot.sort_by_key(|h| (h.y, h.x));
+        hot.dedup_by_key(|h| (h.y, h.x));
+        let telegraph = [(7u16, 5u16), (33, 17)];
+        let spec = TableSpec {
+            geometry: G,
+            saturation_adu: sat,
+            gains: &gains,
+            column_bias: Some(&cb),
+            dark_rel: Some(MapSpec {
+                tile_log2,
+                tiles: &dark,
+            }),
+            flat_inv: Some(MapSpec {
+                tile_log2,
+                tiles: &flat,
+            }),
+            hot_ref_k: Kelvin::from_num(263),
+            hot: &hot,
+            telegraph: &telegraph,
+        };
+        let mut buf = vec![0u8; spec.encoded_len()];
+        write_table(&spec, &mut buf).unwrap();
+        let table = CalibTable::parse(&buf).unwrap();
+        let cal = FrameCalibration::new(
+            table,
+            FrameConditions {
+                dark_scale_e: Electrons::from_bits(dark_scale_bits),
+                exposure_ms: 500,
+                temperature_k: Kelvin::from_num(270),
+            },
+        );
+        // Every above-threshold pixel becomes a candidate (no peak, size or SNR cut), so a
+        // single pixel the pre-filter wrongly drops changes the list.
+        let config = DetectConfig {
+            peak_sigmas: 0.0,
+            min_pixels: 1,
+            min_snr: -1.0,
+            ..DetectConfig::default()
+        };
+        let mut reference = LineDetector::<256>::new(config, G.active_cols, G.active_rows)
+            .with_background_stride(stride);
+        let mut scan = ScanDetector::<256>::new(cal, config, stride);
+        let mut e = vec![Electrons::ZERO; usize::from(G.active_cols)];
+        let mut fl = vec![PixelFlags::empty(); e.len()];
+        let mut k = 0usize;
+        for y in 0..G.active_rows {
+            let line: Vec<u16> = (0..G.line_len())
+                .map(|c| {
+                    // Near-Gaussian noise (sum of four uniform draws): a tail past the 2.5 and
+                    // 5 sigma thresholds, so samples sit at every distance from them.
+                    let mut v = 1000u32;
+                    for _ in 0..4 {
+                        k += 1;
+                        v += u32::from(noise[k % noise.len()] % 32);
+                    }
+                    if let Some(x) = c.checked_sub(G.first_active_col()) {
+                        for &(sx, sy, a) in &spots {
+                            if (x as u16).abs_diff(sx) <= 1 && y.abs_diff(sy) <= 1 {
+                                v += u32::from(a);
+                            }
+                        }
+                    }
+                    v.min(65535) as u16
+                })
+                .collect();
+            let lv = LineLevels::measure(&G, &line).unwrap();
+            cal.calibrate_span(y, 0, &line, &lv, &mut e, &mut fl)
+                .unwrap();
+            reference.push_line(y, &e, &fl).unwrap();
+            scan.push_raw_line(y, &line, &lv).unwrap();
+        }
+        reference.finish();
+        scan.finish();
+        prop_assert_eq!(sorted(reference.candidates()), sorted(scan.candidates()));
+        Ok(())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+
+        #[test]
+        fn scan_equals_calibrated_path_on_random_tables(
+            tile_log2 in 0u8..4,
+            gains in [1u32..=u32::MAX, 1u32..=u32::MAX],
+            column_bias in prop::collection::vec(any::<i16>(), G.line_len()),
+            dark in prop::collection::vec(any::<u8>(), 1..40),
+            flat in prop::collection::vec(1u16.., 1..40),
+            hot in prop::collection::vec((0u16..40, 0u16..24, any::<bool>()), 0..4),
+            spots in prop::collection::vec((0u16..40, 0u16..24, prop_oneof![0u16..200, 0u16..30000]), 0..8),
+            noise in prop::collection::vec(any::<u16>(), 997..1500),
+            sat in 1000u16..=65535,
+            dark_scale_bits in -(1i32 << 20)..(1i32 << 20),
+            stride in 1u16..6,
+            uniform in any::<bool>(),
+        ) {
+            check(tile_log2, gains, column_bias, dark, flat, hot, spots, noise, sat, dark_scale_bits, stride, uniform)?;
+        }
+    }
+}
