@@ -33,6 +33,7 @@ fn simulate(dir: &Path) -> SimFiles {
         dsnu: 0.1,
         prnu: 0.02,
         psf_a_px: Some(A_PX),
+        measured_frames: 0,
     })
     .expect("simulate")
 }

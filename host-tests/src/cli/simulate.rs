@@ -19,6 +19,8 @@ use super::{CliError, write_file};
 use crate::demo::{render_frame, star_field};
 use crate::fits::{MapF32, RawFrame, write_map, write_raw_frame};
 use crate::sim::{SensorParams, Simulator};
+use startrack_core::geometry::Segment;
+use startrack_core::window::Rect;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -49,7 +51,19 @@ pub struct SimulateArgs {
     /// One PSF 80 %-energy radius for every star, px (0.3 to 10; written as `PSFA`).
     #[arg(long)]
     pub psf_a_px: Option<f64>,
+    /// Write the dark and flat maps as a ground calibration would measure them, from this many
+    /// simulated dark frames and as many flat frames (with their calibration noise), instead
+    /// of the simulator's truth; 0 writes the truth. The bias map is always the truth.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=1000))]
+    pub measured_frames: u32,
 }
+
+/// First frame number of the simulated calibration frames of `--measured-frames` (the scene
+/// is frame 0; these never share noise with it).
+pub const CALIBRATION_FRAME0: u32 = 1_000_000;
+
+/// Mean level of the simulated flat-field frames, e- per pixel (a fifth of full well).
+pub const FLAT_LEVEL_E: f64 = 20_000.0;
 
 /// The files `simulate` writes, in `dir`.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -167,24 +181,75 @@ pub fn run(args: &SimulateArgs) -> Result<SimFiles, CliError> {
         keys: gains.clone(),
     };
     write_map(&files.bias, &bias)?;
-    let norm = sim.covered_dark_mean();
+    let (dark_data, flat_data) = if args.measured_frames == 0 {
+        let norm = sim.covered_dark_mean();
+        let flat = (0..rows)
+            .flat_map(|y| (0..cols).map(move |x| (x, y)))
+            .map(|(x, y)| sim.flat(x, y) as f32)
+            .collect();
+        (full(&|c, l| sim.dark_rel(c, l) / norm), flat)
+    } else {
+        measured_maps(&sim, args.measured_frames)?
+    };
     let dark = MapF32 {
         rows: lines,
         cols: len,
-        data: full(&|c, l| sim.dark_rel(c, l) / norm),
+        data: dark_data,
         keys: gains.clone(),
     };
     write_map(&files.dark, &dark)?;
     let flat = MapF32 {
         rows,
         cols,
-        data: (0..rows)
-            .flat_map(|y| (0..cols).map(move |x| (x, y)))
-            .map(|(x, y)| sim.flat(x, y) as f32)
-            .collect(),
+        data: flat_data,
         keys: gains,
     };
     write_map(&files.flat, &flat)?;
     write_file(&files.hot, b"col,row,dark_e\n")?;
     Ok(files)
+}
+
+/// The relative dark map (full readout) and the flat (active area) measured from `frames` dark
+/// and `frames` flat simulated frames ([`Simulator::measure_dark_map`],
+/// [`Simulator::measure_flat_inv_map`]). The dark map is measured on the active area and
+/// normalised to the covered pixels of every line, so its covered columns are written as 1 (their
+/// mean, what `calib build` divides by) and the over-scan columns as 0 (no dark).
+fn measured_maps(sim: &Simulator, frames: u32) -> Result<(Vec<f32>, Vec<f32>), CliError> {
+    let g = sim.params.geometry;
+    let (lines, len) = (usize::from(g.lines), g.line_len());
+    let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+    let region = Rect {
+        x0: 0,
+        y0: 0,
+        width: g.active_cols,
+        height: g.active_rows,
+    };
+    let measure_err = |e: startrack_core::calib::LineError| {
+        CliError::Usage(format!("measuring the calibration maps: {e:?}"))
+    };
+    let dark = sim
+        .measure_dark_map(frames, CALIBRATION_FRAME0, region, 0..lines)
+        .map_err(measure_err)?;
+    let flat_inv = sim
+        .measure_flat_inv_map(frames, CALIBRATION_FRAME0 + frames, FLAT_LEVEL_E, region)
+        .map_err(measure_err)?;
+    let mut dark_full = vec![0.0f32; lines * len];
+    for (l, line) in dark_full.chunks_exact_mut(len).enumerate() {
+        for (c, v) in line.iter_mut().enumerate() {
+            *v = match g.segment(c) {
+                Some(Segment::Active) if l < rows => {
+                    dark.values[l * cols + (c - g.first_active_col())] as f32
+                }
+                Some(Segment::Covered) => 1.0,
+                _ => 0.0,
+            };
+        }
+    }
+    let flat = flat_inv
+        .values
+        .iter()
+        .take(cols * rows)
+        .map(|&inv| if inv > 0.0 { (1.0 / inv) as f32 } else { 1.0 })
+        .collect();
+    Ok((dark_full, flat))
 }

@@ -47,11 +47,14 @@ impl Simulator {
     }
 
     /// Electrons of raw sample `raw` at raw column `col` with the line's measured levels:
-    /// `(raw - bias) * gain` (gains are known to calibration).
+    /// `(raw - bias - column bias) * gain`. Gains and the column bias are known to calibration
+    /// before the dark: the bias map comes from many bias frames, whose noise is neglected
+    /// here. Leaving the column bias in would put the bias pattern into the dark map, which
+    /// `calib build` would then subtract twice.
     fn electrons_of(&self, raw: u16, col: usize, levels: &LineLevels) -> f64 {
         let g = self.params.geometry;
         let Output(o) = g.output_of_col(col);
-        let bias = levels.bias(Output(o)).to_num::<f64>();
+        let bias = levels.bias(Output(o)).to_num::<f64>() + self.column_bias_adu(col);
         (f64::from(raw) - bias) * self.params.gain_e_per_adu[usize::from(o)]
     }
 
