@@ -5,4 +5,6 @@ pub mod cli;
 pub mod demo;
 pub mod fits;
 pub mod pipeline;
+pub mod accuracy;
+pub mod pixcorr;
 pub mod sim;

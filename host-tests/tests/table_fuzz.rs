@@ -7,6 +7,8 @@ mod table_fixtures;
 
 use fixed::types::U8F8;
 use proptest::prelude::*;
+use startrack_core::centroid::cog::CogPower;
+use startrack_core::centroid::pixcorr::PixCorrBackground;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::{
     CalibTable, DIR_ENTRY_LEN, HEADER_LEN, HotPixel, HotPolicy, SectionKind, TableError,
@@ -75,7 +77,7 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
             outputs: o,
         },
     );
-    (geom, any::<u64>(), 0u8..=10, 0u8..=10, any::<[bool; 5]>()).prop_map(
+    (geom, any::<u64>(), 0u8..=10, 0u8..=10, any::<[bool; 6]>()).prop_map(
         |(g, seed, dl, fl, present)| {
             // A small deterministic generator keeps the strategy simple and the values varied.
             let mut s = seed | 1;
@@ -112,6 +114,30 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
                 .collect();
             tg.sort_by_key(|&(x, y)| (y, x));
             tg.dedup();
+            // 1..=16 curves with random valid fields and knots.
+            let curves: Vec<Vec<u8>> = (0..1 + next() % 16)
+                .map(|_| {
+                    let n = 5 + (next() % 125) as usize;
+                    let mut knots: Vec<i16> = (0..n).map(|_| next() as i16).collect();
+                    knots[0] = 0;
+                    enc_curve(
+                        if next() % 2 == 0 {
+                            CogPower::One
+                        } else {
+                            CogPower::Two
+                        },
+                        3 + 2 * (next() % 15) as u8,
+                        [
+                            PixCorrBackground::Given,
+                            PixCorrBackground::PerimeterMean,
+                            PixCorrBackground::PerimeterMedian,
+                        ][(next() % 3) as usize],
+                        1 + (next() % 0xFFFF) as u16,
+                        1 + (next() % 0x8000) as u16,
+                        &knots,
+                    )
+                })
+                .collect();
             OwnedSpec {
                 geometry: g,
                 saturation_adu: next() as u16,
@@ -142,6 +168,7 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
                 hot_ref_k: Kelvin::from_bits(next() as u32),
                 hot: if present[3] { hot } else { Vec::new() },
                 telegraph: if present[4] { tg } else { Vec::new() },
+                pixcorr: if present[5] { curves } else { Vec::new() },
             }
         },
     )
@@ -151,6 +178,12 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
 fn check_round_trip(s: &OwnedSpec) -> Result<(), TestCaseError> {
     let bytes = s.write();
     let t = CalibTable::parse(&bytes).map_err(|e| TestCaseError::fail(format!("rejected: {e}")))?;
+    prop_assert_eq!(t.pixcorr().len(), s.pixcorr.len());
+    for (c, want) in t.pixcorr().iter().zip(&s.pixcorr) {
+        let mut got = c.header().to_bytes().to_vec();
+        got.extend_from_slice(c.knot_bytes());
+        prop_assert_eq!(&got, want);
+    }
     let g = s.geometry;
     prop_assert_eq!(*t.geometry(), g);
     prop_assert_eq!(t.saturation_adu(), s.saturation_adu);
@@ -360,6 +393,11 @@ fn resealed_section_corruption_of_each_kind_is_caught_or_harmless() {
                         Ok(p) => {
                             exercise(&p);
                             accepted += 1;
+                        }
+                        Err(TableError::PixCorrCurve { .. } | TableError::Reserved)
+                            if kind == SectionKind::PixCorr =>
+                        {
+                            rejected += 1;
                         }
                         Err(
                             TableError::SectionLength(k)

@@ -52,6 +52,7 @@ pub mod cog;
 pub mod gauss_fit;
 pub mod iwc;
 pub mod math;
+pub mod pixcorr;
 pub mod quadratic;
 
 use crate::calib::PixelFlags;

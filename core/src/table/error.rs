@@ -17,17 +17,20 @@ pub enum SectionKind {
     HotPixels = 5,
     /// Telegraph-pixel list.
     Telegraph = 6,
+    /// Pixel-phase correction curves of the centre of gravity.
+    PixCorr = 7,
 }
 
 impl SectionKind {
     /// Every kind, in directory order.
-    pub const ALL: [SectionKind; 6] = [
+    pub const ALL: [SectionKind; 7] = [
         Self::Gains,
         Self::ColumnBias,
         Self::DarkRel,
         Self::FlatInv,
         Self::HotPixels,
         Self::Telegraph,
+        Self::PixCorr,
     ];
 
     /// The kind with this code, if any.
@@ -44,6 +47,7 @@ impl SectionKind {
             Self::FlatInv => "inverse flat",
             Self::HotPixels => "hot pixels",
             Self::Telegraph => "telegraph pixels",
+            Self::PixCorr => "pixel-phase correction",
         }
     }
 }
@@ -107,6 +111,14 @@ pub enum TableError {
         /// The entry's index within the section.
         index: u32,
     },
+    /// A pixel-phase correction curve is malformed: `index` is the curve's position in the
+    /// section (the curve count when the curves do not fill the section exactly).
+    PixCorrCurve {
+        /// The curve's index.
+        index: u32,
+        /// What is wrong with it.
+        error: crate::centroid::pixcorr::PixCorrError,
+    },
 }
 
 impl core::fmt::Display for TableError {
@@ -153,6 +165,9 @@ impl core::fmt::Display for TableError {
                 "calibration table: {} entry {index} out of range",
                 section.name()
             ),
+            Self::PixCorrCurve { index, error } => {
+                write!(f, "calibration table: curve {index}: {error}")
+            }
         }
     }
 }

@@ -34,10 +34,18 @@
 //! | 4 | inverse flat | map header + u16 per tile | [`FlatInv`] U2F14, not 0 |
 //! | 5 | hot pixels | u32 reference temperature U16F16 K, u32 count, entries | see [`HotPixel`] |
 //! | 6 | telegraph pixels | u32 count, entries x u16, y u16 | active coordinates |
+//! | 7 | pixel-phase correction | u16 count (1..=16), u16 reserved 0, curves back to back | see [`crate::centroid::pixcorr`] |
 //!
 //! Gains are required; every other section is optional and its absence means "no
 //! correction": column bias 0, relative dark 1 (the covered columns' dark subtracted
-//! uniformly), flat 1, no hot or telegraph pixels.
+//! uniformly), flat 1, no hot or telegraph pixels, an uncorrected centre of gravity.
+//!
+//! A pixel-phase correction curve (section 7) is an 8-byte header (power, box side,
+//! background, knot count, PSF width `a` U8F8 px, largest measured phase U0F16 px) and its
+//! knots (i16, I1F15 px); each curve is checked like any entry, and a bad one is reported as
+//! [`TableError::PixCorrCurve`] with its index. The host builds them
+//! (`startrack_host::pixcorr`); the firmware picks one with [`CalibTable::pixcorr`] and
+//! [`crate::centroid::pixcorr::PixCorrSet::find`].
 //!
 //! A map covers the active area in square tiles of `2^tile_log2` pixels (0 = one value per
 //! pixel, the full map; larger tiles are the reduced form that fits internal flash: the
@@ -56,7 +64,7 @@ mod write;
 
 pub use error::{SectionKind, TableError, WriteError};
 pub use parse::{CalibTable, DefectList, HotList, MapView};
-pub use write::{MapSpec, TableSpec, write_table};
+pub use write::{MapSpec, TableSpec, write_table, write_table_with_pixcorr};
 
 use crate::units::{ERatePerS, Kelvin};
 use fixed::types::U8F8;
@@ -75,6 +83,10 @@ pub const MAP_HEADER_LEN: usize = 8;
 pub const HOT_ENTRY_LEN: usize = 12;
 /// Size of one telegraph-pixel entry in bytes.
 pub const TELEGRAPH_ENTRY_LEN: usize = 4;
+/// Most curves a pixel-phase correction section may hold.
+pub const MAX_PIXCORR_CURVES: u16 = 16;
+/// Size of the pixel-phase correction section's own header (count, reserved).
+pub const PIXCORR_HEADER_LEN: usize = 4;
 /// Largest map tile: 2^10 = 1024 pixels.
 pub const MAX_TILE_LOG2: u8 = 10;
 

@@ -3,8 +3,10 @@
 use super::error::{SectionKind, TableError};
 use super::{
     CRC, DIR_ENTRY_LEN, HEADER_LEN, HOT_ENTRY_LEN, HotPixel, HotPolicy, MAGIC, MAP_HEADER_LEN,
-    MAX_TILE_LOG2, MapHeader, RefTemperature, TELEGRAPH_ENTRY_LEN, VERSION,
+    MAX_PIXCORR_CURVES, MAX_TILE_LOG2, MapHeader, PIXCORR_HEADER_LEN, RefTemperature,
+    TELEGRAPH_ENTRY_LEN, VERSION,
 };
+use crate::centroid::pixcorr::PixCorrSet;
 use crate::geometry::{MAX_OUTPUTS, Output, ReadoutGeometry};
 use crate::units::{ColumnBiasAdu, DarkRel, ERatePerS, FlatInv, GainEPerAdu};
 use fixed::types::U8F8;
@@ -38,6 +40,7 @@ pub struct CalibTable<'a> {
     flat: Option<MapView<'a>>,
     hot: HotList<'a>,
     telegraph: DefectList<'a>,
+    pixcorr: PixCorrSet<'a>,
 }
 
 /// A tiled map over the active area, read in place.
@@ -242,7 +245,7 @@ impl<'a> CalibTable<'a> {
         geometry.validate().map_err(TableError::Geometry)?;
         let saturation_adu = rd16(24)?;
 
-        let mut found: [Option<&'a [u8]>; 6] = [None; 6];
+        let mut found: [Option<&'a [u8]>; 7] = [None; 7];
         // (offset, length, kind) of each section, to prove they cover the table exactly.
         let mut extents = [(0usize, 0usize, SectionKind::Gains); MAX_SECTIONS];
         for i in 0..usize::from(n_sections) {
@@ -258,7 +261,7 @@ impl<'a> CalibTable<'a> {
             }
             *slot = Some(s.bytes);
         }
-        let [gains, column_bias, dark, flat, hot, telegraph] = found;
+        let [gains, column_bias, dark, flat, hot, telegraph, pixcorr] = found;
         if gains.is_none() {
             return Err(TableError::MissingSection(SectionKind::Gains));
         }
@@ -301,6 +304,7 @@ impl<'a> CalibTable<'a> {
             .map(|t| parse_telegraph(t, &geometry))
             .transpose()?
             .unwrap_or_default();
+        let pixcorr = pixcorr.map(parse_pixcorr).transpose()?.unwrap_or_default();
 
         Ok(Self {
             len: bytes.len(),
@@ -312,6 +316,7 @@ impl<'a> CalibTable<'a> {
             flat,
             hot,
             telegraph,
+            pixcorr,
         })
     }
 
@@ -402,6 +407,11 @@ impl<'a> CalibTable<'a> {
     /// The telegraph-pixel list (empty when absent).
     pub fn telegraph_pixels(&self) -> DefectList<'a> {
         self.telegraph
+    }
+
+    /// The pixel-phase correction curves of the centre of gravity (empty when absent).
+    pub fn pixcorr(&self) -> PixCorrSet<'a> {
+        self.pixcorr
     }
 }
 
@@ -559,4 +569,25 @@ fn parse_telegraph<'a>(b: &'a [u8], g: &ReadoutGeometry) -> Result<DefectList<'a
         prev = Some((y, x));
     }
     Ok(list)
+}
+
+fn parse_pixcorr(b: &[u8]) -> Result<PixCorrSet<'_>, TableError> {
+    let k = SectionKind::PixCorr;
+    let count = u16_at(b, 0).ok_or(TableError::SectionLength(k))?;
+    if u16_at(b, 2).ok_or(TableError::SectionLength(k))? != 0 {
+        return Err(TableError::Reserved);
+    }
+    if count == 0 || count > MAX_PIXCORR_CURVES {
+        return Err(TableError::OutOfRange {
+            section: k,
+            index: 0,
+        });
+    }
+    let curves = b
+        .get(PIXCORR_HEADER_LEN..)
+        .ok_or(TableError::SectionLength(k))?;
+    PixCorrSet::parse(usize::from(count), curves).map_err(|(i, error)| TableError::PixCorrCurve {
+        index: i as u32,
+        error,
+    })
 }

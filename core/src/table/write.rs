@@ -4,8 +4,9 @@
 use super::error::{SectionKind, WriteError};
 use super::{
     CRC, DIR_ENTRY_LEN, HEADER_LEN, HOT_ENTRY_LEN, HotPixel, HotPolicy, MAGIC, MAP_HEADER_LEN,
-    MapHeader, RefTemperature, TELEGRAPH_ENTRY_LEN, VERSION,
+    MapHeader, PIXCORR_HEADER_LEN, RefTemperature, TELEGRAPH_ENTRY_LEN, VERSION,
 };
+use crate::centroid::pixcorr::PixCorr;
 use crate::geometry::ReadoutGeometry;
 use crate::table::CalibTable;
 use crate::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu};
@@ -44,32 +45,55 @@ pub struct TableSpec<'a> {
 }
 
 impl TableSpec<'_> {
-    fn sections(&self) -> impl Iterator<Item = (SectionKind, usize)> + '_ {
-        let map_len = |tiles: usize, elem: usize| MAP_HEADER_LEN + tiles * elem;
-        [
-            Some((SectionKind::Gains, 4 * self.gains.len())),
-            self.column_bias
-                .map(|c| (SectionKind::ColumnBias, 2 * c.len())),
-            self.dark_rel
-                .map(|m| (SectionKind::DarkRel, map_len(m.tiles.len(), 1))),
-            self.flat_inv
-                .map(|m| (SectionKind::FlatInv, map_len(m.tiles.len(), 2))),
-            (!self.hot.is_empty())
-                .then_some((SectionKind::HotPixels, 8 + HOT_ENTRY_LEN * self.hot.len())),
-            (!self.telegraph.is_empty()).then_some((
-                SectionKind::Telegraph,
-                4 + TELEGRAPH_ENTRY_LEN * self.telegraph.len(),
-            )),
-        ]
-        .into_iter()
-        .flatten()
-    }
-
     /// Bytes the encoded table takes.
     pub fn encoded_len(&self) -> usize {
-        let n = self.sections().count();
-        HEADER_LEN + DIR_ENTRY_LEN * n + self.sections().map(|(_, l)| l).sum::<usize>()
+        encoded_len(self, &[])
     }
+
+    /// Bytes the encoded table takes with a pixel-phase section of `curves`.
+    pub fn encoded_len_with_pixcorr(&self, curves: &[PixCorr<'_>]) -> usize {
+        encoded_len(self, curves)
+    }
+}
+
+/// The sections `spec` and `curves` make, with their lengths, in kind order.
+fn sections<'s>(
+    spec: &'s TableSpec<'_>,
+    curves: &'s [PixCorr<'_>],
+) -> impl Iterator<Item = (SectionKind, usize)> + 's {
+    let map_len = |tiles: usize, elem: usize| MAP_HEADER_LEN + tiles * elem;
+    [
+        Some((SectionKind::Gains, 4 * spec.gains.len())),
+        spec.column_bias
+            .map(|c| (SectionKind::ColumnBias, 2 * c.len())),
+        spec.dark_rel
+            .map(|m| (SectionKind::DarkRel, map_len(m.tiles.len(), 1))),
+        spec.flat_inv
+            .map(|m| (SectionKind::FlatInv, map_len(m.tiles.len(), 2))),
+        (!spec.hot.is_empty())
+            .then_some((SectionKind::HotPixels, 8 + HOT_ENTRY_LEN * spec.hot.len())),
+        (!spec.telegraph.is_empty()).then_some((
+            SectionKind::Telegraph,
+            4 + TELEGRAPH_ENTRY_LEN * spec.telegraph.len(),
+        )),
+        (!curves.is_empty()).then(|| {
+            (
+                SectionKind::PixCorr,
+                PIXCORR_HEADER_LEN
+                    + curves
+                        .iter()
+                        .map(|c| c.header().encoded_len())
+                        .sum::<usize>(),
+            )
+        }),
+    ]
+    .into_iter()
+    .flatten()
+}
+
+fn encoded_len(spec: &TableSpec<'_>, curves: &[PixCorr<'_>]) -> usize {
+    let n = sections(spec, curves).count();
+    HEADER_LEN + DIR_ENTRY_LEN * n + sections(spec, curves).map(|(_, l)| l).sum::<usize>()
 }
 
 /// A bounds-checked little-endian cursor over the output buffer.
@@ -92,19 +116,29 @@ impl Out<'_> {
 /// defect list, a map of the wrong size) is reported as [`WriteError::Invalid`] and never
 /// produces a table.
 pub fn write_table(spec: &TableSpec<'_>, out: &mut [u8]) -> Result<usize, WriteError> {
-    let len = spec.encoded_len();
+    write_table_with_pixcorr(spec, &[], out)
+}
+
+/// As [`write_table`], with a pixel-phase correction section (kind 7) holding `curves`
+/// (none: no section; more than [`super::MAX_PIXCORR_CURVES`]: [`WriteError::Invalid`]).
+pub fn write_table_with_pixcorr(
+    spec: &TableSpec<'_>,
+    curves: &[PixCorr<'_>],
+    out: &mut [u8],
+) -> Result<usize, WriteError> {
+    let len = encoded_len(spec, curves);
     let buf = out
         .get_mut(..len)
         .ok_or(WriteError::BufferTooSmall { needed: len })?;
-    let n = spec.sections().count();
+    let n = sections(spec, curves).count();
     let dir_end = HEADER_LEN + DIR_ENTRY_LEN * n;
 
     // Sections first, then the directory that names them, then the header over both.
     let mut o = Out { buf, pos: dir_end };
-    let mut entries = [(SectionKind::Gains, 0usize, 0usize); 6];
-    for (slot, (kind, slen)) in entries.iter_mut().zip(spec.sections()) {
+    let mut entries = [(SectionKind::Gains, 0usize, 0usize); 7];
+    for (slot, (kind, slen)) in entries.iter_mut().zip(sections(spec, curves)) {
         *slot = (kind, o.pos, slen);
-        write_section(&mut o, spec, kind);
+        write_section(&mut o, spec, curves, kind);
     }
     for (i, (kind, start, slen)) in entries.iter().take(n).enumerate() {
         let crc = o
@@ -144,7 +178,7 @@ pub fn write_table(spec: &TableSpec<'_>, out: &mut [u8]) -> Result<usize, WriteE
     Ok(len)
 }
 
-fn write_section(o: &mut Out<'_>, spec: &TableSpec<'_>, kind: SectionKind) {
+fn write_section(o: &mut Out<'_>, spec: &TableSpec<'_>, curves: &[PixCorr<'_>], kind: SectionKind) {
     let g = &spec.geometry;
     match kind {
         SectionKind::Gains => spec
@@ -186,6 +220,19 @@ fn write_section(o: &mut Out<'_>, spec: &TableSpec<'_>, kind: SectionKind) {
             for (x, y) in spec.telegraph {
                 o.put(&x.to_le_bytes());
                 o.put(&y.to_le_bytes());
+            }
+        }
+        SectionKind::PixCorr => {
+            // A count past u16 is written as u16::MAX: parsing it back rejects the table.
+            o.put(
+                &u16::try_from(curves.len())
+                    .unwrap_or(u16::MAX)
+                    .to_le_bytes(),
+            );
+            o.put(&0u16.to_le_bytes());
+            for c in curves {
+                o.put(&c.header().to_bytes());
+                o.put(c.knot_bytes());
             }
         }
     }

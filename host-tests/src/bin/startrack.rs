@@ -45,6 +45,8 @@ enum Command {
     Calib(CalibCommand),
     /// Write a simulated raw frame, its star truth and the true calibration maps to a folder.
     Simulate(startrack_host::cli::simulate::SimulateArgs),
+    /// Every centroid method's RMS error over the Cramer-Rao bound, by Monte Carlo (markdown).
+    Accuracy(startrack_host::cli::accuracy::AccuracyArgs),
 }
 
 #[derive(Subcommand)]
@@ -86,6 +88,13 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             }
             Err(e) => fail("simulate", &e),
+        },
+        Command::Accuracy(args) => match startrack_host::cli::accuracy::run(&args) {
+            Ok(table) => {
+                print!("{table}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail("accuracy", &e),
         },
         Command::Demo { seed, stars } => match startrack_host::demo::run(seed, stars) {
             Ok(report) => {

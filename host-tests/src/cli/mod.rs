@@ -2,6 +2,7 @@
 //! each with its clap `Args` struct and a `run` that returns a typed [`CliError`] (the binary
 //! prints it as one line and exits non-zero; nothing here panics on bad input).
 
+pub mod accuracy;
 pub mod calib_build;
 pub mod process;
 pub mod simulate;

@@ -1,6 +1,7 @@
 //! f64 references for the centroid tests: the paper's pixel-integrated Gaussian PSF (eq. 3 and
 //! 5), reference centroids (CoG power 1 and 2, 3-point quadratic fits, Gaussian-windowed
-//! centroid), the Cramer-Rao bound, and a seeded Gaussian noise source.
+//! centroid), the Cramer-Rao bound (from the library, shared with `startrack accuracy`), and a
+//! seeded Gaussian noise source.
 //!
 //! Self-contained (no `libm`): erf/erfc are a Taylor series below |x| = 2.5 and a continued
 //! fraction above, both good to ~1e-14, checked in `centroid_math`.
@@ -218,25 +219,19 @@ pub fn ref_iwc(
     (x, y)
 }
 
-/// Cramer-Rao bound on x for the pixelated Gaussian in `win` (accuracy-theory.md), px.
+/// Cramer-Rao bound on x for the pixelated Gaussian in `win` (accuracy-theory.md), px: the
+/// library's [`startrack_host::accuracy::crlb_x_px`] in active-area coordinates.
 pub fn crlb_x(win: Win, star: Star, background: f64, read_noise: f64) -> f64 {
-    let phi = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
-    let mut fisher = 0.0;
-    for r in 0..win.h {
-        let yi = f64::from(win.y0 + r);
-        let py = pixel_frac(yi, star.y, star.sigma);
-        for c in 0..win.w {
-            let xi = f64::from(win.x0 + c);
-            let px = pixel_frac(xi, star.x, star.sigma);
-            let dpx = (phi((xi - 0.5 - star.x) / star.sigma)
-                - phi((xi + 0.5 - star.x) / star.sigma))
-                / star.sigma;
-            let mu = star.flux * px * py + background;
-            let d = star.flux * dpx * py;
-            fisher += d * d / (mu + read_noise * read_noise);
-        }
-    }
-    1.0 / fisher.sqrt()
+    startrack_host::accuracy::crlb_x_px(
+        win.w,
+        win.h,
+        star.x - f64::from(win.x0),
+        star.y - f64::from(win.y0),
+        star.sigma,
+        star.flux,
+        background,
+        read_noise,
+    )
 }
 
 /// Seeded splitmix64 with Box-Muller normals: deterministic and dependency-free.
@@ -283,8 +278,5 @@ pub fn mean_std(v: &[f64]) -> (f64, f64) {
 }
 
 /// Flux in an n x n box giving `snr` by eq. 8 with per-pixel background variance `var_bg`.
-pub fn flux_for_snr(snr: f64, n: f64, var_bg: f64) -> f64 {
-    // S^2 = snr^2 (S + n^2 var_bg)
-    let k = snr * snr;
-    0.5 * (k + (k * k + 4.0 * k * n * n * var_bg).sqrt())
-}
+#[allow(unused_imports)]
+pub use startrack_host::accuracy::flux_for_snr;

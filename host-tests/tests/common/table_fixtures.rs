@@ -4,10 +4,12 @@
 //! reached.
 #![allow(dead_code)]
 
+use startrack_core::centroid::cog::CogPower;
+use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::{
     CalibTable, DIR_ENTRY_LEN, HEADER_LEN, HotPixel, HotPolicy, MAP_HEADER_LEN, MapSpec,
-    SectionKind, TableSpec, write_table,
+    SectionKind, TableSpec, write_table, write_table_with_pixcorr,
 };
 use startrack_core::units::{ColumnBiasAdu, DarkRel, ERatePerS, FlatInv, GainEPerAdu, Kelvin};
 
@@ -88,9 +90,24 @@ pub struct OwnedSpec {
     pub hot_ref_k: Kelvin,
     pub hot: Vec<HotPixel>,
     pub telegraph: Vec<(u16, u16)>,
+    /// Pixel-phase correction curves, each encoded by [`enc_curve`] (none: no section).
+    pub pixcorr: Vec<Vec<u8>>,
 }
 
 impl OwnedSpec {
+    /// The curves, parsed by the core (panics on a malformed fixture).
+    pub fn curves(&self) -> Vec<PixCorr<'_>> {
+        self.pixcorr
+            .iter()
+            .map(|b| PixCorr::parse(b).expect("fixture curve").0)
+            .collect()
+    }
+
+    /// Bytes of the whole table, pixel-phase section included.
+    pub fn encoded_len(&self) -> usize {
+        self.spec().encoded_len_with_pixcorr(&self.curves())
+    }
+
     pub fn spec(&self) -> TableSpec<'_> {
         TableSpec {
             geometry: self.geometry,
@@ -111,9 +128,14 @@ impl OwnedSpec {
         }
     }
 
-    /// Encodes with `write_table`, panicking (in the test) on failure.
+    /// Encodes with `write_table_with_pixcorr`, panicking (in the test) on failure.
     pub fn write(&self) -> Vec<u8> {
-        write_spec(&self.spec()).unwrap_or_else(|e| panic!("write_table failed: {e}"))
+        let curves = self.curves();
+        let mut buf = vec![0u8; self.encoded_len()];
+        let n = write_table_with_pixcorr(&self.spec(), &curves, &mut buf)
+            .unwrap_or_else(|e| panic!("write_table failed: {e}"));
+        assert_eq!(n, buf.len(), "write_table length differs from encoded_len");
+        buf
     }
 }
 
@@ -225,7 +247,56 @@ pub fn full_spec(g: ReadoutGeometry, dark_log2: u8, flat_log2: u8) -> OwnedSpec 
         hot_ref_k: Kelvin::from_num(233.25),
         hot: hot_pixels(&g),
         telegraph: telegraph(&g),
+        pixcorr: pixcorr_curves(),
     }
+}
+
+/// Two small curves (5 and 7 knots), encoded from the documented layout by hand.
+pub fn pixcorr_curves() -> Vec<Vec<u8>> {
+    vec![
+        enc_curve(
+            CogPower::One,
+            5,
+            PixCorrBackground::Given,
+            0x0180,
+            0x7000,
+            &[0, -300, -520, -610, -400],
+        ),
+        enc_curve(
+            CogPower::Two,
+            7,
+            PixCorrBackground::PerimeterMedian,
+            0x0240,
+            0x6800,
+            &[0, 100, 250, 380, 420, 400, 330],
+        ),
+    ]
+}
+
+/// One curve: the 8-byte header (power, box, background, knot count, a U8F8 bits, m_max
+/// U0F16 bits) and its I1F15 knot bits.
+pub fn enc_curve(
+    power: CogPower,
+    box_side: u8,
+    bg: PixCorrBackground,
+    a_bits: u16,
+    m_max_bits: u16,
+    knots: &[i16],
+) -> Vec<u8> {
+    let p = if power == CogPower::One { 1 } else { 2 };
+    let mut v = vec![p, box_side, bg as u8, knots.len() as u8];
+    v.extend_from_slice(&a_bits.to_le_bytes());
+    v.extend_from_slice(&m_max_bits.to_le_bytes());
+    v.extend(knots.iter().flat_map(|k| k.to_le_bytes()));
+    v
+}
+
+/// The pixel-phase section: count, reserved 0, the curves back to back.
+pub fn enc_pixcorr(curves: &[Vec<u8>]) -> Vec<u8> {
+    let mut v = (curves.len() as u16).to_le_bytes().to_vec();
+    v.extend_from_slice(&[0, 0]);
+    v.extend(curves.iter().flatten());
+    v
 }
 
 /// A spec with only the required gains.
@@ -240,6 +311,7 @@ pub fn gains_only(g: ReadoutGeometry) -> OwnedSpec {
         hot_ref_k: Kelvin::from_num(240),
         hot: Vec::new(),
         telegraph: Vec::new(),
+        pixcorr: Vec::new(),
     }
 }
 
@@ -396,6 +468,12 @@ impl RawTable {
             t.sections.push(RawSection::new(
                 SectionKind::Telegraph,
                 enc_telegraph(&s.telegraph),
+            ));
+        }
+        if !s.pixcorr.is_empty() {
+            t.sections.push(RawSection::new(
+                SectionKind::PixCorr,
+                enc_pixcorr(&s.pixcorr),
             ));
         }
         t
@@ -607,5 +685,21 @@ pub fn exercise(t: &CalibTable<'_>) -> usize {
         assert!(tg.contains(x, y));
     }
     assert_eq!(tg.get(tg.len()), None);
+    // Every curve reads, and its correction is finite across and beyond a pixel.
+    let set = t.pixcorr();
+    assert_eq!(set.iter().count(), set.len());
+    for c in set.iter() {
+        let h = c.header();
+        assert!(h.knots >= 5 && h.box_side % 2 == 1);
+        assert_eq!(
+            set.find(h.power, h.box_side, h.background, h.a_px.to_num())
+                .map(|f| f.header().a_px),
+            Some(h.a_px)
+        );
+        for i in -12..=12 {
+            let (v, s) = c.correction(0.1 * i as f32);
+            assert!(v.is_finite() && s.is_finite());
+        }
+    }
     visited
 }

@@ -1,0 +1,401 @@
+//! The paper's correction of pixelisation and window bounding for the centre of gravity: a
+//! tabulated function of the *measured* position inside the central pixel.
+//!
+//! # What it corrects
+//! A noise-free CoG (power 1 or 2, box `n x n` anchored on the brightest pixel) of a star of
+//! PSF width `a` at true phase `p` (true centre minus the anchor pixel's centre, in
+//! `[-1/2, 1/2]`) reads the phase `m(p)`: an S-curve from pixelisation (small `a`) and a
+//! pull towards the box centre from truncation (large `a`) and from a background estimate
+//! that holds part of the star (perimeter backgrounds). For a separable PSF and a square box
+//! each axis depends only on its own phase. Where `m` is strictly increasing it can be
+//! inverted: the table stores `c(m) = p(m) - m`, and the corrected position is `x + c(m)`.
+//! The host builds the table from the exact pixel-integrated Gaussian in f64
+//! (`startrack_host::pixcorr`) for one `(a, box, power, background)` and stores it with the
+//! calibration (table section kind 7, see [`crate::table`]).
+//!
+//! # Format (compact, read in place)
+//! One curve is an 8-byte header and `n` knots:
+//! ```text
+//! 0  u8   power (1 or 2)
+//! 1  u8   box side (odd, 3..=MAX_SIDE)
+//! 2  u8   background the curve was made for (0 given, 1 perimeter mean, 2 perimeter median)
+//! 3  u8   n, the number of knots (MIN_KNOTS..=MAX_KNOTS)
+//! 4  u16  a, the PSF's 80 %-energy radius the curve was made for, U8F8 px (> 0)
+//! 6  u16  m_max = m(1/2), the largest measured phase, U0F16 px (0 < m_max <= 1/2)
+//! 8  n x i16  c(m_k), I1F15 px (range [-1, 1) px, step 2^-15 = 3.1e-5 px),
+//!             at m_k = m_max k / (n - 1), k = 0..n-1; c(0) = 0
+//! ```
+//! Only the half phase `[0, m_max]` is stored: `c` is odd (mirror symmetry of the pixel).
+//! A truncated CoG never reads past `m_max = m(1/2) < 1/2`: when the true centre crosses the
+//! pixel edge the anchor moves to the neighbour and the reading jumps from `m_max` to
+//! `1 - m_max`. 33 knots take 74 bytes.
+//!
+//! # Formula and cost
+//! `m = x - round(x)` (the CoG is within `m_max` of its anchor, so `round(x)` is the anchor).
+//! `c(|m|)` by a Catmull-Rom cubic through the four nearest knots (a ghost knot by the odd
+//! symmetry at 0, a linear one past `m_max`), sign restored; past `m_max` (noise only) the
+//! end value, slope 0. The error estimate
+//! is scaled by the slope `dp/dm = 1 + c'(m)` of the same cubic. Per axis: one `floor`, about
+//! 20 flops, four knot reads; no division. A few tens of cycles per star on the M7.
+//!
+//! # Where it fails
+//! - Only for the curve's `(a, box, power, background)` and for a box anchored on the peak
+//!   ([`super::cog::Anchor::Peak`]); another PSF width leaves a residual proportional to the
+//!   difference of the two curves.
+//! - Where `m(p)` is not strictly increasing the curve cannot be built (the host builder
+//!   refuses); where it is nearly flat (small `a` with power 2, a 3x3 box on a wide PSF) the
+//!   correction multiplies the noise by `dp/dm`, which the error estimate shows.
+//! - Perimeter backgrounds are not exactly separable (the ring's mean depends on both
+//!   phases): the curve is made at the other axis' phase 0, the residual is measured in
+//!   `host-tests/tests/pixcorr.rs`.
+//! - Under noise, the peak pixel can be a neighbour of the true one: not corrected.
+
+use super::cog::CogPower;
+use super::{Background, Centroid, CentroidFlags, MAX_SIDE};
+use fixed::types::{I1F15, U0F16, U8F8};
+
+/// Fewest knots a curve may have.
+pub const MIN_KNOTS: u8 = 5;
+/// Most knots a curve may have.
+pub const MAX_KNOTS: u8 = 129;
+/// Size of a curve's header in bytes.
+pub const CURVE_HEADER_LEN: usize = 8;
+
+/// The background source a curve was made for (it shapes the truncation part of the curve).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum PixCorrBackground {
+    /// [`Background::Given`]: the true level.
+    Given = 0,
+    /// [`Background::PerimeterMean`].
+    PerimeterMean = 1,
+    /// [`Background::PerimeterMedian`].
+    PerimeterMedian = 2,
+}
+
+impl PixCorrBackground {
+    /// The kind with this code.
+    pub fn from_code(code: u8) -> Option<Self> {
+        match code {
+            0 => Some(Self::Given),
+            1 => Some(Self::PerimeterMean),
+            2 => Some(Self::PerimeterMedian),
+            _ => None,
+        }
+    }
+
+    /// The kind of a centroid's background source.
+    pub fn of(background: &Background) -> Self {
+        match background {
+            Background::Given { .. } => Self::Given,
+            Background::PerimeterMean => Self::PerimeterMean,
+            Background::PerimeterMedian => Self::PerimeterMedian,
+        }
+    }
+}
+
+/// What a curve corrects.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CurveHeader {
+    /// CoG weights.
+    pub power: CogPower,
+    /// Box side, px (odd).
+    pub box_side: u8,
+    /// Background source.
+    pub background: PixCorrBackground,
+    /// Number of knots over the half phase `[0, 1/2]`.
+    pub knots: u8,
+    /// PSF 80 %-energy radius, px (U8F8).
+    pub a_px: U8F8,
+    /// The largest measured phase `m(1/2)`, px (U0F16, in `(0, 1/2]`).
+    pub phase_max_px: U0F16,
+}
+
+impl CurveHeader {
+    /// Bytes the curve takes (header and knots).
+    pub const fn encoded_len(&self) -> usize {
+        CURVE_HEADER_LEN + 2 * self.knots as usize
+    }
+
+    /// The 8 header bytes.
+    pub fn to_bytes(&self) -> [u8; CURVE_HEADER_LEN] {
+        let a = self.a_px.to_bits().to_le_bytes();
+        let m = self.phase_max_px.to_bits().to_le_bytes();
+        let power = match self.power {
+            CogPower::One => 1,
+            CogPower::Two => 2,
+        };
+        [
+            power,
+            self.box_side,
+            self.background as u8,
+            self.knots,
+            a[0],
+            a[1],
+            m[0],
+            m[1],
+        ]
+    }
+}
+
+/// Why a curve is rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum PixCorrError {
+    /// Fewer bytes than the header and its knots need.
+    TooShort,
+    /// Power not 1 or 2.
+    Power(u8),
+    /// Box side even, below 3 or above [`MAX_SIDE`].
+    BoxSide(u8),
+    /// Unknown background code.
+    Background(u8),
+    /// Knot count outside [`MIN_KNOTS`]`..=`[`MAX_KNOTS`].
+    Knots(u8),
+    /// PSF width 0.
+    Width,
+    /// `m_max` is 0 or above 1/2.
+    PhaseMax,
+    /// The first knot is not 0 (the symmetry requires it).
+    FirstKnot,
+}
+
+impl core::fmt::Display for PixCorrError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::TooShort => f.write_str("pixel-phase curve truncated"),
+            Self::Power(p) => write!(f, "pixel-phase curve: power {p} (1 or 2)"),
+            Self::BoxSide(s) => write!(f, "pixel-phase curve: box side {s} (odd, 3..=31)"),
+            Self::Background(b) => write!(f, "pixel-phase curve: background code {b}"),
+            Self::Knots(n) => write!(f, "pixel-phase curve: {n} knots (5..=129)"),
+            Self::Width => f.write_str("pixel-phase curve: PSF width 0"),
+            Self::PhaseMax => f.write_str("pixel-phase curve: largest phase not in (0, 1/2]"),
+            Self::FirstKnot => f.write_str("pixel-phase curve: first knot not zero"),
+        }
+    }
+}
+
+impl core::error::Error for PixCorrError {}
+
+/// One checked curve, borrowing its knots (little-endian `i16`, I1F15 px).
+#[derive(Clone, Copy, Debug)]
+pub struct PixCorr<'a> {
+    header: CurveHeader,
+    knots: &'a [u8],
+}
+
+/// Reads knot `i` (bits) of a little-endian i16 slice.
+fn knot_bits(knots: &[u8], i: usize) -> Option<i16> {
+    let j = i.checked_mul(2)?;
+    Some(i16::from_le_bytes([*knots.get(j)?, *knots.get(j + 1)?]))
+}
+
+impl<'a> PixCorr<'a> {
+    /// Checks the curve at the start of `bytes`; returns it and the bytes it takes.
+    pub fn parse(bytes: &'a [u8]) -> Result<(Self, usize), PixCorrError> {
+        let h = bytes
+            .get(..CURVE_HEADER_LEN)
+            .ok_or(PixCorrError::TooShort)?;
+        let byte = |i: usize| h.get(i).copied().unwrap_or(0);
+        let power = match byte(0) {
+            1 => CogPower::One,
+            2 => CogPower::Two,
+            p => return Err(PixCorrError::Power(p)),
+        };
+        let box_side = byte(1);
+        if box_side < 3 || box_side.is_multiple_of(2) || u16::from(box_side) > MAX_SIDE {
+            return Err(PixCorrError::BoxSide(box_side));
+        }
+        let background =
+            PixCorrBackground::from_code(byte(2)).ok_or(PixCorrError::Background(byte(2)))?;
+        let knots = byte(3);
+        if !(MIN_KNOTS..=MAX_KNOTS).contains(&knots) {
+            return Err(PixCorrError::Knots(knots));
+        }
+        let a_bits = u16::from_le_bytes([byte(4), byte(5)]);
+        if a_bits == 0 {
+            return Err(PixCorrError::Width);
+        }
+        let m_bits = u16::from_le_bytes([byte(6), byte(7)]);
+        if m_bits == 0 || m_bits > 0x8000 {
+            return Err(PixCorrError::PhaseMax);
+        }
+        let header = CurveHeader {
+            power,
+            box_side,
+            background,
+            knots,
+            a_px: U8F8::from_bits(a_bits),
+            phase_max_px: U0F16::from_bits(m_bits),
+        };
+        let len = header.encoded_len();
+        let data = bytes
+            .get(CURVE_HEADER_LEN..len)
+            .ok_or(PixCorrError::TooShort)?;
+        if knot_bits(data, 0) != Some(0) {
+            return Err(PixCorrError::FirstKnot);
+        }
+        Ok((
+            Self {
+                header,
+                knots: data,
+            },
+            len,
+        ))
+    }
+
+    /// What the curve corrects.
+    pub fn header(&self) -> CurveHeader {
+        self.header
+    }
+
+    /// The stored knots: little-endian i16, I1F15 px.
+    pub fn knot_bytes(&self) -> &'a [u8] {
+        self.knots
+    }
+
+    /// Stored knot `k` in px (0 outside).
+    fn stored(&self, k: isize) -> f32 {
+        let bits = usize::try_from(k)
+            .ok()
+            .and_then(|i| knot_bits(self.knots, i))
+            .unwrap_or(0);
+        I1F15::from_bits(bits).to_num::<f32>()
+    }
+
+    /// Knot `k` in px, with a ghost knot on each side: `c(-h) = -c(h)` (odd symmetry) and a
+    /// linear continuation past the last.
+    fn knot(&self, k: isize) -> f32 {
+        let last = isize::from(self.header.knots) - 1;
+        if k < 0 {
+            -self.stored(-k)
+        } else if k > last {
+            2.0 * self.stored(last) - self.stored(last - 1)
+        } else {
+            self.stored(k)
+        }
+    }
+
+    /// The correction `c(m)` and its slope `dc/dm` at measured phase `m` (px, taken modulo
+    /// one pixel into `[-1/2, 1/2]`); `(0, 0)` for a non-finite `m`.
+    pub fn correction(&self, m: f32) -> (f32, f32) {
+        if !m.is_finite() {
+            return (0.0, 0.0);
+        }
+        let m = m - libm::floorf(m + 0.5);
+        let (sign, u) = if m < 0.0 { (-1.0, -m) } else { (1.0, m) };
+        let span = f32::from(self.header.knots - 1);
+        let m_max = self.header.phase_max_px.to_num::<f32>();
+        if u >= m_max {
+            return (sign * self.stored(isize::from(self.header.knots) - 1), 0.0);
+        }
+        let t = (u / m_max * span).clamp(0.0, span);
+        // t < span, so k <= knots - 2 and k + 1 is a stored knot.
+        let k = (libm::floorf(t) as isize).min(isize::from(self.header.knots) - 2);
+        let f = t - k as f32;
+        let (p0, p1, p2, p3) = (
+            self.knot(k - 1),
+            self.knot(k),
+            self.knot(k + 1),
+            self.knot(k + 2),
+        );
+        let (b, c, d) = (
+            0.5 * (p2 - p0),
+            p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3,
+            1.5 * (p1 - p2) + 0.5 * (p3 - p0),
+        );
+        let value = p1 + f * (b + f * (c + f * d));
+        let slope = (b + f * (2.0 * c + 3.0 * f * d)) * span / m_max;
+        (sign * value, slope)
+    }
+
+    /// The corrected centroid: each coordinate `x + c(x - round(x))`, each error estimate
+    /// times `1 + c'`. A degenerate centroid is returned unchanged.
+    pub fn apply(&self, c: Centroid) -> Centroid {
+        if c.flags.contains(CentroidFlags::DEGENERATE) {
+            return c;
+        }
+        let axis = |x: f32, sigma: f32| {
+            let (dx, slope) = self.correction(x);
+            (x + dx, sigma * (1.0 + slope).max(0.0))
+        };
+        let (x_px, sigma_x_px) = axis(c.x_px, c.sigma_x_px);
+        let (y_px, sigma_y_px) = axis(c.y_px, c.sigma_y_px);
+        Centroid {
+            x_px,
+            y_px,
+            sigma_x_px,
+            sigma_y_px,
+            ..c
+        }
+    }
+}
+
+/// The curves of a table's pixel-phase section, read in place.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PixCorrSet<'a> {
+    count: usize,
+    bytes: &'a [u8],
+}
+
+impl<'a> PixCorrSet<'a> {
+    /// Checks `count` curves back to back filling `bytes` exactly; on failure the index of
+    /// the first bad curve and why (a length mismatch is reported on curve `count`).
+    pub fn parse(count: usize, bytes: &'a [u8]) -> Result<Self, (usize, PixCorrError)> {
+        let mut off = 0usize;
+        for i in 0..count {
+            let rest = bytes.get(off..).ok_or((i, PixCorrError::TooShort))?;
+            let (_, len) = PixCorr::parse(rest).map_err(|e| (i, e))?;
+            off += len;
+        }
+        if off != bytes.len() {
+            return Err((count, PixCorrError::TooShort));
+        }
+        Ok(Self { count, bytes })
+    }
+
+    /// Number of curves.
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    /// True when there is no curve.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// The curves in stored order.
+    pub fn iter(&self) -> impl Iterator<Item = PixCorr<'a>> + 'a {
+        let bytes = self.bytes;
+        let mut off = 0usize;
+        (0..self.count).map_while(move |_| {
+            let (c, len) = PixCorr::parse(bytes.get(off..)?).ok()?;
+            off += len;
+            Some(c)
+        })
+    }
+
+    /// The curve for this power, box and background whose PSF width is nearest `a_px`
+    /// (a scan of the section: a few curves, a few header reads each).
+    pub fn find(
+        &self,
+        power: CogPower,
+        box_side: u8,
+        background: PixCorrBackground,
+        a_px: f32,
+    ) -> Option<PixCorr<'a>> {
+        self.iter()
+            .filter(|c| {
+                let h = c.header;
+                h.power == power && h.box_side == box_side && h.background == background
+            })
+            .min_by(|x, y| {
+                let dx = (x.header.a_px.to_num::<f32>() - a_px).abs();
+                let dy = (y.header.a_px.to_num::<f32>() - a_px).abs();
+                dx.total_cmp(&dy)
+            })
+    }
+}

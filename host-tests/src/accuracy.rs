@@ -1,0 +1,511 @@
+//! How close each centroid method of the core comes to the Cramer-Rao bound: a seeded Monte
+//! Carlo of simulated stars against their true positions, and the bound itself.
+//!
+//! # The experiment
+//! For a PSF width `a` and an SNR (paper eq. 8 in a 5x5 box, background `bg_e` e-/px and read
+//! noise `read_e`): `trials` stars at true positions uniform over a pixel (both axes),
+//! pixel-integrated Gaussian means (paper eq. 3 and 5, [`crate::sim::psf`]), Poisson photon
+//! noise on star plus background and Gaussian read noise (as the simulator draws them). Each
+//! method sees the same stars (one seed per `(a, SNR)`), in its own window centred on the
+//! star's pixel, with the background given (level and variance: the detector's estimate), and
+//! its result is compared with the truth:
+//! - `rms_px`: RMS of the error over both axes (bias and noise);
+//! - `crlb_px`: RMS over the same stars of the bound on a 9x9 window
+//!   (accuracy-theory.md; larger windows add nothing at a <= 2 px), so `rms / crlb` is 1 for
+//!   an efficient unbiased estimator;
+//! - `scatter_px`: RMS of the estimate minus the same method on the noise-free image of the
+//!   same star (the random part alone), against `sigma_est_px`, the RMS of the method's own
+//!   error estimate (`sigma_x`, `sigma_y`);
+//! - `failures`: results flagged degenerate or not converged, left out of the statistics.
+//!
+//! # Tolerances from the trial count
+//! With `2 N` (x and y) near-Gaussian errors, an RMS has a relative standard error of about
+//! `1 / sqrt(4 N)` ([`rms_relative_se`]): 1.1 % for N = 2000. The tests add 3.5 of these to
+//! their bounds.
+//!
+//! Cost: a cell is `trials` x 2 method runs plus the bound; the whole default table (16
+//! methods, 4 widths, 3 SNRs, 2000 trials) takes a few seconds in release.
+
+use crate::pixcorr::{CurveSpec, build_curve};
+use crate::sim::psf::{pixel_fraction, sigma_of_a};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal, Poisson};
+use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use startrack_core::centroid::iwc::{IwcParams, iwc};
+use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
+use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
+use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
+use startrack_core::units::Electrons;
+use startrack_core::window::{Rect, Window};
+use std::fmt::Write as _;
+
+/// A centroid method and its window.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Method {
+    /// Centre of gravity in an `n x n` box around the peak (window `n + 2`).
+    Cog {
+        /// Weights.
+        power: CogPower,
+        /// Box side.
+        box_side: u8,
+        /// With the pixel-phase correction for the star's `a`.
+        corrected: bool,
+    },
+    /// Gaussian-windowed centroid, weight sigma the PSF's, 9x9 window.
+    Iwc,
+    /// Three-point peak fit per axis, 5x5 window.
+    Quadratic(QuadraticKind),
+    /// Pixel-integrated Gaussian fit, PSF sigma known, on an `n x n` window.
+    GaussFit {
+        /// Window side.
+        window: u8,
+    },
+}
+
+impl Method {
+    /// Every method of the table: CoG power 1 and 2 in 3/5/7 boxes, plain and corrected,
+    /// IWC, parabolic and log-parabolic peaks, the Gauss fit on 5x5 and 7x7.
+    pub fn all() -> Vec<Method> {
+        let mut v = Vec::new();
+        for corrected in [false, true] {
+            for power in [CogPower::One, CogPower::Two] {
+                for box_side in [3, 5, 7] {
+                    v.push(Method::Cog {
+                        power,
+                        box_side,
+                        corrected,
+                    });
+                }
+            }
+        }
+        v.push(Method::Iwc);
+        v.push(Method::Quadratic(QuadraticKind::Parabolic));
+        v.push(Method::Quadratic(QuadraticKind::Gaussian));
+        v.push(Method::GaussFit { window: 5 });
+        v.push(Method::GaussFit { window: 7 });
+        v
+    }
+
+    /// A short name, e.g. `cog2 5x5 corrected`.
+    pub fn name(&self) -> String {
+        match self {
+            Method::Cog {
+                power,
+                box_side,
+                corrected,
+            } => format!(
+                "cog{} {box_side}x{box_side}{}",
+                if *power == CogPower::One { 1 } else { 2 },
+                if *corrected { " corrected" } else { "" }
+            ),
+            Method::Iwc => "iwc 9x9".into(),
+            Method::Quadratic(QuadraticKind::Parabolic) => "quadratic 3-point".into(),
+            Method::Quadratic(QuadraticKind::Gaussian) => "log-quadratic 3-point".into(),
+            Method::GaussFit { window } => format!("gauss fit {window}x{window}"),
+        }
+    }
+
+    /// The window side the method is given.
+    pub fn window_side(&self) -> u16 {
+        match self {
+            Method::Cog { box_side, .. } => u16::from(*box_side) + 2,
+            Method::Iwc => 9,
+            Method::Quadratic(_) => 5,
+            Method::GaussFit { window } => u16::from(*window),
+        }
+    }
+}
+
+/// The noise and the number of trials of one experiment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Noise {
+    /// Background (sky and dark), e- per pixel, Poisson.
+    pub background_e: f64,
+    /// Read noise, e- RMS.
+    pub read_noise_e: f64,
+    /// Stars per cell.
+    pub trials: usize,
+    /// Seed of the whole experiment.
+    pub seed: u64,
+}
+
+impl Default for Noise {
+    /// 100 e- of background, 5 e- read noise, 2000 trials, seed 1.
+    fn default() -> Self {
+        Self {
+            background_e: 100.0,
+            read_noise_e: 5.0,
+            trials: 2000,
+            seed: 1,
+        }
+    }
+}
+
+/// One method at one `(a, SNR)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cell {
+    /// The method.
+    pub method: Method,
+    /// PSF 80 %-energy radius, px.
+    pub a_px: f64,
+    /// Eq. 8 SNR in a 5x5 box.
+    pub snr: f64,
+    /// RMS error against the truth, px.
+    pub rms_px: f64,
+    /// RMS Cramer-Rao bound over the same stars, px.
+    pub crlb_px: f64,
+    /// RMS of the noise part of the error, px.
+    pub scatter_px: f64,
+    /// RMS of the method's own error estimate, px.
+    pub sigma_est_px: f64,
+    /// Results flagged degenerate or not converged (left out).
+    pub failures: usize,
+    /// Stars used.
+    pub trials: usize,
+}
+
+impl Cell {
+    /// RMS error over the Cramer-Rao bound.
+    pub fn efficiency_ratio(&self) -> f64 {
+        self.rms_px / self.crlb_px
+    }
+}
+
+/// Relative standard error of an RMS over `n` near-Gaussian samples: `1 / sqrt(2 n)`.
+pub fn rms_relative_se(n: usize) -> f64 {
+    1.0 / (2.0 * n.max(1) as f64).sqrt()
+}
+
+/// Flux (e-) whose eq. 8 SNR in an `n x n` box is `snr`, all the flux in the box, per-pixel
+/// noise variance `var_bg` (e-^2): the root of `S^2 = snr^2 (S + n^2 var_bg)`.
+pub fn flux_for_snr(snr: f64, n: f64, var_bg: f64) -> f64 {
+    let k = snr * snr;
+    0.5 * (k + (k * k + 4.0 * k * n * n * var_bg).sqrt())
+}
+
+/// Cramer-Rao bound on x (px) for a pixel-integrated Gaussian of sigma `sigma_px` and `flux_e`
+/// at (`x`, `y`) on a `width x height` window whose pixel centres are at integers `0..`, on a
+/// background of `background_e` e-/px (Poisson) with read noise `read_noise_e`
+/// (accuracy-theory.md: `F = sum (d mu / d x)^2 / (mu + r^2)`, bound `1 / sqrt(F)`).
+#[allow(clippy::too_many_arguments)]
+pub fn crlb_x_px(
+    width: u16,
+    height: u16,
+    x: f64,
+    y: f64,
+    sigma_px: f64,
+    flux_e: f64,
+    background_e: f64,
+    read_noise_e: f64,
+) -> f64 {
+    let phi = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let mut fisher = 0.0;
+    for r in 0..height {
+        let yi = f64::from(r);
+        let py = pixel_fraction(yi, y, sigma_px);
+        for c in 0..width {
+            let xi = f64::from(c);
+            let px = pixel_fraction(xi, x, sigma_px);
+            let dpx = (phi((xi - 0.5 - x) / sigma_px) - phi((xi + 0.5 - x) / sigma_px)) / sigma_px;
+            let mu = flux_e * px * py + background_e;
+            let d = flux_e * dpx * py;
+            let v = mu + read_noise_e * read_noise_e;
+            // A pixel with no expected signal and no noise carries no information.
+            if v > 0.0 {
+                fisher += d * d / v;
+            }
+        }
+    }
+    1.0 / fisher.sqrt()
+}
+
+/// Noise-free means (row-major) of a star at window coordinates (`x`, `y`), e-.
+fn render(side: u16, x: f64, y: f64, sigma: f64, flux: f64, bg: f64) -> Vec<f64> {
+    let fx: Vec<f64> = (0..side)
+        .map(|c| pixel_fraction(f64::from(c), x, sigma))
+        .collect();
+    let fy: Vec<f64> = (0..side)
+        .map(|r| pixel_fraction(f64::from(r), y, sigma))
+        .collect();
+    fy.iter()
+        .flat_map(|py| fx.iter().map(move |px| bg + flux * px * py))
+        .collect()
+}
+
+fn to_electrons(v: &[f64]) -> Vec<Electrons> {
+    v.iter()
+        .map(|&x| Electrons::from_num(x.clamp(-33_554_431.0, 33_554_431.0)))
+        .collect()
+}
+
+/// A method ready to run: its parameters and, for a corrected CoG, its curve's bytes.
+struct Prepared {
+    method: Method,
+    curve: Option<Vec<u8>>,
+    sigma_px: f64,
+    background: Background,
+}
+
+impl Prepared {
+    /// `None` when the method has no curve for this `a` (the builder refuses it).
+    fn new(method: Method, a_px: f64, var_bg: f64, bg: f64) -> Option<Self> {
+        let curve = match method {
+            Method::Cog {
+                power,
+                box_side,
+                corrected: true,
+            } => Some(
+                build_curve(&CurveSpec {
+                    a_px,
+                    box_side,
+                    power,
+                    background: PixCorrBackground::Given,
+                    knots: 33,
+                })
+                .ok()?
+                .bytes,
+            ),
+            _ => None,
+        };
+        Some(Self {
+            method,
+            curve,
+            sigma_px: sigma_of_a(a_px),
+            background: Background::Given {
+                level_e: bg as f32,
+                variance_e2: var_bg as f32,
+            },
+        })
+    }
+
+    fn run(&self, input: &CentroidInput<'_>) -> Centroid {
+        let s = self.sigma_px as f32;
+        match self.method {
+            Method::Cog {
+                power, box_side, ..
+            } => {
+                let c = cog(
+                    input,
+                    &CogParams {
+                        power,
+                        box_side,
+                        anchor: Anchor::Peak,
+                        background: self.background,
+                    },
+                );
+                match self.curve.as_deref().map(PixCorr::parse) {
+                    Some(Ok((curve, _))) => curve.apply(c),
+                    _ => c,
+                }
+            }
+            Method::Iwc => iwc(
+                input,
+                &IwcParams {
+                    background: self.background,
+                    ..IwcParams::new(s)
+                },
+            ),
+            Method::Quadratic(kind) => quadratic(
+                input,
+                &QuadraticParams {
+                    kind,
+                    background: self.background,
+                },
+            ),
+            Method::GaussFit { window } => gauss_fit(
+                input,
+                &GaussFitParams {
+                    fit_background: false,
+                    background: self.background,
+                    start_box: window.min(5),
+                    ..GaussFitParams::new(s)
+                },
+            ),
+        }
+    }
+}
+
+/// A seed for one `(a, SNR)` cell: the same stars for every method.
+fn cell_seed(seed: u64, a_px: f64, snr: f64) -> u64 {
+    seed ^ a_px.to_bits().rotate_left(17) ^ snr.to_bits().rotate_left(41)
+}
+
+/// Runs `method` at `(a_px, snr)`; `None` when it does not apply (no correction curve).
+pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Cell> {
+    let var_bg = noise.background_e + noise.read_noise_e.powi(2);
+    let prepared = Prepared::new(method, a_px, var_bg, noise.background_e)?;
+    let flux = flux_for_snr(snr, 5.0, var_bg);
+    let sigma = sigma_of_a(a_px);
+    let side = method.window_side();
+    let centre = f64::from(side / 2);
+    let mut rng = ChaCha8Rng::seed_from_u64(cell_seed(noise.seed, a_px, snr));
+    let read = Normal::new(0.0, noise.read_noise_e.max(0.0)).ok()?;
+    let rect = Rect {
+        x0: 0,
+        y0: 0,
+        width: side,
+        height: side,
+    };
+    let (mut err2, mut crlb2, mut scat2, mut est2) = (0.0, 0.0, 0.0, 0.0);
+    let (mut used, mut failures) = (0usize, 0usize);
+    let bad = CentroidFlags::DEGENERATE | CentroidFlags::NOT_CONVERGED;
+    for _ in 0..noise.trials {
+        let u = rand_distr::Uniform::new(-0.5, 0.5).ok()?;
+        let (x, y) = (centre + u.sample(&mut rng), centre + u.sample(&mut rng));
+        let mean = render(side, x, y, sigma, flux, noise.background_e);
+        let noisy: Vec<f64> = mean
+            .iter()
+            .map(|&m| {
+                let photons = Poisson::new(m.max(1e-9)).map_or(m, |p| p.sample(&mut rng));
+                photons + read.sample(&mut rng)
+            })
+            .collect();
+        let e = to_electrons(&noisy);
+        let e0 = to_electrons(&mean);
+        let c = prepared.run(&CentroidInput::new(Window::new(rect, &e)?));
+        let c0 = prepared.run(&CentroidInput::new(Window::new(rect, &e0)?));
+        if c.flags.intersects(bad) || c0.flags.intersects(bad) {
+            failures += 1;
+            continue;
+        }
+        let (cx, cy) = (f64::from(c.x_px), f64::from(c.y_px));
+        err2 += (cx - x).powi(2) + (cy - y).powi(2);
+        scat2 += (cx - f64::from(c0.x_px)).powi(2) + (cy - f64::from(c0.y_px)).powi(2);
+        est2 += f64::from(c.sigma_x_px).powi(2) + f64::from(c.sigma_y_px).powi(2);
+        // The bound on a 9x9 window around the star's pixel (symmetric in x and y).
+        let bx = crlb_x_px(
+            9,
+            9,
+            x - centre + 4.0,
+            y - centre + 4.0,
+            sigma,
+            flux,
+            noise.background_e,
+            noise.read_noise_e,
+        );
+        let by = crlb_x_px(
+            9,
+            9,
+            y - centre + 4.0,
+            x - centre + 4.0,
+            sigma,
+            flux,
+            noise.background_e,
+            noise.read_noise_e,
+        );
+        crlb2 += bx * bx + by * by;
+        used += 1;
+    }
+    let n = (2 * used.max(1)) as f64;
+    Some(Cell {
+        method,
+        a_px,
+        snr,
+        rms_px: (err2 / n).sqrt(),
+        crlb_px: (crlb2 / n).sqrt(),
+        scatter_px: (scat2 / n).sqrt(),
+        sigma_est_px: (est2 / n).sqrt(),
+        failures,
+        trials: noise.trials,
+    })
+}
+
+/// Every method at every `(a, SNR)` (cells that do not apply are left out).
+pub fn run(methods: &[Method], widths_a_px: &[f64], snrs: &[f64], noise: &Noise) -> Vec<Cell> {
+    let mut cells = Vec::new();
+    for &a in widths_a_px {
+        for &snr in snrs {
+            for &m in methods {
+                cells.extend(run_cell(m, a, snr, noise));
+            }
+        }
+    }
+    cells
+}
+
+/// A markdown table: one row per method, one column per `(a, SNR)`, each cell
+/// `RMS / CRLB` (and the failures when any), then the error-estimate table
+/// `sigma_est / scatter`.
+pub fn markdown(
+    cells: &[Cell],
+    methods: &[Method],
+    widths_a_px: &[f64],
+    snrs: &[f64],
+    noise: &Noise,
+) -> String {
+    let mut s = String::new();
+    let cols: Vec<(f64, f64)> = widths_a_px
+        .iter()
+        .flat_map(|&a| snrs.iter().map(move |&snr| (a, snr)))
+        .collect();
+    let find = |m: &Method, a: f64, snr: f64| {
+        cells
+            .iter()
+            .find(|c| c.method == *m && c.a_px == a && c.snr == snr)
+    };
+    let header = |s: &mut String, title: &str| {
+        let _ = write!(s, "| {title} |");
+        for (a, snr) in &cols {
+            let _ = write!(s, " a {a} SNR {snr} |");
+        }
+        s.push('\n');
+        s.push_str("|---|");
+        for _ in &cols {
+            s.push_str("---|");
+        }
+        s.push('\n');
+    };
+    let _ = writeln!(
+        s,
+        "RMS error / Cramer-Rao bound ({} stars per cell, uniform pixel phase, background {} e-/px, read noise {} e-, seed {}; SNR by eq. 8 in 5x5; `-` = no correction curve):\n",
+        noise.trials, noise.background_e, noise.read_noise_e, noise.seed
+    );
+    header(&mut s, "method");
+    for m in methods {
+        let _ = write!(s, "| {} |", m.name());
+        for &(a, snr) in &cols {
+            match find(m, a, snr) {
+                Some(c) if c.failures > 0 => {
+                    let _ = write!(s, " {:.2} ({} failed) |", c.efficiency_ratio(), c.failures);
+                }
+                Some(c) => {
+                    let _ = write!(s, " {:.2} |", c.efficiency_ratio());
+                }
+                None => s.push_str(" - |"),
+            }
+        }
+        s.push('\n');
+    }
+    let _ = writeln!(s, "\nCRLB, px:\n");
+    header(&mut s, "");
+    s.push_str("| CRLB |");
+    for &(a, snr) in &cols {
+        match cells.iter().find(|c| c.a_px == a && c.snr == snr) {
+            Some(c) => {
+                let _ = write!(s, " {:.4} |", c.crlb_px);
+            }
+            None => s.push_str(" - |"),
+        }
+    }
+    s.push('\n');
+    let _ = writeln!(
+        s,
+        "\nError estimate / measured scatter (sigma_x, sigma_y against the noise part of the error):\n"
+    );
+    header(&mut s, "method");
+    for m in methods {
+        let _ = write!(s, "| {} |", m.name());
+        for &(a, snr) in &cols {
+            match find(m, a, snr) {
+                Some(c) => {
+                    let _ = write!(s, " {:.2} |", c.sigma_est_px / c.scatter_px);
+                }
+                None => s.push_str(" - |"),
+            }
+        }
+        s.push('\n');
+    }
+    s
+}

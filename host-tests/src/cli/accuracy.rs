@@ -1,0 +1,72 @@
+//! `startrack accuracy`: the table of every centroid method's RMS error over the Cramer-Rao
+//! bound, and of its error estimate over its measured scatter, from the seeded Monte Carlo of
+//! [`crate::accuracy`], printed as markdown.
+
+use crate::accuracy::{Method, Noise, markdown, run as run_table};
+use clap::Args;
+
+/// Options of `startrack accuracy`.
+#[derive(Args, Clone, Debug)]
+pub struct AccuracyArgs {
+    /// Stars per cell (the RMS's relative standard error is 1/sqrt(4 N)).
+    #[arg(long, default_value_t = 2000)]
+    pub trials: usize,
+    /// Seed (reruns with the same seed print the same table).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// PSF widths a (80 %-energy radius), px, comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [0.7, 1.0, 1.5, 2.0])]
+    pub a: Vec<f64>,
+    /// SNRs (eq. 8 in a 5x5 box), comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [10.0, 30.0, 100.0])]
+    pub snr: Vec<f64>,
+    /// Background, e- per pixel.
+    #[arg(long, default_value_t = 100.0)]
+    pub background_e: f64,
+    /// Read noise, e- RMS.
+    #[arg(long, default_value_t = 5.0)]
+    pub read_noise_e: f64,
+}
+
+/// Why the table cannot be made.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AccuracyError(pub String);
+
+impl std::fmt::Display for AccuracyError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for AccuracyError {}
+
+/// Runs the Monte Carlo and returns the markdown tables.
+pub fn run(args: &AccuracyArgs) -> Result<String, AccuracyError> {
+    let usage = |m: &str| Err(AccuracyError(m.into()));
+    if args.trials == 0 {
+        return usage("--trials must be at least 1");
+    }
+    if args
+        .a
+        .iter()
+        .any(|a| !(a.is_finite() && *a > 0.1 && *a < 20.0))
+    {
+        return usage("--a: widths must be in (0.1, 20) px");
+    }
+    if args.snr.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return usage("--snr: values must be positive");
+    }
+    let usable = |v: f64| v.is_finite() && v >= 0.0;
+    if !(usable(args.background_e) && usable(args.read_noise_e)) {
+        return usage("--background-e and --read-noise-e must be finite and not negative");
+    }
+    let noise = Noise {
+        background_e: args.background_e,
+        read_noise_e: args.read_noise_e,
+        trials: args.trials,
+        seed: args.seed,
+    };
+    let methods = Method::all();
+    let cells = run_table(&methods, &args.a, &args.snr, &noise);
+    Ok(markdown(&cells, &methods, &args.a, &args.snr, &noise))
+}
