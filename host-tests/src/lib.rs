@@ -1,10 +1,11 @@
 //! Host side of the star tracker: the simulated CCD47-20 and what the `startrack` command
 //! and the tests share. The core runs here unchanged, exactly as on the Cortex-M7.
 
+pub mod accuracy;
 pub mod cli;
 pub mod demo;
+pub mod figures;
 pub mod fits;
 pub mod pipeline;
-pub mod accuracy;
 pub mod pixcorr;
 pub mod sim;

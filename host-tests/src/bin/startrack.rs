@@ -47,6 +47,8 @@ enum Command {
     Simulate(startrack_host::cli::simulate::SimulateArgs),
     /// Every centroid method's RMS error over the Cramer-Rao bound, by Monte Carlo (markdown).
     Accuracy(startrack_host::cli::accuracy::AccuracyArgs),
+    /// The founding paper's Figures 1-6 (CSV with parameters, PNG) from the core's code.
+    Figures(startrack_host::cli::figures::Args),
 }
 
 #[derive(Subcommand)]
@@ -96,6 +98,7 @@ fn main() -> ExitCode {
             }
             Err(e) => fail("accuracy", &e),
         },
+        Command::Figures(args) => startrack_host::cli::figures::run(&args),
         Command::Demo { seed, stars } => match startrack_host::demo::run(seed, stars) {
             Ok(report) => {
                 startrack_host::demo::print(&report);

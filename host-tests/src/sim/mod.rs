@@ -12,6 +12,7 @@
 //! per-column pattern, output gains, Gaussian read noise, full-well clipping, 16-bit ADC
 //! rounding and saturation.
 
+pub mod measured;
 pub mod params;
 pub mod psf;
 pub mod render;

@@ -42,6 +42,9 @@ pub struct SensorParams {
     pub full_well_e: f64,
     /// Add shot and read noise (off: the expected value, rounded to ADU).
     pub noise: bool,
+    /// Uniform illumination (sky background, or a flat-field lamp), e- per active pixel
+    /// before the flat; 0 by default.
+    pub sky_e: f64,
 }
 
 impl Default for SensorParams {
@@ -58,6 +61,7 @@ impl Default for SensorParams {
             prnu: 0.02,
             full_well_e: 100_000.0,
             noise: true,
+            sky_e: 0.0,
         }
     }
 }

@@ -86,15 +86,29 @@ impl Simulator {
             .sum()
     }
 
+    /// Expected dark electrons of raw element (`col`, `line`) in this frame (0 on the
+    /// over-scan, which has no pixel behind it).
+    pub fn expected_dark_e(&self, col: usize, line: usize) -> f64 {
+        match self.params.geometry.segment(col) {
+            Some(Segment::Active | Segment::Covered) => {
+                self.params.dark_mean_e * self.dark_rel(col, line)
+            }
+            _ => 0.0,
+        }
+    }
+
     /// Expected electrons collected by raw element (`col`, `line`): star light through the
     /// flat plus dark charge (what a perfect calibration recovers is the star part).
     fn expected_parts_e(&self, col: usize, line: usize) -> (f64, f64) {
         let g = &self.params.geometry;
-        let dark = self.params.dark_mean_e * self.dark_rel(col, line);
+        let dark = self.expected_dark_e(col, line);
         match g.segment(col) {
             Some(Segment::Active) if line < usize::from(g.active_rows) => {
                 let x = col - g.first_active_col();
-                (self.star_e(x, line) * self.flat(x, line), dark)
+                (
+                    (self.star_e(x, line) + self.params.sky_e) * self.flat(x, line),
+                    dark,
+                )
             }
             Some(Segment::Active | Segment::Covered) => (0.0, dark),
             _ => (0.0, 0.0),

@@ -131,3 +131,55 @@ impl Simulator {
         Ok(buf)
     }
 }
+
+impl Simulator {
+    /// A per-pixel calibration table with the given maps (active area, row-major) instead of
+    /// the truth: e.g. the maps of [`super::measured`]. `None` leaves a map out ("no
+    /// correction"); gains and, when `column_bias`, the true column bias are included.
+    pub fn table_from_maps(
+        &self,
+        column_bias: bool,
+        dark_rel: Option<&[f64]>,
+        flat_inv: Option<&[f64]>,
+    ) -> Result<Vec<u8>, WriteError> {
+        let p = &self.params;
+        let g = p.geometry;
+        let gains: Vec<GainEPerAdu> = (0..g.outputs)
+            .map(|o| GainEPerAdu::saturating_from_num(p.gain_e_per_adu[usize::from(o)]))
+            .collect();
+        let bias: Vec<ColumnBiasAdu> = (0..g.line_len())
+            .map(|c| match g.segment(c) {
+                Some(Segment::OverScan) => ColumnBiasAdu::ZERO,
+                _ => ColumnBiasAdu::saturating_from_num(self.column_bias_adu(c)),
+            })
+            .collect();
+        let dark: Option<Vec<DarkRel>> =
+            dark_rel.map(|m| m.iter().map(|v| DarkRel::saturating_from_num(*v)).collect());
+        let flat: Option<Vec<FlatInv>> = flat_inv.map(|m| {
+            m.iter()
+                .map(|v| FlatInv::saturating_from_num(*v).max(FlatInv::DELTA))
+                .collect()
+        });
+        let spec = TableSpec {
+            geometry: g,
+            saturation_adu: 65535,
+            gains: &gains,
+            column_bias: column_bias.then_some(&bias[..]),
+            dark_rel: dark.as_deref().map(|tiles| MapSpec {
+                tile_log2: 0,
+                tiles,
+            }),
+            flat_inv: flat.as_deref().map(|tiles| MapSpec {
+                tile_log2: 0,
+                tiles,
+            }),
+            hot_ref_k: Kelvin::from_num(293),
+            hot: &[],
+            telegraph: &[],
+        };
+        let mut buf = vec![0u8; spec.encoded_len()];
+        let n = write_table(&spec, &mut buf)?;
+        buf.truncate(n);
+        Ok(buf)
+    }
+}

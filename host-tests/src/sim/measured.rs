@@ -1,0 +1,207 @@
+//! Calibration maps *measured* the way a ground calibration measures them: from N simulated
+//! dark frames (or flat frames), with the calibration noise that leaves, instead of the
+//! simulator's truth.
+//!
+//! Dark: every frame's pixels are bias-subtracted with the over-scan level the core measures
+//! on that line ([`LineLevels::measure`]) and converted with the output's gain; the relative
+//! dark of a pixel is its sum over the frames divided by the sum of the frames' covered-pixel
+//! means (the quantity the core's dark scale estimates), so the map is normalised like the
+//! core expects. Its noise per pixel is `sqrt(dark + read^2) / (dark sqrt(N))` relative
+//! (e.g. 250 e- dark, 5 e- read, N = 32: 0.012).
+//!
+//! Flat: N frames of uniform illumination of `level_e` per pixel, dark-subtracted with the
+//! true dark, normalised to their mean over the measured region; its noise is about
+//! `1 / sqrt(N level_e)` relative.
+//!
+//! Cost: one rendered sample per pixel of the region per frame, plus the 48 reference
+//! elements (over-scan and covered) of each of its lines.
+
+use super::render::Simulator;
+use startrack_core::calib::{LineError, LineLevels};
+use startrack_core::geometry::{Output, Segment};
+use startrack_core::window::Rect;
+
+/// A measured map over the whole active area (row-major, `active_cols` x `active_rows`):
+/// measured inside `region`, 1 (no correction) outside.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeasuredMap {
+    /// The map values.
+    pub values: Vec<f64>,
+    /// Where it was measured.
+    pub region: Rect,
+    /// Number of frames averaged.
+    pub frames: u32,
+}
+
+impl Simulator {
+    /// Fills `out` (a whole raw line) with only the over-scan and covered elements of `line`
+    /// rendered, zeros elsewhere: what the core's levels need, at 48 samples instead of 1072.
+    pub fn render_reference_line(&self, line: usize, out: &mut [u16]) {
+        let g = self.params.geometry;
+        for (col, v) in out.iter_mut().enumerate() {
+            *v = match g.segment(col) {
+                Some(Segment::OverScan | Segment::Covered) => self.raw_sample(col, line),
+                _ => 0,
+            };
+        }
+    }
+
+    /// Electrons of raw sample `raw` at raw column `col` with the line's measured levels:
+    /// `(raw - bias) * gain` (gains are known to calibration).
+    fn electrons_of(&self, raw: u16, col: usize, levels: &LineLevels) -> f64 {
+        let g = self.params.geometry;
+        let Output(o) = g.output_of_col(col);
+        let bias = levels.bias(Output(o)).to_num::<f64>();
+        (f64::from(raw) - bias) * self.params.gain_e_per_adu[usize::from(o)]
+    }
+
+    /// The relative dark map measured from `frames` dark frames (frame numbers
+    /// `first_frame ..`) of this sensor (its stars are ignored), over `region`, normalised to
+    /// the mean of the covered pixels of `covered_lines`: the lines whose covered columns
+    /// give the dark scale in use (the whole frame, `0..lines`, on the firmware). Normalising
+    /// to other covered pixels than the scale's would leave their fixed-pattern difference as
+    /// a uniform dark error.
+    pub fn measure_dark_map(
+        &self,
+        frames: u32,
+        first_frame: u32,
+        region: Rect,
+        covered_lines: std::ops::Range<usize>,
+    ) -> Result<MeasuredMap, LineError> {
+        let g = self.params.geometry;
+        let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+        let mut sum = vec![0.0f64; cols * rows];
+        let (mut covered_sum, mut covered_n) = (0.0f64, 0usize);
+        let mut line = vec![0u16; g.line_len()];
+        for k in 0..frames {
+            let dark = Simulator {
+                params: self.params.clone(),
+                stars: Vec::new(),
+                frame: first_frame.wrapping_add(k),
+            };
+            for y in covered_lines.clone() {
+                if y >= usize::from(g.lines) {
+                    break;
+                }
+                dark.render_reference_line(y, &mut line);
+                let lv = LineLevels::measure(&g, &line)?;
+                for (s, e) in g.covered_cols() {
+                    for col in s..e {
+                        covered_sum += dark.electrons_of(dark.raw_sample(col, y), col, &lv);
+                        covered_n += 1;
+                    }
+                }
+            }
+            for y in region.y0..region.y0.saturating_add(region.height) {
+                let y = usize::from(y);
+                if y >= rows {
+                    break;
+                }
+                dark.render_reference_line(y, &mut line);
+                let lv = LineLevels::measure(&g, &line)?;
+                for x in region.x0..region.x0.saturating_add(region.width) {
+                    let x = usize::from(x);
+                    if x >= cols {
+                        break;
+                    }
+                    let col = g.raw_col_of_x(x);
+                    if let Some(v) = sum.get_mut(y * cols + x) {
+                        *v += dark.electrons_of(dark.raw_sample(col, y), col, &lv);
+                    }
+                }
+            }
+        }
+        let covered_mean_sum = if covered_n == 0 {
+            0.0
+        } else {
+            covered_sum / covered_n as f64 * f64::from(frames)
+        };
+        let values = sum
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let (x, y) = ((i % cols) as u16, (i / cols) as u16);
+                if region.contains(x, y) && covered_mean_sum > 0.0 {
+                    s / covered_mean_sum
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        Ok(MeasuredMap {
+            values,
+            region,
+            frames,
+        })
+    }
+
+    /// The inverse flat map measured from `frames` uniformly lit frames of `level_e` e- per
+    /// pixel (frame numbers `first_frame ..`), over `region`: each pixel's mean of
+    /// `(raw - bias) * gain - true dark`, inverted relative to the region's mean.
+    pub fn measure_flat_inv_map(
+        &self,
+        frames: u32,
+        first_frame: u32,
+        level_e: f64,
+        region: Rect,
+    ) -> Result<MeasuredMap, LineError> {
+        let g = self.params.geometry;
+        let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+        let mut sum = vec![0.0f64; cols * rows];
+        let mut line = vec![0u16; g.line_len()];
+        let mut lit = Simulator::new(
+            super::SensorParams {
+                sky_e: level_e,
+                ..self.params.clone()
+            },
+            Vec::new(),
+        );
+        for k in 0..frames {
+            lit.frame = first_frame.wrapping_add(k);
+            for y in region.y0..region.y0.saturating_add(region.height) {
+                let y = usize::from(y);
+                if y >= rows {
+                    break;
+                }
+                lit.render_reference_line(y, &mut line);
+                let lv = LineLevels::measure(&g, &line)?;
+                for x in region.x0..region.x0.saturating_add(region.width) {
+                    let x = usize::from(x);
+                    if x >= cols {
+                        break;
+                    }
+                    let col = g.raw_col_of_x(x);
+                    let dark = lit.expected_dark_e(col, y);
+                    if let Some(v) = sum.get_mut(y * cols + x) {
+                        *v += lit.electrons_of(lit.raw_sample(col, y), col, &lv) - dark;
+                    }
+                }
+            }
+        }
+        let inside = |i: usize| region.contains((i % cols) as u16, (i / cols) as u16);
+        let (mut tot, mut n) = (0.0, 0usize);
+        for (i, s) in sum.iter().enumerate() {
+            if inside(i) {
+                tot += s;
+                n += 1;
+            }
+        }
+        let mean = if n == 0 { 0.0 } else { tot / n as f64 };
+        let values = sum
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                if inside(i) && *s > 0.0 && mean > 0.0 {
+                    mean / s
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        Ok(MeasuredMap {
+            values,
+            region,
+            frames,
+        })
+    }
+}
