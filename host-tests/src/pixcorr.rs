@@ -257,3 +257,45 @@ pub fn build_curve(spec: &CurveSpec) -> Result<Curve, BuildError> {
         bytes,
     })
 }
+
+impl Curve {
+    /// The curve as the core reads it.
+    pub fn parsed(&self) -> Result<PixCorr<'_>, startrack_core::centroid::pixcorr::PixCorrError> {
+        PixCorr::parse(&self.bytes).map(|(c, _)| c)
+    }
+}
+
+/// Builds one curve per spec (any refusal is returned with the spec's index).
+pub fn build_curves(specs: &[CurveSpec]) -> Result<Vec<Curve>, (usize, BuildError)> {
+    specs
+        .iter()
+        .enumerate()
+        .map(|(i, s)| build_curve(s).map_err(|e| (i, e)))
+        .collect()
+}
+
+/// A whole calibration table: `spec`'s sections and a pixel-phase section holding `curves`
+/// (a curve whose bytes were altered is reported with its index, never dropped).
+pub fn write_table_with_curves(
+    spec: &startrack_core::table::TableSpec<'_>,
+    curves: &[Curve],
+) -> Result<Vec<u8>, startrack_core::table::WriteError> {
+    let parsed = curves
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            c.parsed().map_err(|error| {
+                startrack_core::table::WriteError::Invalid(
+                    startrack_core::table::TableError::PixCorrCurve {
+                        index: i as u32,
+                        error,
+                    },
+                )
+            })
+        })
+        .collect::<Result<Vec<PixCorr<'_>>, _>>()?;
+    let mut buf = vec![0u8; spec.encoded_len_with_pixcorr(&parsed)];
+    let n = startrack_core::table::write_table_with_pixcorr(spec, &parsed, &mut buf)?;
+    buf.truncate(n);
+    Ok(buf)
+}

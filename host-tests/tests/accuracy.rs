@@ -148,3 +148,56 @@ fn crlb_tends_to_the_shot_noise_limit() {
     let f = flux_for_snr(10.0, 5.0, 125.0);
     assert!((f / (f + 25.0 * 125.0).sqrt() - 10.0).abs() < 1e-9);
 }
+
+#[test]
+fn the_command_prints_every_method_and_rejects_bad_options() {
+    use startrack_host::cli::accuracy::{AccuracyArgs, run as command};
+    let args = AccuracyArgs {
+        trials: 20,
+        seed: 7,
+        a: vec![1.0],
+        snr: vec![30.0],
+        background_e: 100.0,
+        read_noise_e: 5.0,
+    };
+    let out = command(&args).unwrap();
+    for m in Method::all() {
+        // Each method has a row in the RMS table and in the estimate table.
+        assert_eq!(
+            out.matches(&format!("| {} |", m.name())).count(),
+            2,
+            "{}",
+            m.name()
+        );
+    }
+    // Same seed, same table; another seed, another.
+    assert_eq!(command(&args).unwrap(), out);
+    assert_ne!(
+        command(&AccuracyArgs {
+            seed: 8,
+            ..args.clone()
+        })
+        .unwrap(),
+        out
+    );
+    for bad in [
+        AccuracyArgs {
+            trials: 0,
+            ..args.clone()
+        },
+        AccuracyArgs {
+            a: vec![f64::NAN],
+            ..args.clone()
+        },
+        AccuracyArgs {
+            snr: vec![-1.0],
+            ..args.clone()
+        },
+        AccuracyArgs {
+            read_noise_e: -1.0,
+            ..args.clone()
+        },
+    ] {
+        assert!(command(&bad).is_err(), "{bad:?}");
+    }
+}

@@ -9,19 +9,13 @@
 #[path = "common/psf.rs"]
 mod psf;
 
-use psf::{Star, Win, ref_cog, render, sigma_of_a, to_electrons, to_f64};
+use psf::{Star, Sweep, WIDTHS_A, Win, phases, ref_cog, render, sigma_of_a, to_electrons, to_f64};
 use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::units::Electrons;
 use startrack_core::window::Window;
 
-const WIDTHS_A: [f64; 7] = [0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 3.0];
 const BOXES: [u8; 4] = [3, 5, 7, 9];
-
-/// Pixel phases over the central pixel, avoiding the +-1/2 edges (ties of the peak).
-fn phases() -> impl Iterator<Item = f64> {
-    (0..10).map(|i| -0.45 + 0.1 * f64::from(i))
-}
 
 fn power_of(p: CogPower) -> u8 {
     match p {
@@ -33,73 +27,49 @@ fn power_of(p: CogPower) -> u8 {
 #[test]
 fn matches_f64_reference_noise_free() {
     let win = Win::centred(100, 200, 11);
+    let sweep = Sweep {
+        win,
+        flux: 1.0e5,
+        background: 0.0,
+        tol_px: 1e-4,
+        forbidden: CentroidFlags::DEGENERATE | CentroidFlags::CLAMPED | CentroidFlags::LOW_SNR,
+    };
     let mut worst: f64 = 0.0;
     for power in [CogPower::One, CogPower::Two] {
         for side in BOXES {
+            let params = CogParams {
+                power,
+                box_side: side,
+                anchor: Anchor::Peak,
+                background: Background::Given {
+                    level_e: 0.0,
+                    variance_e2: 0.0,
+                },
+            };
             for a in WIDTHS_A {
-                let mut sys_sq = 0.0;
-                let mut count = 0.0;
-                for px in phases() {
-                    for py in phases() {
-                        let star = Star {
-                            x: 100.0 + px,
-                            y: 200.0 + py,
-                            sigma: sigma_of_a(a),
-                            flux: 1.0e5,
-                        };
-                        let e = to_electrons(&render(win, star, 0.0));
-                        let q = to_f64(&e);
-                        let w = Window::new(win.rect(), &e).unwrap();
-                        let params = CogParams {
-                            power,
-                            box_side: side,
-                            anchor: Anchor::Peak,
-                            background: Background::Given {
-                                level_e: 0.0,
-                                variance_e2: 0.0,
-                            },
-                        };
-                        let c = cog(&CentroidInput::new(w), &params);
-                        let anchor = psf::peak(&q, win.w);
-                        let (rx, ry) = ref_cog(
-                            &q,
+                let r = sweep.run(
+                    a,
+                    &format!("{power:?} box {side}"),
+                    |w| cog(&CentroidInput::new(w), &params),
+                    |q, _| {
+                        ref_cog(
+                            q,
                             win.w,
                             win.h,
-                            anchor,
+                            psf::peak(q, win.w),
                             u16::from(side / 2),
                             power_of(power),
                             0.0,
                             0.0,
                             true,
                         )
-                        .unwrap();
-                        let (rx, ry) = (rx + f64::from(win.x0), ry + f64::from(win.y0));
-                        let err = (f64::from(c.x_px) - rx)
-                            .abs()
-                            .max((f64::from(c.y_px) - ry).abs());
-                        worst = worst.max(err);
-                        assert!(
-                            err < 1e-4,
-                            "{power:?} box {side} a {a} phase ({px},{py}): core ({}, {}) ref ({rx}, {ry})",
-                            c.x_px,
-                            c.y_px
-                        );
-                        assert!(
-                            !c.flags.intersects(
-                                CentroidFlags::DEGENERATE
-                                    | CentroidFlags::CLAMPED
-                                    | CentroidFlags::LOW_SNR
-                            ),
-                            "{:?}",
-                            c.flags
-                        );
-                        sys_sq += (rx - star.x).powi(2);
-                        count += 1.0;
-                    }
-                }
+                        .unwrap()
+                    },
+                );
+                worst = worst.max(r.worst_px);
                 eprintln!(
                     "systematic rms {power:?} box {side} a {a:4.2} px: {:.4} px",
-                    (sys_sq / count).sqrt()
+                    r.systematic_rms_px
                 );
             }
         }
@@ -124,15 +94,7 @@ fn perimeter_background_mean_and_median() {
             };
             let e = to_electrons(&render(win, star, 250.0));
             let q = to_f64(&e);
-            let mut border: Vec<f64> = q
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| {
-                    let (c, r) = (i % 9, i / 9);
-                    c == 0 || r == 0 || c == 8 || r == 8
-                })
-                .map(|(_, v)| *v)
-                .collect();
+            let mut border = psf::border(&q, 9);
             border.sort_by(f64::total_cmp);
             let bg = if is_median {
                 0.5 * (border[15] + border[16])

@@ -9,45 +9,30 @@
 mod psf;
 
 use psf::{
-    Rng, Star, Win, add_noise, crlb_x, flux_for_snr, mean_std, ref_cog, render, sigma_of_a,
-    to_electrons, to_f64,
+    McResult, MonteCarlo, Star, Win, crlb_x, flux_for_snr, mean_std, ref_cog, render, sigma_of_a,
 };
 use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
-use startrack_core::window::Window;
 
 const BG_E: f64 = 100.0;
 const READ_E: f64 = 5.0;
 const VAR_BG: f64 = BG_E + READ_E * READ_E;
 const TRIALS: usize = 4000;
 
+/// The core's results and, on the same data, plain eq. 6 (no variance subtraction) in f64.
 struct Run {
-    /// Estimates of x minus the true x.
-    dx: Vec<f64>,
-    /// Plain eq. 6 (no variance subtraction) on the same data, f64.
+    core: McResult,
+    /// Plain eq. 6 estimates minus the true x.
     naive_dx: Vec<f64>,
-    sigma_est: Vec<f64>,
-    snr_est: Vec<f64>,
-    flux: Vec<f64>,
 }
 
 fn run(snr: f64, power: CogPower, background: Background, seed: u64) -> (Run, Star, Win) {
     let win = Win::centred(100, 100, 9);
-    let flux = flux_for_snr(snr, 5.0, VAR_BG);
     let star = Star {
         x: 100.3,
         y: 99.85,
         sigma: sigma_of_a(2.0),
-        flux,
-    };
-    let mean = render(win, star, BG_E);
-    let mut rng = Rng::new(seed);
-    let mut r = Run {
-        dx: vec![],
-        naive_dx: vec![],
-        sigma_est: vec![],
-        snr_est: vec![],
-        flux: vec![],
+        flux: flux_for_snr(snr, 5.0, VAR_BG),
     };
     let params = CogParams {
         power,
@@ -55,27 +40,29 @@ fn run(snr: f64, power: CogPower, background: Background, seed: u64) -> (Run, St
         anchor: Anchor::WindowCentre,
         background,
     };
-    for _ in 0..TRIALS {
-        let e = to_electrons(&add_noise(&mean, BG_E, VAR_BG, &mut rng));
-        let q = to_f64(&e);
-        let c = cog(
-            &CentroidInput::new(Window::new(win.rect(), &e).unwrap()),
-            &params,
-        );
+    let mut naive_dx = Vec::new();
+    let core = MonteCarlo {
+        win,
+        star,
+        background: BG_E,
+        var_bg: VAR_BG,
+        trials: TRIALS,
+        seed,
+        fail_flags: CentroidFlags::empty(),
+    }
+    .run(|w, q| {
+        let c = cog(&CentroidInput::new(w), &params);
         assert!(
             !c.flags
                 .intersects(CentroidFlags::DEGENERATE | CentroidFlags::CLAMPED),
             "SNR {snr}: {c:?}"
         );
-        r.dx.push(f64::from(c.x_px) - star.x);
-        r.sigma_est.push(f64::from(c.sigma_x_px));
-        r.snr_est.push(f64::from(c.snr));
-        r.flux.push(f64::from(c.flux_e));
-        if let Some((nx, _)) = ref_cog(&q, 9, 9, (4, 4), 2, 2, BG_E, 0.0, false) {
-            r.naive_dx.push(nx + f64::from(win.x0) - star.x);
+        if let Some((nx, _)) = ref_cog(q, 9, 9, (4, 4), 2, 2, BG_E, 0.0, false) {
+            naive_dx.push(nx + f64::from(win.x0) - star.x);
         }
-    }
-    (r, star, win)
+        c
+    });
+    (Run { core, naive_dx }, star, win)
 }
 
 /// The noise-free expectation of the estimator: its formula on the mean image with `E[w]`
@@ -92,16 +79,7 @@ fn expected_x(win: Win, star: Star, power: CogPower, bg: f64) -> f64 {
 
 /// The noise-free perimeter mean (the expectation of the measured level).
 fn perimeter_mean(win: Win, star: Star) -> f64 {
-    let mean = render(win, star, BG_E);
-    let border: Vec<f64> = mean
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| {
-            let (c, r) = (i % 9, i / 9);
-            c == 0 || r == 0 || c == 8 || r == 8
-        })
-        .map(|(_, v)| *v)
-        .collect();
+    let border = psf::border(&render(win, star, BG_E), 9);
     border.iter().sum::<f64>() / border.len() as f64
 }
 
@@ -125,7 +103,7 @@ fn power_two_with_variance_subtraction_is_unbiased() {
                 perimeter_mean(win, star)
             };
             let want = expected_x(win, star, CogPower::Two, bg);
-            let (m, s) = mean_std(&r.dx);
+            let (m, s) = mean_std(&r.core.dx);
             let se = s / (TRIALS as f64).sqrt();
             let (nm, _) = mean_std(&r.naive_dx);
             eprintln!(
@@ -154,10 +132,9 @@ fn error_estimate_matches_scatter() {
         for (snr, seed) in [(10.0, 11u64), (20.0, 12), (50.0, 13), (100.0, 14)] {
             for bgmode in [Background::PerimeterMean, Background::PerimeterMedian] {
                 let (r, star, win) = run(snr, power, bgmode, seed);
-                let (_, measured) = mean_std(&r.dx);
-                let est = r.sigma_est.iter().map(|s| s * s).sum::<f64>() / r.sigma_est.len() as f64;
-                let est = est.sqrt();
-                let (snr_m, _) = mean_std(&r.snr_est);
+                let (_, measured) = mean_std(&r.core.dx);
+                let est = r.core.estimate_rms();
+                let (snr_m, _) = mean_std(&r.core.snr);
                 let crlb = crlb_x(win, star, BG_E, READ_E);
                 eprintln!(
                     "{power:?} SNR {snr:5.1} ({bgmode:?}, measured SNR {snr_m:6.1}): scatter {measured:.4} px, estimate {est:.4} px (ratio {:.3}), CRLB {crlb:.4} px (efficiency {:.2})",
@@ -170,7 +147,7 @@ fn error_estimate_matches_scatter() {
                 );
                 // The reported SNR against the flux's actual signal-to-scatter (eq. 8 plus the
                 // background level's error, which a 32-pixel perimeter makes significant).
-                let (fm, fs) = mean_std(&r.flux);
+                let (fm, fs) = mean_std(&r.core.flux);
                 assert!(
                     (snr_m / (fm / fs) - 1.0).abs() < 0.2,
                     "reported SNR {snr_m}, flux/scatter {}",

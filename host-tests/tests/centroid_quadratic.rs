@@ -7,18 +7,12 @@
 mod psf;
 
 use psf::{
-    Rng, Star, Win, add_noise, flux_for_snr, mean_std, ref_quad3, render, sigma_of_a, to_electrons,
-    to_f64,
+    MonteCarlo, Star, Sweep, WIDTHS_A, Win, flux_for_snr, mean_std, ref_quad3, render, sigma_of_a,
+    to_electrons,
 };
 use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::window::Window;
-
-const WIDTHS_A: [f64; 7] = [0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 3.0];
-
-fn phases() -> impl Iterator<Item = f64> {
-    (0..10).map(|i| -0.45 + 0.1 * f64::from(i))
-}
 
 /// Reference fit on the quantised window values (window-relative).
 fn reference(q: &[f64], w: usize, kind: QuadraticKind) -> (f64, f64) {
@@ -37,57 +31,33 @@ fn reference(q: &[f64], w: usize, kind: QuadraticKind) -> (f64, f64) {
 
 #[test]
 fn matches_f64_reference_noise_free() {
-    let win = Win::centred(500, 30, 7);
+    let sweep = Sweep {
+        win: Win::centred(500, 30, 7),
+        flux: 5.0e4,
+        background: 0.0,
+        tol_px: 1e-4,
+        forbidden: CentroidFlags::DEGENERATE | CentroidFlags::PEAK_AT_EDGE,
+    };
     let mut worst: f64 = 0.0;
     for kind in [QuadraticKind::Parabolic, QuadraticKind::Gaussian] {
+        let params = QuadraticParams {
+            kind,
+            background: Background::Given {
+                level_e: 0.0,
+                variance_e2: 0.0,
+            },
+        };
         for a in WIDTHS_A {
-            let mut sys_sq = 0.0;
-            let mut n = 0.0;
-            for px in phases() {
-                for py in phases() {
-                    let star = Star {
-                        x: 500.0 + px,
-                        y: 30.0 + py,
-                        sigma: sigma_of_a(a),
-                        flux: 5.0e4,
-                    };
-                    let e = to_electrons(&render(win, star, 0.0));
-                    let q = to_f64(&e);
-                    let params = QuadraticParams {
-                        kind,
-                        background: Background::Given {
-                            level_e: 0.0,
-                            variance_e2: 0.0,
-                        },
-                    };
-                    let c = quadratic(
-                        &CentroidInput::new(Window::new(win.rect(), &e).unwrap()),
-                        &params,
-                    );
-                    let (rx, ry) = reference(&q, 7, kind);
-                    let (rx, ry) = (rx + f64::from(win.x0), ry + f64::from(win.y0));
-                    let err = (f64::from(c.x_px) - rx)
-                        .abs()
-                        .max((f64::from(c.y_px) - ry).abs());
-                    worst = worst.max(err);
-                    assert!(
-                        err < 1e-4,
-                        "{kind:?} a {a} ({px},{py}): core ({}, {}) ref ({rx}, {ry})",
-                        c.x_px,
-                        c.y_px
-                    );
-                    assert!(
-                        !c.flags
-                            .intersects(CentroidFlags::DEGENERATE | CentroidFlags::PEAK_AT_EDGE),
-                        "{c:?}"
-                    );
-                    sys_sq += (rx - star.x).powi(2);
-                    n += 1.0;
-                }
-            }
+            let r = sweep.run(
+                a,
+                &format!("{kind:?}"),
+                |w| quadratic(&CentroidInput::new(w), &params),
+                |q, _| reference(q, 7, kind),
+            );
+            worst = worst.max(r.worst_px);
             eprintln!(
                 "systematic rms {kind:?} a {a:4.2} px: {:.4} px",
-                (sys_sq / n).sqrt()
+                r.systematic_rms_px
             );
         }
     }
@@ -144,25 +114,26 @@ fn error_estimate_matches_scatter() {
                 sigma: sigma_of_a(1.5),
                 flux: flux_for_snr(snr, 3.0, VAR_BG),
             };
-            let mean = render(win, star, BG);
-            let mut rng = Rng::new(seed);
-            let (mut dx, mut est) = (vec![], vec![]);
             let params = QuadraticParams {
                 kind,
                 background: Background::PerimeterMean,
             };
-            for _ in 0..4000 {
-                let e = to_electrons(&add_noise(&mean, BG, VAR_BG, &mut rng));
-                let c = quadratic(
-                    &CentroidInput::new(Window::new(win.rect(), &e).unwrap()),
-                    &params,
-                );
-                assert!(!c.flags.contains(CentroidFlags::DEGENERATE), "{c:?}");
-                dx.push(f64::from(c.x_px) - star.x);
-                est.push(f64::from(c.sigma_x_px).powi(2));
+            let r = MonteCarlo {
+                win,
+                star,
+                background: BG,
+                var_bg: VAR_BG,
+                trials: 4000,
+                seed,
+                fail_flags: CentroidFlags::empty(),
             }
-            let (m, s) = mean_std(&dx);
-            let e = (est.iter().sum::<f64>() / est.len() as f64).sqrt();
+            .run(|w, _| {
+                let c = quadratic(&CentroidInput::new(w), &params);
+                assert!(!c.flags.contains(CentroidFlags::DEGENERATE), "{c:?}");
+                c
+            });
+            let (dx, e) = (&r.dx, r.estimate_rms());
+            let (m, s) = mean_std(dx);
             eprintln!(
                 "{kind:?} SNR(3x3) {snr:5.1}: mean error {m:+.4} px, scatter {s:.4} px, estimate {e:.4} px (ratio {:.3})",
                 e / s

@@ -268,3 +268,55 @@ fn apply_never_produces_nan_and_keeps_degenerate() {
     assert!(c.flags.contains(CentroidFlags::DEGENERATE));
     assert_eq!(curve.apply(c), c);
 }
+
+#[test]
+fn a_table_with_curves_from_the_host_builder() {
+    use startrack_core::table::CalibTable;
+    use startrack_host::pixcorr::{build_curves, write_table_with_curves};
+    let specs: Vec<CurveSpec> = [0.75, 1.5, 3.0]
+        .iter()
+        .map(|&a_px| CurveSpec {
+            a_px,
+            box_side: 5,
+            power: CogPower::One,
+            background: PixCorrBackground::Given,
+            knots: 33,
+        })
+        .collect();
+    let curves = build_curves(&specs).unwrap();
+    let gains = [startrack_core::units::GainEPerAdu::ONE];
+    let spec = startrack_core::table::TableSpec {
+        geometry: startrack_core::geometry::ReadoutGeometry::CCD47_20_DUAL,
+        saturation_adu: 65_000,
+        gains: &[gains[0], gains[0]],
+        column_bias: None,
+        dark_rel: None,
+        flat_inv: None,
+        hot_ref_k: startrack_core::units::Kelvin::ZERO,
+        hot: &[],
+        telegraph: &[],
+    };
+    let bytes = write_table_with_curves(&spec, &curves).unwrap();
+    let t = CalibTable::parse(&bytes).unwrap();
+    assert_eq!(t.pixcorr().len(), 3);
+    // The nearest width is chosen; the stored curve is the built one.
+    let c = t
+        .pixcorr()
+        .find(CogPower::One, 5, PixCorrBackground::Given, 1.4)
+        .unwrap();
+    assert_eq!(c.header(), curves[1].header);
+    assert_eq!(c.knot_bytes(), &curves[1].bytes[8..]);
+    // A refused spec names its index.
+    let bad = [
+        specs[0],
+        CurveSpec {
+            a_px: 0.5,
+            power: CogPower::Two,
+            ..specs[0]
+        },
+    ];
+    assert!(matches!(
+        build_curves(&bad),
+        Err((1, BuildError::NotMonotone { .. }))
+    ));
+}

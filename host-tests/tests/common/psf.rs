@@ -280,3 +280,208 @@ pub fn mean_std(v: &[f64]) -> (f64, f64) {
 /// Flux in an n x n box giving `snr` by eq. 8 with per-pixel background variance `var_bg`.
 #[allow(unused_imports)]
 pub use startrack_host::accuracy::flux_for_snr;
+
+// ---------------------------------------------------------------------------------------------
+// The two loops every centroid test runs: a noise-free sweep over pixel phases and a seeded
+// Monte Carlo under noise, each taking the method under test as a closure.
+
+/// PSF widths (the paper's a, px) the noise-free sweeps cover.
+pub const WIDTHS_A: [f64; 7] = [0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 3.0];
+
+/// Pixel phases over the central pixel, avoiding the +-1/2 edges (ties of the peak).
+pub fn phases() -> impl Iterator<Item = f64> {
+    (0..10).map(|i| -0.45 + 0.1 * f64::from(i))
+}
+
+/// A noise-free sweep: a star of width `a` at every pair of [`phases`] around the window's
+/// centre pixel, `flux` e- on a flat `background`.
+#[derive(Clone, Copy, Debug)]
+pub struct Sweep {
+    pub win: Win,
+    pub flux: f64,
+    pub background: f64,
+    /// Largest allowed |core - reference|, px.
+    pub tol_px: f64,
+    /// Flags the core must not set.
+    pub forbidden: startrack_core::centroid::CentroidFlags,
+}
+
+/// What a sweep measured.
+#[derive(Clone, Copy, Debug)]
+pub struct SweepResult {
+    /// RMS over the phases of the reference's x error against the truth (the method's
+    /// systematic error), px.
+    pub systematic_rms_px: f64,
+    /// Largest |core - reference| in x or y, px.
+    pub worst_px: f64,
+}
+
+impl Sweep {
+    /// Runs `core` on each rendered window and `reference` (window-relative, on the values the
+    /// core saw, quantised back to f64, and the star) and asserts they agree within `tol_px`.
+    pub fn run(
+        &self,
+        a: f64,
+        label: &str,
+        core: impl Fn(startrack_core::window::Window<'_>) -> startrack_core::centroid::Centroid,
+        reference: impl Fn(&[f64], &Star) -> (f64, f64),
+    ) -> SweepResult {
+        let win = self.win;
+        let (cx, cy) = (f64::from(win.x0 + win.w / 2), f64::from(win.y0 + win.h / 2));
+        let (mut sys_sq, mut n, mut worst) = (0.0, 0.0, 0.0f64);
+        for px in phases() {
+            for py in phases() {
+                let star = Star {
+                    x: cx + px,
+                    y: cy + py,
+                    sigma: sigma_of_a(a),
+                    flux: self.flux,
+                };
+                let e = to_electrons(&render(win, star, self.background));
+                let q = to_f64(&e);
+                let c = core(startrack_core::window::Window::new(win.rect(), &e).unwrap());
+                let (rx, ry) = reference(&q, &star);
+                let (rx, ry) = (rx + f64::from(win.x0), ry + f64::from(win.y0));
+                let err = (f64::from(c.x_px) - rx)
+                    .abs()
+                    .max((f64::from(c.y_px) - ry).abs());
+                worst = worst.max(err);
+                assert!(
+                    err < self.tol_px,
+                    "{label} a {a} ({px},{py}): core ({}, {}) ref ({rx}, {ry})",
+                    c.x_px,
+                    c.y_px
+                );
+                assert!(
+                    !c.flags.intersects(self.forbidden),
+                    "{label} a {a} ({px},{py}): {c:?}"
+                );
+                sys_sq += (rx - star.x).powi(2);
+                n += 1.0;
+            }
+        }
+        SweepResult {
+            systematic_rms_px: (sys_sq / n).sqrt(),
+            worst_px: worst,
+        }
+    }
+}
+
+/// A seeded Monte Carlo of one star under Gaussian noise of variance
+/// `max(signal, 0) + var_bg` (see [`add_noise`]).
+#[derive(Clone, Copy, Debug)]
+pub struct MonteCarlo {
+    pub win: Win,
+    pub star: Star,
+    pub background: f64,
+    pub var_bg: f64,
+    pub trials: usize,
+    pub seed: u64,
+    /// Results with any of these flags are counted as failed and left out.
+    pub fail_flags: startrack_core::centroid::CentroidFlags,
+}
+
+/// What a Monte Carlo measured (the results that did not fail).
+#[derive(Clone, Debug, Default)]
+pub struct McResult {
+    /// Estimated x minus the true x, px.
+    pub dx: Vec<f64>,
+    /// The method's sigma_x, px.
+    pub sigma_x: Vec<f64>,
+    pub snr: Vec<f64>,
+    pub flux: Vec<f64>,
+    pub failed: usize,
+}
+
+impl McResult {
+    /// RMS of the method's own error estimate, px.
+    pub fn estimate_rms(&self) -> f64 {
+        (self.sigma_x.iter().map(|s| s * s).sum::<f64>() / self.sigma_x.len() as f64).sqrt()
+    }
+}
+
+impl MonteCarlo {
+    /// Runs `method` on `trials` noisy windows; it gets the window and the same pixels as f64
+    /// (for references computed on the same data).
+    pub fn run(
+        &self,
+        mut method: impl FnMut(
+            startrack_core::window::Window<'_>,
+            &[f64],
+        ) -> startrack_core::centroid::Centroid,
+    ) -> McResult {
+        let mean = render(self.win, self.star, self.background);
+        let mut rng = Rng::new(self.seed);
+        let mut r = McResult::default();
+        for _ in 0..self.trials {
+            let e = to_electrons(&add_noise(&mean, self.background, self.var_bg, &mut rng));
+            let q = to_f64(&e);
+            let c = method(
+                startrack_core::window::Window::new(self.win.rect(), &e).unwrap(),
+                &q,
+            );
+            if c.flags.intersects(self.fail_flags) {
+                r.failed += 1;
+                continue;
+            }
+            r.dx.push(f64::from(c.x_px) - self.star.x);
+            r.sigma_x.push(f64::from(c.sigma_x_px));
+            r.snr.push(f64::from(c.snr));
+            r.flux.push(f64::from(c.flux_e));
+        }
+        r
+    }
+}
+
+/// Background (e-/px) and read noise (e-) of the standard noisy scene.
+pub const NOISE_BG_E: f64 = 100.0;
+pub const NOISE_READ_E: f64 = 5.0;
+
+/// The standard noisy scene: a 9x9 window centred on pixel (100, 100), a star of width `a` at
+/// (100 + `offset`), eq. 8 SNR `snr` in a 5x5 box on [`NOISE_BG_E`] with [`NOISE_READ_E`].
+pub fn standard_scene(a: f64, snr: f64, offset: (f64, f64)) -> (Win, Star) {
+    let var_bg = NOISE_BG_E + NOISE_READ_E * NOISE_READ_E;
+    (
+        Win::centred(100, 100, 9),
+        Star {
+            x: 100.0 + offset.0,
+            y: 100.0 + offset.1,
+            sigma: sigma_of_a(a),
+            flux: flux_for_snr(snr, 5.0, var_bg),
+        },
+    )
+}
+
+/// [`MonteCarlo`] on [`standard_scene`].
+pub fn standard_monte_carlo(
+    a: f64,
+    snr: f64,
+    offset: (f64, f64),
+    seed: u64,
+    trials: usize,
+    fail_flags: startrack_core::centroid::CentroidFlags,
+) -> MonteCarlo {
+    let (win, star) = standard_scene(a, snr, offset);
+    MonteCarlo {
+        win,
+        star,
+        background: NOISE_BG_E,
+        var_bg: NOISE_BG_E + NOISE_READ_E * NOISE_READ_E,
+        trials,
+        seed,
+        fail_flags,
+    }
+}
+
+/// The border ring of a row-major `w`-wide window, in row-major order.
+pub fn border(v: &[f64], w: usize) -> Vec<f64> {
+    let h = v.len() / w;
+    v.iter()
+        .enumerate()
+        .filter(|(i, _)| {
+            let (c, r) = (i % w, i / w);
+            c == 0 || r == 0 || c + 1 == w || r + 1 == h
+        })
+        .map(|(_, x)| *x)
+        .collect()
+}
