@@ -57,15 +57,14 @@ fn m7_costs_map_measured_extrapolated_and_estimated_stages() {
     // Linear in the pixel count: 500 + (980 - 500) / 24 * (9 - 25) = 180.
     let (c, basis) = m7_cost(&cog(CogPower::One, 3, false), &t).unwrap();
     assert!((c - 180.0).abs() < 1e-9, "{c}");
-    assert!(basis.starts_with("extrapolated"), "{basis}");
+    assert_eq!(basis, "extrapolated");
     // Power 2 given: cog1_given_bg + (cog2 - cog1) = 980 + 140.
     let (c, _) = m7_cost(&cog(CogPower::Two, 7, false), &t).unwrap();
     assert!((c - 1120.0).abs() < 1e-9, "{c}");
-    // The correction is not counted: same as uncorrected.
-    assert_eq!(
-        m7_cost(&cog(CogPower::One, 5, true), &t).unwrap().0,
-        m7_cost(&cog(CogPower::One, 5, false), &t).unwrap().0
-    );
+    // The correction is not counted: same as uncorrected, and said so.
+    let (c, basis) = m7_cost(&cog(CogPower::One, 5, true), &t).unwrap();
+    assert_eq!(c, 500.0);
+    assert_eq!(basis, "measured; correction not counted");
     assert_eq!(
         m7_cost(&Method::GaussFit { window: 7 }, &t).unwrap().0,
         90000.0
@@ -152,12 +151,18 @@ fn two_runs_write_identical_csvs() {
         // Every scene and method has a row: 12 chart cells x 3 methods; 10 scenes x 3.
         let rows = x.lines().filter(|l| !l.starts_with('#')).count() - 1;
         assert_eq!(rows, if name == "tradeoff.csv" { 36 } else { 30 }, "{name}");
+        // No field holds a comma: every line has as many fields as the column names.
+        let mut lines = x.lines().filter(|l| !l.starts_with('#'));
+        let fields = lines.next().unwrap().split(',').count();
+        for l in lines {
+            assert_eq!(l.split(',').count(), fields, "{name}: {l}");
+        }
     }
     // Without host timing the host_ns column is empty.
     let t = std::fs::read_to_string(a.path().join("tradeoff.csv")).unwrap();
     assert!(
         t.lines()
-            .any(|l| l.starts_with("gauss fit 5x5,5,1,30,50000,measured,,"))
+            .any(|l| l.starts_with("gauss fit 5x5,5,1,30,50000,perimeter bg + background fitted,,"))
     );
 }
 

@@ -12,12 +12,14 @@
 //! - `measured`: the stage of the same method, box and background;
 //! - `perimeter bg`: the measured stage uses a perimeter-median background (an upper bound:
 //!   the median of the ring is part of it);
+//! - `perimeter bg + background fitted`: the Gauss fit's stage also fits the background (one
+//!   more parameter per step; an upper bound);
 //! - `extrapolated`: linear in the pixel count through the 5x5 and 7x7 stages (3x3 boxes,
 //!   IWC 9x9);
 //! - `power-2 extra added`: CoG power 2 with a given background = `cog1_given_bg` plus the
 //!   measured difference `cog2 - cog1` of the perimeter stages;
-//! - a corrected CoG costs its uncorrected CoG here: the correction (one table lookup and
-//!   linear interpolation per axis) is not in the bench yet.
+//! - `correction not counted`: a corrected CoG costs its uncorrected CoG here: the
+//!   correction (one table lookup and linear interpolation per axis) is not in the bench yet.
 //!
 //! # Host time
 //! [`host_ns_per_star`] runs the method on a fixed set of noisy stars (seeded) in repeated
@@ -116,26 +118,31 @@ impl M7Table {
 /// M7 instructions per star of `method` and how they were obtained (module docs); `None`
 /// when the table lacks the stages.
 pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
-    let basis = |extrapolated: bool, what: &str| {
-        if extrapolated {
-            format!("extrapolated; {what}")
-        } else {
-            what.to_string()
-        }
+    let basis = |extrapolated: bool, what: &str| match (extrapolated, what) {
+        (true, "measured") => "extrapolated".to_string(),
+        (true, _) => format!("extrapolated; {what}"),
+        (false, _) => what.to_string(),
     };
     match *method {
         Method::Cog {
-            power, box_side, ..
+            power,
+            box_side,
+            corrected,
         } => {
             let n = u16::from(box_side);
             let (c1, ex) = t.by_side("centroid_cog1_given_bg", n)?;
-            match power {
-                CogPower::One => Some((c1, basis(ex, "measured"))),
+            let (cost, what) = match power {
+                CogPower::One => (c1, basis(ex, "measured")),
                 CogPower::Two => {
                     let (p1, _) = t.by_side("centroid_cog1", n)?;
                     let (p2, _) = t.by_side("centroid_cog2", n)?;
-                    Some((c1 + (p2 - p1).max(0.0), basis(ex, "power-2 extra added")))
+                    (c1 + (p2 - p1).max(0.0), basis(ex, "power-2 extra added"))
                 }
+            };
+            if corrected {
+                Some((cost, format!("{what}; correction not counted")))
+            } else {
+                Some((cost, what))
             }
         }
         Method::Iwc => {
@@ -156,7 +163,7 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
         }
         Method::GaussFit { window } => {
             let (c, ex) = t.by_side("centroid_gauss_fit", u16::from(window))?;
-            Some((c, basis(ex, "measured")))
+            Some((c, basis(ex, "perimeter bg + background fitted")))
         }
     }
 }
