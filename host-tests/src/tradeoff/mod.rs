@@ -10,8 +10,8 @@
 //!   detection.
 //!
 //! Everything but the host-ns column is seeded and deterministic: two runs write identical
-//! files apart from that column. The full run takes about a minute of CPU in release;
-//! `--quick` (fewer stars, a coarser grid) a few seconds.
+//! files apart from that column. The full run takes about 20 s of CPU in release;
+//! `--quick` (fewer stars, a coarser grid) about 4 s.
 
 pub mod chart;
 pub mod cost;
