@@ -509,3 +509,20 @@ pub fn markdown(
     }
     s
 }
+
+/// A method made ready once for a PSF width and a given background, to run on windows other
+/// than [`run_cell`]'s (the failure maps of [`crate::tradeoff`] perturb the star first).
+pub struct PreparedMethod(Prepared);
+
+impl PreparedMethod {
+    /// `method` for PSF width `a_px`, told the background level `background_e` (e-/px) and its
+    /// per-pixel variance `variance_e2`; `None` when it has no correction curve for `a_px`.
+    pub fn new(method: Method, a_px: f64, background_e: f64, variance_e2: f64) -> Option<Self> {
+        Prepared::new(method, a_px, variance_e2, background_e).map(Self)
+    }
+
+    /// Runs the method on `input`.
+    pub fn run(&self, input: &CentroidInput<'_>) -> Centroid {
+        self.0.run(input)
+    }
+}

@@ -9,3 +9,4 @@ pub mod fits;
 pub mod pipeline;
 pub mod pixcorr;
 pub mod sim;
+pub mod tradeoff;

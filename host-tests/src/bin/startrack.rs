@@ -49,6 +49,8 @@ enum Command {
     Accuracy(startrack_host::cli::accuracy::AccuracyArgs),
     /// The founding paper's Figures 1-6 (CSV with parameters, PNG) from the core's code.
     Figures(startrack_host::cli::figures::Args),
+    /// Cost per star against accuracy (Pareto frontier) and failure maps of every centroid method.
+    Tradeoff(startrack_host::cli::tradeoff::Args),
 }
 
 #[derive(Subcommand)]
@@ -99,6 +101,7 @@ fn main() -> ExitCode {
             Err(e) => fail("accuracy", &e),
         },
         Command::Figures(args) => startrack_host::cli::figures::run(&args),
+        Command::Tradeoff(args) => startrack_host::cli::tradeoff::run(&args),
         Command::Demo { seed, stars } => match startrack_host::demo::run(seed, stars) {
             Ok(report) => {
                 startrack_host::demo::print(&report);

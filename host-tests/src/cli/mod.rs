@@ -7,6 +7,7 @@ pub mod calib_build;
 pub mod figures;
 pub mod process;
 pub mod simulate;
+pub mod tradeoff;
 
 use crate::fits::FitsError;
 use crate::pipeline::PipelineError;

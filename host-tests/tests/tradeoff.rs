@@ -1,0 +1,205 @@
+//! `startrack tradeoff`'s logic: the Pareto frontier on hand-made points, the M7 cost table
+//! and its mapping to the methods, the run's determinism, and the command's bad inputs.
+
+use startrack_core::centroid::cog::CogPower;
+use startrack_host::accuracy::{Method, Noise};
+use startrack_host::figures::Written;
+use startrack_host::tradeoff::cost::{M7Table, m7_cost};
+use startrack_host::tradeoff::failures::{self, MapSpec, Perturb};
+use startrack_host::tradeoff::pareto::frontier;
+use startrack_host::tradeoff::{chart, write_failures};
+use std::process::Command;
+
+#[test]
+fn pareto_keeps_exactly_the_undominated_points() {
+    // (cost, error): b is cheaper and better than c; d costs more than a with the same error.
+    let pts = [
+        (1.0, 5.0),           // a: cheapest
+        (2.0, 2.0),           // b
+        (3.0, 3.0),           // c: dominated by b
+        (4.0, 5.0),           // d: dominated by a and b
+        (5.0, 1.0),           // e: most accurate
+        (5.0, 1.0),           // f: equal to e, neither dominates the other
+        (f64::NAN, 0.1),      // no cost: never on it, dominates nothing
+        (0.5, f64::INFINITY), // no error: never on it
+    ];
+    assert_eq!(
+        frontier(&pts),
+        vec![true, true, false, false, true, true, false, false]
+    );
+    assert!(frontier(&[]).is_empty());
+    assert_eq!(frontier(&[(3.0, 3.0)]), vec![true]);
+    // Equal cost, worse error: dominated.
+    assert_eq!(frontier(&[(1.0, 1.0), (1.0, 2.0)]), vec![true, false]);
+}
+
+fn table() -> M7Table {
+    M7Table::parse(
+        "# calibration comment\nstage,unit,instructions_per_unit\n\
+         centroid_cog1_5x5,star,1000\ncentroid_cog1_7x7,star,1960\n\
+         centroid_cog2_5x5,star,1100\ncentroid_cog2_7x7,star,2100\n\
+         centroid_cog1_given_bg_5x5,star,500\ncentroid_cog1_given_bg_7x7,star,980\n\
+         centroid_gauss_fit_5x5,star,50000\ncentroid_gauss_fit_7x7,star,90000\n",
+    )
+    .unwrap()
+}
+
+#[test]
+fn m7_costs_map_measured_extrapolated_and_estimated_stages() {
+    let t = table();
+    let cog = |power, box_side, corrected| Method::Cog {
+        power,
+        box_side,
+        corrected,
+    };
+    let (c, basis) = m7_cost(&cog(CogPower::One, 5, false), &t).unwrap();
+    assert_eq!((c, basis.as_str()), (500.0, "measured"));
+    // Linear in the pixel count: 500 + (980 - 500) / 24 * (9 - 25) = 180.
+    let (c, basis) = m7_cost(&cog(CogPower::One, 3, false), &t).unwrap();
+    assert!((c - 180.0).abs() < 1e-9, "{c}");
+    assert_eq!(basis, "extrapolated");
+    // Power 2 given: cog1_given_bg + (cog2 - cog1) = 980 + 140.
+    let (c, _) = m7_cost(&cog(CogPower::Two, 7, false), &t).unwrap();
+    assert!((c - 1120.0).abs() < 1e-9, "{c}");
+    // The correction is not counted: same as uncorrected, and said so.
+    let (c, basis) = m7_cost(&cog(CogPower::One, 5, true), &t).unwrap();
+    assert_eq!(c, 500.0);
+    assert_eq!(basis, "measured; correction not counted");
+    assert_eq!(
+        m7_cost(&Method::GaussFit { window: 7 }, &t).unwrap().0,
+        90000.0
+    );
+    // A stage missing from the table gives no cost.
+    assert!(m7_cost(&Method::Iwc, &t).is_none());
+}
+
+#[test]
+fn m7_parse_rejects_malformed_rows() {
+    assert!(M7Table::parse("").is_err());
+    assert!(M7Table::parse("stage,unit,instructions_per_unit\n").is_err());
+    let e = M7Table::parse("stage,unit,instructions_per_unit\na,star,12\nb,star\n").unwrap_err();
+    assert_eq!(e.line, 3);
+    assert!(M7Table::parse("a,star,abc\n").is_err());
+    assert!(M7Table::parse("a,star,-1\n").is_err());
+    assert!(M7Table::parse("a,star,NaN\n").is_err());
+}
+
+#[test]
+fn committed_m7_costs_cover_every_method() {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/m7-costs.csv"))
+        .expect("host-tests/m7-costs.csv (cargo m7-bench > host-tests/m7-costs.csv)");
+    let t = M7Table::parse(&text).unwrap();
+    for m in Method::all() {
+        let (c, _) = m7_cost(&m, &t).unwrap_or_else(|| panic!("{} has no M7 cost", m.name()));
+        assert!(c > 0.0, "{}: {c}", m.name());
+    }
+    // The Gauss fit is the most expensive per star, a given-background CoG 3x3 the cheapest.
+    let costs: Vec<f64> = Method::all()
+        .iter()
+        .map(|m| m7_cost(m, &t).unwrap().0)
+        .collect();
+    let fit = m7_cost(&Method::GaussFit { window: 7 }, &t).unwrap().0;
+    assert!(costs.iter().all(|&c| c <= fit));
+}
+
+/// A small run of both outputs into `dir`.
+fn small_run(dir: &std::path::Path) {
+    let methods = vec![
+        Method::Cog {
+            power: CogPower::One,
+            box_side: 5,
+            corrected: true,
+        },
+        Method::Iwc,
+        Method::GaussFit { window: 5 },
+    ];
+    let noise = Noise {
+        trials: 60,
+        ..Noise::default()
+    };
+    let costs = chart::costs(&methods, &table(), 0);
+    let rows = chart::rows(&methods, &costs, &noise, || {});
+    let mut w = Written::default();
+    chart::write(dir, &rows, &methods, &noise, "test table", &mut w).unwrap();
+    let spec = MapSpec {
+        grid_snr: vec![3.0, 30.0],
+        grid_a_px: vec![0.5, 1.5],
+        sweeps: vec![
+            Perturb::Dsnu(0.2),
+            Perturb::HotPixel(300.0),
+            Perturb::Telegraph(300.0),
+            Perturb::Saturation(2.0),
+            Perturb::Edge(0),
+            Perturb::Pair(2.0),
+        ],
+        trials: 40,
+        ..MapSpec::new(true)
+    };
+    let cells = failures::run(&methods, &spec, || {});
+    write_failures(dir, &methods, &spec, &cells, &mut w).unwrap();
+}
+
+#[test]
+fn two_runs_write_identical_csvs() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    small_run(a.path());
+    small_run(b.path());
+    for name in ["tradeoff.csv", "failures.csv"] {
+        let x = std::fs::read_to_string(a.path().join(name)).unwrap();
+        let y = std::fs::read_to_string(b.path().join(name)).unwrap();
+        assert_eq!(x, y, "{name} differs between two runs");
+        // Every scene and method has a row: 12 chart cells x 3 methods; 10 scenes x 3.
+        let rows = x.lines().filter(|l| !l.starts_with('#')).count() - 1;
+        assert_eq!(rows, if name == "tradeoff.csv" { 36 } else { 30 }, "{name}");
+        // No field holds a comma: every line has as many fields as the column names.
+        let mut lines = x.lines().filter(|l| !l.starts_with('#'));
+        let fields = lines.next().unwrap().split(',').count();
+        for l in lines {
+            assert_eq!(l.split(',').count(), fields, "{name}: {l}");
+        }
+    }
+    // Without host timing the host_ns column is empty.
+    let t = std::fs::read_to_string(a.path().join("tradeoff.csv")).unwrap();
+    assert!(
+        t.lines()
+            .any(|l| l.starts_with("gauss fit 5x5,5,1,30,50000,perimeter bg + background fitted,,"))
+    );
+}
+
+fn startrack(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_startrack"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn bad_m7_file_is_a_one_line_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(
+        &bad,
+        "stage,unit,instructions_per_unit\ncentroid_x,star,many\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    for m7 in [bad.clone(), dir.path().join("missing.csv")] {
+        let (ok, stdout, stderr) = startrack(&[
+            "tradeoff",
+            "--out",
+            out.to_str().unwrap(),
+            "--m7",
+            m7.to_str().unwrap(),
+        ]);
+        assert!(!ok);
+        assert!(stdout.is_empty(), "{stdout}");
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(stderr.starts_with("startrack tradeoff: "), "{stderr}");
+    }
+    assert!(!out.exists(), "nothing is written on a bad M7 file");
+}
