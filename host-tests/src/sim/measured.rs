@@ -55,6 +55,41 @@ impl Simulator {
         (f64::from(raw) - bias) * self.params.gain_e_per_adu[usize::from(o)]
     }
 
+    /// Adds to `sum` (the active area, row-major) the electrons of each pixel of `region`
+    /// (clipped to the active area) in this frame, minus `minus_e(raw column, line)`:
+    /// `(raw - bias) * gain - minus_e`, the bias from the over-scan of each line as the core
+    /// measures it. `line` is scratch for a whole raw line. Fails where a line's levels cannot
+    /// be measured.
+    fn add_region_e(
+        &self,
+        region: Rect,
+        sum: &mut [f64],
+        line: &mut [u16],
+        minus_e: impl Fn(usize, usize) -> f64,
+    ) -> Result<(), LineError> {
+        let g = self.params.geometry;
+        let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+        for y in region.y0..region.y0.saturating_add(region.height) {
+            let y = usize::from(y);
+            if y >= rows {
+                break;
+            }
+            self.render_reference_line(y, line);
+            let lv = LineLevels::measure(&g, line)?;
+            for x in region.x0..region.x0.saturating_add(region.width) {
+                let x = usize::from(x);
+                if x >= cols {
+                    break;
+                }
+                let col = g.raw_col_of_x(x);
+                if let Some(v) = sum.get_mut(y * cols + x) {
+                    *v += self.electrons_of(self.raw_sample(col, y), col, &lv) - minus_e(col, y);
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The relative dark map measured from `frames` dark frames (frame numbers
     /// `first_frame ..`) of this sensor (its stars are ignored), over `region`, normalised to
     /// the mean of the covered pixels of `covered_lines`: the lines whose covered columns
@@ -92,24 +127,7 @@ impl Simulator {
                     }
                 }
             }
-            for y in region.y0..region.y0.saturating_add(region.height) {
-                let y = usize::from(y);
-                if y >= rows {
-                    break;
-                }
-                dark.render_reference_line(y, &mut line);
-                let lv = LineLevels::measure(&g, &line)?;
-                for x in region.x0..region.x0.saturating_add(region.width) {
-                    let x = usize::from(x);
-                    if x >= cols {
-                        break;
-                    }
-                    let col = g.raw_col_of_x(x);
-                    if let Some(v) = sum.get_mut(y * cols + x) {
-                        *v += dark.electrons_of(dark.raw_sample(col, y), col, &lv);
-                    }
-                }
-            }
+            dark.add_region_e(region, &mut sum, &mut line, |_, _| 0.0)?;
         }
         let covered_mean_sum = if covered_n == 0 {
             0.0
@@ -158,25 +176,9 @@ impl Simulator {
         );
         for k in 0..frames {
             lit.frame = first_frame.wrapping_add(k);
-            for y in region.y0..region.y0.saturating_add(region.height) {
-                let y = usize::from(y);
-                if y >= rows {
-                    break;
-                }
-                lit.render_reference_line(y, &mut line);
-                let lv = LineLevels::measure(&g, &line)?;
-                for x in region.x0..region.x0.saturating_add(region.width) {
-                    let x = usize::from(x);
-                    if x >= cols {
-                        break;
-                    }
-                    let col = g.raw_col_of_x(x);
-                    let dark = lit.expected_dark_e(col, y);
-                    if let Some(v) = sum.get_mut(y * cols + x) {
-                        *v += lit.electrons_of(lit.raw_sample(col, y), col, &lv) - dark;
-                    }
-                }
-            }
+            lit.add_region_e(region, &mut sum, &mut line, |col, y| {
+                lit.expected_dark_e(col, y)
+            })?;
         }
         let inside = |i: usize| region.contains((i % cols) as u16, (i / cols) as u16);
         let (mut tot, mut n) = (0.0, 0usize);
