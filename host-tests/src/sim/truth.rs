@@ -39,11 +39,12 @@ impl TruthSections {
 /// The mean of `f(x, y)` over each `2^tile_log2` square tile of `g`'s active area, row-major
 /// (the tiles of [`MapHeader::for_area`]), the last row and column of tiles clipped at the
 /// area's edges; a tile with no pixel (an empty area) gives 0. `tile_log2 = 0` gives `f` per
-/// pixel. Cost: one call of `f` per active pixel.
+/// pixel; above 16 it is taken as 16, as the table's header does. Cost: one call of `f` per
+/// active pixel.
 pub fn tile_means(g: &ReadoutGeometry, tile_log2: u8, f: &dyn Fn(usize, usize) -> f64) -> Vec<f64> {
     let header = MapHeader::for_area(g.active_cols, g.active_rows, tile_log2);
     let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
-    let t = 1usize << tile_log2;
+    let t = 1usize << header.tile_log2;
     let (tx, ty) = (usize::from(header.tiles_x), usize::from(header.tiles_y));
     (0..ty * tx)
         .map(|i| {
