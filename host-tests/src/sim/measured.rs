@@ -33,6 +33,37 @@ pub struct MeasuredMap {
     pub frames: u32,
 }
 
+impl MeasuredMap {
+    /// The map of per-pixel sums `sum` (the active area, row-major, `cols` wide):
+    /// `value(sum)` inside `region`, 1 (no correction) outside it and where `value` gives
+    /// `None`.
+    fn from_sums(
+        sum: &[f64],
+        cols: usize,
+        region: Rect,
+        frames: u32,
+        value: impl Fn(f64) -> Option<f64>,
+    ) -> Self {
+        let values = sum
+            .iter()
+            .enumerate()
+            .map(|(i, &s)| {
+                let (x, y) = ((i % cols) as u16, (i / cols) as u16);
+                region
+                    .contains(x, y)
+                    .then(|| value(s))
+                    .flatten()
+                    .unwrap_or(1.0)
+            })
+            .collect();
+        Self {
+            values,
+            region,
+            frames,
+        }
+    }
+}
+
 impl Simulator {
     /// Fills `out` (a whole raw line) with only the over-scan and covered elements of `line`
     /// rendered, zeros elsewhere: what the core's levels need, at 48 samples instead of 1072.
@@ -134,23 +165,9 @@ impl Simulator {
         } else {
             covered_sum / covered_n as f64 * f64::from(frames)
         };
-        let values = sum
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                let (x, y) = ((i % cols) as u16, (i / cols) as u16);
-                if region.contains(x, y) && covered_mean_sum > 0.0 {
-                    s / covered_mean_sum
-                } else {
-                    1.0
-                }
-            })
-            .collect();
-        Ok(MeasuredMap {
-            values,
-            region,
-            frames,
-        })
+        Ok(MeasuredMap::from_sums(&sum, cols, region, frames, |s| {
+            (covered_mean_sum > 0.0).then(|| s / covered_mean_sum)
+        }))
     }
 
     /// The inverse flat map measured from `frames` uniformly lit frames of `level_e` e- per
@@ -189,21 +206,8 @@ impl Simulator {
             }
         }
         let mean = if n == 0 { 0.0 } else { tot / n as f64 };
-        let values = sum
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                if inside(i) && *s > 0.0 && mean > 0.0 {
-                    mean / s
-                } else {
-                    1.0
-                }
-            })
-            .collect();
-        Ok(MeasuredMap {
-            values,
-            region,
-            frames,
-        })
+        Ok(MeasuredMap::from_sums(&sum, cols, region, frames, |s| {
+            (s > 0.0 && mean > 0.0).then(|| mean / s)
+        }))
     }
 }

@@ -165,29 +165,32 @@ impl Simulator {
         })
     }
 
+    /// `f(x, y, raw column)` over the active area row by row, its `Some`s in that order
+    /// (sorted by (y, x)). Cost: one call of `f` per active pixel.
+    fn scan_active<T>(&self, f: impl Fn(u16, u16, usize) -> Option<T>) -> Vec<T> {
+        let g = self.params.geometry;
+        (0..g.active_rows)
+            .flat_map(|y| (0..g.active_cols).map(move |x| (x, y)))
+            .filter_map(|(x, y)| f(x, y, g.raw_col_of_x(usize::from(x))))
+            .collect()
+    }
+
     /// The true hot pixels of the active area, sorted by (y, x), with the `Correct` policy
     /// (empty when hot pixels are off). Scans every active pixel once.
     pub fn hot_pixels_truth(&self) -> Vec<HotPixel> {
         let Some(h) = self.params.effects.hot else {
             return Vec::new();
         };
-        let g = self.params.geometry;
-        let mut out = Vec::new();
-        for y in 0..g.active_rows {
-            for x in 0..g.active_cols {
-                let col = g.raw_col_of_x(usize::from(x));
-                if let Some(rate) = self.hot_rate_e_per_s(col, usize::from(y)) {
-                    out.push(HotPixel {
-                        x,
-                        y,
-                        rate_e_per_s: ERatePerS::saturating_from_num(rate),
-                        doubling_k: U8F8::saturating_from_num(h.doubling_k),
-                        policy: HotPolicy::Correct,
-                    });
-                }
-            }
-        }
-        out
+        self.scan_active(|x, y, col| {
+            self.hot_rate_e_per_s(col, usize::from(y))
+                .map(|rate| HotPixel {
+                    x,
+                    y,
+                    rate_e_per_s: ERatePerS::saturating_from_num(rate),
+                    doubling_k: U8F8::saturating_from_num(h.doubling_k),
+                    policy: HotPolicy::Correct,
+                })
+        })
     }
 
     /// The true telegraph pixels of the active area (x, y), sorted by (y, x) (empty when
@@ -196,17 +199,7 @@ impl Simulator {
         if self.params.effects.telegraph.is_none() {
             return Vec::new();
         }
-        let g = self.params.geometry;
-        let mut out = Vec::new();
-        for y in 0..g.active_rows {
-            for x in 0..g.active_cols {
-                let col = g.raw_col_of_x(usize::from(x));
-                if self.telegraph_step_e(col, usize::from(y)).is_some() {
-                    out.push((x, y));
-                }
-            }
-        }
-        out
+        self.scan_active(|x, y, col| self.telegraph_step_e(col, usize::from(y)).map(|_| (x, y)))
     }
 }
 
