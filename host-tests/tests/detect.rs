@@ -126,9 +126,10 @@ fn hot_and_telegraph_pixels_never_detect() {
     );
 }
 
-#[test]
-fn full_list_keeps_the_brightest_and_counts_the_rest() {
-    let stars: Vec<(f64, f64, f64)> = (0..10)
+/// Ten separated stars (x px, y px, flux e-) on a diagonal, fluxes 2000..20000 e-: more
+/// than a 4-entry list holds, each brighter than the last.
+fn ten_stars() -> Vec<(f64, f64, f64)> {
+    (0..10)
         .map(|i| {
             (
                 20.0 + 22.0 * f64::from(i),
@@ -136,7 +137,12 @@ fn full_list_keeps_the_brightest_and_counts_the_rest() {
                 2000.0 * f64::from(i + 1),
             )
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn full_list_keeps_the_brightest_and_counts_the_rest() {
+    let stars = ten_stars();
     let d = run::<4>(&synthetic(&stars, 3), &|_, _| PixelFlags::empty());
     assert_eq!(d.dropped(), 6);
     let mut fluxes: Vec<f32> = d.candidates().iter().map(|c| c.flux_e).collect();
@@ -330,15 +336,7 @@ proptest! {
 /// line after the blob's rows), and `finish_closed` the rest: together, the final list.
 #[test]
 fn closed_candidates_are_reported_once_when_their_blob_ends() {
-    let stars: Vec<(f64, f64, f64)> = (0..10)
-        .map(|i| {
-            (
-                20.0 + 22.0 * f64::from(i),
-                20.0 + 9.0 * f64::from(i),
-                2000.0 * f64::from(i + 1),
-            )
-        })
-        .collect();
+    let stars = ten_stars();
     let lines = synthetic(&stars, 3);
     let flags = vec![PixelFlags::empty(); usize::from(W)];
     for capacity_limited in [false, true] {

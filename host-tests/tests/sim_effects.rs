@@ -1,6 +1,6 @@
 //! The simulator's optional physics (`sim::effects`) and measured maps (`sim::measured`):
-//! each effect does what it says, and with every effect on a window rendered alone still
-//! equals the same pixels of full-frame lines, bit for bit.
+//! each effect does what it says, and a window rendered alone equals the same pixels of
+//! full-frame lines, bit for bit, with no effect and with every effect on.
 //!
 //! Statistical checks state their tolerance from the number of draws: a proportion q over n
 //! draws within 5 binomial standard errors `sqrt(q (1 - q) / n)`; a noise RMS over n pixels
@@ -10,6 +10,7 @@ use startrack_core::window::Rect;
 use startrack_host::sim::effects::{
     CosmicRays, Cti, DarkLaw, Effects, HotPixels, PsfShape, TelegraphPixels,
 };
+use startrack_host::sim::measured::MeasuredMap;
 use startrack_host::sim::{SensorParams, Simulator, Star};
 
 fn all_effects() -> Effects {
@@ -49,12 +50,66 @@ fn all_effects() -> Effects {
 }
 
 fn star(x: f64, y: f64) -> Star {
+    star_e(x, y, 80_000.0)
+}
+
+fn star_e(x: f64, y: f64, signal_e: f64) -> Star {
     Star {
         x_px: x,
         y_px: y,
-        signal_e: 80_000.0,
+        signal_e,
         a_px: 1.5,
     }
+}
+
+/// `rect` rendered alone equals the same pixels of whole rendered lines, bit for bit, and a
+/// rerun gives the same samples; `what` names the case in a failure.
+fn assert_window_equals_lines(sim: &Simulator, rect: Rect, what: &str) {
+    let g = sim.params.geometry;
+    let win = sim.render_window(rect);
+    let mut line = vec![0u16; g.line_len()];
+    for r in 0..rect.height {
+        sim.render_line(usize::from(rect.y0 + r), &mut line);
+        for c in 0..rect.width {
+            let x = usize::from(rect.x0 + c);
+            assert_eq!(
+                win[usize::from(r * rect.width + c)],
+                line[g.raw_col_of_x(x)],
+                "{what} ({x}, {})",
+                rect.y0 + r
+            );
+        }
+    }
+    assert_eq!(win, sim.render_window(rect), "{what}: rerun");
+}
+
+/// RMS of `m`'s values minus `truth(x, y)` over its region (row by row), and the number of
+/// pixels.
+fn rms_against_truth(
+    m: &MeasuredMap,
+    active_cols: usize,
+    truth: impl Fn(usize, usize) -> f64,
+) -> (f64, usize) {
+    let r = m.region;
+    let (mut sq, mut n) = (0.0, 0usize);
+    for y in r.y0..r.y0 + r.height {
+        for x in r.x0..r.x0 + r.width {
+            let (x, y) = (usize::from(x), usize::from(y));
+            sq += (m.values[y * active_cols + x] - truth(x, y)).powi(2);
+            n += 1;
+        }
+    }
+    ((sq / n as f64).sqrt(), n)
+}
+
+/// A noise RMS measured over `n` pixels is within 5 relative standard errors
+/// `1 / sqrt(2 n)` of `expect`.
+fn assert_rms_near(rms: f64, expect: f64, n: usize) {
+    let tol = 5.0 / (2.0 * n as f64).sqrt();
+    assert!(
+        (rms / expect - 1.0).abs() < tol,
+        "rms {rms} expected {expect}"
+    );
 }
 
 #[test]
@@ -84,29 +139,34 @@ fn window_equals_full_frame_with_every_effect_on() {
                 vec![star(6.3, 20.2), star(12.0, 14.5), star(3.0, 31.0)],
             )
         };
-        let g = sim.params.geometry;
         let rect = Rect {
             x0: 0,
             y0: 12,
             width: 17,
             height: 16,
         };
-        let win = sim.render_window(rect);
-        let mut line = vec![0u16; g.line_len()];
-        for r in 0..rect.height {
-            sim.render_line(usize::from(rect.y0 + r), &mut line);
-            for c in 0..rect.width {
-                let x = usize::from(rect.x0 + c);
-                assert_eq!(
-                    win[usize::from(r * rect.width + c)],
-                    line[g.raw_col_of_x(x)],
-                    "{psf:?} ({x}, {})",
-                    rect.y0 + r
-                );
-            }
-        }
-        assert_eq!(win, sim.render_window(rect));
+        assert_window_equals_lines(&sim, rect, &format!("{psf:?}"));
     }
+}
+
+/// Moved here from a unit test of `sim/render.rs`, which repeated the check of
+/// [`assert_window_equals_lines`].
+#[test]
+fn window_equals_full_lines() {
+    let sim = Simulator::new(SensorParams::default(), vec![star_e(510.3, 20.7, 50_000.0)]);
+    let rect = Rect {
+        x0: 505,
+        y0: 16,
+        width: 11,
+        height: 9,
+    };
+    assert_window_equals_lines(&sim, rect, "no effects");
+    // Another frame gives other noise.
+    let next = Simulator {
+        frame: 1,
+        ..sim.clone()
+    };
+    assert_ne!(sim.render_window(rect), next.render_window(rect));
 }
 
 #[test]
@@ -364,28 +424,15 @@ fn measured_dark_map_has_the_noise_of_its_frames() {
         .measure_dark_map(frames, 1000, region, 0..usize::from(g.lines))
         .unwrap();
     let norm = sim.covered_dark_mean();
-    let mut sq = 0.0;
-    let mut n = 0usize;
-    for y in region.y0..region.y0 + region.height {
-        for x in region.x0..region.x0 + region.width {
-            let (x, y) = (usize::from(x), usize::from(y));
-            let truth = sim.dark_rel(g.raw_col_of_x(x), y) / norm;
-            let v = m.values[y * usize::from(g.active_cols) + x];
-            sq += (v - truth).powi(2);
-            n += 1;
-        }
-    }
-    let rms = (sq / n as f64).sqrt();
+    let (rms, n) = rms_against_truth(&m, usize::from(g.active_cols), |x, y| {
+        sim.dark_rel(g.raw_col_of_x(x), y) / norm
+    });
     // Dark shot noise + read noise per frame, and ADC rounding (gain^2 / 12), over N frames,
     // relative to the mean dark.
     let d = sim.params.dark_mean_e;
     let gain = 1.5f64;
     let expect = ((d + 25.0 + gain * gain / 12.0) / f64::from(frames)).sqrt() / d;
-    let tol = 5.0 / (2.0 * n as f64).sqrt();
-    assert!(
-        (rms / expect - 1.0).abs() < tol,
-        "rms {rms} expected {expect}"
-    );
+    assert_rms_near(rms, expect, n);
     // Outside the region: no correction.
     assert_eq!(m.values[0], 1.0);
 }
@@ -406,8 +453,6 @@ fn measured_flat_map_recovers_the_prnu() {
     };
     let (frames, level) = (8, 20_000.0);
     let m = sim.measure_flat_inv_map(frames, 50, level, region).unwrap();
-    let mut sq = 0.0;
-    let mut n = 0usize;
     let mut mean_flat = 0.0;
     for y in 100..140 {
         for x in 600..640 {
@@ -415,23 +460,13 @@ fn measured_flat_map_recovers_the_prnu() {
         }
     }
     mean_flat /= 1600.0;
-    for y in 100..140usize {
-        for x in 600..640usize {
-            let truth = mean_flat / sim.flat(x, y);
-            let v = m.values[y * usize::from(g.active_cols) + x];
-            sq += (v - truth).powi(2);
-            n += 1;
-        }
-    }
-    let rms = (sq / n as f64).sqrt();
+    let (rms, n) = rms_against_truth(&m, usize::from(g.active_cols), |x, y| {
+        mean_flat / sim.flat(x, y)
+    });
     // Photon + read noise over N frames at the level; far below the 2 % PRNU.
     let expect = ((level + 25.0 + 250.0) / f64::from(frames)).sqrt() / level;
-    let tol = 5.0 / (2.0 * n as f64).sqrt();
     eprintln!("flat map rms {rms} expected {expect}");
-    assert!(
-        (rms / expect - 1.0).abs() < tol,
-        "rms {rms} expected {expect}"
-    );
+    assert_rms_near(rms, expect, n);
     assert!(rms < 0.02 / 5.0);
 }
 

@@ -2,7 +2,7 @@
 //! image size `a` (0.25..8 px, log scale), for 3x3, 5x5 and 7x7 boxes. The paper finds a
 //! minimum (pixelisation below, truncation above); for the 5x5 box it lies near a ~ 1 px.
 
-use super::{Effort, FigureError, Written, csv, log_space, plot, systematic};
+use super::{Effort, FigureError, FigureFiles, Written, log_space, plot, systematic};
 use std::path::Path;
 
 /// One point of Figure 1 or 4.
@@ -70,41 +70,26 @@ pub fn write_rms_figure(
         .iter()
         .map(|r| format!("{:.6},{},{:.6e}", r.a_px, r.window, r.rms_px))
         .collect();
-    csv::write_csv(
-        out,
-        &format!("fig{fig}.csv"),
-        &header,
-        "a_px,window,rms_px",
-        &lines,
-        written,
-    )?;
-    let series: Vec<plot::Series> = WINDOWS
-        .iter()
-        .enumerate()
-        .map(|(i, &w)| {
-            plot::Series::solid(
-                format!("{w}x{w} box"),
-                rows.iter()
-                    .filter(|r| r.window == w && r.rms_px > 0.0)
-                    .map(|r| (r.a_px, r.rms_px))
-                    .collect(),
-                i,
-            )
-        })
-        .collect();
-    plot::lines(
-        out,
-        &format!("fig{fig}.png"),
-        &plot::Chart {
+    FigureFiles {
+        number: fig,
+        header,
+        columns: "a_px,window,rms_px",
+        rows: lines,
+        chart: plot::Chart {
             title: format!("Fig. {fig}: CoG power {power}, systematic error vs image size"),
             x_label: "a, px (80 % radius)".into(),
             y_label: "RMS shift, px".into(),
             log_x: true,
             log_y: true,
         },
-        &series,
-        written,
-    )
+        series: plot::solid_per_key(
+            &WINDOWS,
+            |w| format!("{w}x{w} box"),
+            &rows,
+            |r, w| (r.window == w && r.rms_px > 0.0).then_some((r.a_px, r.rms_px)),
+        ),
+    }
+    .write(out, written)
 }
 
 /// Writes fig1.csv and fig1.png.

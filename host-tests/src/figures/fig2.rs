@@ -2,7 +2,7 @@
 //! position inside the central pixel (y at the pixel centre), 5x5 box, large images: the box
 //! truncates the wings and pulls the estimate towards the box centre.
 
-use super::{Effort, FigureError, Written, csv, plot, systematic};
+use super::{Effort, FigureError, FigureFiles, Written, plot, systematic};
 use std::path::Path;
 
 /// One point of Figure 2 or 3.
@@ -74,41 +74,26 @@ pub fn write_shift_figure(
         .iter()
         .map(|r| format!("{},{:.6},{:.6e}", r.a_px, r.true_x_px, r.shift_px))
         .collect();
-    csv::write_csv(
-        out,
-        &format!("fig{fig}.csv"),
-        &header,
-        "a_px,true_x_px,shift_px",
-        &lines,
-        written,
-    )?;
-    let series: Vec<plot::Series> = a_values
-        .iter()
-        .enumerate()
-        .map(|(i, &a)| {
-            plot::Series::solid(
-                format!("a = {a} px"),
-                rows.iter()
-                    .filter(|r| r.a_px == a)
-                    .map(|r| (r.true_x_px, r.shift_px))
-                    .collect(),
-                i,
-            )
-        })
-        .collect();
-    plot::lines(
-        out,
-        &format!("fig{fig}.png"),
-        &plot::Chart {
+    FigureFiles {
+        number: fig,
+        header,
+        columns: "a_px,true_x_px,shift_px",
+        rows: lines,
+        chart: plot::Chart {
             title: format!("Fig. {fig}: CoG shift, {what} images, 5x5 box"),
             x_label: "true position in the central pixel, px".into(),
             y_label: "shift, px".into(),
             log_x: false,
             log_y: false,
         },
-        &series,
-        written,
-    )
+        series: plot::solid_per_key(
+            a_values,
+            |a| format!("a = {a} px"),
+            &rows,
+            |r, a| (r.a_px == a).then_some((r.true_x_px, r.shift_px)),
+        ),
+    }
+    .write(out, written)
 }
 
 /// Writes fig2.csv and fig2.png.

@@ -35,7 +35,7 @@
 //! `DARK_LINES` lines);
 //! the measured maps cost `dark_frames x 128^2` samples per DSNU value.
 
-use super::{Effort, FigureError, Written, csv, plot};
+use super::{Effort, FigureError, FigureFiles, Written, plot};
 use crate::sim::{SensorParams, Simulator, Star};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::{RngExt, SeedableRng};
@@ -431,44 +431,50 @@ pub fn write(out: &Path, res: &Fig5Result, written: &mut Written) -> Result<(), 
         0,
         "Figure 5: centroid error against dark non-uniformity".into(),
     );
-    csv::write_csv(
-        out,
-        "fig5.csv",
-        &header,
-        "snr0,dsnu,power,method,rms_px,detect_rate",
-        &lines,
-        written,
-    )?;
-    // Colour: SNR and power; solid: the paper's perimeter; dashed: our precalc.
-    let mut series = Vec::new();
-    for method in [Method::Perimeter, Method::Precalc] {
-        for (si, &snr0) in res.params.snr0.iter().enumerate() {
-            for power in [1u8, 2] {
-                series.push(plot::Series {
-                    label: format!("SNR {snr0}, pow {power}, {}", method.name()),
-                    points: res
-                        .points
-                        .iter()
-                        .filter(|q| q.method == method && q.snr0 == snr0 && q.power == power)
-                        .map(|q| (q.dsnu, q.rms_px))
-                        .collect(),
-                    color: 2 * si + usize::from(power - 1),
-                    dashed: method == Method::Precalc,
-                });
-            }
-        }
-    }
-    plot::lines(
-        out,
-        "fig5.png",
-        &plot::Chart {
+    FigureFiles {
+        number: 5,
+        header,
+        columns: "snr0,dsnu,power,method,rms_px,detect_rate",
+        rows: lines,
+        chart: plot::Chart {
             title: "Fig. 5: position error vs DSNU (perimeter = paper, precalc = ours)".into(),
             x_label: "DSNU (dark sigma / mean)".into(),
             y_label: "RMS error, px".into(),
             log_x: false,
             log_y: true,
         },
-        &series,
-        written,
-    )
+        series: dsnu_series(res, &[1, 2], |q| q.rms_px),
+    }
+    .write(out, written)
+}
+
+/// The curves of Figures 5 and 6: `y` of each point against its DSNU, one curve per
+/// (method, SNR, CoG power in `powers`), in that nesting order. Colour: SNR and power;
+/// solid: the paper's perimeter; dashed: our precalc. The power is in the label only when
+/// `powers` has more than one.
+pub fn dsnu_series(res: &Fig5Result, powers: &[u8], y: fn(&Fig5Point) -> f64) -> Vec<plot::Series> {
+    let mut series = Vec::new();
+    for method in [Method::Perimeter, Method::Precalc] {
+        for (si, &snr0) in res.params.snr0.iter().enumerate() {
+            for (pi, &power) in powers.iter().enumerate() {
+                let label = if powers.len() > 1 {
+                    format!("SNR {snr0}, pow {power}, {}", method.name())
+                } else {
+                    format!("SNR {snr0}, {}", method.name())
+                };
+                series.push(plot::Series {
+                    label,
+                    points: res
+                        .points
+                        .iter()
+                        .filter(|q| q.method == method && q.snr0 == snr0 && q.power == power)
+                        .map(|q| (q.dsnu, y(q)))
+                        .collect(),
+                    color: powers.len() * si + pi,
+                    dashed: method == Method::Precalc,
+                });
+            }
+        }
+    }
+    series
 }

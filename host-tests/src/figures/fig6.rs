@@ -1,8 +1,8 @@
 //! Figure 6: detection probability (measured SNR > 3) against DSNU, from the same trials as
 //! Figure 5 (power 1; the detection does not depend on the power).
 
-use super::fig5::{Fig5Result, Method, header};
-use super::{FigureError, Written, csv, plot};
+use super::fig5::{Fig5Result, dsnu_series, header};
+use super::{FigureError, FigureFiles, Written, plot};
 use std::path::Path;
 
 /// Writes fig6.csv and fig6.png.
@@ -25,41 +25,19 @@ pub fn write(out: &Path, res: &Fig5Result, written: &mut Written) -> Result<(), 
         0,
         "Figure 6: detection probability against dark non-uniformity".into(),
     );
-    csv::write_csv(
-        out,
-        "fig6.csv",
-        &h,
-        "snr0,dsnu,method,detect_rate",
-        &lines,
-        written,
-    )?;
-    // Colour: SNR; solid: the paper's perimeter; dashed: our precalc.
-    let mut series = Vec::new();
-    for method in [Method::Perimeter, Method::Precalc] {
-        for (si, &snr0) in res.params.snr0.iter().enumerate() {
-            series.push(plot::Series {
-                label: format!("SNR {snr0}, {}", method.name()),
-                points: pts
-                    .iter()
-                    .filter(|q| q.method == method && q.snr0 == snr0)
-                    .map(|q| (q.dsnu, q.detect_rate))
-                    .collect(),
-                color: si,
-                dashed: method == Method::Precalc,
-            });
-        }
-    }
-    plot::lines(
-        out,
-        "fig6.png",
-        &plot::Chart {
+    FigureFiles {
+        number: 6,
+        header: h,
+        columns: "snr0,dsnu,method,detect_rate",
+        rows: lines,
+        chart: plot::Chart {
             title: "Fig. 6: detection probability vs DSNU".into(),
             x_label: "DSNU (dark sigma / mean)".into(),
             y_label: "P(measured SNR > 3)".into(),
             log_x: false,
             log_y: false,
         },
-        &series,
-        written,
-    )
+        series: dsnu_series(res, &[1], |q| q.detect_rate),
+    }
+    .write(out, written)
 }

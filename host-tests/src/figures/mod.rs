@@ -59,6 +59,46 @@ impl std::fmt::Display for FigureError {
 
 impl std::error::Error for FigureError {}
 
+/// One figure's two files: `fig{number}.csv` (the rows under their `#` header and column
+/// names, [`csv::write_csv`]) and `fig{number}.png` (the chart of `series`, [`plot::lines`]).
+#[derive(Clone, Debug)]
+pub struct FigureFiles {
+    /// The figure's number in the paper.
+    pub number: u8,
+    /// The CSV's parameter header, one comment line each.
+    pub header: Vec<String>,
+    /// The CSV's column names, comma-separated.
+    pub columns: &'static str,
+    /// The CSV's rows, comma-separated.
+    pub rows: Vec<String>,
+    /// The PNG's texts and axes.
+    pub chart: plot::Chart,
+    /// The PNG's curves.
+    pub series: Vec<plot::Series>,
+}
+
+impl FigureFiles {
+    /// Writes the CSV, then the PNG, into `out` (a missing font skips only the PNG).
+    pub fn write(&self, out: &Path, written: &mut Written) -> Result<(), FigureError> {
+        let n = self.number;
+        csv::write_csv(
+            out,
+            &format!("fig{n}.csv"),
+            &self.header,
+            self.columns,
+            &self.rows,
+            written,
+        )?;
+        plot::lines(
+            out,
+            &format!("fig{n}.png"),
+            &self.chart,
+            &self.series,
+            written,
+        )
+    }
+}
+
 /// Writes fig1..fig6 (CSV and PNG) into `out`, creating it; `progress` shows a progress bar
 /// on the Monte Carlo figures.
 pub fn run_all(out: &Path, effort: Effort, progress: bool) -> Result<Written, FigureError> {

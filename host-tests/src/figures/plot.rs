@@ -43,6 +43,26 @@ impl Series {
     }
 }
 
+/// One solid curve per key of `keys`, coloured in their order, labelled `label(key)`: the
+/// points `point(row, key)` of `rows`, in row order (`None`: the row is not on that curve).
+pub fn solid_per_key<R, K: Copy>(
+    keys: &[K],
+    label: impl Fn(K) -> String,
+    rows: &[R],
+    point: impl Fn(&R, K) -> Option<(f64, f64)>,
+) -> Vec<Series> {
+    keys.iter()
+        .enumerate()
+        .map(|(i, &k)| {
+            Series::solid(
+                label(k),
+                rows.iter().filter_map(|r| point(r, k)).collect(),
+                i,
+            )
+        })
+        .collect()
+}
+
 /// Distinct colours that read on white.
 const PALETTE: [RGBColor; 8] = [
     RGBColor(0x1f, 0x77, 0xb4),

@@ -33,6 +33,37 @@ pub struct MeasuredMap {
     pub frames: u32,
 }
 
+impl MeasuredMap {
+    /// The map of per-pixel sums `sum` (the active area, row-major, `cols` wide):
+    /// `value(sum)` inside `region`, 1 (no correction) outside it and where `value` gives
+    /// `None`.
+    fn from_sums(
+        sum: &[f64],
+        cols: usize,
+        region: Rect,
+        frames: u32,
+        value: impl Fn(f64) -> Option<f64>,
+    ) -> Self {
+        let values = sum
+            .iter()
+            .enumerate()
+            .map(|(i, &s)| {
+                let (x, y) = ((i % cols) as u16, (i / cols) as u16);
+                region
+                    .contains(x, y)
+                    .then(|| value(s))
+                    .flatten()
+                    .unwrap_or(1.0)
+            })
+            .collect();
+        Self {
+            values,
+            region,
+            frames,
+        }
+    }
+}
+
 impl Simulator {
     /// Fills `out` (a whole raw line) with only the over-scan and covered elements of `line`
     /// rendered, zeros elsewhere: what the core's levels need, at 48 samples instead of 1072.
@@ -56,6 +87,41 @@ impl Simulator {
         let Output(o) = g.output_of_col(col);
         let bias = levels.bias(Output(o)).to_num::<f64>() + self.column_bias_adu(col);
         (f64::from(raw) - bias) * self.params.gain_e_per_adu[usize::from(o)]
+    }
+
+    /// Adds to `sum` (the active area, row-major) the electrons of each pixel of `region`
+    /// (clipped to the active area) in this frame, minus `minus_e(raw column, line)`:
+    /// `(raw - bias) * gain - minus_e`, the bias from the over-scan of each line as the core
+    /// measures it. `line` is scratch for a whole raw line. Fails where a line's levels cannot
+    /// be measured.
+    fn add_region_e(
+        &self,
+        region: Rect,
+        sum: &mut [f64],
+        line: &mut [u16],
+        minus_e: impl Fn(usize, usize) -> f64,
+    ) -> Result<(), LineError> {
+        let g = self.params.geometry;
+        let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+        for y in region.y0..region.y0.saturating_add(region.height) {
+            let y = usize::from(y);
+            if y >= rows {
+                break;
+            }
+            self.render_reference_line(y, line);
+            let lv = LineLevels::measure(&g, line)?;
+            for x in region.x0..region.x0.saturating_add(region.width) {
+                let x = usize::from(x);
+                if x >= cols {
+                    break;
+                }
+                let col = g.raw_col_of_x(x);
+                if let Some(v) = sum.get_mut(y * cols + x) {
+                    *v += self.electrons_of(self.raw_sample(col, y), col, &lv) - minus_e(col, y);
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The relative dark map measured from `frames` dark frames (frame numbers
@@ -95,47 +161,16 @@ impl Simulator {
                     }
                 }
             }
-            for y in region.y0..region.y0.saturating_add(region.height) {
-                let y = usize::from(y);
-                if y >= rows {
-                    break;
-                }
-                dark.render_reference_line(y, &mut line);
-                let lv = LineLevels::measure(&g, &line)?;
-                for x in region.x0..region.x0.saturating_add(region.width) {
-                    let x = usize::from(x);
-                    if x >= cols {
-                        break;
-                    }
-                    let col = g.raw_col_of_x(x);
-                    if let Some(v) = sum.get_mut(y * cols + x) {
-                        *v += dark.electrons_of(dark.raw_sample(col, y), col, &lv);
-                    }
-                }
-            }
+            dark.add_region_e(region, &mut sum, &mut line, |_, _| 0.0)?;
         }
         let covered_mean_sum = if covered_n == 0 {
             0.0
         } else {
             covered_sum / covered_n as f64 * f64::from(frames)
         };
-        let values = sum
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                let (x, y) = ((i % cols) as u16, (i / cols) as u16);
-                if region.contains(x, y) && covered_mean_sum > 0.0 {
-                    s / covered_mean_sum
-                } else {
-                    1.0
-                }
-            })
-            .collect();
-        Ok(MeasuredMap {
-            values,
-            region,
-            frames,
-        })
+        Ok(MeasuredMap::from_sums(&sum, cols, region, frames, |s| {
+            (covered_mean_sum > 0.0).then(|| s / covered_mean_sum)
+        }))
     }
 
     /// The inverse flat map measured from `frames` uniformly lit frames of `level_e` e- per
@@ -161,25 +196,9 @@ impl Simulator {
         );
         for k in 0..frames {
             lit.frame = first_frame.wrapping_add(k);
-            for y in region.y0..region.y0.saturating_add(region.height) {
-                let y = usize::from(y);
-                if y >= rows {
-                    break;
-                }
-                lit.render_reference_line(y, &mut line);
-                let lv = LineLevels::measure(&g, &line)?;
-                for x in region.x0..region.x0.saturating_add(region.width) {
-                    let x = usize::from(x);
-                    if x >= cols {
-                        break;
-                    }
-                    let col = g.raw_col_of_x(x);
-                    let dark = lit.expected_dark_e(col, y);
-                    if let Some(v) = sum.get_mut(y * cols + x) {
-                        *v += lit.electrons_of(lit.raw_sample(col, y), col, &lv) - dark;
-                    }
-                }
-            }
+            lit.add_region_e(region, &mut sum, &mut line, |col, y| {
+                lit.expected_dark_e(col, y)
+            })?;
         }
         let inside = |i: usize| region.contains((i % cols) as u16, (i / cols) as u16);
         let (mut tot, mut n) = (0.0, 0usize);
@@ -190,21 +209,8 @@ impl Simulator {
             }
         }
         let mean = if n == 0 { 0.0 } else { tot / n as f64 };
-        let values = sum
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                if inside(i) && *s > 0.0 && mean > 0.0 {
-                    mean / s
-                } else {
-                    1.0
-                }
-            })
-            .collect();
-        Ok(MeasuredMap {
-            values,
-            region,
-            frames,
-        })
+        Ok(MeasuredMap::from_sums(&sum, cols, region, frames, |s| {
+            (s > 0.0 && mean > 0.0).then(|| mean / s)
+        }))
     }
 }

@@ -3,7 +3,7 @@
 
 use super::render::Simulator;
 use fixed::types::U8F8;
-use startrack_core::geometry::Segment;
+use startrack_core::geometry::{ReadoutGeometry, Segment};
 use startrack_core::table::{
     HotPixel, HotPolicy, MapHeader, MapSpec, TableSpec, WriteError, write_table,
 };
@@ -36,7 +36,58 @@ impl TruthSections {
     };
 }
 
+/// The mean of `f(x, y)` over each `2^tile_log2` square tile of `g`'s active area, row-major
+/// (the tiles of [`MapHeader::for_area`]), the last row and column of tiles clipped at the
+/// area's edges; a tile with no pixel (an empty area) gives 0. `tile_log2 = 0` gives `f` per
+/// pixel; above 16 it is taken as 16, as the table's header does. Cost: one call of `f` per
+/// active pixel.
+pub fn tile_means(g: &ReadoutGeometry, tile_log2: u8, f: &dyn Fn(usize, usize) -> f64) -> Vec<f64> {
+    let header = MapHeader::for_area(g.active_cols, g.active_rows, tile_log2);
+    let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+    let t = 1usize << header.tile_log2;
+    let (tx, ty) = (usize::from(header.tiles_x), usize::from(header.tiles_y));
+    (0..ty * tx)
+        .map(|i| {
+            let (x0, y0) = ((i % tx) * t, (i / tx) * t);
+            let (x1, y1) = ((x0 + t).min(cols), (y0 + t).min(rows));
+            let sum: f64 = (y0..y1)
+                .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+                .map(|(x, y)| f(x, y))
+                .sum();
+            sum / ((x1 - x0) * (y1 - y0)).max(1) as f64
+        })
+        .collect()
+}
+
+/// Writes `spec` into a buffer of exactly its encoded length.
+fn encode(spec: &TableSpec<'_>) -> Result<Vec<u8>, WriteError> {
+    let mut buf = vec![0u8; spec.encoded_len()];
+    let n = write_table(spec, &mut buf)?;
+    buf.truncate(n);
+    Ok(buf)
+}
+
 impl Simulator {
+    /// Each output's true gain, in the table's format (saturating).
+    fn true_gains(&self) -> Vec<GainEPerAdu> {
+        let p = &self.params;
+        (0..p.geometry.outputs)
+            .map(|o| GainEPerAdu::saturating_from_num(p.gain_e_per_adu[usize::from(o)]))
+            .collect()
+    }
+
+    /// The true per-column bias of a whole raw line, in the table's format (saturating); 0 on
+    /// the over-scan, which is the bias reference.
+    fn true_column_bias(&self) -> Vec<ColumnBiasAdu> {
+        let g = self.params.geometry;
+        (0..g.line_len())
+            .map(|c| match g.segment(c) {
+                Some(Segment::OverScan) => ColumnBiasAdu::ZERO,
+                _ => ColumnBiasAdu::saturating_from_num(self.column_bias_adu(c)),
+            })
+            .collect()
+    }
+
     /// The mean relative dark of the covered pixels: the dark map is normalised to it.
     pub fn covered_dark_mean(&self) -> f64 {
         let g = &self.params.geometry;
@@ -65,46 +116,21 @@ impl Simulator {
         sections: TruthSections,
         tile_log2: u8,
     ) -> Result<Vec<u8>, WriteError> {
-        let p = &self.params;
-        let g = p.geometry;
-        let gains: Vec<GainEPerAdu> = (0..g.outputs)
-            .map(|o| GainEPerAdu::saturating_from_num(p.gain_e_per_adu[usize::from(o)]))
-            .collect();
-        let column_bias: Vec<ColumnBiasAdu> = (0..g.line_len())
-            .map(|c| match g.segment(c) {
-                Some(Segment::OverScan) => ColumnBiasAdu::ZERO,
-                _ => ColumnBiasAdu::saturating_from_num(self.column_bias_adu(c)),
-            })
-            .collect();
+        let g = self.params.geometry;
+        let (gains, column_bias) = (self.true_gains(), self.true_column_bias());
         let norm = self.covered_dark_mean();
-        let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
-        let header = MapHeader::for_area(g.active_cols, g.active_rows, tile_log2);
-        // The mean of `f` over each tile, row-major, clipped at the active area's edges.
-        let tiled = |f: &dyn Fn(usize, usize) -> f64| -> Vec<f64> {
-            let t = 1usize << tile_log2;
-            let (tx, ty) = (usize::from(header.tiles_x), usize::from(header.tiles_y));
-            (0..ty * tx)
-                .map(|i| {
-                    let (x0, y0) = ((i % tx) * t, (i / tx) * t);
-                    let (x1, y1) = ((x0 + t).min(cols), (y0 + t).min(rows));
-                    let sum: f64 = (y0..y1)
-                        .flat_map(|y| (x0..x1).map(move |x| (x, y)))
-                        .map(|(x, y)| f(x, y))
-                        .sum();
-                    sum / ((x1 - x0) * (y1 - y0)) as f64
-                })
-                .collect()
-        };
         let dark: Vec<DarkRel> = if sections.dark {
-            tiled(&|x, y| self.dark_rel(g.raw_col_of_x(x), y) / norm)
-                .into_iter()
-                .map(DarkRel::saturating_from_num)
-                .collect()
+            tile_means(&g, tile_log2, &|x, y| {
+                self.dark_rel(g.raw_col_of_x(x), y) / norm
+            })
+            .into_iter()
+            .map(DarkRel::saturating_from_num)
+            .collect()
         } else {
             Vec::new()
         };
         let flat: Vec<FlatInv> = if sections.flat {
-            tiled(&|x, y| 1.0 / self.flat(x, y))
+            tile_means(&g, tile_log2, &|x, y| 1.0 / self.flat(x, y))
                 .into_iter()
                 .map(|v| FlatInv::saturating_from_num(v).max(FlatInv::DELTA))
                 .collect()
@@ -129,10 +155,7 @@ impl Simulator {
             hot: &hot,
             telegraph: &telegraph,
         };
-        let mut buf = vec![0u8; spec.encoded_len()];
-        let n = write_table(&spec, &mut buf)?;
-        buf.truncate(n);
-        Ok(buf)
+        encode(&spec)
     }
 
     /// Reference temperature of the hot-pixel rates (293 K when hot pixels are off).
@@ -142,29 +165,32 @@ impl Simulator {
         })
     }
 
+    /// `f(x, y, raw column)` over the active area row by row, its `Some`s in that order
+    /// (sorted by (y, x)). Cost: one call of `f` per active pixel.
+    fn scan_active<T>(&self, f: impl Fn(u16, u16, usize) -> Option<T>) -> Vec<T> {
+        let g = self.params.geometry;
+        (0..g.active_rows)
+            .flat_map(|y| (0..g.active_cols).map(move |x| (x, y)))
+            .filter_map(|(x, y)| f(x, y, g.raw_col_of_x(usize::from(x))))
+            .collect()
+    }
+
     /// The true hot pixels of the active area, sorted by (y, x), with the `Correct` policy
     /// (empty when hot pixels are off). Scans every active pixel once.
     pub fn hot_pixels_truth(&self) -> Vec<HotPixel> {
         let Some(h) = self.params.effects.hot else {
             return Vec::new();
         };
-        let g = self.params.geometry;
-        let mut out = Vec::new();
-        for y in 0..g.active_rows {
-            for x in 0..g.active_cols {
-                let col = g.raw_col_of_x(usize::from(x));
-                if let Some(rate) = self.hot_rate_e_per_s(col, usize::from(y)) {
-                    out.push(HotPixel {
-                        x,
-                        y,
-                        rate_e_per_s: ERatePerS::saturating_from_num(rate),
-                        doubling_k: U8F8::saturating_from_num(h.doubling_k),
-                        policy: HotPolicy::Correct,
-                    });
-                }
-            }
-        }
-        out
+        self.scan_active(|x, y, col| {
+            self.hot_rate_e_per_s(col, usize::from(y))
+                .map(|rate| HotPixel {
+                    x,
+                    y,
+                    rate_e_per_s: ERatePerS::saturating_from_num(rate),
+                    doubling_k: U8F8::saturating_from_num(h.doubling_k),
+                    policy: HotPolicy::Correct,
+                })
+        })
     }
 
     /// The true telegraph pixels of the active area (x, y), sorted by (y, x) (empty when
@@ -173,17 +199,7 @@ impl Simulator {
         if self.params.effects.telegraph.is_none() {
             return Vec::new();
         }
-        let g = self.params.geometry;
-        let mut out = Vec::new();
-        for y in 0..g.active_rows {
-            for x in 0..g.active_cols {
-                let col = g.raw_col_of_x(usize::from(x));
-                if self.telegraph_step_e(col, usize::from(y)).is_some() {
-                    out.push((x, y));
-                }
-            }
-        }
-        out
+        self.scan_active(|x, y, col| self.telegraph_step_e(col, usize::from(y)).map(|_| (x, y)))
     }
 }
 
@@ -197,17 +213,8 @@ impl Simulator {
         dark_rel: Option<&[f64]>,
         flat_inv: Option<&[f64]>,
     ) -> Result<Vec<u8>, WriteError> {
-        let p = &self.params;
-        let g = p.geometry;
-        let gains: Vec<GainEPerAdu> = (0..g.outputs)
-            .map(|o| GainEPerAdu::saturating_from_num(p.gain_e_per_adu[usize::from(o)]))
-            .collect();
-        let bias: Vec<ColumnBiasAdu> = (0..g.line_len())
-            .map(|c| match g.segment(c) {
-                Some(Segment::OverScan) => ColumnBiasAdu::ZERO,
-                _ => ColumnBiasAdu::saturating_from_num(self.column_bias_adu(c)),
-            })
-            .collect();
+        let g = self.params.geometry;
+        let (gains, bias) = (self.true_gains(), self.true_column_bias());
         let dark: Option<Vec<DarkRel>> =
             dark_rel.map(|m| m.iter().map(|v| DarkRel::saturating_from_num(*v)).collect());
         let flat: Option<Vec<FlatInv>> = flat_inv.map(|m| {
@@ -232,9 +239,6 @@ impl Simulator {
             hot: &[],
             telegraph: &[],
         };
-        let mut buf = vec![0u8; spec.encoded_len()];
-        let n = write_table(&spec, &mut buf)?;
-        buf.truncate(n);
-        Ok(buf)
+        encode(&spec)
     }
 }
