@@ -46,9 +46,7 @@ use fixed::types::U8F8;
 use startrack_core::centroid::cog::CogPower;
 use startrack_core::centroid::pixcorr::PixCorrBackground;
 use startrack_core::geometry::{Output, ReadoutGeometry, Segment};
-use startrack_core::table::{
-    HotPixel, HotPolicy, MAX_TILE_LOG2, MapHeader, MapSpec, TableSpec, write_table,
-};
+use startrack_core::table::{HotPixel, HotPolicy, MAX_TILE_LOG2, MapSpec, TableSpec, write_table};
 use startrack_core::units::{ColumnBiasAdu, DarkRel, ERatePerS, FlatInv, GainEPerAdu, Kelvin};
 use std::path::{Path, PathBuf};
 
@@ -296,25 +294,6 @@ pub fn column_bias_from_map(g: &ReadoutGeometry, bias: &MapF32) -> (Vec<ColumnBi
     (cb, clamped)
 }
 
-/// The mean of `f(x, y)` over each `2^tile_log2` tile of the active area, row-major.
-fn tiled(g: &ReadoutGeometry, tile_log2: u8, f: &dyn Fn(usize, usize) -> f64) -> Vec<f64> {
-    let header = MapHeader::for_area(g.active_cols, g.active_rows, tile_log2);
-    let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
-    let t = 1usize << tile_log2;
-    let (tx, ty) = (usize::from(header.tiles_x), usize::from(header.tiles_y));
-    (0..ty * tx)
-        .map(|i| {
-            let (x0, y0) = ((i % tx) * t, (i / tx) * t);
-            let (x1, y1) = ((x0 + t).min(cols), (y0 + t).min(rows));
-            let sum: f64 = (y0..y1)
-                .flat_map(|y| (x0..x1).map(move |x| (x, y)))
-                .map(|(x, y)| f(x, y))
-                .sum();
-            sum / ((x1 - x0) * (y1 - y0)).max(1) as f64
-        })
-        .collect()
-}
-
 /// Relative dark tiles from a full-readout dark map, normalised to its covered columns'
 /// mean. Returns the tiles, the covered mean found, and how many tiles were clamped.
 pub fn dark_from_map(
@@ -346,7 +325,7 @@ pub fn dark_from_map(
         ) / mean
     };
     let mut clamped = 0;
-    let tiles = tiled(g, tile_log2, &f)
+    let tiles = crate::sim::truth::tile_means(g, tile_log2, &f)
         .into_iter()
         .map(|v| {
             if !(0.0..=DarkRel::MAX.to_num::<f64>()).contains(&v) {
@@ -372,7 +351,7 @@ pub fn flat_from_map(g: &ReadoutGeometry, flat: &MapF32, tile_log2: u8) -> (Vec<
         let v = f64::from(flat.get(y, x).unwrap_or(1.0));
         if v <= 1.0 / limit { limit } else { 1.0 / v }
     };
-    let tiles = tiled(g, tile_log2, &f)
+    let tiles = crate::sim::truth::tile_means(g, tile_log2, &f)
         .into_iter()
         .map(|v| FlatInv::saturating_from_num(v).max(FlatInv::DELTA))
         .collect();

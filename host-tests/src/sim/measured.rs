@@ -91,8 +91,8 @@ impl Simulator {
 
     /// Adds to `sum` (the active area, row-major) the electrons of each pixel of `region`
     /// (clipped to the active area) in this frame, minus `minus_e(raw column, line)`:
-    /// `(raw - bias) * gain - minus_e`, the bias from the over-scan of each line as the core
-    /// measures it. `line` is scratch for a whole raw line. Fails where a line's levels cannot
+    /// `(raw - bias) * gain - minus_e`, the bias being the over-scan level of each line as the
+    /// core measures it plus the column bias ([`Self::electrons_of`]). `line` is scratch for a whole raw line. Fails where a line's levels cannot
     /// be measured.
     fn add_region_e(
         &self,
