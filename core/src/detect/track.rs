@@ -12,8 +12,10 @@
 //! 2. On the interior (the window less its border), `F = pixel - bg` (exact on the I26F6 bits,
 //!    then f32). A pixel is *usable* unless it is excluded or a corrected hot pixel. Hot and
 //!    telegraph pixels are never usable, so they never make a detection, whatever their value.
-//! 3. The peak: the brightest usable interior pixel. The aperture (reported as `pixels`):
-//!    the pixels above `pixel_sigmas * sigma` (or saturated) 8-connected to the peak.
+//! 3. The peak: the brightest usable interior pixel. The aperture (reported as `pixels`,
+//!    so at least 1): the peak, and the pixels above `pixel_sigmas * sigma` (or saturated)
+//!    8-connected to it. A faint star can pass the SNR test of step 4 with no pixel above
+//!    the threshold: its aperture is then the peak alone.
 //! 4. Flux and measured SNR in the `box_side` box around the peak (usable pixels, `n` of
 //!    them), the paper's eq. 8 with the measured noise plus the level's error:
 //!    `snr = S / sqrt(max(S, 0) + n sigma^2 + n^2 var_level)`, `S = sum(F)`. A fixed box, not
@@ -283,18 +285,13 @@ pub fn track_detect(
     if pc == 1 || pr == 1 || pc + 2 == w || pr + 2 == h {
         out.flags |= TrackFlags::EDGE;
     }
-    // 3. The aperture: above pixels 8-connected to the peak, by sweeps until stable.
+    // 3. The aperture: the peak, and above pixels 8-connected to it, by sweeps until stable.
     let mut mask = [0u32; MAX_SIDE as usize];
-    if above(p)
-        && let Some(row) = mask.get_mut(pr)
-    {
+    if let Some(row) = mask.get_mut(pr) {
         *row = 1 << pc;
     }
     let interior = (w - 2) * (h - 2);
     for sweep in 0..interior {
-        if !above(p) {
-            break;
-        }
         let mut changed = false;
         for k in 0..interior {
             // Alternate directions so that any path is followed in a few sweeps.
