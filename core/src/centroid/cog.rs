@@ -35,6 +35,19 @@
 //! most 120 values for the median), 3 divides and one square root per axis: a 5x5 box with a
 //! 7x7 median background is a few hundred flops (an operation count, not an M7 measurement).
 //!
+//! # Lean power-1 path
+//! Power 1 on a box without excluded pixels (the common case) sums integers, not floats:
+//! with `F` the exact `I26F6` difference pixel - level (bits, 1/64 e-) and `Q = max(F, 0)`,
+//! it accumulates `sum F`, `sum dx F`, `sum dy F`, `sum Q`, `sum dx Q`, `sum dy Q`,
+//! `sum dx^2 Q`, `sum dy^2 Q` in i64, row by row, and the terms of `var_bg` in the error
+//! sums come from the box's closed-form moments (`sum dx^2 = rows * sum_cols dx^2`, ...). The
+//! per-star step converts the eight sums to f32 and solves as above: a few tens of flops per
+//! star, none per pixel. No overflow for any input, not only 16-bit-derived ones: pixel bits
+//! and the level are i32, so `|F| < 2^32`; `|d| <= 15` (box side <= [`super::MAX_SIDE`]),
+//! `d^2 < 2^8`; at most 961 < 2^10 pixels: every sum is below `2^32 * 2^8 * 2^10 = 2^50`.
+//! The sums are exact, so the path is at least as accurate as the f32 one; the host tests
+//! compare both against f64 references.
+//!
 //! # Where it fails
 //! - Pixelisation: an S-curve bias in the pixel phase for small PSFs, worse for power 2
 //!   (paper Figures 3 and 4). Measured RMS over phases (host test `centroid_cog`), 5x5 box:
@@ -196,6 +209,9 @@ pub(crate) fn cog_in_box(
     anchor: (u16, u16),
     power: CogPower,
 ) -> Option<Measured> {
+    if power == CogPower::One && !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+        return cog1_lean(p, bx, anchor);
+    }
     let var_bg = p.bg.variance_e2;
     let var_level = p.bg.level_variance_e2;
     let (mut wsum, mut var_sum, mut g_sum) = (0.0f32, 0.0f32, 0.0f32);
@@ -233,6 +249,92 @@ pub(crate) fn cog_in_box(
         col: f32::from(anchor.0) + ox,
         row: f32::from(anchor.1) + oy,
         flux_e: flux,
+        snr,
+        sigma_col: sigx,
+        sigma_row: sigy,
+    })
+}
+
+/// `sum(d)` and `sum(d^2)` of the offsets `d = lo - anchor ..= hi - anchor` of a box side.
+fn offset_sums(lo: u16, hi: u16, anchor: u16) -> (f32, f32) {
+    let (mut s1, mut s2) = (0i32, 0i32);
+    for c in lo..=hi {
+        let d = i32::from(c) - i32::from(anchor);
+        s1 += d;
+        s2 += d * d;
+    }
+    (s1 as f32, s2 as f32)
+}
+
+/// The power-1 CoG of a box without excluded pixels (the common case): the lean path of
+/// [`cog_in_box`], same formula and result (see "Lean power-1 path" in the module docs).
+fn cog1_lean(p: &Prepared<'_>, bx: PixelBox, anchor: (u16, u16)) -> Option<Measured> {
+    let width = usize::from(p.width);
+    let bg = p.bg.level_bits;
+    let (c0, c1) = (usize::from(bx.col0), usize::from(bx.col1));
+    let (ax, ay) = (i64::from(anchor.0), i64::from(anchor.1));
+    // Exact sums in Electrons bits (1/64 e-): S = sum F, Q = sum max(F, 0), with d-moments.
+    let (mut s0, mut sx, mut sy) = (0i64, 0i64, 0i64);
+    let (mut q0, mut qx, mut qy, mut qxx, mut qyy) = (0i64, 0i64, 0i64, 0i64, 0i64);
+    let dx0 = i64::from(bx.col0) - ax;
+    for row in bx.row0..=bx.row1 {
+        let start = usize::from(row) * width;
+        let line = p.pixels.get(start + c0..=start + c1)?;
+        let (mut rs, mut rx, mut rq, mut rqx, mut rqxx) = (0i64, 0i64, 0i64, 0i64, 0i64);
+        for (dx, e) in (dx0..).zip(line) {
+            let f = i64::from(e.to_bits()) - bg;
+            let q = if f > 0 { f } else { 0 };
+            rs += f;
+            rx += dx * f;
+            rq += q;
+            let dq = dx * q;
+            rqx += dq;
+            rqxx += dx * dq;
+        }
+        let dy = i64::from(row) - ay;
+        s0 += rs;
+        sx += rx;
+        sy += dy * rs;
+        q0 += rq;
+        qx += rqx;
+        qxx += rqxx;
+        let dq = dy * rq;
+        qy += dq;
+        qyy += dy * dq;
+    }
+    if s0 <= 0 {
+        return None;
+    }
+    // Per star: the sums in e- and the background variance's closed-form box moments.
+    const E: f32 = 1.0 / 64.0;
+    let var_bg = p.bg.variance_e2;
+    let var_level = p.bg.level_variance_e2;
+    let (sdx, sdx2) = offset_sums(bx.col0, bx.col1, anchor.0);
+    let (sdy, sdy2) = offset_sums(bx.row0, bx.row1, anchor.1);
+    let ncols = f32::from(bx.col1 - bx.col0 + 1);
+    let nrows = f32::from(bx.row1 - bx.row0 + 1);
+    let n = ncols * nrows;
+    let wsum = s0 as f32 * E;
+    let var_sum = q0 as f32 * E + n * var_bg;
+    let sxs = AxisSums {
+        dw: sx as f32 * E,
+        d2var: qxx as f32 * E + var_bg * nrows * sdx2,
+        dvar: qx as f32 * E + var_bg * nrows * sdx,
+        dg: nrows * sdx,
+    };
+    let sys = AxisSums {
+        dw: sy as f32 * E,
+        d2var: qyy as f32 * E + var_bg * ncols * sdy2,
+        dvar: qy as f32 * E + var_bg * ncols * sdy,
+        dg: ncols * sdy,
+    };
+    let (ox, sigx) = sxs.solve(wsum, var_sum, n, var_level);
+    let (oy, sigy) = sys.solve(wsum, var_sum, n, var_level);
+    let snr = wsum / math::sqrt(var_sum + n * n * var_level).max(f32::MIN_POSITIVE);
+    Some(Measured {
+        col: f32::from(anchor.0) + ox,
+        row: f32::from(anchor.1) + oy,
+        flux_e: wsum,
         snr,
         sigma_col: sigx,
         sigma_row: sigy,

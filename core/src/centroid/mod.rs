@@ -431,6 +431,9 @@ impl<'a> Prepared<'a> {
             let (dc, dr) = (u32::from(c.abs_diff(cc)), u32::from(r.abs_diff(cr)));
             dc * dc + dr * dr
         };
+        if !self.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+            return self.peak_clean();
+        }
         let mut best: Option<(i64, u32, u16, u16)> = None;
         for row in 0..self.height {
             for col in 0..self.width {
@@ -443,6 +446,31 @@ impl<'a> Prepared<'a> {
             }
         }
         best.map(|(_, _, c, r)| (c, r))
+    }
+
+    /// [`Self::peak`] for a window without excluded pixels: one walk of the pixel slice,
+    /// the distance computed only for a candidate at least as bright as the best so far.
+    fn peak_clean(&self) -> Option<(u16, u16)> {
+        let (cc, cr) = self.centre();
+        let w = usize::from(self.width).max(1);
+        let mut best_v = i32::MIN;
+        let mut best_d = u32::MAX;
+        let mut best = None;
+        for (row, line) in (0u16..).zip(self.pixels.chunks_exact(w)) {
+            for (col, e) in (0u16..).zip(line) {
+                let b = e.to_bits();
+                if b >= best_v {
+                    let (dc, dr) = (u32::from(col.abs_diff(cc)), u32::from(row.abs_diff(cr)));
+                    let d = dc * dc + dr * dr;
+                    if b > best_v || d < best_d || best.is_none() {
+                        best_v = b;
+                        best_d = d;
+                        best = Some((col, row));
+                    }
+                }
+            }
+        }
+        best
     }
 
     /// The window's centre pixel (window-relative).
