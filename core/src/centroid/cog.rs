@@ -42,9 +42,13 @@
 //! `sum dx^2 Q`, `sum dy^2 Q` in i64, row by row, and the terms of `var_bg` in the error
 //! sums come from the box's closed-form moments (`sum dx^2 = rows * sum_cols dx^2`, ...). The
 //! per-star step converts the eight sums to f32 and solves as above: a few tens of flops per
-//! star, none per pixel. No overflow for any input, not only 16-bit-derived ones: pixel bits
-//! and the level are i32, so `|F| < 2^32`; `|d| <= 15` (box side <= [`super::MAX_SIDE`]),
-//! `d^2 < 2^8`; at most 961 < 2^10 pixels: every sum is below `2^32 * 2^8 * 2^10 = 2^50`.
+//! star, none per pixel. `F` is taken in i32, so each product is one 32x32->64
+//! multiply-accumulate. 16-bit-derived pixels and levels are within ±21.1 M e- (1.35e9 bits),
+//! so `F` can leave i32 only when a pixel and the level are of opposite signs and beyond
+//! ±16.7 M e- each: such a box is detected by the subtraction's overflow
+//! flag and handed to the f32 path. No sum overflows: `|F| <= 2^31`, `|d| <= 15` (box side
+//! <= [`super::MAX_SIDE`]), `d^2 < 2^8`, at most 961 < 2^10 pixels: every sum is below
+//! `2^31 * 2^8 * 2^10 = 2^49`.
 //! The sums are exact, so the path is at least as accurate as the f32 one; the host tests
 //! compare both against f64 references.
 //!
@@ -212,6 +216,16 @@ pub(crate) fn cog_in_box(
     if power == CogPower::One && !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
         return cog1_lean(p, bx, anchor);
     }
+    cog_in_box_f32(p, bx, anchor, power)
+}
+
+/// [`cog_in_box`] on per-pixel f32 sums: any power, excluded pixels skipped.
+fn cog_in_box_f32(
+    p: &Prepared<'_>,
+    bx: PixelBox,
+    anchor: (u16, u16),
+    power: CogPower,
+) -> Option<Measured> {
     let var_bg = p.bg.variance_e2;
     let var_level = p.bg.level_variance_e2;
     let (mut wsum, mut var_sum, mut g_sum) = (0.0f32, 0.0f32, 0.0f32);
@@ -270,37 +284,50 @@ fn offset_sums(lo: u16, hi: u16, anchor: u16) -> (f32, f32) {
 /// [`cog_in_box`], same formula and result (see "Lean power-1 path" in the module docs).
 fn cog1_lean(p: &Prepared<'_>, bx: PixelBox, anchor: (u16, u16)) -> Option<Measured> {
     let width = usize::from(p.width);
-    let bg = p.bg.level_bits;
+    // The level fits i32 (a median of i32 bits or a saturated given level); if it did not,
+    // or a difference overflows i32 below, the general path takes the box.
+    let Ok(bg) = i32::try_from(p.bg.level_bits) else {
+        return cog_in_box_f32(p, bx, anchor, CogPower::One);
+    };
     let (c0, c1) = (usize::from(bx.col0), usize::from(bx.col1));
-    let (ax, ay) = (i64::from(anchor.0), i64::from(anchor.1));
+    let dx0 = i32::from(bx.col0) - i32::from(anchor.0);
     // Exact sums in Electrons bits (1/64 e-): S = sum F, Q = sum max(F, 0), with d-moments.
+    // F is i32 here, so every product is one 32x32->64 multiply-accumulate.
     let (mut s0, mut sx, mut sy) = (0i64, 0i64, 0i64);
     let (mut q0, mut qx, mut qy, mut qxx, mut qyy) = (0i64, 0i64, 0i64, 0i64, 0i64);
-    let dx0 = i64::from(bx.col0) - ax;
-    for row in bx.row0..=bx.row1 {
+    let mut overflow = false;
+    for (row, dy) in (bx.row0..=bx.row1).zip(i32::from(bx.row0) - i32::from(anchor.1)..) {
         let start = usize::from(row) * width;
         let line = p.pixels.get(start + c0..=start + c1)?;
-        let (mut rs, mut rx, mut rq, mut rqx, mut rqxx) = (0i64, 0i64, 0i64, 0i64, 0i64);
+        // Pass 1: F and its column moment.
+        let (mut rs, mut rx) = (0i64, 0i64);
         for (dx, e) in (dx0..).zip(line) {
-            let f = i64::from(e.to_bits()) - bg;
-            let q = if f > 0 { f } else { 0 };
-            rs += f;
-            rx += dx * f;
-            rq += q;
-            let dq = dx * q;
-            rqx += dq;
-            rqxx += dx * dq;
+            let (f, o) = e.to_bits().overflowing_sub(bg);
+            overflow |= o;
+            rs += i64::from(f);
+            rx += i64::from(dx) * i64::from(f);
         }
-        let dy = i64::from(row) - ay;
+        // Pass 2: Q = max(F, 0) and its moments (F recomputed: cheaper than storing it).
+        let (mut rq, mut rqx, mut rqxx) = (0i64, 0i64, 0i64);
+        for (dx, e) in (dx0..).zip(line) {
+            let f = e.to_bits().wrapping_sub(bg);
+            let q = i64::from(f.max(0));
+            rq += q;
+            rqx += i64::from(dx) * q;
+            rqxx += i64::from(dx * dx) * q;
+        }
+        let dy = i64::from(dy);
         s0 += rs;
         sx += rx;
         sy += dy * rs;
         q0 += rq;
         qx += rqx;
         qxx += rqxx;
-        let dq = dy * rq;
-        qy += dq;
-        qyy += dy * dq;
+        qy += dy * rq;
+        qyy += dy * dy * rq;
+    }
+    if overflow {
+        return cog_in_box_f32(p, bx, anchor, CogPower::One);
     }
     if s0 <= 0 {
         return None;
