@@ -269,6 +269,16 @@ fn cog_in_box_f32(
     })
 }
 
+/// An exact integer sum as f32: one `vcvt` when it fits i32 (the usual case), else the
+/// library conversion.
+#[inline(always)]
+fn sum_f32(v: i64) -> f32 {
+    match i32::try_from(v) {
+        Ok(v) => v as f32,
+        Err(_) => v as f32,
+    }
+}
+
 /// `sum(d)` and `sum(d^2)` of the offsets `d = lo - anchor ..= hi - anchor` of a box side.
 fn offset_sums(lo: u16, hi: u16, anchor: u16) -> (f32, f32) {
     let (mut s1, mut s2) = (0i32, 0i32);
@@ -341,18 +351,18 @@ fn cog1_lean(p: &Prepared<'_>, bx: PixelBox, anchor: (u16, u16)) -> Option<Measu
     let ncols = f32::from(bx.col1 - bx.col0 + 1);
     let nrows = f32::from(bx.row1 - bx.row0 + 1);
     let n = ncols * nrows;
-    let wsum = s0 as f32 * E;
-    let var_sum = q0 as f32 * E + n * var_bg;
+    let wsum = sum_f32(s0) * E;
+    let var_sum = sum_f32(q0) * E + n * var_bg;
     let sxs = AxisSums {
-        dw: sx as f32 * E,
-        d2var: qxx as f32 * E + var_bg * nrows * sdx2,
-        dvar: qx as f32 * E + var_bg * nrows * sdx,
+        dw: sum_f32(sx) * E,
+        d2var: sum_f32(qxx) * E + var_bg * nrows * sdx2,
+        dvar: sum_f32(qx) * E + var_bg * nrows * sdx,
         dg: nrows * sdx,
     };
     let sys = AxisSums {
-        dw: sy as f32 * E,
-        d2var: qyy as f32 * E + var_bg * ncols * sdy2,
-        dvar: qy as f32 * E + var_bg * ncols * sdy,
+        dw: sum_f32(sy) * E,
+        d2var: sum_f32(qyy) * E + var_bg * ncols * sdy2,
+        dvar: sum_f32(qy) * E + var_bg * ncols * sdy,
         dg: ncols * sdy,
     };
     let (ox, sigx) = sxs.solve(wsum, var_sum, n, var_level);
