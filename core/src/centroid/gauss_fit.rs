@@ -37,8 +37,8 @@
 //!   undersampled stars (s < 0.4 px) become sensitive to it.
 //! - Non-Gaussian PSFs (coma, defocus): a model error; use the CoG with a correction table.
 //! - Blends and cosmic rays in the window pull the fit (no outlier rejection).
-//! - `erfc` by Abramowitz & Stegun 7.1.26 (error 5e-7 of the flux per pixel) limits the
-//!   noise-free accuracy to ~1e-5 px.
+//! - `erfc` by Abramowitz & Stegun 7.1.26 (error below 1.5e-7 per edge, so a few 1e-7 of
+//!   the flux per pixel) limits the noise-free accuracy to ~1e-5 px.
 
 use super::cog::{cog_start, usable_sigma_px};
 use super::{
@@ -131,12 +131,11 @@ fn chol_solve(l: &Mat4, b: &[f32; 4]) -> [f32; 4] {
     x
 }
 
-/// Per-column (or per-row) pixel fractions and their derivatives for centre `c`: the same
-/// values as [`math::pixel_fraction`] and the difference of normal densities, from one
+/// Per-column (or per-row) pixel fractions and their derivatives for centre `c`, from one
 /// `erfc` and one density per pixel *edge* (`n + 1` of each, shared by the two pixels an edge
-/// separates, rather than two per pixel). With `E(z) = erfc(|z|)` at the edges, the
-/// tail-side cases of `pixel_fraction` read the same stored values, so the fractions are
-/// bit for bit those of `pixel_fraction`.
+/// separates), both from one exponential ([`math::erfc_abs_and_gauss`], A&S 7.1.26). With
+/// `E(z) = erfc(|z|)` at the edges the fraction takes the same tail-side cases as
+/// [`math::pixel_fraction`], so no two numbers near 1 are subtracted.
 fn profile(
     n: u16,
     c: f32,
@@ -146,10 +145,12 @@ fn profile(
 ) {
     const FRAC_1_SQRT_2: f32 = core::f32::consts::FRAC_1_SQRT_2;
     // Edge k is at i - 1/2 for pixel i = k; z scaled for erfc, t for the density.
+    // phi(u/s) = exp(-z^2) / sqrt(2 pi) with z = u / (s sqrt 2).
+    const FRAC_1_SQRT_2PI: f32 = 0.398_942_3;
     let edge = |k: u16| {
-        let u = f32::from(k) - 0.5 - c;
-        let z = u / s * FRAC_1_SQRT_2;
-        (z, math::erfc(z.abs()), math::norm_pdf(u / s))
+        let z = (f32::from(k) - 0.5 - c) / s * FRAC_1_SQRT_2;
+        let (e, g) = math::erfc_abs_and_gauss(z);
+        (z, e, FRAC_1_SQRT_2PI * g)
     };
     let mut lo = edge(0);
     for ((i, f), d) in (0..n).zip(frac.iter_mut()).zip(dfrac.iter_mut()) {
