@@ -189,6 +189,9 @@ fn normal_equations(p: &Prepared<'_>, theta: [f32; 4], s: f32, fit_bg: bool) -> 
     profile(p.width, vget(&theta, X), s, &mut px, &mut dpx);
     profile(p.height, vget(&theta, Y), s, &mut py, &mut dpy);
     let (flux, bg) = (vget(&theta, N), vget(&theta, B));
+    if !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+        return normal_equations_clean(p, (&px, &dpx, &py, &dpy), flux, bg, fit_bg);
+    }
     let mut a = [[0.0f32; 4]; 4];
     let mut b = [0.0f32; 4];
     let whole = super::PixelBox {
@@ -238,6 +241,69 @@ fn normal_equations(p: &Prepared<'_>, theta: [f32; 4], s: f32, fit_bg: bool) -> 
     }
     Normal { a, b }
 }
+
+/// [`normal_equations`] on a window without excluded pixels: a walk of the pixel rows with
+/// the row's factors hoisted, the ten upper-triangle sums and the four right-hand sides in
+/// scalars (registers), the same terms as the general loop.
+fn normal_equations_clean(
+    p: &Prepared<'_>,
+    (px, dpx, py, dpy): Profiles<'_>,
+    flux: f32,
+    bg: f32,
+    fit_bg: bool,
+) -> Normal {
+    let w = usize::from(p.width).max(1);
+    let j3 = if fit_bg { 1.0f32 } else { 0.0 };
+    let var1 = p.bg.variance_e2 + 1.0;
+    let level = p.bg.level_bits;
+    let (mut a00, mut a01, mut a02, mut a03, mut a11) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let (mut a12, mut a13, mut a22, mut a23, mut a33) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let (mut b0, mut b1, mut b2, mut b3) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let rows = p.pixels.chunks_exact(w).zip(py.iter().zip(dpy.iter()));
+    for (line, (&fy, &dy)) in rows {
+        let (nfy, ndy) = (flux * fy, flux * dy);
+        for (e, (&fx, &dx)) in line.iter().zip(px.iter().zip(dpx.iter())) {
+            let f = (i64::from(e.to_bits()) - level) as f32 / 64.0;
+            let star = nfy * fx;
+            let wt = 1.0 / (super::pos(star) + var1);
+            let (j0, j1, j2) = (nfy * dx, ndy * fx, fx * fy);
+            let res = f - (bg + star);
+            let (w0, w1, w2, w3) = (j0 * wt, j1 * wt, j2 * wt, j3 * wt);
+            a00 += w0 * j0;
+            a01 += w0 * j1;
+            a02 += w0 * j2;
+            a03 += w0 * j3;
+            a11 += w1 * j1;
+            a12 += w1 * j2;
+            a13 += w1 * j3;
+            a22 += w2 * j2;
+            a23 += w2 * j3;
+            a33 += w3 * j3;
+            b0 += w0 * res;
+            b1 += w1 * res;
+            b2 += w2 * res;
+            b3 += w3 * res;
+        }
+    }
+    let a = [
+        [a00, a01, a02, a03],
+        [a01, a11, a12, a13],
+        [a02, a12, a22, a23],
+        [a03, a13, a23, if fit_bg { a33 } else { 1.0 }],
+    ];
+    Normal {
+        a,
+        b: [b0, b1, b2, b3],
+    }
+}
+
+/// The four profiles of [`normal_equations`]: column fractions and derivatives, then rows'.
+type Profiles<'r> = (
+    &'r [f32; MAX_SIDE as usize],
+    &'r [f32; MAX_SIDE as usize],
+    &'r [f32; MAX_SIDE as usize],
+    &'r [f32; MAX_SIDE as usize],
+);
 
 /// Jacobi-scales, factors and solves; returns the step and the scaled factor.
 fn solve(n: &Normal) -> Option<([f32; 4], [f32; 4], Mat4)> {
