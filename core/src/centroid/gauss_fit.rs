@@ -192,6 +192,17 @@ fn normal_equations(p: &Prepared<'_>, theta: [f32; 4], s: f32, fit_bg: bool) -> 
     if !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
         return normal_equations_clean(p, (&px, &dpx, &py, &dpy), flux, bg, fit_bg);
     }
+    normal_equations_general(p, (&px, &dpx, &py, &dpy), flux, bg, fit_bg)
+}
+
+/// The normal equations' sums over the usable pixels (excluded ones skipped).
+fn normal_equations_general(
+    p: &Prepared<'_>,
+    (px, dpx, py, dpy): Profiles<'_>,
+    flux: f32,
+    bg: f32,
+    fit_bg: bool,
+) -> Normal {
     let mut a = [[0.0f32; 4]; 4];
     let mut b = [0.0f32; 4];
     let whole = super::PixelBox {
@@ -255,7 +266,12 @@ fn normal_equations_clean(
     let w = usize::from(p.width).max(1);
     let j3 = if fit_bg { 1.0f32 } else { 0.0 };
     let var1 = p.bg.variance_e2 + 1.0;
-    let level = p.bg.level_bits;
+    // The level and every difference in i32 (one vcvt per pixel, not a library i64
+    // conversion); a window where that fails takes the general loop.
+    let Ok(level) = i32::try_from(p.bg.level_bits) else {
+        return normal_equations_general(p, (px, dpx, py, dpy), flux, bg, fit_bg);
+    };
+    let mut overflow = false;
     let (mut a00, mut a01, mut a02, mut a03, mut a11) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
     let (mut a12, mut a13, mut a22, mut a23, mut a33) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
     let (mut b0, mut b1, mut b2, mut b3) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
@@ -263,7 +279,9 @@ fn normal_equations_clean(
     for (line, (&fy, &dy)) in rows {
         let (nfy, ndy) = (flux * fy, flux * dy);
         for (e, (&fx, &dx)) in line.iter().zip(px.iter().zip(dpx.iter())) {
-            let f = (i64::from(e.to_bits()) - level) as f32 / 64.0;
+            let (d, o) = e.to_bits().overflowing_sub(level);
+            overflow |= o;
+            let f = d as f32 / 64.0;
             let star = nfy * fx;
             let wt = 1.0 / (super::pos(star) + var1);
             let (j0, j1, j2) = (nfy * dx, ndy * fx, fx * fy);
@@ -284,6 +302,9 @@ fn normal_equations_clean(
             b2 += w2 * res;
             b3 += w3 * res;
         }
+    }
+    if overflow {
+        return normal_equations_general(p, (px, dpx, py, dpy), flux, bg, fit_bg);
     }
     let a = [
         [a00, a01, a02, a03],
