@@ -22,7 +22,8 @@
 //! the last estimate with `NOT_CONVERGED`. Steps are capped at one pixel.
 //!
 //! # Error estimate
-//! The covariance `(J^T W J)^-1` at the solution: `sigma_x`, `sigma_y` and the flux error are
+//! The covariance `(J^T W J)^-1` at the solution (after convergence, the one of the last
+//! step's start, less than `tolerance_px` away, so no extra evaluation): `sigma_x`, `sigma_y` and the flux error are
 //! the square roots of its diagonal. `flux_e` is the fitted total flux `N` (the whole PSF, not
 //! the window's share) and `snr` is `N / sigma_N` (which, unlike eq. 8, charges the fit for
 //! the background it also fits).
@@ -374,8 +375,11 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
     let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
     let give_up = |extra: CentroidFlags| p.finish(start, extra | CentroidFlags::NOT_CONVERGED);
     let mut converged = params.max_iterations == 0;
+    // The factor of the converged step's normal equations: the covariance there, a step of
+    // under `tolerance_px` from the solution, instead of one more evaluation.
+    let mut last_factor = None;
     for _ in 0..params.max_iterations {
-        let Some((step, _, _)) = solve(&normal_equations(&p, theta, s, params.fit_background))
+        let Some((step, d, l)) = solve(&normal_equations(&p, theta, s, params.fit_background))
         else {
             return give_up(extra);
         };
@@ -397,14 +401,21 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
         }
         if sx.abs() < params.tolerance_px && sy.abs() < params.tolerance_px {
             converged = true;
+            last_factor = Some((d, l));
             break;
         }
     }
     if !converged {
         extra |= CentroidFlags::NOT_CONVERGED;
     }
-    // Covariance at the solution.
-    let Some((_, d, l)) = solve(&normal_equations(&p, theta, s, params.fit_background)) else {
+    // Covariance at the solution (or at the converged step's start, within tolerance_px).
+    let factor = match last_factor {
+        Some(f) => Some(f),
+        None => {
+            solve(&normal_equations(&p, theta, s, params.fit_background)).map(|(_, d, l)| (d, l))
+        }
+    };
+    let Some((d, l)) = factor else {
         return give_up(extra);
     };
     let flux = vget(&theta, N);
