@@ -28,7 +28,9 @@
 //! A row segment is cut into runs that share the output amplifier, the dark tile and the
 //! flat tile (8 pixels with the 8x8-tiled table); the bias, gain, dark term and inverse
 //! flat are looked up once per run. Per pixel: the column-bias look-up, one 32x32->64
-//! multiply, one 64x16 multiply, shifts, the clamp and the saturation test. Defect lists are
+//! multiply, one 64x16 multiply, shifts and the saturation test (no clamp: the bound above).
+//! A window up to [`WINDOW_SETUP_COLS`] wide looks its per-column constants up once per
+//! window and the dark and flat terms once per tile row. Defect lists are
 //! searched once per row (binary search), not per pixel. Measured by `cargo m7-bench`
 //! (`line_calibrate`, `window_calibrate`; README, "Cortex-M7 cost").
 

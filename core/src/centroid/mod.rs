@@ -242,8 +242,8 @@ fn level_to_bits(level_e: f32) -> i64 {
     i64::from(r as i32)
 }
 
-/// `max(v, 0)` (0 for NaN, as `f32::max`) by a compare: on the `thumbv7em-none-eabihf`
-/// target (Cortex-M4 FPU, no `vmaxnm`) `f32::max` is a call to `fmaxf`.
+/// `max(v, 0)` (0 for NaN, as `f32::max`) by a compare: without `-C target-cpu=cortex-m7`
+/// (the Cortex-M4 FPU, no `vmaxnm`) `f32::max` is a call to `fmaxf`.
 #[inline(always)]
 pub(crate) fn pos(v: f32) -> f32 {
     if v > 0.0 { v } else { 0.0 }
