@@ -102,3 +102,24 @@ fn erfc_and_pixel_fraction() {
     eprintln!("pixel_fraction: worst absolute error {worst:.2e} (of the unit flux)");
     assert!(worst < 6e-7);
 }
+
+#[test]
+fn erfc_abs_and_gauss_against_f64() {
+    // The Gauss fit's per-edge pair: erfc(|z|) within A&S 7.1.26's 1.5e-7 plus the f32
+    // rounding of its ~10 operations on values below 2 (half an ulp of 2, 1.2e-7, each):
+    // 1.35e-6; exp(-z^2) <= 1 with `math::exp`'s 5e-7 relative error.
+    let (mut worst_erfc, mut worst_gauss): (f64, f64) = (0.0, 0.0);
+    for z in samples(-6.0, 6.0, 120_000) {
+        let z32 = z as f32;
+        let (e, g) = math::erfc_abs_and_gauss(z32);
+        let x = f64::from(z32).abs();
+        worst_erfc = worst_erfc.max((f64::from(e) - psf::erfc(x)).abs());
+        worst_gauss = worst_gauss.max((f64::from(g) - (-x * x).exp()).abs());
+    }
+    eprintln!(
+        "erfc_abs_and_gauss: worst absolute error {worst_erfc:.2e} (erfc), {worst_gauss:.2e} (exp)"
+    );
+    assert!(worst_erfc < 1.35e-6, "{worst_erfc}");
+    assert!(worst_gauss < 5e-7, "{worst_gauss}");
+    assert_eq!(math::erfc_abs_and_gauss(f32::NAN), (1.0, 0.0));
+}

@@ -28,7 +28,9 @@
 //! A row segment is cut into runs that share the output amplifier, the dark tile and the
 //! flat tile (8 pixels with the 8x8-tiled table); the bias, gain, dark term and inverse
 //! flat are looked up once per run. Per pixel: the column-bias look-up, one 32x32->64
-//! multiply, one 64x16 multiply, shifts, the clamp and the saturation test. Defect lists are
+//! multiply, one 64x16 multiply, shifts and the saturation test (no clamp: the bound above).
+//! A window up to [`WINDOW_SETUP_COLS`] wide looks its per-column constants up once per
+//! window and the dark and flat terms once per tile row. Defect lists are
 //! searched once per row (binary search), not per pixel. Measured by `cargo m7-bench`
 //! (`line_calibrate`, `window_calibrate`; README, "Cortex-M7 cost").
 
@@ -157,7 +159,10 @@ fn pixel_bits(raw: u16, offset_16ths: i32, gain: GainEPerAdu, dark_16: i64, flat
 pub(crate) fn pixel_bits_d(d: i32, gain: GainEPerAdu, dark_16: i64, flat: FlatInv) -> i32 {
     let s = (i64::from(d) * i64::from(gain.to_bits())) >> 16;
     let e = (s - dark_16) * i64::from(flat.to_bits());
-    ((e + (1 << 23)) >> 24).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+    // No clamp: the module docs prove |result| <= 1.35e9 < 2^31 for every input (the regular
+    // dark term is below 2^38 in 2^-16 e-, the hot-pixel one below HOT_DARK_LIMIT_E), so the
+    // cast keeps the value; the calibration property tests check the extremes.
+    ((e + (1 << 23)) >> 24) as i32
 }
 
 /// The regular dark term in 2^-16 e-.
@@ -183,6 +188,10 @@ fn run_end(x: u32, end: u32, dark_log2: Option<u8>, flat_log2: Option<u8>, split
     }
     stop
 }
+
+/// Widest window [`FrameCalibration::calibrate_window`] calibrates with per-window set-up
+/// (wider ones go row by row through the span path; both give the same bits).
+pub const WINDOW_SETUP_COLS: usize = 16;
 
 impl<'t> FrameCalibration<'t> {
     /// Binds `table` to one frame's conditions.
@@ -256,12 +265,120 @@ impl<'t> FrameCalibration<'t> {
         }
         // One search of the defect lists for the whole window instead of one per row.
         let defects = self.rows_have_defects(rect.y0, rect.y0.saturating_add(rect.height));
+        if w <= WINDOW_SETUP_COLS {
+            return self.calibrate_window_narrow(rect, raw, levels, out_e, out_flags, defects);
+        }
         let rows = raw
             .chunks_exact(w)
             .zip(out_e.chunks_exact_mut(w))
             .zip(out_flags.chunks_exact_mut(w));
         for (((raw_row, e_row), f_row), (lv, y)) in rows.zip(levels.iter().zip(rect.y0..)) {
             flags |= self.calibrate_row((y, rect.x0), raw_row, lv, e_row, f_row, defects)?;
+        }
+        Ok(flags)
+    }
+
+    /// [`Self::calibrate_window`] for a window at most [`WINDOW_SETUP_COLS`] wide (buffers
+    /// already checked): the per-column constants (output, gain, column bias) are looked up
+    /// once per window, the dark and flat terms once per tile row of the window (and within
+    /// it once per tile), the line bias once per row; the pixels then take the same
+    /// [`pixel_bits`] with the same values as [`Self::calibrate_row`], so the bits and flags
+    /// are identical.
+    fn calibrate_window_narrow(
+        &self,
+        rect: Rect,
+        raw: &[u16],
+        levels: &[LineLevels],
+        out_e: &mut [Electrons],
+        out_flags: &mut [PixelFlags],
+        defects: bool,
+    ) -> Result<PixelFlags, CalibError> {
+        let t = &self.table;
+        let g = t.geometry();
+        let w = usize::from(rect.width);
+        if u32::from(rect.y0) + u32::from(rect.height) > u32::from(g.active_rows)
+            || usize::from(rect.x0) + w > usize::from(g.active_cols)
+        {
+            return Err(CalibError::OutsideActiveArea);
+        }
+        let sat = t.saturation_adu();
+        // Per column: on output 1 (else 0), column bias (1/16 ADU), gain.
+        let mut on_out1 = [false; WINDOW_SETUP_COLS];
+        let mut cb16 = [0i32; WINDOW_SETUP_COLS];
+        let mut gain = [GainEPerAdu::ONE; WINDOW_SETUP_COLS];
+        for (x, ((o, c), gn)) in (usize::from(rect.x0)..)
+            .zip(on_out1.iter_mut().zip(cb16.iter_mut()).zip(gain.iter_mut()))
+            .take(w)
+        {
+            let col = g.raw_col_of_x(x);
+            let out = g.output_of_col(col);
+            *o = out.0 == 1;
+            *c = i32::from(t.column_bias(col).to_bits());
+            *gn = t.gain(out);
+        }
+        let shift =
+            |m: Option<crate::table::MapView<'_>>| m.map_or(16, |m| m.header().tile_log2.min(16));
+        let (dl, fl) = (shift(t.dark_map()), shift(t.flat_map()));
+        let mut dark = [0i64; WINDOW_SETUP_COLS];
+        let mut flat = [FlatInv::ONE; WINDOW_SETUP_COLS];
+        let mut tile_row: Option<(u32, u32)> = None;
+        let mut offset = [0i32; WINDOW_SETUP_COLS];
+        let mut flags = PixelFlags::empty();
+        let rows = raw
+            .chunks_exact(w)
+            .zip(out_e.chunks_exact_mut(w))
+            .zip(out_flags.chunks_exact_mut(w));
+        for (((raw_row, e_row), f_row), (lv, y)) in rows.zip(levels.iter().zip(rect.y0..)) {
+            // Dark and flat of each column, again only when the row enters a new tile row.
+            let key = (u32::from(y) >> dl, u32::from(y) >> fl);
+            if tile_row != Some(key) {
+                tile_row = Some(key);
+                let mut last: Option<(u32, u32)> = None;
+                let mut cur = (0i64, FlatInv::ONE);
+                for (x, (d, f)) in (rect.x0..)
+                    .zip(dark.iter_mut().zip(flat.iter_mut()))
+                    .take(w)
+                {
+                    let k = (u32::from(x) >> dl, u32::from(x) >> fl);
+                    if last != Some(k) {
+                        last = Some(k);
+                        cur = (
+                            dark_16ths(t.dark_rel(x, y), self.dark_scale_bits),
+                            t.flat_inv(x, y),
+                        );
+                    }
+                    (*d, *f) = cur;
+                }
+            }
+            let b0 = offset_16ths(lv.bias(crate::geometry::Output(0)), ColumnBiasAdu::ZERO);
+            let b1 = offset_16ths(lv.bias(crate::geometry::Output(1)), ColumnBiasAdu::ZERO);
+            for (o, (c, is1)) in offset
+                .iter_mut()
+                .zip(cb16.iter().zip(on_out1.iter()))
+                .take(w)
+            {
+                *o = if *is1 { b1 } else { b0 } + *c;
+            }
+            let consts = offset
+                .iter()
+                .zip(gain.iter())
+                .zip(dark.iter().zip(flat.iter()));
+            for ((r, (e, f)), ((off, gn), (d, fl))) in raw_row
+                .iter()
+                .zip(e_row.iter_mut().zip(f_row.iter_mut()))
+                .zip(consts)
+            {
+                *e = Electrons::from_bits(pixel_bits(*r, *off, *gn, *d, *fl));
+                *f = if *r >= sat {
+                    PixelFlags::SATURATED
+                } else {
+                    PixelFlags::empty()
+                };
+                flags |= *f;
+            }
+            if defects {
+                flags |= self.apply_defects(y, rect.x0, raw_row, lv, e_row, f_row);
+            }
         }
         Ok(flags)
     }

@@ -35,6 +35,23 @@
 //! most 120 values for the median), 3 divides and one square root per axis: a 5x5 box with a
 //! 7x7 median background is a few hundred flops (an operation count, not an M7 measurement).
 //!
+//! # Lean power-1 path
+//! Power 1 on a box without excluded pixels (the common case) sums integers, not floats:
+//! with `F` the exact `I26F6` difference pixel - level (bits, 1/64 e-) and `Q = max(F, 0)`,
+//! it accumulates `sum F`, `sum dx F`, `sum dy F`, `sum Q`, `sum dx Q`, `sum dy Q`,
+//! `sum dx^2 Q`, `sum dy^2 Q` in i64, row by row, and the terms of `var_bg` in the error
+//! sums come from the box's closed-form moments (`sum dx^2 = rows * sum_cols dx^2`, ...). The
+//! per-star step converts the eight sums to f32 and solves as above: a few tens of flops per
+//! star, none per pixel. `F` is taken in i32, so each product is one 32x32->64
+//! multiply-accumulate. 16-bit-derived pixels and levels are within ±21.1 M e- (1.35e9 bits),
+//! so `F` can leave i32 only when a pixel and the level are of opposite signs and beyond
+//! ±16.7 M e- each: such a box is detected by the subtraction's overflow
+//! flag and handed to the f32 path. No sum overflows: `|F| <= 2^31`, `|d| <= 15` (box side
+//! <= [`super::MAX_SIDE`]), `d^2 < 2^8`, at most 961 < 2^10 pixels: every sum is below
+//! `2^31 * 2^8 * 2^10 = 2^49`.
+//! The sums are exact, so the path is at least as accurate as the f32 one; the host tests
+//! compare both against f64 references.
+//!
 //! # Where it fails
 //! - Pixelisation: an S-curve bias in the pixel phase for small PSFs, worse for power 2
 //!   (paper Figures 3 and 4). Measured RMS over phases (host test `centroid_cog`), 5x5 box:
@@ -196,6 +213,19 @@ pub(crate) fn cog_in_box(
     anchor: (u16, u16),
     power: CogPower,
 ) -> Option<Measured> {
+    if power == CogPower::One && !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+        return cog1_lean(p, bx, anchor);
+    }
+    cog_in_box_f32(p, bx, anchor, power)
+}
+
+/// [`cog_in_box`] on per-pixel f32 sums: any power, excluded pixels skipped.
+fn cog_in_box_f32(
+    p: &Prepared<'_>,
+    bx: PixelBox,
+    anchor: (u16, u16),
+    power: CogPower,
+) -> Option<Measured> {
     let var_bg = p.bg.variance_e2;
     let var_level = p.bg.level_variance_e2;
     let (mut wsum, mut var_sum, mut g_sum) = (0.0f32, 0.0f32, 0.0f32);
@@ -233,6 +263,115 @@ pub(crate) fn cog_in_box(
         col: f32::from(anchor.0) + ox,
         row: f32::from(anchor.1) + oy,
         flux_e: flux,
+        snr,
+        sigma_col: sigx,
+        sigma_row: sigy,
+    })
+}
+
+/// An integer sum as f32 from the two 32-bit halves of its magnitude (two `vcvt`s and a
+/// multiply-add instead of the library's i64 conversion): correctly rounded below 2^32, and
+/// within 1 ulp above (the low half's rounding error, < 2^8, is then below 2^-24 of it).
+#[inline(always)]
+fn sum_f32(v: i64) -> f32 {
+    let m = v.unsigned_abs();
+    let r = (m >> 32) as u32 as f32 * 4_294_967_296.0 + m as u32 as f32;
+    if v < 0 { -r } else { r }
+}
+
+/// `sum(d)` and `sum(d^2)` of the offsets `d = lo - anchor ..= hi - anchor` of a box side.
+fn offset_sums(lo: u16, hi: u16, anchor: u16) -> (f32, f32) {
+    let (mut s1, mut s2) = (0i32, 0i32);
+    for c in lo..=hi {
+        let d = i32::from(c) - i32::from(anchor);
+        s1 += d;
+        s2 += d * d;
+    }
+    (s1 as f32, s2 as f32)
+}
+
+/// The power-1 CoG of a box without excluded pixels (the common case): the lean path of
+/// [`cog_in_box`], same formula and result (see "Lean power-1 path" in the module docs).
+fn cog1_lean(p: &Prepared<'_>, bx: PixelBox, anchor: (u16, u16)) -> Option<Measured> {
+    let width = usize::from(p.width);
+    // The level fits i32 (a median of i32 bits or a saturated given level); if it did not,
+    // or a difference overflows i32 below, the general path takes the box.
+    let Ok(bg) = i32::try_from(p.bg.level_bits) else {
+        return cog_in_box_f32(p, bx, anchor, CogPower::One);
+    };
+    let (c0, c1) = (usize::from(bx.col0), usize::from(bx.col1));
+    let dx0 = i32::from(bx.col0) - i32::from(anchor.0);
+    // Exact sums in Electrons bits (1/64 e-): S = sum F, Q = sum max(F, 0), with d-moments.
+    // F is i32 here, so every product is one 32x32->64 multiply-accumulate.
+    let (mut s0, mut sx, mut sy) = (0i64, 0i64, 0i64);
+    let (mut q0, mut qx, mut qy, mut qxx, mut qyy) = (0i64, 0i64, 0i64, 0i64, 0i64);
+    let mut overflow = false;
+    for (row, dy) in (bx.row0..=bx.row1).zip(i32::from(bx.row0) - i32::from(anchor.1)..) {
+        let start = usize::from(row) * width;
+        let line = p.pixels.get(start + c0..=start + c1)?;
+        // Pass 1: F and its column moment.
+        let (mut rs, mut rx) = (0i64, 0i64);
+        for (dx, e) in (dx0..).zip(line) {
+            let (f, o) = e.to_bits().overflowing_sub(bg);
+            overflow |= o;
+            rs += i64::from(f);
+            rx += i64::from(dx) * i64::from(f);
+        }
+        // Pass 2: Q = max(F, 0) and its moments (F recomputed: cheaper than storing it).
+        let (mut rq, mut rqx, mut rqxx) = (0i64, 0i64, 0i64);
+        for (dx, e) in (dx0..).zip(line) {
+            let f = e.to_bits().wrapping_sub(bg);
+            let q = i64::from(f.max(0));
+            rq += q;
+            rqx += i64::from(dx) * q;
+            rqxx += i64::from(dx * dx) * q;
+        }
+        let dy = i64::from(dy);
+        s0 += rs;
+        sx += rx;
+        sy += dy * rs;
+        q0 += rq;
+        qx += rqx;
+        qxx += rqxx;
+        qy += dy * rq;
+        qyy += dy * dy * rq;
+    }
+    if overflow {
+        return cog_in_box_f32(p, bx, anchor, CogPower::One);
+    }
+    if s0 <= 0 {
+        return None;
+    }
+    // Per star: the sums in e- and the background variance's closed-form box moments.
+    const E: f32 = 1.0 / 64.0;
+    let var_bg = p.bg.variance_e2;
+    let var_level = p.bg.level_variance_e2;
+    let (sdx, sdx2) = offset_sums(bx.col0, bx.col1, anchor.0);
+    let (sdy, sdy2) = offset_sums(bx.row0, bx.row1, anchor.1);
+    let ncols = f32::from(bx.col1 - bx.col0 + 1);
+    let nrows = f32::from(bx.row1 - bx.row0 + 1);
+    let n = ncols * nrows;
+    let wsum = sum_f32(s0) * E;
+    let var_sum = sum_f32(q0) * E + n * var_bg;
+    let sxs = AxisSums {
+        dw: sum_f32(sx) * E,
+        d2var: sum_f32(qxx) * E + var_bg * nrows * sdx2,
+        dvar: sum_f32(qx) * E + var_bg * nrows * sdx,
+        dg: nrows * sdx,
+    };
+    let sys = AxisSums {
+        dw: sum_f32(sy) * E,
+        d2var: sum_f32(qyy) * E + var_bg * ncols * sdy2,
+        dvar: sum_f32(qy) * E + var_bg * ncols * sdy,
+        dg: ncols * sdy,
+    };
+    let (ox, sigx) = sxs.solve(wsum, var_sum, n, var_level);
+    let (oy, sigy) = sys.solve(wsum, var_sum, n, var_level);
+    let snr = wsum / math::sqrt(var_sum + n * n * var_level).max(f32::MIN_POSITIVE);
+    Some(Measured {
+        col: f32::from(anchor.0) + ox,
+        row: f32::from(anchor.1) + oy,
+        flux_e: wsum,
         snr,
         sigma_col: sigx,
         sigma_row: sigy,

@@ -22,13 +22,15 @@
 //! the last estimate with `NOT_CONVERGED`. Steps are capped at one pixel.
 //!
 //! # Error estimate
-//! The covariance `(J^T W J)^-1` at the solution: `sigma_x`, `sigma_y` and the flux error are
+//! The covariance `(J^T W J)^-1` at the solution (after convergence, the one of the last
+//! step's start, less than `tolerance_px` away, so no extra evaluation): `sigma_x`, `sigma_y` and the flux error are
 //! the square roots of its diagonal. `flux_e` is the fitted total flux `N` (the whole PSF, not
 //! the window's share) and `snr` is `N / sigma_N` (which, unlike eq. 8, charges the fit for
 //! the background it also fits).
 //!
 //! # Cost
-//! Per step: ~2 (w + h) `erfc`/`exp` evaluations, then ~30 multiply-adds per pixel for the
+//! Per step: `w + h + 2` `erfc` and normal-density evaluations (one per pixel edge, shared
+//! by neighbouring pixels), then ~20 multiply-adds per pixel for the upper triangle of the
 //! normal equations; 3-5 steps. A 9x9 window is ~15 k flops per star, about the IWC's.
 //!
 //! # Where it fails
@@ -36,8 +38,8 @@
 //!   undersampled stars (s < 0.4 px) become sensitive to it.
 //! - Non-Gaussian PSFs (coma, defocus): a model error; use the CoG with a correction table.
 //! - Blends and cosmic rays in the window pull the fit (no outlier rejection).
-//! - `erfc` by Abramowitz & Stegun 7.1.26 (error 5e-7 of the flux per pixel) limits the
-//!   noise-free accuracy to ~1e-5 px.
+//! - `erfc` by Abramowitz & Stegun 7.1.26 (error below 1.5e-7 per edge, so a few 1e-7 of
+//!   the flux per pixel) limits the noise-free accuracy to ~1e-5 px.
 
 use super::cog::{cog_start, usable_sigma_px};
 use super::{
@@ -130,7 +132,11 @@ fn chol_solve(l: &Mat4, b: &[f32; 4]) -> [f32; 4] {
     x
 }
 
-/// Per-column (or per-row) pixel fractions and their derivatives for centre `c`.
+/// Per-column (or per-row) pixel fractions and their derivatives for centre `c`, from one
+/// `erfc` and one density per pixel *edge* (`n + 1` of each, shared by the two pixels an edge
+/// separates), both from one exponential ([`math::erfc_abs_and_gauss`], A&S 7.1.26). With
+/// `E(z) = erfc(|z|)` at the edges the fraction takes the same tail-side cases as
+/// [`math::pixel_fraction`], so no two numbers near 1 are subtracted.
 fn profile(
     n: u16,
     c: f32,
@@ -138,11 +144,30 @@ fn profile(
     frac: &mut [f32; MAX_SIDE as usize],
     dfrac: &mut [f32; MAX_SIDE as usize],
 ) {
+    const FRAC_1_SQRT_2: f32 = core::f32::consts::FRAC_1_SQRT_2;
+    // Edge k is at i - 1/2 for pixel i = k; z scaled for erfc, t for the density.
+    // phi(u/s) = exp(-z^2) / sqrt(2 pi) with z = u / (s sqrt 2).
+    const FRAC_1_SQRT_2PI: f32 = 0.398_942_3;
+    let edge = |k: u16| {
+        let z = (f32::from(k) - 0.5 - c) / s * FRAC_1_SQRT_2;
+        let (e, g) = math::erfc_abs_and_gauss(z);
+        (z, e, FRAC_1_SQRT_2PI * g)
+    };
+    let mut lo = edge(0);
     for ((i, f), d) in (0..n).zip(frac.iter_mut()).zip(dfrac.iter_mut()) {
-        let fi = f32::from(i);
-        *f = math::pixel_fraction(fi, c, s);
+        let hi = edge(i + 1);
+        let ((zl, el, pl), (zh, eh, ph)) = (lo, hi);
+        let v = if zl >= 0.0 {
+            0.5 * (el - eh)
+        } else if zh <= 0.0 {
+            0.5 * (eh - el)
+        } else {
+            1.0 - 0.5 * (el + eh)
+        };
+        *f = v.max(0.0);
         // dP/dc = (phi(lo) - phi(hi)) / s
-        *d = (math::norm_pdf((fi - 0.5 - c) / s) - math::norm_pdf((fi + 0.5 - c) / s)) / s;
+        *d = (pl - ph) / s;
+        lo = hi;
     }
 }
 
@@ -165,6 +190,20 @@ fn normal_equations(p: &Prepared<'_>, theta: [f32; 4], s: f32, fit_bg: bool) -> 
     profile(p.width, vget(&theta, X), s, &mut px, &mut dpx);
     profile(p.height, vget(&theta, Y), s, &mut py, &mut dpy);
     let (flux, bg) = (vget(&theta, N), vget(&theta, B));
+    if !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+        return normal_equations_clean(p, (&px, &dpx, &py, &dpy), flux, bg, fit_bg);
+    }
+    normal_equations_general(p, (&px, &dpx, &py, &dpy), flux, bg, fit_bg)
+}
+
+/// The normal equations' sums over the usable pixels (excluded ones skipped).
+fn normal_equations_general(
+    p: &Prepared<'_>,
+    (px, dpx, py, dpy): Profiles<'_>,
+    flux: f32,
+    bg: f32,
+    fit_bg: bool,
+) -> Normal {
     let mut a = [[0.0f32; 4]; 4];
     let mut b = [0.0f32; 4];
     let whole = super::PixelBox {
@@ -196,9 +235,16 @@ fn normal_equations(p: &Prepared<'_>, theta: [f32; 4], s: f32, fit_bg: bool) -> 
         for (i, (row_a, bi)) in a.iter_mut().zip(b.iter_mut()).enumerate() {
             let ji = vget(&j, i) * wt;
             *bi += ji * res;
-            for (k, aik) in row_a.iter_mut().enumerate() {
+            // The upper triangle only (the matrix is symmetric): 10 products, not 16.
+            for (k, aik) in row_a.iter_mut().enumerate().skip(i) {
                 *aik += ji * vget(&j, k);
             }
+        }
+    }
+    for i in 1..4 {
+        for k in 0..i {
+            let v = at(&a, k, i);
+            set(&mut a, i, k, v);
         }
     }
     if !fit_bg {
@@ -207,6 +253,79 @@ fn normal_equations(p: &Prepared<'_>, theta: [f32; 4], s: f32, fit_bg: bool) -> 
     }
     Normal { a, b }
 }
+
+/// [`normal_equations`] on a window without excluded pixels: a walk of the pixel rows with
+/// the row's factors hoisted, the ten upper-triangle sums and the four right-hand sides in
+/// scalars (registers), the same terms as the general loop.
+fn normal_equations_clean(
+    p: &Prepared<'_>,
+    (px, dpx, py, dpy): Profiles<'_>,
+    flux: f32,
+    bg: f32,
+    fit_bg: bool,
+) -> Normal {
+    let w = usize::from(p.width).max(1);
+    let j3 = if fit_bg { 1.0f32 } else { 0.0 };
+    let var1 = p.bg.variance_e2 + 1.0;
+    // The level and every difference in i32 (one vcvt per pixel, not a library i64
+    // conversion); a window where that fails takes the general loop.
+    let Ok(level) = i32::try_from(p.bg.level_bits) else {
+        return normal_equations_general(p, (px, dpx, py, dpy), flux, bg, fit_bg);
+    };
+    let mut overflow = false;
+    let (mut a00, mut a01, mut a02, mut a03, mut a11) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let (mut a12, mut a13, mut a22, mut a23, mut a33) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let (mut b0, mut b1, mut b2, mut b3) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let rows = p.pixels.chunks_exact(w).zip(py.iter().zip(dpy.iter()));
+    for (line, (&fy, &dy)) in rows {
+        let (nfy, ndy) = (flux * fy, flux * dy);
+        for (e, (&fx, &dx)) in line.iter().zip(px.iter().zip(dpx.iter())) {
+            let (d, o) = e.to_bits().overflowing_sub(level);
+            overflow |= o;
+            let f = d as f32 / 64.0;
+            let star = nfy * fx;
+            let wt = 1.0 / (super::pos(star) + var1);
+            let (j0, j1, j2) = (nfy * dx, ndy * fx, fx * fy);
+            let res = f - (bg + star);
+            let (w0, w1, w2, w3) = (j0 * wt, j1 * wt, j2 * wt, j3 * wt);
+            a00 += w0 * j0;
+            a01 += w0 * j1;
+            a02 += w0 * j2;
+            a03 += w0 * j3;
+            a11 += w1 * j1;
+            a12 += w1 * j2;
+            a13 += w1 * j3;
+            a22 += w2 * j2;
+            a23 += w2 * j3;
+            a33 += w3 * j3;
+            b0 += w0 * res;
+            b1 += w1 * res;
+            b2 += w2 * res;
+            b3 += w3 * res;
+        }
+    }
+    if overflow {
+        return normal_equations_general(p, (px, dpx, py, dpy), flux, bg, fit_bg);
+    }
+    let a = [
+        [a00, a01, a02, a03],
+        [a01, a11, a12, a13],
+        [a02, a12, a22, a23],
+        [a03, a13, a23, if fit_bg { a33 } else { 1.0 }],
+    ];
+    Normal {
+        a,
+        b: [b0, b1, b2, b3],
+    }
+}
+
+/// The four profiles of [`normal_equations`]: column fractions and derivatives, then rows'.
+type Profiles<'r> = (
+    &'r [f32; MAX_SIDE as usize],
+    &'r [f32; MAX_SIDE as usize],
+    &'r [f32; MAX_SIDE as usize],
+    &'r [f32; MAX_SIDE as usize],
+);
 
 /// Jacobi-scales, factors and solves; returns the step and the scaled factor.
 fn solve(n: &Normal) -> Option<([f32; 4], [f32; 4], Mat4)> {
@@ -256,8 +375,11 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
     let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
     let give_up = |extra: CentroidFlags| p.finish(start, extra | CentroidFlags::NOT_CONVERGED);
     let mut converged = params.max_iterations == 0;
+    // The factor of the converged step's normal equations: the covariance there, a step of
+    // under `tolerance_px` from the solution, instead of one more evaluation.
+    let mut last_factor = None;
     for _ in 0..params.max_iterations {
-        let Some((step, _, _)) = solve(&normal_equations(&p, theta, s, params.fit_background))
+        let Some((step, d, l)) = solve(&normal_equations(&p, theta, s, params.fit_background))
         else {
             return give_up(extra);
         };
@@ -279,14 +401,21 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
         }
         if sx.abs() < params.tolerance_px && sy.abs() < params.tolerance_px {
             converged = true;
+            last_factor = Some((d, l));
             break;
         }
     }
     if !converged {
         extra |= CentroidFlags::NOT_CONVERGED;
     }
-    // Covariance at the solution.
-    let Some((_, d, l)) = solve(&normal_equations(&p, theta, s, params.fit_background)) else {
+    // Covariance at the solution (or at the converged step's start, within tolerance_px).
+    let factor = match last_factor {
+        Some(f) => Some(f),
+        None => {
+            solve(&normal_equations(&p, theta, s, params.fit_background)).map(|(_, d, l)| (d, l))
+        }
+    };
+    let Some((d, l)) = factor else {
         return give_up(extra);
     };
     let flux = vget(&theta, N);

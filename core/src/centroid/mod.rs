@@ -242,8 +242,8 @@ fn level_to_bits(level_e: f32) -> i64 {
     i64::from(r as i32)
 }
 
-/// `max(v, 0)` (0 for NaN, as `f32::max`) by a compare: on the `thumbv7em-none-eabihf`
-/// target (Cortex-M4 FPU, no `vmaxnm`) `f32::max` is a call to `fmaxf`.
+/// `max(v, 0)` (0 for NaN, as `f32::max`) by a compare: without `-C target-cpu=cortex-m7`
+/// (the Cortex-M4 FPU, no `vmaxnm`) `f32::max` is a call to `fmaxf`.
 #[inline(always)]
 pub(crate) fn pos(v: f32) -> f32 {
     if v > 0.0 { v } else { 0.0 }
@@ -398,20 +398,27 @@ impl<'a> Prepared<'a> {
         // Pixel bits are `Electrons` (i32), so the buffer holds i32 (cheaper to compare on
         // the M7 than i64); deviations from the median can reach 2^32, so they are u32.
         let mut buf = [0i32; MAX_PERIMETER];
-        let mut n = 0usize;
-        for (slot, b) in buf.iter_mut().zip(self.perimeter()) {
-            *slot = i32::try_from(b).unwrap_or(if b < 0 { i32::MIN } else { i32::MAX });
-            n += 1;
-        }
+        let n = if self.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+            let mut n = 0usize;
+            for (slot, b) in buf.iter_mut().zip(self.perimeter()) {
+                *slot = i32::try_from(b).unwrap_or(if b < 0 { i32::MIN } else { i32::MAX });
+                n += 1;
+            }
+            n
+        } else {
+            self.perimeter_clean(&mut buf)
+        };
         let v = buf.get_mut(..n)?;
         let (lo, hi) = middle_pair(v)?;
         // Mean of the middle two, rounded towards minus infinity.
         let med = (i64::from(lo) + i64::from(hi)).div_euclid(2);
-        let mut dev = [0u32; MAX_PERIMETER];
-        for (d, x) in dev.iter_mut().zip(v.iter()) {
-            *d = u32::try_from((i64::from(*x) - med).unsigned_abs()).unwrap_or(u32::MAX);
+        // Absolute deviations in place (saturated at i32::MAX bits, 33.5 M e-: beyond the
+        // calibrated range, and a MAD that large marks the window as useless anyway).
+        for x in v.iter_mut() {
+            *x = i32::try_from((i64::from(*x) - med).unsigned_abs()).unwrap_or(i32::MAX);
         }
-        let (dlo, dhi) = middle_pair(dev.get_mut(..n)?)?;
+        let (dlo, dhi) = middle_pair(v)?;
+        let (dlo, dhi) = (dlo.unsigned_abs(), dhi.unsigned_abs());
         let mad_bits = (u64::from(dlo) + u64::from(dhi)) / 2;
         let mad = mad_bits as f32 / 64.0 * 1.4826;
         let var = if n > 1 { sanitize_var(mad * mad) } else { 0.0 };
@@ -431,6 +438,9 @@ impl<'a> Prepared<'a> {
             let (dc, dr) = (u32::from(c.abs_diff(cc)), u32::from(r.abs_diff(cr)));
             dc * dc + dr * dr
         };
+        if !self.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+            return self.peak_clean();
+        }
         let mut best: Option<(i64, u32, u16, u16)> = None;
         for row in 0..self.height {
             for col in 0..self.width {
@@ -443,6 +453,66 @@ impl<'a> Prepared<'a> {
             }
         }
         best.map(|(_, _, c, r)| (c, r))
+    }
+
+    /// The border ring's bits of a window without excluded pixels, copied straight from the
+    /// pixel rows into `buf` (top row, the side pixels of the middle rows, bottom row);
+    /// returns how many (the values [`Self::perimeter`] gives, in another order).
+    fn perimeter_clean(&self, buf: &mut [i32; MAX_PERIMETER]) -> usize {
+        let w = usize::from(self.width);
+        let h = usize::from(self.height);
+        let mut slots = buf.iter_mut();
+        let mut n = 0usize;
+        let mut put = |e: &crate::units::Electrons| {
+            if let Some(s) = slots.next() {
+                *s = e.to_bits();
+                n += 1;
+            }
+        };
+        let mut rows = self.pixels.chunks_exact(w.max(1)).take(h);
+        if let Some(top) = rows.next() {
+            top.iter().for_each(&mut put);
+        }
+        let mut last = None;
+        for row in rows {
+            if let Some(prev) = last.replace(row) {
+                if let Some(e) = prev.first() {
+                    put(e);
+                }
+                if let Some(e) = prev.last().filter(|_| w > 1) {
+                    put(e);
+                }
+            }
+        }
+        if let Some(bottom) = last {
+            bottom.iter().for_each(&mut put);
+        }
+        n
+    }
+
+    /// [`Self::peak`] for a window without excluded pixels: one walk of the pixel slice,
+    /// the distance computed only for a candidate at least as bright as the best so far.
+    fn peak_clean(&self) -> Option<(u16, u16)> {
+        let (cc, cr) = self.centre();
+        let w = usize::from(self.width).max(1);
+        let mut best_v = i32::MIN;
+        let mut best_d = u32::MAX;
+        let mut best = None;
+        for (row, line) in (0u16..).zip(self.pixels.chunks_exact(w)) {
+            for (col, e) in (0u16..).zip(line) {
+                let b = e.to_bits();
+                if b >= best_v {
+                    let (dc, dr) = (u32::from(col.abs_diff(cc)), u32::from(row.abs_diff(cr)));
+                    let d = dc * dc + dr * dr;
+                    if b > best_v || d < best_d || best.is_none() {
+                        best_v = b;
+                        best_d = d;
+                        best = Some((col, row));
+                    }
+                }
+            }
+        }
+        best
     }
 
     /// The window's centre pixel (window-relative).

@@ -19,13 +19,14 @@ use core::fmt::Write;
 use core::hint::black_box;
 use core::sync::atomic::{AtomicU32, Ordering};
 
-use fixed::types::{U8F8, U16F16};
+use fixed::types::{U0F16, U8F8, U16F16};
 use startrack_core::calib::{
     DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
 };
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::iwc::{IwcParams, iwc};
+use startrack_core::centroid::pixcorr::{CurveHeader, PixCorr, PixCorrBackground};
 use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
 use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::detect::{DetectConfig, ScanDetector};
@@ -574,6 +575,25 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         row(out, "tracking_frame", "frame_30_stars", t_track, 1);
     }
 
+    // A pixel-phase curve for the firmware's CoG (power 1, box 7, perimeter median): 33
+    // knots of an S-shaped correction (the values do not change the cost).
+    let mut curve_bytes = [0u8; 8 + 2 * 33];
+    let header = CurveHeader {
+        power: CogPower::One,
+        box_side: 7,
+        background: PixCorrBackground::PerimeterMedian,
+        knots: 33,
+        a_px: U8F8::from_num(1.2),
+        phase_max_px: U0F16::from_num(0.45),
+    };
+    curve_bytes[..8].copy_from_slice(&header.to_bytes());
+    for k in 1..33usize {
+        let v = (k as i32 * (32 - k as i32) * 3) as i16;
+        curve_bytes[8 + 2 * k..10 + 2 * k].copy_from_slice(&v.to_le_bytes());
+    }
+    let (curve, _) = PixCorr::parse(&curve_bytes).map_err(|_| "pixel-phase curve")?;
+    let mut t_cog1c = 0u64;
+
     // Star windows: 7x7 around a star, calibrated from its 7 raw lines, then centroided.
     let mut t_window = 0u64;
     let mut t_centroid = [[0u64; METHODS]; 2];
@@ -623,6 +643,12 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
             CentroidInput::new(w5).with_pixel_flags(&wf5),
             CentroidInput::new(w7).with_pixel_flags(&wf),
         ];
+        // The firmware's corrected CoG: power 1, 7x7 box, perimeter median, then the curve.
+        let input7 = black_box(&inputs[1]);
+        t_cog1c += measure(overhead, || {
+            let c = curve.apply(cog(input7, &CogParams::new(CogPower::One, 7)));
+            black_box(c.x_px + c.y_px);
+        });
         for (input, acc) in inputs.iter().zip(t_centroid.iter_mut()) {
             let side = input.window.rect.width as u8;
             for (m, slot) in acc.iter_mut().enumerate() {
@@ -638,6 +664,13 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         "window_calibrate",
         "window_7x7",
         t_window,
+        WINDOW_REPS as u64,
+    );
+    row(
+        out,
+        "centroid_cog1c_7x7",
+        "star",
+        t_cog1c,
         WINDOW_REPS as u64,
     );
     for (side, acc) in [5u8, 7].iter().zip(t_centroid.iter()) {
