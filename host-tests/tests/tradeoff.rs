@@ -93,13 +93,35 @@ fn committed_m7_costs_cover_every_method() {
         let (c, _) = m7_cost(&m, &t).unwrap_or_else(|| panic!("{} has no M7 cost", m.name()));
         assert!(c > 0.0, "{}: {c}", m.name());
     }
-    // The Gauss fit is the most expensive per star, a given-background CoG 3x3 the cheapest.
-    let costs: Vec<f64> = Method::all()
-        .iter()
-        .map(|m| m7_cost(m, &t).unwrap().0)
-        .collect();
+    // A CoG costs more in a bigger box, and the pixel-phase correction adds to it.
+    let cog = |power, box_side, corrected| {
+        m7_cost(
+            &Method::Cog {
+                power,
+                box_side,
+                corrected,
+            },
+            &t,
+        )
+        .unwrap()
+        .0
+    };
+    for power in [CogPower::One, CogPower::Two] {
+        for corrected in [false, true] {
+            let (c3, c5, c7) = (
+                cog(power, 3, corrected),
+                cog(power, 5, corrected),
+                cog(power, 7, corrected),
+            );
+            assert!(c3 < c5 && c5 < c7, "{c3} {c5} {c7}");
+        }
+        for side in [3, 5, 7] {
+            assert!(cog(power, side, true) > cog(power, side, false));
+        }
+    }
+    // The Gauss fit costs more than any CoG of the same box.
     let fit = m7_cost(&Method::GaussFit { window: 7 }, &t).unwrap().0;
-    assert!(costs.iter().all(|&c| c <= fit));
+    assert!(fit > cog(CogPower::Two, 7, true));
 }
 
 /// A small run of both outputs into `dir`.

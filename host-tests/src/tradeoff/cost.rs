@@ -18,8 +18,13 @@
 //!   IWC 9x9);
 //! - `power-2 extra added`: CoG power 2 with a given background = `cog1_given_bg` plus the
 //!   measured difference `cog2 - cog1` of the perimeter stages;
-//! - `correction not counted`: a corrected CoG costs its uncorrected CoG here: the
-//!   correction (one table lookup and linear interpolation per axis) is not in the bench yet.
+//! - `correction added (7x7 measurement)`: a corrected CoG costs its uncorrected CoG plus
+//!   the measured `centroid_cog1c_7x7 - centroid_cog1_7x7` (the curve's look-up and
+//!   interpolation, independent of the box);
+//! - `correction not counted`: the same with a bench CSV that lacks `centroid_cog1c_7x7`.
+//!
+//! The 3-point peaks use their `_given_bg` stages (the background the Monte Carlo gives
+//! them) when the CSV has them, else the perimeter-median stages (`perimeter bg`).
 //!
 //! # Host time
 //! [`host_ns_per_star`] runs the method on a fixed set of noisy stars (seeded) in repeated
@@ -140,7 +145,15 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
                 }
             };
             if corrected {
-                Some((cost, format!("{what}; correction not counted")))
+                // The correction's own cost: the bench's corrected CoG 7x7 less the plain one
+                // (the curve look-up and interpolation do not depend on the box).
+                match (t.get("centroid_cog1c_7x7"), t.get("centroid_cog1_7x7")) {
+                    (Some(c), Some(p)) => Some((
+                        cost + (c - p).max(0.0),
+                        format!("{what}; correction added (7x7 measurement)"),
+                    )),
+                    _ => Some((cost, format!("{what}; correction not counted"))),
+                }
             } else {
                 Some((cost, what))
             }
@@ -158,8 +171,16 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
                     "centroid_quadratic_gaussian"
                 }
             };
-            let (c, ex) = t.by_side(stage, method.window_side())?;
-            Some((c, basis(ex, "perimeter bg")))
+            // The given-background stage is what the Monte Carlo runs; older bench CSVs only
+            // have the perimeter-median one, an upper bound.
+            let given = format!("{stage}_given_bg");
+            match t.by_side(&given, method.window_side()) {
+                Some((c, ex)) => Some((c, basis(ex, "measured"))),
+                None => {
+                    let (c, ex) = t.by_side(stage, method.window_side())?;
+                    Some((c, basis(ex, "perimeter bg")))
+                }
+            }
         }
         Method::GaussFit { window } => {
             let (c, ex) = t.by_side("centroid_gauss_fit", u16::from(window))?;
