@@ -2,6 +2,10 @@
 //! temporary folder, checked against the simulator's truth, and every bad-input path of the
 //! binary (one-line error, non-zero exit, no panic).
 
+#[path = "common/cli.rs"]
+mod common_cli;
+
+use common_cli::{build_args, startrack};
 use startrack_core::table::CalibTable;
 use startrack_host::cli::calib_build::{CalibBuildArgs, build};
 use startrack_host::cli::process::{ProcessArgs, measure};
@@ -11,7 +15,6 @@ use startrack_host::pipeline::{CSV_HEADER, Method};
 use startrack_host::sim::Simulator;
 use startrack_host::sim::truth::TruthSections;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 const SEED: u64 = 5;
 const STARS: usize = 40;
@@ -29,26 +32,6 @@ fn simulate(dir: &Path, seed: u64, stars: usize) -> SimFiles {
         measured_frames: 0,
     })
     .expect("simulate")
-}
-
-fn build_args(f: &SimFiles, out: PathBuf) -> CalibBuildArgs {
-    CalibBuildArgs {
-        out,
-        bias: Some(f.bias.clone()),
-        dark: Some(f.dark.clone()),
-        flat: Some(f.flat.clone()),
-        gains: None,
-        hot: Some(f.hot.clone()),
-        hot_exposure_s: 1.0,
-        hot_ref_k: 293.0,
-        hot_doubling_k: 6.0,
-        hot_exclude_above_e: 10_000.0,
-        tile_log2: 0,
-        saturation_adu: 65535,
-        psf_a_px: None,
-        pixcorr_boxes: "5,7".into(),
-        pixcorr_powers: "1,2".into(),
-    }
 }
 
 fn process_args(frame: &Path, table: &Path) -> ProcessArgs {
@@ -255,19 +238,6 @@ fn hot_csv_becomes_sorted_active_entries() {
             .iter()
             .any(|n| n.contains("1 outside the active area"))
     );
-}
-
-/// Runs the binary; returns (success, stdout, stderr).
-fn startrack(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_startrack"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 /// A failure is one line on standard error, prefixed with the command, no panic.

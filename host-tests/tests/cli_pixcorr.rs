@@ -3,6 +3,9 @@
 //! curve applied), against the simulator's truth and against the same frame processed with a
 //! table without curves (plain CoG, flagged uncorrected).
 
+#[path = "common/cli.rs"]
+mod common_cli;
+
 use startrack_core::table::CalibTable;
 use startrack_host::cli::calib_build::{CalibBuildArgs, build};
 use startrack_host::cli::process::{ProcessArgs, measure};
@@ -40,21 +43,9 @@ fn simulate(dir: &Path) -> SimFiles {
 
 fn build_args(f: &SimFiles, out: PathBuf, psf_a_px: Option<String>) -> CalibBuildArgs {
     CalibBuildArgs {
-        out,
-        bias: Some(f.bias.clone()),
-        dark: Some(f.dark.clone()),
-        flat: Some(f.flat.clone()),
-        gains: None,
-        hot: Some(f.hot.clone()),
-        hot_exposure_s: 1.0,
-        hot_ref_k: 293.0,
-        hot_doubling_k: 6.0,
-        hot_exclude_above_e: 10_000.0,
-        tile_log2: 0,
         saturation_adu: SATURATION_ADU,
         psf_a_px,
-        pixcorr_boxes: "5,7".into(),
-        pixcorr_powers: "1,2".into(),
+        ..common_cli::build_args(f, out)
     }
 }
 

@@ -1,6 +1,10 @@
 //! `startrack tradeoff`'s logic: the Pareto frontier on hand-made points, the M7 cost table
 //! and its mapping to the methods, the run's determinism, and the command's bad inputs.
 
+#[path = "common/cli.rs"]
+mod common_cli;
+
+use common_cli::startrack;
 use startrack_core::centroid::cog::CogPower;
 use startrack_host::accuracy::{Method, Noise};
 use startrack_host::figures::Written;
@@ -8,7 +12,6 @@ use startrack_host::tradeoff::cost::{M7Table, m7_cost};
 use startrack_host::tradeoff::failures::{self, MapSpec, Perturb};
 use startrack_host::tradeoff::pareto::frontier;
 use startrack_host::tradeoff::{chart, write_failures};
-use std::process::Command;
 
 #[test]
 fn pareto_keeps_exactly_the_undominated_points() {
@@ -186,18 +189,6 @@ fn two_runs_write_identical_csvs() {
         t.lines()
             .any(|l| l.starts_with("gauss fit 5x5,5,1,30,50000,perimeter bg + background fitted,,"))
     );
-}
-
-fn startrack(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_startrack"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 #[test]
