@@ -5,9 +5,7 @@
 use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use startrack_core::calib::{
-    DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
-};
+use startrack_core::calib::{FrameCalibration, FrameConditions, PixelFlags};
 use startrack_core::detect::{DetectConfig, DetectError, DetectionFlags, LineDetector};
 use startrack_core::table::CalibTable;
 use startrack_core::units::{Electrons, Kelvin};
@@ -262,19 +260,13 @@ fn simulated_frame_end_to_end() {
     let g = params.geometry;
     let table = sim.truth_table(TruthSections::ALL).unwrap();
     let table = CalibTable::parse(&table).unwrap();
-    let mut lines = Vec::new();
-    let mut est = DarkScaleEstimator::new();
-    let mut line = vec![0u16; g.line_len()];
-    for y in 0..usize::from(g.lines) {
-        sim.render_line(y, &mut line);
-        let lv = LineLevels::measure(&g, &line).unwrap();
-        est.add_line(&table, &line, &lv).unwrap();
-        lines.push((line.clone(), lv));
-    }
+    let raw = startrack_host::demo::render_frame(&sim);
+    let levels = startrack_host::pipeline::measure_levels(&table, &raw).unwrap();
+    let lines: Vec<_> = raw.chunks_exact(g.line_len()).zip(&levels.lines).collect();
     let cal = FrameCalibration::new(
         table,
         FrameConditions {
-            dark_scale_e: est.estimate().unwrap(),
+            dark_scale_e: levels.dark_scale_e.unwrap(),
             exposure_ms: 1000,
             temperature_k: Kelvin::from_num(293),
         },

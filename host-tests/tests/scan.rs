@@ -4,9 +4,7 @@
 //! of dark, flat and column bias; and the scan must calibrate only a small part of a quiet
 //! frame (otherwise it is no faster).
 
-use startrack_core::calib::{
-    DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
-};
+use startrack_core::calib::{FrameCalibration, FrameConditions, LineLevels, PixelFlags};
 use startrack_core::detect::{DetectConfig, LineDetector, ScanDetector};
 use startrack_core::table::CalibTable;
 use startrack_core::units::{Electrons, Kelvin};
@@ -28,19 +26,17 @@ fn frame(params: SensorParams, n_stars: usize, tile_log2: u8) -> Frame {
         .truth_table_tiled(TruthSections::ALL, tile_log2)
         .unwrap();
     let parsed = CalibTable::parse(&table).unwrap();
-    let mut lines = Vec::new();
-    let mut est = DarkScaleEstimator::new();
-    let mut line = vec![0u16; g.line_len()];
-    for y in 0..usize::from(g.lines) {
-        sim.render_line(y, &mut line);
-        let lv = LineLevels::measure(&g, &line).unwrap();
-        est.add_line(&parsed, &line, &lv).unwrap();
-        lines.push((line.clone(), lv));
-    }
+    let raw = startrack_host::demo::render_frame(&sim);
+    let levels = startrack_host::pipeline::measure_levels(&parsed, &raw).unwrap();
+    let lines = raw
+        .chunks_exact(g.line_len())
+        .map(<[u16]>::to_vec)
+        .zip(levels.lines)
+        .collect();
     Frame {
         table,
         lines,
-        dark_scale_e: est.estimate().unwrap(),
+        dark_scale_e: levels.dark_scale_e.unwrap(),
         params,
     }
 }
