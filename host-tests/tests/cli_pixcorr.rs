@@ -12,7 +12,6 @@ use startrack_host::cli::process::{ProcessArgs, measure};
 use startrack_host::cli::simulate::{SimFiles, SimulateArgs};
 use startrack_host::pipeline::{FrameResult, Method, StarRow, UNCORRECTED_BIT};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 const SEED: u64 = 11;
 const STARS: usize = 60;
@@ -275,17 +274,7 @@ fn the_binary_reports_curves_built_and_used() {
     let s = setup();
     let dir = s.with_curves.parent().unwrap();
     let out = dir.join("bin.bin");
-    let run = |args: &[&str]| {
-        let o = Command::new(env!("CARGO_BIN_EXE_startrack"))
-            .args(args)
-            .output()
-            .unwrap();
-        (
-            o.status.success(),
-            String::from_utf8_lossy(&o.stdout).into_owned(),
-            String::from_utf8_lossy(&o.stderr).into_owned(),
-        )
-    };
+    let run = common_cli::startrack;
     let (ok, stdout, stderr) = run(&[
         "calib",
         "build",
