@@ -77,6 +77,30 @@ fn m7_costs_map_measured_extrapolated_and_estimated_stages() {
 }
 
 #[test]
+fn gauss_fit_cost_prefers_the_given_background_stage() {
+    // With the Monte Carlo's stage (background given and held) in the CSV, that stage is the
+    // cost, measured; the perimeter stage (background fitted) is only the fallback above.
+    let text = "centroid_gauss_fit_5x5,star,50000\ncentroid_gauss_fit_7x7,star,90000\n\
+                centroid_gauss_fit_given_bg_5x5,star,3000\n\
+                centroid_gauss_fit_given_bg_7x7,star,4200\n";
+    let t = M7Table::parse(text).unwrap();
+    for (window, want) in [(5u8, 3000.0), (7, 4200.0)] {
+        let (c, basis) = m7_cost(&Method::GaussFit { window }, &t).unwrap();
+        assert_eq!((c, basis.as_str()), (want, "measured"), "window {window}");
+    }
+    // Other windows: linear in the pixel count through the given-background stages.
+    let (c, basis) = m7_cost(&Method::GaussFit { window: 9 }, &t).unwrap();
+    assert!((c - (4200.0 + 1200.0 / 24.0 * 32.0)).abs() < 1e-9, "{c}");
+    assert_eq!(basis, "extrapolated");
+    // Without them: the perimeter stage, labelled as the upper bound it is.
+    let (c, basis) = m7_cost(&Method::GaussFit { window: 5 }, &table()).unwrap();
+    assert_eq!(
+        (c, basis.as_str()),
+        (50000.0, "perimeter bg + background fitted")
+    );
+}
+
+#[test]
 fn m7_parse_rejects_malformed_rows() {
     assert!(M7Table::parse("").is_err());
     assert!(M7Table::parse("stage,unit,instructions_per_unit\n").is_err());

@@ -685,7 +685,7 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
     Ok(())
 }
 
-const METHODS: usize = 9;
+const METHODS: usize = 10;
 const METHOD_NAMES: [&str; METHODS] = [
     "cog1",
     "cog2",
@@ -696,6 +696,7 @@ const METHOD_NAMES: [&str; METHODS] = [
     "gauss_fit",
     "quadratic_parabolic_given_bg",
     "quadratic_gaussian_given_bg",
+    "gauss_fit_given_bg",
 ];
 /// The PSF's sigma of the synthetic stars, px.
 const PSF_SIGMA_PX: f32 = 1.0;
@@ -732,6 +733,20 @@ fn run_method(m: usize, side: u8, input: &CentroidInput<'_>) -> f32 {
             },
         ),
         6 => gauss_fit(input, &GaussFitParams::new(PSF_SIGMA_PX)),
+        // The near-CRLB method as `startrack accuracy` runs it: background given and held
+        // (not fitted), start box the window's side capped at 5.
+        9 => gauss_fit(
+            input,
+            &GaussFitParams {
+                fit_background: false,
+                background: Background::Given {
+                    level_e: 10.0,
+                    variance_e2: 40.0,
+                },
+                start_box: side.min(5),
+                ..GaussFitParams::new(PSF_SIGMA_PX)
+            },
+        ),
         // The 3-point peaks with the detector's background, as `startrack accuracy` and the
         // trade-off chart run them: no perimeter median.
         m => quadratic(

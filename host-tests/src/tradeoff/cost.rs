@@ -5,15 +5,18 @@
 //! `cargo m7-bench` prints `stage,unit,instructions_per_unit` (QEMU `-icount` instructions,
 //! identical run to run; `host-tests/m7-costs.csv` is a committed copy, regenerated with
 //! `cargo m7-bench > host-tests/m7-costs.csv`). The bench times each method with the whole
-//! 5x5 or 7x7 window as its box and (except `cog1_given_bg`) a perimeter-median background,
+//! 5x5 or 7x7 window as its box and (except the `_given_bg` stages) a perimeter-median
+//! background,
 //! while the accuracy experiment runs a CoG box two pixels narrower than its window with the
 //! background given, IWC on 9x9 and the quadratic on 5x5. [`m7_cost`] maps each method to the
 //! nearest measurement and says how in a `basis` string:
 //! - `measured`: the stage of the same method, box and background;
 //! - `perimeter bg`: the measured stage uses a perimeter-median background (an upper bound:
 //!   the median of the ring is part of it);
-//! - `perimeter bg + background fitted`: the Gauss fit's stage also fits the background (one
-//!   more parameter per step; an upper bound);
+//! - `perimeter bg + background fitted`: the Gauss fit's perimeter stage, which also fits the
+//!   background (one more parameter per step; an upper bound), used only when the CSV lacks
+//!   the `centroid_gauss_fit_given_bg` stages (the Monte Carlo's configuration: background
+//!   given and held, start box `min(window, 5)`; basis `measured`);
 //! - `extrapolated`: linear in the pixel count through the 5x5 and 7x7 stages (3x3 boxes,
 //!   IWC 9x9);
 //! - `power-2 extra added`: CoG power 2 with a given background = `cog1_given_bg` plus the
@@ -183,8 +186,17 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
             }
         }
         Method::GaussFit { window } => {
-            let (c, ex) = t.by_side("centroid_gauss_fit", u16::from(window))?;
-            Some((c, basis(ex, "perimeter bg + background fitted")))
+            // The given-background stage runs the Monte Carlo's configuration (background
+            // given and held, start box min(window, 5)); older bench CSVs only have the
+            // perimeter-median stage that also fits the background, an upper bound.
+            let n = u16::from(window);
+            match t.by_side("centroid_gauss_fit_given_bg", n) {
+                Some((c, ex)) => Some((c, basis(ex, "measured"))),
+                None => {
+                    let (c, ex) = t.by_side("centroid_gauss_fit", n)?;
+                    Some((c, basis(ex, "perimeter bg + background fitted")))
+                }
+            }
         }
     }
 }
