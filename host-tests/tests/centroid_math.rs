@@ -123,3 +123,50 @@ fn erfc_abs_and_gauss_against_f64() {
     assert!(worst_gauss < 5e-7, "{worst_gauss}");
     assert_eq!(math::erfc_abs_and_gauss(f32::NAN), (1.0, 0.0));
 }
+
+#[test]
+fn edge_grid_against_f64() {
+    // The Gauss fit's edges: `erfc_abs_and_gauss` at (u0 + k) h with the exponentials from a
+    // recurrence. A value is at most j <= 5 steps from a direct `exp` (error d = 1e-7, the
+    // measured bound of the test above), step i's factor carrying d + i (d + e) (q's error
+    // accumulates; e = 6e-8, one rounding), each step one more rounding, the first step
+    // downwards a divide: relative error <= d + (j + 1) d + j (j - 1) / 2 (d + e) + (j + 1) e
+    // = 2.6e-6 for j = 5 (measured: ~1e-6, the errors partly cancel). erfc = poly(t) g <= 1,
+    // so its error is within `erfc_abs_and_gauss`'s allowance (1.35e-6) plus that: 4e-6.
+    let (mut worst_erfc, mut worst_gauss): (f64, f64) = (0.0, 0.0);
+    let mut out = [[0.0f32; 3]; 32];
+    for h in [0.02f32, 0.1, 0.4, 0.707, 1.3, 3.5, 7.1] {
+        for u0 in samples(-31.5, 0.5, 2000) {
+            for n in [1usize, 2, 6, 8, 17, 32] {
+                let out = &mut out[..n];
+                let u0 = u0 as f32;
+                math::EdgeGrid::new(h).fill(u0, out);
+                for (k, &[z, e, g]) in out.iter().enumerate() {
+                    assert_eq!(z, (u0 + k as f32) * h, "z at k {k}");
+                    let x = ((f64::from(u0) + k as f64) * f64::from(h)).abs();
+                    worst_erfc = worst_erfc.max((f64::from(e) - psf::erfc(x)).abs());
+                    worst_gauss = worst_gauss.max((f64::from(g) - (-x * x).exp()).abs());
+                }
+            }
+        }
+    }
+    eprintln!(
+        "EdgeGrid::fill: worst absolute error {worst_erfc:.2e} (erfc), {worst_gauss:.2e} (exp)"
+    );
+    assert!(worst_erfc < 4e-6, "{worst_erfc}");
+    assert!(worst_gauss < 2.6e-6, "{worst_gauss}");
+    // Not finite or not positive spacing: per-edge values, still finite.
+    for (u0, h) in [
+        (f32::NAN, 0.5),
+        (0.0, f32::NAN),
+        (0.0, -1.0),
+        (f32::INFINITY, 1.0),
+    ] {
+        let mut out = [[0.0f32; 3]; 4];
+        math::EdgeGrid::new(h).fill(u0, &mut out);
+        assert!(
+            out.iter().all(|o| o[1].is_finite() && o[2].is_finite()),
+            "{out:?}"
+        );
+    }
+}

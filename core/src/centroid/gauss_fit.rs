@@ -41,7 +41,7 @@
 //! - `erfc` by Abramowitz & Stegun 7.1.26 (error below 1.5e-7 per edge, so a few 1e-7 of
 //!   the flux per pixel) limits the noise-free accuracy to ~1e-5 px.
 
-use super::cog::{cog_start, usable_sigma_px};
+use super::cog::{CogPower, cog_in_box, usable_sigma_px};
 use super::{
     Background, Centroid, CentroidFlags, CentroidInput, MAX_SIDE, Measured, Prepared, math,
 };
@@ -140,23 +140,18 @@ fn chol_solve(l: &Mat4, b: &[f32; 4]) -> [f32; 4] {
 fn profile(
     n: u16,
     c: f32,
-    s: f32,
+    grid: &Grid,
     frac: &mut [f32; MAX_SIDE as usize],
     dfrac: &mut [f32; MAX_SIDE as usize],
+    edges: &mut Edges,
 ) {
-    const FRAC_1_SQRT_2: f32 = core::f32::consts::FRAC_1_SQRT_2;
-    // Edge k is at i - 1/2 for pixel i = k; z scaled for erfc, t for the density.
-    // phi(u/s) = exp(-z^2) / sqrt(2 pi) with z = u / (s sqrt 2).
-    const FRAC_1_SQRT_2PI: f32 = 0.398_942_3;
-    let edge = |k: u16| {
-        let z = (f32::from(k) - 0.5 - c) / s * FRAC_1_SQRT_2;
-        let (e, g) = math::erfc_abs_and_gauss(z);
-        (z, e, FRAC_1_SQRT_2PI * g)
-    };
-    let mut lo = edge(0);
-    for ((i, f), d) in (0..n).zip(frac.iter_mut()).zip(dfrac.iter_mut()) {
-        let hi = edge(i + 1);
-        let ((zl, el, pl), (zh, eh, ph)) = (lo, hi);
+    let n = usize::from(n).min(MAX_SIDE as usize);
+    let edges = edges.get_mut(..=n).unwrap_or_default();
+    // Edge k is at k - 1/2: z = (k - 1/2 - c) h.
+    grid.edges.fill(-0.5 - c, edges);
+    let pairs = edges.iter().zip(edges.iter().skip(1));
+    for ((f, d), (&[zl, el, gl], &[zh, eh, gh])) in frac.iter_mut().zip(dfrac.iter_mut()).zip(pairs)
+    {
         let v = if zl >= 0.0 {
             0.5 * (el - eh)
         } else if zh <= 0.0 {
@@ -164,12 +159,32 @@ fn profile(
         } else {
             1.0 - 0.5 * (el + eh)
         };
-        *f = v.max(0.0);
+        *f = super::pos(v);
         // dP/dc = (phi(lo) - phi(hi)) / s
-        *d = (pl - ph) / s;
-        lo = hi;
+        *d = (gl - gh) * grid.dscale;
     }
 }
+
+/// The PSF's edge grid: spacing `h = 1 / (s sqrt 2)` in erfc's units and the density's
+/// scale `1 / (s sqrt(2 pi))` (`phi(u / s) / s = exp(-z^2) dscale`, `z = u h`).
+struct Grid {
+    edges: math::EdgeGrid,
+    dscale: f32,
+}
+
+impl Grid {
+    fn new(s: f32) -> Self {
+        const FRAC_1_SQRT_2: f32 = core::f32::consts::FRAC_1_SQRT_2;
+        const FRAC_1_SQRT_2PI: f32 = 0.398_942_3;
+        Self {
+            edges: math::EdgeGrid::new(FRAC_1_SQRT_2 / s),
+            dscale: FRAC_1_SQRT_2PI / s,
+        }
+    }
+}
+
+/// Scratch for [`profile`]: `[z, erfc(|z|), exp(-z^2)]` at each pixel edge.
+type Edges = [[f32; 3]; MAX_SIDE as usize + 1];
 
 /// Parameter order in the normal equations.
 const X: usize = 0;
@@ -187,8 +202,24 @@ struct Normal {
 fn normal_equations(p: &Prepared<'_>, theta: [f32; 4], s: f32, fit_bg: bool) -> Normal {
     const M: usize = MAX_SIDE as usize;
     let (mut px, mut dpx, mut py, mut dpy) = ([0.0f32; M], [0.0f32; M], [0.0f32; M], [0.0f32; M]);
-    profile(p.width, vget(&theta, X), s, &mut px, &mut dpx);
-    profile(p.height, vget(&theta, Y), s, &mut py, &mut dpy);
+    let mut edges = [[0.0f32; 3]; MAX_SIDE as usize + 1];
+    let grid = Grid::new(s);
+    profile(
+        p.width,
+        vget(&theta, X),
+        &grid,
+        &mut px,
+        &mut dpx,
+        &mut edges,
+    );
+    profile(
+        p.height,
+        vget(&theta, Y),
+        &grid,
+        &mut py,
+        &mut dpy,
+        &mut edges,
+    );
     let (flux, bg) = (vget(&theta, N), vget(&theta, B));
     if !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
         return normal_equations_clean(p, (&px, &dpx, &py, &dpy), flux, bg, fit_bg);
@@ -359,7 +390,38 @@ fn variance(l: &Mat4, d: &[f32; 4], i: usize) -> f32 {
 
 /// The Gaussian fit of `input` (see the module docs).
 pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid {
-    let (p, start, mut extra) = match cog_start(input, params.background, params.start_box) {
+    let p = match Prepared::new(input, params.background) {
+        Ok(p) => p,
+        Err(c) => return c,
+    };
+    if !params.fit_background && !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+        return held::fit(&p, params);
+    }
+    fit_general(&p, params)
+}
+
+/// The starting CoG of `cog::cog_start` on an already prepared window: the power-1 CoG of a
+/// `start_box` around the peak, and `EDGE_CLIPPED` when the box was clipped.
+fn start_cog(p: &Prepared<'_>, start_box: u8) -> Result<(Measured, CentroidFlags), Centroid> {
+    let Some((pc, pr)) = p.peak() else {
+        return Err(p.degenerate(CentroidFlags::empty()));
+    };
+    let (bx, clipped) = p.box_around(pc, pr, start_box);
+    let extra = if clipped {
+        CentroidFlags::EDGE_CLIPPED
+    } else {
+        CentroidFlags::empty()
+    };
+    match cog_in_box(p, bx, (pc, pr), CogPower::One) {
+        Some(start) => Ok((start, extra)),
+        None => Err(p.degenerate(extra)),
+    }
+}
+
+/// The four-parameter fit (background fitted, or excluded pixels): the module docs' method
+/// with the 4x4 Jacobi-scaled Cholesky solve.
+fn fit_general(p: &Prepared<'_>, params: &GaussFitParams) -> Centroid {
+    let (start, mut extra) = match start_cog(p, params.start_box) {
         Ok(s) => s,
         Err(c) => return c,
     };
@@ -379,7 +441,7 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
     // under `tolerance_px` from the solution, instead of one more evaluation.
     let mut last_factor = None;
     for _ in 0..params.max_iterations {
-        let Some((step, d, l)) = solve(&normal_equations(&p, theta, s, params.fit_background))
+        let Some((step, d, l)) = solve(&normal_equations(p, theta, s, params.fit_background))
         else {
             return give_up(extra);
         };
@@ -412,7 +474,7 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
     let factor = match last_factor {
         Some(f) => Some(f),
         None => {
-            solve(&normal_equations(&p, theta, s, params.fit_background)).map(|(_, d, l)| (d, l))
+            solve(&normal_equations(p, theta, s, params.fit_background)).map(|(_, d, l)| (d, l))
         }
     };
     let Some((d, l)) = factor else {
@@ -428,4 +490,271 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
         sigma_row: math::sqrt(variance(&l, &d, Y)),
     };
     p.finish(m, extra)
+}
+
+/// The three-parameter fit (x, y, N) with the background held, on a window without excluded
+/// pixels: the same model, weights, start, steps and stopping rule as [`fit_general`] with
+/// `fit_background` off (whose `B` row is a decoupled unit pivot with a zero step), computed
+/// with less work. See the module docs' "Held background" section.
+mod held {
+    use super::{Centroid, GaussFitParams};
+    use super::{
+        CentroidFlags, CogPower, Edges, Grid, MAX_SIDE, Measured, Prepared, cog_in_box, math,
+        profile, usable_sigma_px,
+    };
+
+    const M: usize = MAX_SIDE as usize;
+
+    /// The LDL^T factor of the 3x3 normal matrix: unit lower `l10, l20, l21` and the
+    /// reciprocal pivots `1/d0, 1/d1, 1/d2`.
+    struct Ldl {
+        l10: f32,
+        l20: f32,
+        l21: f32,
+        id: [f32; 3],
+    }
+
+    impl Ldl {
+        /// Factors `a` (upper triangle `a00 a01 a02 a11 a12 a22`); `None` unless every pivot
+        /// is above `1e-12` of its diagonal element (the 4x4 path's test on the Jacobi-scaled
+        /// matrix) and finite.
+        fn new(a: [f32; 6]) -> Option<Self> {
+            let [a00, a01, a02, a11, a12, a22] = a;
+            let ok = |d: f32, aii: f32| d > 1e-12 * aii && d.is_finite() && aii.is_finite();
+            if !(a00 > 0.0 && a00.is_finite()) {
+                return None;
+            }
+            let id0 = 1.0 / a00;
+            let (l10, l20) = (a01 * id0, a02 * id0);
+            let d1 = a11 - l10 * a01;
+            if !ok(d1, a11) {
+                return None;
+            }
+            let id1 = 1.0 / d1;
+            let l21 = (a12 - l20 * a01) * id1;
+            let d2 = a22 - l20 * a02 - l21 * l21 * d1;
+            if !ok(d2, a22) {
+                return None;
+            }
+            Some(Self {
+                l10,
+                l20,
+                l21,
+                id: [id0, id1, 1.0 / d2],
+            })
+        }
+
+        /// Solves `A x = b`.
+        fn solve(&self, b: [f32; 3]) -> [f32; 3] {
+            let [id0, id1, id2] = self.id;
+            let [b0, b1, b2] = b;
+            let y1 = b1 - self.l10 * b0;
+            let y2 = b2 - self.l20 * b0 - self.l21 * y1;
+            let x2 = y2 * id2;
+            let x1 = y1 * id1 - self.l21 * x2;
+            let x0 = b0 * id0 - self.l10 * x1 - self.l20 * x2;
+            [x0, x1, x2]
+        }
+
+        /// The diagonal of `A^-1`: `sum_k (L^-1)_ki^2 / d_k`.
+        fn inverse_diagonal(&self) -> [f32; 3] {
+            let [id0, id1, id2] = self.id;
+            let m20 = self.l10 * self.l21 - self.l20;
+            [
+                id0 + self.l10 * self.l10 * id1 + m20 * m20 * id2,
+                id1 + self.l21 * self.l21 * id2,
+                id2,
+            ]
+        }
+    }
+
+    /// The normal equations at `(x, y, n)`: upper triangle and right-hand side.
+    ///
+    /// With `j = (N fy dx, N fx dy, fx fy)` every product separates into a row factor and a
+    /// column sum: per pixel only the weight, the residual and five row sums
+    /// (`w dx^2, w dx fx, w fx^2, w dx r, w fx r`), per row nine multiply-adds, and the
+    /// powers of `N` once at the end.
+    #[allow(clippy::too_many_arguments)]
+    fn normal(
+        p: &Prepared<'_>,
+        level_e: f32,
+        var1: f32,
+        grid: &Grid,
+        (x, y, n): (f32, f32, f32),
+        (prof, edges): (&mut [[f32; M]; 4], &mut Edges),
+    ) -> ([f32; 6], [f32; 3]) {
+        let [px, dpx, py, dpy] = prof;
+        profile(p.width, x, grid, px, dpx, edges);
+        profile(p.height, y, grid, py, dpy, edges);
+        let w = usize::from(p.width).max(1);
+        let (mut a00, mut a01, mut a02, mut a11, mut a12, mut a22) =
+            (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let (mut b0, mut b1, mut b2) = (0.0f32, 0.0f32, 0.0f32);
+        let rows = p.pixels.chunks_exact(w).zip(py.iter().zip(dpy.iter()));
+        for (line, (&fy, &dy)) in rows {
+            let nfy = n * fy;
+            let (mut r1, mut r2, mut r3, mut r4, mut r5) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+            for (e, (&fx, &dx)) in line.iter().zip(px.iter().zip(dpx.iter())) {
+                let f = e.to_bits() as f32 * (1.0 / 64.0) - level_e;
+                let star = nfy * fx;
+                let wt = 1.0 / (star + var1);
+                let res = f - star;
+                let (wdx, wfx) = (wt * dx, wt * fx);
+                r1 += wdx * dx;
+                r2 += wdx * fx;
+                r3 += wfx * fx;
+                r4 += wdx * res;
+                r5 += wfx * res;
+            }
+            let (fy2, fdy) = (fy * fy, fy * dy);
+            a00 += fy2 * r1;
+            a01 += fdy * r2;
+            a02 += fy2 * r2;
+            a11 += dy * dy * r3;
+            a12 += fdy * r3;
+            a22 += fy2 * r3;
+            b0 += fy * r4;
+            b1 += dy * r5;
+            b2 += fy * r5;
+        }
+        let n2 = n * n;
+        (
+            [a00 * n2, a01 * n2, a02 * n, a11 * n2, a12 * n, a22],
+            [b0 * n, b1 * n, b2],
+        )
+    }
+
+    /// The start: the peak (the brightest pixel, ties to the one nearest the window's centre
+    /// pixel, as [`Prepared::peak`]) in one walk of the pixel bits, then the power-1 CoG of
+    /// the `start_box` around it in f32 sums; its flux also starts `N`. `None`: no positive
+    /// flux in the box.
+    fn start(p: &Prepared<'_>, level_e: f32, start_box: u8) -> Option<Start> {
+        let w = usize::from(p.width).max(1);
+        let (cc, cr) = p.centre();
+        let at = |i: usize| ((i % w) as u16, (i / w) as u16);
+        let dist2 = |i: usize| {
+            let (c, r) = at(i);
+            let (dc, dr) = (u32::from(c.abs_diff(cc)), u32::from(r.abs_diff(cr)));
+            dc * dc + dr * dr
+        };
+        let (mut best_v, mut best_i) = (i32::MIN, None);
+        for (i, e) in p.pixels.iter().enumerate() {
+            let b = e.to_bits();
+            if b > best_v {
+                (best_v, best_i) = (b, Some(i));
+            } else if b == best_v && best_i.is_none_or(|j| dist2(i) < dist2(j)) {
+                best_i = Some(i);
+            }
+        }
+        let peak = at(best_i?);
+        let (bx, clipped) = p.box_around(peak.0, peak.1, start_box);
+        let (mut s0, mut sc, mut sr) = (0.0f32, 0.0f32, 0.0f32);
+        let mut rf = f32::from(bx.row0);
+        for row in bx.row0..=bx.row1 {
+            let first = usize::from(row) * w;
+            let line = p
+                .pixels
+                .get(first + usize::from(bx.col0)..=first + usize::from(bx.col1))?;
+            let (mut rs, mut rc, mut cf) = (0.0f32, 0.0f32, f32::from(bx.col0));
+            for e in line {
+                let f = e.to_bits() as f32 * (1.0 / 64.0) - level_e;
+                rs += f;
+                rc += f * cf;
+                cf += 1.0;
+            }
+            s0 += rs;
+            sc += rc;
+            sr += rs * rf;
+            rf += 1.0;
+        }
+        (s0 > 0.0).then(|| Start {
+            peak,
+            theta: (sc / s0, sr / s0, s0),
+            clipped,
+        })
+    }
+
+    /// [`start`]'s result: the peak pixel, `(x, y, N)` and whether the box was clipped.
+    struct Start {
+        peak: (u16, u16),
+        theta: (f32, f32, f32),
+        clipped: bool,
+    }
+
+    /// The held-background fit (see [`held`]).
+    pub(super) fn fit(p: &Prepared<'_>, params: &GaussFitParams) -> Centroid {
+        let level_e = p.bg.level_e();
+        let Some(Start {
+            peak,
+            theta: (x0, y0, flux0),
+            clipped,
+        }) = start(p, level_e, params.start_box)
+        else {
+            return super::fit_general(p, params);
+        };
+        let mut extra = if clipped {
+            CentroidFlags::EDGE_CLIPPED
+        } else {
+            CentroidFlags::empty()
+        };
+        // Failure returns the exact starting CoG, with its own error estimate.
+        let give_up = |extra: CentroidFlags| {
+            let (bx, _) = p.box_around(peak.0, peak.1, params.start_box);
+            match cog_in_box(p, bx, peak, CogPower::One) {
+                Some(m) => p.finish(m, extra | CentroidFlags::NOT_CONVERGED),
+                None => p.degenerate(extra),
+            }
+        };
+        let grid = Grid::new(usable_sigma_px(params.psf_sigma_px));
+        let var1 = p.bg.variance_e2 + 1.0;
+        let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
+        let mut theta = (x0, y0, flux0);
+        let mut prof = [[0.0f32; M]; 4];
+        let mut edges = [[0.0f32; 3]; M + 1];
+        let mut converged = params.max_iterations == 0;
+        let mut last = None;
+        for _ in 0..params.max_iterations {
+            let (a, b) = normal(p, level_e, var1, &grid, theta, (&mut prof, &mut edges));
+            let Some(f) = Ldl::new(a) else {
+                return give_up(extra);
+            };
+            let [dx, dy, dn] = f.solve(b);
+            let (sx, sy) = (dx.clamp(-1.0, 1.0), dy.clamp(-1.0, 1.0));
+            theta = (theta.0 + sx, theta.1 + sy, theta.2 + dn);
+            let (x, y, flux) = theta;
+            if !(-0.5..=wmax).contains(&x)
+                || !(-0.5..=hmax).contains(&y)
+                || flux.is_nan()
+                || flux <= 0.0
+            {
+                return give_up(extra);
+            }
+            if sx.abs() < params.tolerance_px && sy.abs() < params.tolerance_px {
+                converged = true;
+                last = Some(f);
+                break;
+            }
+        }
+        if !converged {
+            extra |= CentroidFlags::NOT_CONVERGED;
+        }
+        let factor = match last {
+            Some(f) => Some(f),
+            None => Ldl::new(normal(p, level_e, var1, &grid, theta, (&mut prof, &mut edges)).0),
+        };
+        let Some(f) = factor else {
+            return give_up(extra);
+        };
+        let [vx, vy, vn] = f.inverse_diagonal();
+        let (x, y, flux) = theta;
+        let m = Measured {
+            col: x,
+            row: y,
+            flux_e: flux,
+            snr: flux / math::sqrt(vn).max(f32::MIN_POSITIVE),
+            sigma_col: math::sqrt(vx),
+            sigma_row: math::sqrt(vy),
+        };
+        p.finish(m, extra)
+    }
 }
