@@ -125,48 +125,61 @@ fn erfc_abs_and_gauss_against_f64() {
 }
 
 #[test]
-fn edge_grid_against_f64() {
-    // The Gauss fit's edges: `erfc_abs_and_gauss` at (u0 + k) h with the exponentials from a
-    // recurrence. A value is at most j <= 5 steps from a direct `exp` (error d = 1e-7, the
-    // measured bound of the test above), step i's factor carrying d + i (d + e) (q's error
-    // accumulates; e = 6e-8, one rounding), each step one more rounding, the first step
-    // downwards a divide: relative error <= d + (j + 1) d + j (j - 1) / 2 (d + e) + (j + 1) e
-    // = 2.6e-6 for j = 5 (measured: ~1e-6, the errors partly cancel). erfc = poly(t) g <= 1,
-    // so its error is within `erfc_abs_and_gauss`'s allowance (1.35e-6) plus that: 4e-6.
-    let (mut worst_erfc, mut worst_gauss): (f64, f64) = (0.0, 0.0);
-    let mut out = [[0.0f32; 3]; 32];
+fn edge_grid_pixels_against_f64() {
+    // The Gauss fit's pixel profile: fractions and density differences from the edges
+    // z_k = (u0 + k) h, the exponentials by a recurrence. An edge's exp is at most 5 steps
+    // from a direct `exp` (error d = 1e-7, the measured bound of the test above), step i's
+    // factor carrying d + i (d + e) (q's error accumulates; e = 6e-8, one rounding), each
+    // step one more rounding, the first step downwards a divide: relative error
+    // <= d + (j + 1) d + j (j - 1) / 2 (d + e) + (j + 1) e = 2.6e-6 for j = 5 (measured
+    // ~1e-6: the errors partly cancel). A fraction is half a difference of two erfc, each
+    // within `erfc_abs_and_gauss`'s allowance (1.35e-6) plus 2.6e-6 g (erfc = poly(t) g,
+    // poly(t) <= 1): 4e-6; a density difference is two such g: 5.2e-6.
+    let (mut worst_frac, mut worst_diff): (f64, f64) = (0.0, 0.0);
+    let (mut frac, mut diff) = ([0.0f32; 31], [0.0f32; 31]);
     for h in [0.02f32, 0.1, 0.4, 0.707, 1.3, 3.5, 7.1] {
+        let grid = math::EdgeGrid::new(h);
         for u0 in samples(-31.5, 0.5, 2000) {
-            for n in [1usize, 2, 6, 8, 17, 32] {
-                let out = &mut out[..n];
+            for n in [1usize, 2, 5, 7, 17, 31] {
                 let u0 = u0 as f32;
-                math::EdgeGrid::new(h).fill(u0, out);
-                for (k, &[z, e, g]) in out.iter().enumerate() {
-                    assert_eq!(z, (u0 + k as f32) * h, "z at k {k}");
-                    let x = ((f64::from(u0) + k as f64) * f64::from(h)).abs();
-                    worst_erfc = worst_erfc.max((f64::from(e) - psf::erfc(x)).abs());
-                    worst_gauss = worst_gauss.max((f64::from(g) - (-x * x).exp()).abs());
+                grid.pixels(u0, 1.0, &mut frac[..n], &mut diff[..n]);
+                let z = |k: usize| (f64::from(u0) + k as f64) * f64::from(h);
+                for i in 0..n {
+                    let (lo, hi) = (z(i), z(i + 1));
+                    let want = if lo >= 0.0 {
+                        0.5 * (psf::erfc(lo) - psf::erfc(hi))
+                    } else {
+                        0.5 * (psf::erfc(-hi) - psf::erfc(-lo))
+                    };
+                    let want_d = (-lo * lo).exp() - (-hi * hi).exp();
+                    worst_frac = worst_frac.max((f64::from(frac[i]) - want).abs());
+                    worst_diff = worst_diff.max((f64::from(diff[i]) - want_d).abs());
                 }
             }
         }
     }
     eprintln!(
-        "EdgeGrid::fill: worst absolute error {worst_erfc:.2e} (erfc), {worst_gauss:.2e} (exp)"
+        "EdgeGrid::pixels: worst absolute error {worst_frac:.2e} (fraction), {worst_diff:.2e} \
+         (density difference)"
     );
-    assert!(worst_erfc < 4e-6, "{worst_erfc}");
-    assert!(worst_gauss < 2.6e-6, "{worst_gauss}");
-    // Not finite or not positive spacing: per-edge values, still finite.
+    assert!(worst_frac < 4e-6, "{worst_frac}");
+    assert!(worst_diff < 5.2e-6, "{worst_diff}");
+    // The scale multiplies the differences only.
+    let grid = math::EdgeGrid::new(0.7);
+    let (mut f1, mut d1, mut f2, mut d2) = ([0.0f32; 7], [0.0f32; 7], [0.0f32; 7], [0.0f32; 7]);
+    grid.pixels(-3.2, 1.0, &mut f1, &mut d1);
+    grid.pixels(-3.2, 0.5, &mut f2, &mut d2);
+    assert_eq!(f1, f2);
+    assert!(d1.iter().zip(&d2).all(|(a, b)| *b == 0.5 * a));
+    // Not finite or not positive spacing: direct per-edge values, still finite.
     for (u0, h) in [
         (f32::NAN, 0.5),
         (0.0, f32::NAN),
         (0.0, -1.0),
         (f32::INFINITY, 1.0),
     ] {
-        let mut out = [[0.0f32; 3]; 4];
-        math::EdgeGrid::new(h).fill(u0, &mut out);
-        assert!(
-            out.iter().all(|o| o[1].is_finite() && o[2].is_finite()),
-            "{out:?}"
-        );
+        let (mut f, mut d) = ([0.0f32; 4], [0.0f32; 4]);
+        math::EdgeGrid::new(h).pixels(u0, 1.0, &mut f, &mut d);
+        assert!(f.iter().chain(&d).all(|v| v.is_finite()), "{f:?} {d:?}");
     }
 }

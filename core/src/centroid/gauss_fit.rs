@@ -134,35 +134,16 @@ fn chol_solve(l: &Mat4, b: &[f32; 4]) -> [f32; 4] {
 
 /// Per-column (or per-row) pixel fractions and their derivatives for centre `c`, from one
 /// `erfc` and one density per pixel *edge* (`n + 1` of each, shared by the two pixels an edge
-/// separates), both from one exponential ([`math::erfc_abs_and_gauss`], A&S 7.1.26). With
-/// `E(z) = erfc(|z|)` at the edges the fraction takes the same tail-side cases as
-/// [`math::pixel_fraction`], so no two numbers near 1 are subtracted.
-fn profile(
-    n: u16,
-    c: f32,
-    grid: &Grid,
-    frac: &mut [f32; MAX_SIDE as usize],
-    dfrac: &mut [f32; MAX_SIDE as usize],
-    edges: &mut Edges,
-) {
-    let n = usize::from(n).min(MAX_SIDE as usize);
-    let edges = edges.get_mut(..=n).unwrap_or_default();
-    // Edge k is at k - 1/2: z = (k - 1/2 - c) h.
-    grid.edges.fill(-0.5 - c, edges);
-    let pairs = edges.iter().zip(edges.iter().skip(1));
-    for ((f, d), (&[zl, el, gl], &[zh, eh, gh])) in frac.iter_mut().zip(dfrac.iter_mut()).zip(pairs)
-    {
-        let v = if zl >= 0.0 {
-            0.5 * (el - eh)
-        } else if zh <= 0.0 {
-            0.5 * (eh - el)
-        } else {
-            1.0 - 0.5 * (el + eh)
-        };
-        *f = super::pos(v);
-        // dP/dc = (phi(lo) - phi(hi)) / s
-        *d = (gl - gh) * grid.dscale;
-    }
+/// separates), the densities by [`math::EdgeGrid::pixels`]' recurrence and `erfc` by A&S
+/// 7.1.26. With `E(z) = erfc(|z|)` at the edges the fraction takes the same tail-side cases
+/// as [`math::pixel_fraction`], so no two numbers near 1 are subtracted.
+fn profile(n: u16, c: f32, grid: &Grid, frac: &mut [f32], dfrac: &mut [f32]) {
+    let n = usize::from(n);
+    let (Some(frac), Some(dfrac)) = (frac.get_mut(..n), dfrac.get_mut(..n)) else {
+        return;
+    };
+    // Edge k is at k - 1/2: z = (k - 1/2 - c) h; dP/dc = (phi(lo) - phi(hi)) / s.
+    grid.edges.pixels(-0.5 - c, grid.dscale, frac, dfrac);
 }
 
 /// The PSF's edge grid: spacing `h = 1 / (s sqrt 2)` in erfc's units and the density's
@@ -183,9 +164,6 @@ impl Grid {
     }
 }
 
-/// Scratch for [`profile`]: `[z, erfc(|z|), exp(-z^2)]` at each pixel edge.
-type Edges = [[f32; 3]; MAX_SIDE as usize + 1];
-
 /// Parameter order in the normal equations.
 const X: usize = 0;
 const Y: usize = 1;
@@ -202,24 +180,9 @@ struct Normal {
 fn normal_equations(p: &Prepared<'_>, theta: [f32; 4], s: f32, fit_bg: bool) -> Normal {
     const M: usize = MAX_SIDE as usize;
     let (mut px, mut dpx, mut py, mut dpy) = ([0.0f32; M], [0.0f32; M], [0.0f32; M], [0.0f32; M]);
-    let mut edges = [[0.0f32; 3]; MAX_SIDE as usize + 1];
     let grid = Grid::new(s);
-    profile(
-        p.width,
-        vget(&theta, X),
-        &grid,
-        &mut px,
-        &mut dpx,
-        &mut edges,
-    );
-    profile(
-        p.height,
-        vget(&theta, Y),
-        &grid,
-        &mut py,
-        &mut dpy,
-        &mut edges,
-    );
+    profile(p.width, vget(&theta, X), &grid, &mut px, &mut dpx);
+    profile(p.height, vget(&theta, Y), &grid, &mut py, &mut dpy);
     let (flux, bg) = (vget(&theta, N), vget(&theta, B));
     if !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
         return normal_equations_clean(p, (&px, &dpx, &py, &dpy), flux, bg, fit_bg);
@@ -394,7 +357,11 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
         Ok(p) => p,
         Err(c) => return c,
     };
-    if !params.fit_background && !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+    if !params.fit_background
+        && !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL)
+        && p.width <= held::MAX_SIDE
+        && p.height <= held::MAX_SIDE
+    {
         return held::fit(&p, params);
     }
     fit_general(&p, params)
@@ -499,10 +466,14 @@ fn fit_general(p: &Prepared<'_>, params: &GaussFitParams) -> Centroid {
 mod held {
     use super::{Centroid, GaussFitParams};
     use super::{
-        CentroidFlags, CogPower, Edges, Grid, MAX_SIDE, Measured, Prepared, cog_in_box, math,
-        profile, usable_sigma_px,
+        CentroidFlags, CogPower, Grid, Measured, Prepared, cog_in_box, math, profile,
+        usable_sigma_px,
     };
 
+    /// Largest window side of this path (its profile buffers are zeroed per fit, so they
+    /// are sized for star windows, not for [`super::MAX_SIDE`]); larger windows take the
+    /// general path with `B` pinned.
+    pub(super) const MAX_SIDE: u16 = 16;
     const M: usize = MAX_SIDE as usize;
 
     /// The LDL^T factor of the 3x3 normal matrix: unit lower `l10, l20, l21` and the
@@ -581,11 +552,11 @@ mod held {
         var1: f32,
         grid: &Grid,
         (x, y, n): (f32, f32, f32),
-        (prof, edges): (&mut [[f32; M]; 4], &mut Edges),
+        prof: &mut [[f32; M]; 4],
     ) -> ([f32; 6], [f32; 3]) {
         let [px, dpx, py, dpy] = prof;
-        profile(p.width, x, grid, px, dpx, edges);
-        profile(p.height, y, grid, py, dpy, edges);
+        profile(p.width, x, grid, px, dpx);
+        profile(p.height, y, grid, py, dpy);
         let w = usize::from(p.width).max(1);
         let (mut a00, mut a01, mut a02, mut a11, mut a12, mut a22) =
             (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
@@ -710,11 +681,10 @@ mod held {
         let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
         let mut theta = (x0, y0, flux0);
         let mut prof = [[0.0f32; M]; 4];
-        let mut edges = [[0.0f32; 3]; M + 1];
         let mut converged = params.max_iterations == 0;
         let mut last = None;
         for _ in 0..params.max_iterations {
-            let (a, b) = normal(p, level_e, var1, &grid, theta, (&mut prof, &mut edges));
+            let (a, b) = normal(p, level_e, var1, &grid, theta, &mut prof);
             let Some(f) = Ldl::new(a) else {
                 return give_up(extra);
             };
@@ -740,7 +710,7 @@ mod held {
         }
         let factor = match last {
             Some(f) => Some(f),
-            None => Ldl::new(normal(p, level_e, var1, &grid, theta, (&mut prof, &mut edges)).0),
+            None => Ldl::new(normal(p, level_e, var1, &grid, theta, &mut prof).0),
         };
         let Some(f) = factor else {
             return give_up(extra);

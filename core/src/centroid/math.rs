@@ -15,7 +15,7 @@
 //! | [`erfc`] | `libm::erfcf` | 6e-7 absolute |
 //! | [`pixel_fraction`] | difference of two `erfc`, taken on the tail side | 6e-7 absolute |
 //! | [`erfc_abs_and_gauss`] | Abramowitz & Stegun 7.1.26 and the `exp` it shares | 1.35e-6 / 5e-7 absolute |
-//! | [`EdgeGrid::fill`] | the same at equally spaced points, `exp` by a recurrence | 4e-6 / 2.6e-6 absolute (measured 8e-7 / 1e-6) |
+//! | [`EdgeGrid::pixels`] | pixel fractions from edge `erfc`s, `exp` by a recurrence | see [`EdgeGrid::pixels`] |
 //!
 //! Every function returns a finite value for any input (documented per function), so no NaN
 //! reaches a centroid. Cost on the Cortex-M7 (QEMU instructions): `sqrt` ~25 with one
@@ -151,11 +151,11 @@ fn erfc_from_gauss(z: f32, g: f32) -> f32 {
     t * (a1 + t * (a2 + t * (a3 + t * (a4 + t * a5)))) * g
 }
 
-/// Points between direct evaluations of [`EdgeGrid::fill`]'s recurrence.
+/// Edges between direct evaluations of [`EdgeGrid::pixels`]' recurrence.
 const EDGE_RESTART: usize = 5;
 
 /// Equally spaced points `z_k = (u0 + k) h` (the Gauss fit's pixel edges along one axis, in
-/// units of `s sqrt 2`) and the constants of [`EdgeGrid::fill`]'s recurrence, computed once
+/// units of `s sqrt 2`) and the constants of [`EdgeGrid::pixels`]' recurrence, computed once
 /// per spacing.
 #[derive(Clone, Copy, Debug)]
 pub struct EdgeGrid {
@@ -167,7 +167,7 @@ pub struct EdgeGrid {
 
 impl EdgeGrid {
     /// The grid of spacing `h`; a spacing that is not finite or not positive makes
-    /// [`Self::fill`] evaluate every point directly.
+    /// [`Self::pixels`] evaluate every edge directly.
     pub fn new(h: f32) -> Self {
         let hh = h * h;
         Self {
@@ -177,40 +177,64 @@ impl EdgeGrid {
         }
     }
 
-    /// `[z_k, erfc(|z_k|), exp(-z_k^2)]` at `z_k = (u0 + k) h` for `k` in `0..out.len()`:
-    /// [`erfc_abs_and_gauss`] at each point, with the exponentials from a recurrence instead
-    /// of one `exp` per point.
-    ///
-    /// From `exp(-(z + h)^2) = exp(-z^2) rho(z)` with `rho(z) = exp(-(2 z h + h^2))` and
-    /// `rho(z + h) = rho(z) q`, `q = exp(-2 h^2)`, two multiplies take `g` one point further
+    /// Pixel fractions and density differences along one axis of a unit Gaussian, from the
+    /// pixel edges `z_k = (u0 + k) h`, `k = 0..=n` for the `n = min(frac.len(), diff.len())`
+    /// pixels (edge `k` is pixel `k`'s lower edge): with `E_k = erfc(|z_k|)` and
+    /// `g_k = exp(-z_k^2)` ([`erfc_abs_and_gauss`] at each edge),
+    /// ```text
+    /// frac_i = max(P_i, 0),  P_i = (E_i - E_i+1) / 2  (z_i >= 0),  (E_i+1 - E_i) / 2  (z_i+1 <= 0),
+    ///                              1 - (E_i + E_i+1) / 2  (otherwise: the tail side, as pixel_fraction)
+    /// diff_i = scale (g_i - g_i+1)
+    /// ```
+    /// The exponentials come from a recurrence instead of one `exp` per edge: from
+    /// `exp(-(z + h)^2) = exp(-z^2) rho(z)` with `rho(z) = exp(-(2 z h + h^2))` and
+    /// `rho(z + h) = rho(z) q`, `q = exp(-2 h^2)`, two multiplies take `g` one edge further
     /// from `z = 0`, and `sigma(z) = exp(2 z h - h^2) = q / rho(z)` likewise towards negative
-    /// `z`. It starts at the point nearest `z = 0` (`|z| <= h / 2` there: two `exp` and a
+    /// `z`. It starts at the edge nearest `z = 0` (`|z| <= h / 2` there: two `exp` and a
     /// divide, or three `exp` for `h > 5.9`) and restarts from a direct `exp` pair every 5
-    /// points, so a value is at most 5 steps from a direct `exp`. The factors have exponents
+    /// edges, so a value is at most 5 steps from a direct `exp`. The factors have exponents
     /// <= 0 (no overflow; an underflow is a true value below 1e-38). `q` is computed
     /// directly, not as `rho sigma`: its error enters every step (the product's doubled
     /// error gave 1.6e-6 after 5 steps, the direct `q` 7e-7; 6 steps between restarts gave
-    /// 1.2e-6, 5 steps 9.5e-7; host test `centroid_math`). Cost per point: 2 multiplies and
-    /// `erfc`'s divide and polynomial; per call 2 `exp` and a divide, and 2 `exp` more every 5
-    /// points beyond the first 5 on either side (none for a 7x7 window's 8 edges around a
-    /// centred star). `u0 + k` is exact for `|u0|, k < 2^18`, so `z_k` has one rounding and
-    /// the recurrence follows the same `z_k` to that rounding. A `u0` or spacing that is not
-    /// finite, or a spacing `<= 0`, falls back to [`erfc_abs_and_gauss`] per point.
-    pub fn fill(&self, u0: f32, out: &mut [[f32; 3]]) {
+    /// 1.2e-6, 5 steps 9.5e-7; host test `centroid_math`). Cost per pixel: 2 multiplies,
+    /// `erfc`'s divide and polynomial and the tail-side difference; per call 2 `exp` and a
+    /// divide, and 2 `exp` more every 5 edges beyond the first 5 on either side (none for a
+    /// 7x7 window's 8 edges around a centred star). `u0 + k` is exact for `|u0|, k < 2^18`,
+    /// so `z_k` has one rounding and the recurrence follows the same `z_k` to that rounding.
+    /// A `u0` or spacing that is not finite, or a spacing `<= 0`, falls back to
+    /// [`erfc_abs_and_gauss`] per edge.
+    pub fn pixels(&self, u0: f32, scale: f32, frac: &mut [f32], diff: &mut [f32]) {
         let Self { h, hh, q } = *self;
-        let n = out.len();
+        let n = frac.len().min(diff.len());
+        let put = |f: &mut f32, d: &mut f32, (zl, el, gl): Edge, (zh, eh, gh): Edge| {
+            let v = if zl >= 0.0 {
+                0.5 * (el - eh)
+            } else if zh <= 0.0 {
+                0.5 * (eh - el)
+            } else {
+                1.0 - 0.5 * (el + eh)
+            };
+            *f = if v > 0.0 { v } else { 0.0 };
+            *d = scale * (gl - gh);
+        };
         if !(u0.is_finite() && h.is_finite() && h > 0.0) {
-            let mut k = 0.0f32;
-            for o in out.iter_mut() {
+            let edge = |k: f32| {
                 let z = (u0 + k) * h;
                 let (e, g) = erfc_abs_and_gauss(z);
-                *o = [z, e, g];
+                (z, e, g)
+            };
+            let mut k = 0.0f32;
+            let mut lo = edge(k);
+            for (f, d) in frac.iter_mut().zip(diff.iter_mut()) {
                 k += 1.0;
+                let hi = edge(k);
+                put(f, d, lo, hi);
+                lo = hi;
             }
             return;
         }
-        // The point nearest z = 0 (saturating conversion; clamped to the range).
-        let m = ((0.5 - u0) as usize).min(n.saturating_sub(1));
+        // The edge nearest z = 0 (saturating conversion; clamped to 0..=n).
+        let m = ((0.5 - u0) as usize).min(n);
         let zm = (u0 + m as f32) * h;
         let (gm, rho_m) = (exp(-zm * zm), exp(-(2.0 * zm * h + hh)));
         // sigma_m = q / rho_m, with rho_m >= exp(-2 h^2) = q (|zm| <= h / 2, or zm further
@@ -220,34 +244,58 @@ impl EdgeGrid {
         } else {
             exp(2.0 * zm * h - hh)
         };
-        let (mut g, mut rho, mut left) = (gm, rho_m, EDGE_RESTART);
-        for (j, o) in out.iter_mut().enumerate().skip(m) {
-            let z = (u0 + j as f32) * h;
-            if left == 0 {
-                g = exp(-z * z);
+        let edge_m = (zm, erfc_from_gauss(zm, gm), gm);
+        let (Some((frac_dn, frac_up)), Some((diff_dn, diff_up))) = (
+            frac.get_mut(..n).and_then(|f| f.split_at_mut_checked(m)),
+            diff.get_mut(..n).and_then(|d| d.split_at_mut_checked(m)),
+        ) else {
+            return;
+        };
+        // Upwards: pixel i from edges i (lo) and i + 1, for i = m..n.
+        let (mut lo, mut rho, mut left) = (edge_m, rho_m, EDGE_RESTART);
+        let mut k = m as f32;
+        for (f, d) in frac_up.iter_mut().zip(diff_up.iter_mut()) {
+            k += 1.0;
+            let z = (u0 + k) * h;
+            left -= 1;
+            let g = if left == 0 {
+                left = EDGE_RESTART;
                 rho = exp(-(2.0 * z * h + hh));
-                left = EDGE_RESTART;
-            }
-            left -= 1;
-            *o = [z, erfc_from_gauss(z, g), g];
-            g *= rho;
-            rho *= q;
+                exp(-z * z)
+            } else {
+                let g = lo.2 * rho;
+                rho *= q;
+                g
+            };
+            let hi = (z, erfc_from_gauss(z, g), g);
+            put(f, d, lo, hi);
+            lo = hi;
         }
-        let (mut g, mut sigma, mut left) = (gm * sigma_m, sigma_m * q, EDGE_RESTART);
-        for (i, o) in out.iter_mut().take(m).rev().enumerate() {
-            let z = (u0 + (m - 1 - i) as f32) * h;
-            if left == 0 {
-                g = exp(-z * z);
-                sigma = exp(2.0 * z * h - hh);
-                left = EDGE_RESTART;
-            }
+        // Downwards: pixel i from edges i and i + 1 (hi), for i = m - 1 down to 0.
+        let (mut hi, mut sigma, mut left) = (edge_m, sigma_m, EDGE_RESTART);
+        let mut k = m as f32;
+        for (f, d) in frac_dn.iter_mut().zip(diff_dn.iter_mut()).rev() {
+            k -= 1.0;
+            let z = (u0 + k) * h;
             left -= 1;
-            *o = [z, erfc_from_gauss(z, g), g];
-            g *= sigma;
-            sigma *= q;
+            let g = if left == 0 {
+                left = EDGE_RESTART;
+                sigma = exp(2.0 * z * h - hh);
+                exp(-z * z)
+            } else {
+                let g = hi.2 * sigma;
+                sigma *= q;
+                g
+            };
+            let lo = (z, erfc_from_gauss(z, g), g);
+            put(f, d, lo, hi);
+            hi = lo;
         }
     }
 }
+
+/// An edge's `(z, erfc(|z|), exp(-z^2))`.
+type Edge = (f32, f32, f32);
 
 /// The standard normal density `exp(-z^2/2) / sqrt(2 pi)`.
 pub fn norm_pdf(z: f32) -> f32 {
