@@ -21,25 +21,64 @@
 //! definite return the starting CoG with `NOT_CONVERGED`; running out of iterations returns
 //! the last estimate with `NOT_CONVERGED`. Steps are capped at one pixel.
 //!
+//! # Held background
+//! With `fit_background` off, no excluded pixel and sides up to 16 px (`startrack accuracy`'s
+//! configuration, and the near-CRLB method of issue 5) the same estimator runs on three
+//! parameters `(x, y, N)` (the 4x4 system's `B` row is then a decoupled unit pivot with a
+//! zero step, so nothing changes but the work):
+//! - `J = (N fy dx, N fx dy, fx fy)` separates: per pixel only the weight (one divide), the
+//!   residual and five row sums `w dx^2, w dx fx, w fx^2, w dx r, w fx r`; per row nine
+//!   multiply-adds with the row's `fy, dy`; the powers of `N` once at the end.
+//! - The 3x3 system by `LDL^T` (no square root; a pivot below `1e-12` of its diagonal is
+//!   "not positive definite", the 4x4 path's test on the Jacobi-scaled matrix); the
+//!   covariance diagonal from the factor, `sum_k (L^-1)_ki^2 / d_k`.
+//! - The edge `erfc`s and densities by [`math::EdgeGrid::pixels`]: `exp(-z^2)` by a
+//!   two-multiply recurrence along the edges.
+//! - Start: the peak by one walk of the pixel bits, the power-1 CoG of the box in f32 sums,
+//!   `N` = the box's flux (the first step solves the linear `N` anyway); on failure the exact
+//!   starting CoG (`cog_in_box`, with its error estimate) is computed then.
+//!
+//! The host test `centroid_gauss_fit` checks this path against an f64 implementation of the
+//! same estimator (2e-6 px at `tolerance_px` 1e-6, 4e-6 px at the default 1e-4; error
+//! estimate within 1e-4 relative).
+//!
 //! # Error estimate
 //! The covariance `(J^T W J)^-1` at the solution (after convergence, the one of the last
-//! step's start, less than `tolerance_px` away, so no extra evaluation): `sigma_x`, `sigma_y` and the flux error are
-//! the square roots of its diagonal. `flux_e` is the fitted total flux `N` (the whole PSF, not
-//! the window's share) and `snr` is `N / sigma_N` (which, unlike eq. 8, charges the fit for
-//! the background it also fits).
+//! step's start, less than `tolerance_px` away, so no extra evaluation): `sigma_x`,
+//! `sigma_y` and the flux error are the square roots of its diagonal. `flux_e` is the fitted
+//! total flux `N` (the whole PSF, not the window's share) and `snr` is `N / sigma_N` (which,
+//! unlike eq. 8, charges the fit for the background when it also fits it).
 //!
 //! # Cost
 //! Per step: `w + h + 2` `erfc` and normal-density evaluations (one per pixel edge, shared
-//! by neighbouring pixels), then ~20 multiply-adds per pixel for the upper triangle of the
-//! normal equations; 3-5 steps. A 9x9 window is ~15 k flops per star, about the IWC's.
+//! by neighbouring pixels), then the normal equations' sums per pixel; from the CoG start
+//! a bright star converges in 2 steps (the covariance comes from the last one), a faint one
+//! in 3-4. Measured on the Cortex-M7 (`cargo m7-bench`, QEMU instructions per star, the
+//! bench's bright star, 2 steps):
+//!
+//! | configuration | 5x5 | 7x7 |
+//! |---|---|---|
+//! | background held and given (`centroid_gauss_fit_given_bg_*`: `startrack accuracy`'s) | 4,765 | 7,057 |
+//! | perimeter median, `B` fitted (`centroid_gauss_fit_*`: [`GaussFitParams::new`]) | 16,799 | 22,039 |
+//!
+//! Of the held 7x7's ~7,060 (QEMU `-d exec` trace, see the README): ~1,430 a step for the
+//! normal equations (~18 instructions a pixel: load, convert, weight divide, residual, five
+//! multiply-adds; ~65 a row, with the 4-way unrolled loop's remainder), ~500 a step per axis
+//! for the edge profile (~40 an edge: the A&S divide and polynomial, the recurrence, the
+//! tail-side difference; ~200 for the two `exp` and the divide that start it), ~450 for the
+//! peak walk, ~400 for the start's box CoG, ~150 a step for the solve and bookkeeping, ~390
+//! for validating the window (`Prepared::new`), ~240 for the output (three square roots,
+//! `finish`). The perimeter-median path adds the median and the 4x4 Jacobi-Cholesky solve.
 //!
 //! # Where it fails
 //! - A wrong PSF sigma: position stays nearly unbiased for a symmetric star, flux does not;
 //!   undersampled stars (s < 0.4 px) become sensitive to it.
 //! - Non-Gaussian PSFs (coma, defocus): a model error; use the CoG with a correction table.
 //! - Blends and cosmic rays in the window pull the fit (no outlier rejection).
-//! - `erfc` by Abramowitz & Stegun 7.1.26 (error below 1.5e-7 per edge, so a few 1e-7 of
-//!   the flux per pixel) limits the noise-free accuracy to ~1e-5 px.
+//! - `erfc` by Abramowitz & Stegun 7.1.26 (error below 1.5e-7 per edge; with the f32
+//!   rounding and the `exp` recurrence the pixel fractions are within 4e-6 of the unit flux,
+//!   measured 5e-7, host test `centroid_math`) limits the noise-free accuracy to ~1e-5 px
+//!   (measured 3e-6 to 6e-6 px for a = 0.5..2, host test `centroid_gauss_fit`).
 
 use super::cog::{CogPower, cog_in_box, usable_sigma_px};
 use super::{
