@@ -28,6 +28,7 @@ use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::iwc::{IwcParams, iwc};
 use startrack_core::centroid::pixcorr::{CurveHeader, PixCorr, PixCorrBackground};
 use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
+use startrack_core::centroid::raw_cog::{RawCogParams, RawWindow, raw_cog};
 use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::detect::{DetectConfig, ScanDetector};
 use startrack_core::geometry::ReadoutGeometry;
@@ -593,6 +594,24 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
     }
     let (curve, _) = PixCorr::parse(&curve_bytes).map_err(|_| "pixel-phase curve")?;
     let mut t_cog1c = 0u64;
+    // The same shape made for a given background: the fused raw path's curve.
+    let mut curve_given_bytes = curve_bytes;
+    curve_given_bytes[..8].copy_from_slice(
+        &CurveHeader {
+            background: PixCorrBackground::Given,
+            ..header
+        }
+        .to_bytes(),
+    );
+    let (curve_given, _) =
+        PixCorr::parse(&curve_given_bytes).map_err(|_| "pixel-phase curve (given)")?;
+    let raw_params = RawCogParams {
+        box_side: 7,
+        level_e: 10.0,
+        variance_e2: 40.0,
+        curve: Some(curve_given),
+    };
+    let mut t_cog1c_raw = 0u64;
 
     // Star windows: 7x7 around a star, calibrated from its 7 raw lines, then centroided.
     let mut t_window = 0u64;
@@ -623,6 +642,22 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
             r = cal.calibrate_window(rect, black_box(&wraw), &levels, &mut we, &mut wf);
         });
         r.map_err(|_| "calibrate_window failed")?;
+        // The fused path: raw window and levels to the corrected centroid, calibration
+        // included (the "window_calibrate + corrected CoG 7x7" as one stage).
+        let rw = RawWindow {
+            rect,
+            raw: &wraw,
+            levels: &levels,
+        };
+        let rw = black_box(&rw);
+        let mut fused = None;
+        t_cog1c_raw += measure(overhead, || {
+            fused = Some(raw_cog(&cal, rw, (sx as u16, sy as u16), &raw_params));
+        });
+        let fused = fused.ok_or("raw_cog")?;
+        if fused.centroid.flags.bits() != 0 || fused.general_path {
+            return Err("raw_cog flagged a clean star");
+        }
 
         // Centroids on the 7x7 window and on its central 5x5.
         let mut we5 = [Electrons::ZERO; 25];
@@ -671,6 +706,13 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         "centroid_cog1c_7x7",
         "star",
         t_cog1c,
+        WINDOW_REPS as u64,
+    );
+    row(
+        out,
+        "centroid_cog1c_raw_7x7",
+        "star",
+        t_cog1c_raw,
         WINDOW_REPS as u64,
     );
     for (side, acc) in [5u8, 7].iter().zip(t_centroid.iter()) {
