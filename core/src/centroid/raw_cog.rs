@@ -241,6 +241,18 @@ struct GroupAcc {
     yyp: i32,
 }
 
+impl GroupAcc {
+    /// Adds one row's run sums at row offset `dy` (`dy2 = dy^2`).
+    #[inline(always)]
+    fn add(&mut self, p: i32, q: i32, r: i32, dy: i32, dy2: i32) {
+        self.p += p;
+        self.q += q;
+        self.r += r;
+        self.yp += dy * p;
+        self.yyp += dy2 * p;
+    }
+}
+
 /// `(P, Q, R)` of a run of samples (see [`GroupAcc`]): three adds a sample, no multiply;
 /// `sum dx v` and `sum dx^2 v` follow per cell in closed form.
 #[inline(always)]
@@ -322,72 +334,85 @@ fn fused_sums(
     let mut saturated = false;
     let mut e = [0f32; 5];
     let mut wt = [0i32; 5];
-    let mut acc = [GroupAcc::default(); MB];
-    // Per output: 16 bias summed over the tile row's rows with weights 1, dy, dy^2; and the
-    // rows' count, sum dy, sum dy^2.
-    let mut bias = [[0i32; 3]; 2];
-    let mut rw = [0i32; 3];
     let col_off = usize::from(b.x0 - win.rect.x0);
     let row_off = usize::from(b.y0 - win.rect.y0);
     let levels = win.levels.get(row_off..row_off + usize::from(b.h))?;
-    let rows = win.raw.get(row_off * ww..)?.chunks(ww.max(1));
-    let mut group_y: Option<(u16, (u32, u32))> = None;
-    for ((y, lv), row) in (b.y0..).zip(levels).zip(rows) {
-        // In u32: a shift of 16 (no map) would overflow a u16.
-        let k = (u32::from(y) >> dl, u32::from(y) >> fl);
-        if let Some((gy, gk)) = group_y
-            && gk != k
-        {
-            let rg = RowGroup {
-                y: gy,
-                bias: &bias,
-                rw: &rw,
-            };
-            flush(cal, &gains, groups, &acc, &rg, (&mut e, &mut wt));
-            acc = [GroupAcc::default(); MB];
-            bias = [[0; 3]; 2];
-            rw = [0; 3];
-            group_y = None;
+    let raw = win.raw.get(row_off * ww + col_off..)?;
+    // The column split of two groups (the box's width for one).
+    let split = match groups {
+        [_] => bw,
+        [_, g2] => usize::from(g2.i0),
+        _ => 0,
+    };
+    // Tile rows: runs of rows with the same dark and flat tile row (in u32: a shift of 16,
+    // no map, would overflow a u16).
+    let key = |y: u16| (u32::from(y) >> dl, u32::from(y) >> fl);
+    let mut r0 = 0u16;
+    while r0 < b.h {
+        let y0 = b.y0 + r0;
+        let k0 = key(y0);
+        let mut r1 = r0 + 1;
+        while r1 < b.h && key(b.y0 + r1) == k0 {
+            r1 += 1;
         }
-        if group_y.is_none() {
-            group_y = Some((y, k));
-        }
-        let dy = dy0 + i32::from(y - b.y0);
-        let dy2 = dy * dy;
-        let b0 = offset_16ths(lv.bias(Output(0)), ColumnBiasAdu::ZERO);
-        let b1 = offset_16ths(lv.bias(Output(1)), ColumnBiasAdu::ZERO);
-        for (bo, v) in bias.iter_mut().zip([b0, b1]) {
-            bo[0] += v;
-            bo[1] += dy * v;
-            bo[2] += dy2 * v;
-        }
-        rw[0] += 1;
-        rw[1] += dy;
-        rw[2] += dy2;
-        let row = row.get(col_off..col_off + bw)?;
-        for (gr, a) in groups.iter().zip(acc.iter_mut()) {
-            let i0 = usize::from(gr.i0);
-            let seg = row.get(i0..i0 + usize::from(gr.m))?;
-            let (p, q, r) = row_sums(seg);
-            // A sample at or above saturation makes its run's sum reach it: test the samples
-            // only then.
-            if p >= i32::from(sat) {
-                saturated |= seg.iter().any(|v| *v >= sat);
+        let mut acc = [GroupAcc::default(); MB];
+        // Offsets (16 bias per output) and weights of the tile row's rows.
+        let mut bias = [[0i32; 3]; 2];
+        let mut rw = [0i32; 3];
+        let (ra, rb) = (usize::from(r0), usize::from(r1));
+        for (lv, dy) in levels.get(ra..rb)?.iter().zip(dy0 + i32::from(r0)..) {
+            let dy2 = dy * dy;
+            let b0 = offset_16ths(lv.bias(Output(0)), ColumnBiasAdu::ZERO);
+            let b1 = offset_16ths(lv.bias(Output(1)), ColumnBiasAdu::ZERO);
+            for (bo, v) in bias.iter_mut().zip([b0, b1]) {
+                bo[0] += v;
+                bo[1] += dy * v;
+                bo[2] += dy2 * v;
             }
-            a.p += p;
-            a.q += q;
-            a.r += r;
-            a.yp += dy * p;
-            a.yyp += dy2 * p;
+            rw[0] += 1;
+            rw[1] += dy;
+            rw[2] += dy2;
         }
-    }
-    if let Some((gy, _)) = group_y {
+        let rows = raw.get(ra * ww..)?.chunks(ww.max(1)).take(rb - ra);
+        if split > 0 {
+            // One or two column groups: both runs' sums in registers.
+            let [mut a1, mut a2] = [GroupAcc::default(); 2];
+            for (row, dy) in rows.zip(dy0 + i32::from(r0)..) {
+                let (left, right) = row.get(..bw)?.split_at_checked(split)?;
+                let (p1, q1, s1) = row_sums(left);
+                let (p2, q2, s2) = row_sums(right);
+                // A sample at or above saturation makes its run's sum reach it: test the
+                // samples only then.
+                if p1 + p2 >= i32::from(sat) {
+                    saturated |= left.iter().chain(right).any(|v| *v >= sat);
+                }
+                let dy2 = dy * dy;
+                a1.add(p1, q1, s1, dy, dy2);
+                a2.add(p2, q2, s2, dy, dy2);
+            }
+            acc[0] = a1;
+            acc[1] = a2;
+        } else {
+            for (row, dy) in rows.zip(dy0 + i32::from(r0)..) {
+                let row = row.get(..bw)?;
+                for (gr, a) in groups.iter().zip(acc.iter_mut()) {
+                    let i0 = usize::from(gr.i0);
+                    let seg = row.get(i0..i0 + usize::from(gr.m))?;
+                    let (p, q, r) = row_sums(seg);
+                    if p >= i32::from(sat) {
+                        saturated |= seg.iter().any(|v| *v >= sat);
+                    }
+                    a.add(p, q, r, dy, dy * dy);
+                }
+            }
+        }
         let rg = RowGroup {
-            y: gy,
+            y: y0,
             bias: &bias,
             rw: &rw,
         };
         flush(cal, &gains, groups, &acc, &rg, (&mut e, &mut wt));
+        r0 = r1;
     }
     Some((e, wt, saturated))
 }
