@@ -266,13 +266,14 @@ fn row_sums(seg: &[u16]) -> (i32, i32, i32) {
     (p, q, r)
 }
 
-/// The fused moments `E_w = sum w e` (e-, before the level) of the box, with the weight sums
+/// The fused moments `S_w = sum w (e - level_e)` (e-) of the box, with the weight sums
 /// `sum w`, and whether a sample is saturated. `None` for buffers that do not match (checked
 /// by the caller).
 fn fused_sums(
     cal: &FrameCalibration<'_>,
     win: &RawWindow<'_>,
     b: &BoxAt,
+    level_e: f32,
 ) -> Option<([f32; 5], [i32; 5], bool)> {
     let t = cal.table();
     let g = t.geometry();
@@ -333,11 +334,15 @@ fn fused_sums(
     let sat = t.saturation_adu();
     let mut saturated = false;
     let mut e = [0f32; 5];
-    let mut wt = [0i32; 5];
+    // Weight totals: rows, sum dy, sum dy^2 (the columns' from the groups).
+    let mut rows_w = [0i32; 3];
     let col_off = usize::from(b.x0 - win.rect.x0);
     let row_off = usize::from(b.y0 - win.rect.y0);
     let levels = win.levels.get(row_off..row_off + usize::from(b.h))?;
     let raw = win.raw.get(row_off * ww + col_off..)?;
+    // The outputs the groups read (the other's bias is not needed).
+    let use0 = groups.iter().any(|g| !g.out1);
+    let use1 = groups.iter().any(|g| g.out1);
     // The column split of two groups (the box's width for one).
     let split = match groups {
         [_] => bw,
@@ -357,22 +362,35 @@ fn fused_sums(
         }
         let mut acc = [GroupAcc::default(); MB];
         // Offsets (16 bias per output) and weights of the tile row's rows.
-        let mut bias = [[0i32; 3]; 2];
+        let (mut bias0, mut bias1) = ([0i32; 3], [0i32; 3]);
         let mut rw = [0i32; 3];
         let (ra, rb) = (usize::from(r0), usize::from(r1));
+        let add = |acc: &mut [i32; 3], v: i32, dy: i32, dy2: i32| {
+            acc[0] += v;
+            acc[1] += dy * v;
+            acc[2] += dy2 * v;
+        };
         for (lv, dy) in levels.get(ra..rb)?.iter().zip(dy0 + i32::from(r0)..) {
             let dy2 = dy * dy;
-            let b0 = offset_16ths(lv.bias(Output(0)), ColumnBiasAdu::ZERO);
-            let b1 = offset_16ths(lv.bias(Output(1)), ColumnBiasAdu::ZERO);
-            for (bo, v) in bias.iter_mut().zip([b0, b1]) {
-                bo[0] += v;
-                bo[1] += dy * v;
-                bo[2] += dy2 * v;
+            if use0 {
+                add(
+                    &mut bias0,
+                    offset_16ths(lv.bias(Output(0)), ColumnBiasAdu::ZERO),
+                    dy,
+                    dy2,
+                );
             }
-            rw[0] += 1;
-            rw[1] += dy;
-            rw[2] += dy2;
+            if use1 {
+                add(
+                    &mut bias1,
+                    offset_16ths(lv.bias(Output(1)), ColumnBiasAdu::ZERO),
+                    dy,
+                    dy2,
+                );
+            }
+            add(&mut rw, 1, dy, dy2);
         }
+        let bias = [bias0, bias1];
         let rows = raw.get(ra * ww..)?.chunks(ww.max(1)).take(rb - ra);
         if split > 0 {
             // One or two column groups: both runs' sums in registers.
@@ -406,14 +424,23 @@ fn fused_sums(
                 }
             }
         }
+        for (t, v) in rows_w.iter_mut().zip(rw) {
+            *t += v;
+        }
         let rg = RowGroup {
             y: y0,
             bias: &bias,
             rw: &rw,
         };
-        flush(cal, &gains, groups, &acc, &rg, (&mut e, &mut wt));
+        flush(cal, &gains, groups, &acc, &rg, level_e, &mut e);
         r0 = r1;
     }
+    let (sdx, sdx2) = groups
+        .iter()
+        .fold((0, 0), |(a, b), g| (a + g.sdx[0], b + g.sdx[1]));
+    let [h, sdy, sdy2] = rows_w;
+    let w = bw as i32;
+    let wt = [w * h, h * sdx, h * sdx2, w * sdy, w * sdy2];
     Some((e, wt, saturated))
 }
 
@@ -426,8 +453,8 @@ struct RowGroup<'r> {
 }
 
 /// Ends one tile row of the box: each column group's raw sums become the cell's
-/// `Z_w = sum w d` (offsets subtracted in closed form), then its calibrated moments
-/// `A Z_w - K W_w` are added to `e` and its weights to `wt`.
+/// `Z_w = sum w d` (offsets subtracted in closed form), then its background-subtracted
+/// moments `A Z_w - (K + L) W_w` are added to `e` (`L` = `level_e`).
 #[inline(always)]
 fn flush(
     cal: &FrameCalibration<'_>,
@@ -435,7 +462,8 @@ fn flush(
     groups: &[ColGroup],
     acc: &[GroupAcc; MB],
     rg: &RowGroup<'_>,
-    (e, wt): (&mut [f32; 5], &mut [i32; 5]),
+    level_e: f32,
+    e: &mut [f32; 5],
 ) {
     let t = cal.table();
     let [g0, g1] = *gains;
@@ -466,10 +494,9 @@ fn flush(
         // A = gain_bits flat_bits 2^-46 (e- per 1/16 ADU), K = dark_16 flat_bits 2^-30 (e-)
         // with dark_16 = 16 dark_rel_bits dark_scale_bits.
         let a_c = gain.to_bits() as f32 * flat * (1.0 / 70_368_744_177_664.0);
-        let k_c = dark * flat * (1.0 / 67_108_864.0);
-        for ((ei, wi), (zv, wv)) in e.iter_mut().zip(wt.iter_mut()).zip(z.iter().zip(w.iter())) {
-            *ei += a_c * *zv as f32 - k_c * *wv as f32;
-            *wi += *wv;
+        let kl = dark * flat * (1.0 / 67_108_864.0) + level_e;
+        for (ei, (zv, wv)) in e.iter_mut().zip(z.iter().zip(w.iter())) {
+            *ei += a_c * *zv as f32 - kl * *wv as f32;
         }
     }
 }
@@ -482,15 +509,10 @@ fn fused_cog(
     level_bits: i64,
     var_bg: f32,
 ) -> Option<Meas> {
-    let (e, wt, saturated) = fused_sums(cal, win, b)?;
     // The level is within i32 bits (level_to_bits saturates there).
     let l = level_bits as i32 as f32 * (1.0 / 64.0);
+    let ([s, sx, sxx, sy, syy], wt, saturated) = fused_sums(cal, win, b, l)?;
     let [n, wx, wxx, wy, wyy] = wt.map(|v| v as f32);
-    let s = e[0] - l * n;
-    let sx = e[1] - l * wx;
-    let sxx = e[2] - l * wxx;
-    let sy = e[3] - l * wy;
-    let syy = e[4] - l * wyy;
     // No star: the flux is not positive (or not a number).
     if s.is_nan() || s <= 0.0 {
         return None;
