@@ -15,14 +15,19 @@
 //! `F = e - L` (`L` the given level) and a weight `w` of the pixel's offsets from the anchor
 //! (`dx`, `dy` in `-h..=h`, `h = side / 2`), every CoG sum is, exactly,
 //! ```text
-//! sum w F = sum_cells ( A Z_w - K W_w ) - L sum w,   Z_w = sum_cell w d,  W_w = sum_cell w
+//! sum w F = sum_cells ( A Z_w - (K + L) W_w ),   Z_w = sum_cell w d,  W_w = sum_cell w
 //! ```
-//! for `w` in `1, dx, dx^2, dy, dy^2`. The raw part of `Z_w` is accumulated per column and
-//! tile row: `sum raw`, `sum dy raw`, `sum dy^2 raw` (one add and two multiply-adds per pixel);
-//! the offsets' part (`16 bias` per row and output, `16 column_bias` per column) is subtracted
-//! from these column sums in closed form; `dx` and `dx^2` weights are applied to the column
-//! sums. Only the cell sums (one cell for most 7x7 boxes with the 8x8-tiled table, at most
-//! 2x2 tiles, times 2 outputs at the readout split) meet the calibration constants, in f32.
+//! for `w` in `1, dx, dx^2, dy, dy^2`. The raw part of `Z_w` is accumulated per row and
+//! *column run* (the box's columns of one cell: one run for a box inside a tile column, two
+//! when it crosses a tile edge or the output split) as three running sums, one add each per
+//! sample: `P = sum v`, `Q = sum_i P_i = sum u v`, `R = sum_i Q_i = sum u (u + 1) / 2 v`
+//! (`u = m - i` for the run's i-th of `m` columns). With `c` the `dx` just past the run,
+//! `dx = c - u`, so `sum dx v = c P - Q` and `sum dx^2 v = c^2 P - 2 c Q + 2 R - Q`, per
+//! cell, not per pixel; each row adds `P`, `Q`, `R`, `dy P`, `dy^2 P` to its run's cell. The
+//! offsets' part (`16 bias` per row and output, `16 column_bias` per column) is subtracted
+//! in closed form from sums over the rows and over the columns, which need no raw sample.
+//! Only the cell sums meet the calibration constants, in f32: one cell for a box inside one
+//! tile, usually 2 or 4 (2x2 tiles) with the 8x8-tiled table, more at the output split.
 //! Then, with `S_w = sum w F` and `n` pixels:
 //! ```text
 //! x = S_dx / S_1                                            (offset from the anchor)
@@ -53,22 +58,30 @@
 //!
 //! # Integer ranges (no overflow for any 16-bit input)
 //! Box side at most [`MAX_BOX_SIDE`] = 9, so `|dx|, |dy| <= 4`, `sum |d| <= 20`,
-//! `sum d^2 <= 60` over a side, at most 81 pixels:
-//! - column accumulators over at most 9 rows: `sum raw < 9 * 2^16 < 2^20`,
-//!   `|sum dy raw| <= 20 * 2^16 < 2^21`, `sum dy^2 raw <= 60 * 2^16 < 2^22` (i32);
+//! `sum d^2 <= 60` over a side, at most 81 pixels, all in i32:
+//! - running sums of a run of `m <= 9` samples over at most 9 rows: `P <= 81 * 65535
+//!   < 2^23`, `Q <= 9 P < 2^26`, `R <= 45 P < 2^29`; `|dy P| <= 4 P`, `dy^2 P <= 16 P`;
+//! - `|c| <= 5` (`c` is the last column's `dx` plus one), so `c^2 P < 2^28`, `2 |c| Q < 2^30`,
+//!   `2 R < 2^30`: the `dx^2` moment's terms and result stay below 2^31; the moments
+//!   themselves are below `60 * 9 * 65535 < 2^26`, times 16 below 2^30;
 //! - per pixel `|d| = |16 raw - offset| <= 2^20 + 2^15 < 2^21` (raw <= 65535, bias <= 65535
-//!   ADU, |column bias| < 2^11 ADU), so a column's `sum w d` over its rows is below
-//!   `60 * 2^21 < 2^27`, and `16 sum w raw` and the offsets' sums stay below 2^28 each;
-//! - a cell's `Z_w = sum w d` over at most 81 pixels with `sum |w| <= 9 * 60 = 540`:
-//!   `|Z_w| <= 540 * 2^21 < 2^31` (i32); `W_w <= 540`.
-//!
+//!   ADU, |column bias| < 2^11 ADU); the offsets' weighted sums are below
+//!   `540 * (2^20 + 2^15) < 2^30`, so a cell's `Z_w = sum w d` (`sum |w| <= 9 * 60 = 540`) is
+//!   below `540 * 2^21 < 2^31`; `W_w <= 540`.
+
 //! # Cost
-//! Per pixel one load, one add, two multiply-adds and the saturation maximum; per column and
-//! tile row ~10 integer operations; per cell the table look-ups (gain, dark, flat) and ten
-//! f32 multiply-adds; per star one divide, three square roots (`math::sqrt`) and the curve
-//! (two Catmull-Rom evaluations). Measured by `cargo m7-bench`, stage
-//! `centroid_cog1c_raw_7x7` (and `tracking_frame`, 30 of them).
-//!
+//! Per sample one load and three adds; per row and run the five cell sums (~50 instructions a
+//! row with the bookkeeping and spills); per cell the table look-ups (dark, flat), ~30
+//! integer operations and ten f32 multiply-adds (~220 instructions on the M7 with the
+//! look-ups); per star the column set-up (column biases), one divide, three square roots
+//! (`math::sqrt`), the defect-list search and the curve (two Catmull-Rom evaluations).
+//! `cargo m7-bench`, stage `centroid_cog1c_raw_7x7` (a 7x7 box crossing 2x2 tiles, curve
+//! applied): 3,817 instructions, against 4,655 + 6,901 for `window_calibrate` +
+//! `centroid_cog1c_7x7` (general path with a perimeter median); `tracking_frame`, 30 of
+//! them: 114,310. What bounds it (QEMU trace): the cells (~900 for four), the row loop
+//! (~800), the set-up (~500), the square roots (~150, libm), the defect search (~140) and
+//! the curve (~140).
+
 //! # Re-anchoring
 //! The pixel-phase curve holds only while the CoG lies within half a pixel of the anchor
 //! (its domain is the anchor pixel's phase). When it lands further, the box is moved once to
