@@ -304,16 +304,13 @@ fn fused_sums(
     } else {
         usize::MAX
     };
-    let mut groups = [ColGroup::default(); MB];
-    let mut ng = 0usize;
+    // A heapless vector: no zeroing of unused slots.
+    let mut groups: heapless::Vec<ColGroup, MB> = heapless::Vec::new();
     let (x_start, x_end) = (usize::from(b.x0), usize::from(b.x0) + bw);
     let mut x = x_start;
     // x < 2^16 and the shifts are at most 16: the next tile edge is below 2^17.
     let next_edge = |x: usize, l: u8| ((x >> l) + 1) << l;
-    for gr in groups.iter_mut() {
-        if x >= x_end {
-            break;
-        }
+    while x < x_end {
         let mut stop = x_end.min(next_edge(x, dl)).min(next_edge(x, fl));
         if x < split {
             stop = stop.min(split);
@@ -329,8 +326,8 @@ fn fused_sums(
             sdx[0] += dx;
             sdx[1] += dx * dx;
         }
-        // Box columns are below 2^16 and at most MB of them.
-        *gr = ColGroup {
+        // Box columns are below 2^16 and at most MB of them (so at most MB runs).
+        let gr = ColGroup {
             i0: i0 as u16,
             m: (stop - x) as u16,
             x: x as u16,
@@ -339,10 +336,10 @@ fn fused_sums(
             cb,
             sdx,
         };
-        ng += 1;
+        groups.push(gr).ok()?;
         x = stop;
     }
-    let groups = groups.get(..ng)?;
+    let groups = groups.as_slice();
     let gains = [t.gain(Output(0)), t.gain(Output(1))];
     let sat = t.saturation_adu();
     let mut saturated = false;
@@ -373,7 +370,6 @@ fn fused_sums(
         while r1 < b.h && key(b.y0 + r1) == k0 {
             r1 += 1;
         }
-        let mut acc = [GroupAcc::default(); MB];
         // Offsets (16 bias per output) and weights of the tile row's rows.
         let (mut bias0, mut bias1) = ([0i32; 3], [0i32; 3]);
         let mut rw = [0i32; 3];
@@ -421,9 +417,15 @@ fn fused_sums(
                 a1.add(p1, q1, s1, dy, dy2);
                 a2.add(p2, q2, s2, dy, dy2);
             }
-            acc[0] = a1;
-            acc[1] = a2;
+            let acc = [a1, a2];
+            let rg = RowGroup {
+                y: y0,
+                bias: &bias,
+                rw: &rw,
+            };
+            flush(cal, &gains, groups, &acc, &rg, level_e, &mut e);
         } else {
+            let mut acc = [GroupAcc::default(); MB];
             for (row, dy) in rows.zip(dy0 + i32::from(r0)..) {
                 let row = row.get(..bw)?;
                 for (gr, a) in groups.iter().zip(acc.iter_mut()) {
@@ -436,16 +438,16 @@ fn fused_sums(
                     a.add(p, q, r, dy, dy * dy);
                 }
             }
+            let rg = RowGroup {
+                y: y0,
+                bias: &bias,
+                rw: &rw,
+            };
+            flush(cal, &gains, groups, &acc, &rg, level_e, &mut e);
         }
         for (t, v) in rows_w.iter_mut().zip(rw) {
             *t += v;
         }
-        let rg = RowGroup {
-            y: y0,
-            bias: &bias,
-            rw: &rw,
-        };
-        flush(cal, &gains, groups, &acc, &rg, level_e, &mut e);
         r0 = r1;
     }
     let (sdx, sdx2) = groups
@@ -473,7 +475,7 @@ fn flush(
     cal: &FrameCalibration<'_>,
     gains: &[crate::units::GainEPerAdu; 2],
     groups: &[ColGroup],
-    acc: &[GroupAcc; MB],
+    acc: &[GroupAcc],
     rg: &RowGroup<'_>,
     level_e: f32,
     e: &mut [f32; 5],
