@@ -76,11 +76,13 @@
 //! look-ups); per star the column set-up (column biases), one divide, three square roots
 //! (`math::sqrt`), the defect-list search and the curve (two Catmull-Rom evaluations).
 //! `cargo m7-bench`, stage `centroid_cog1c_raw_7x7` (a 7x7 box crossing 2x2 tiles, curve
-//! applied): 3,817 instructions, against 4,655 + 6,901 for `window_calibrate` +
+//! applied): 3,511 instructions, against 4,655 + 6,901 for `window_calibrate` +
 //! `centroid_cog1c_7x7` (general path with a perimeter median); `tracking_frame`, 30 of
-//! them: 114,310. What bounds it (QEMU trace): the cells (~900 for four), the row loop
-//! (~800), the set-up (~500), the square roots (~150, libm), the defect search (~140) and
-//! the curve (~140).
+//! them: 105,277. What bounds it (QEMU `-d exec` trace of one call): the row loop (~900:
+//! two runs of 3-4 samples a row, their loop set-up and register spills), the box set-up
+//! (~900: column biases, tile rows, the levels' bias sums, spills), the cells (~570 for
+//! four), the square roots (~150, libm), the defect-list search (~140) and the curve
+//! (~140).
 
 //! # Re-anchoring
 //! The pixel-phase curve holds only while the CoG lies within half a pixel of the anchor
