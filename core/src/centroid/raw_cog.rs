@@ -76,9 +76,9 @@
 //! look-ups); per star the column set-up (column biases), one divide, three square roots
 //! (`math::sqrt`), the defect-list search and the curve (two Catmull-Rom evaluations).
 //! `cargo m7-bench`, stage `centroid_cog1c_raw_7x7` (a 7x7 box crossing 2x2 tiles, curve
-//! applied): 3,511 instructions, against 4,655 + 6,901 for `window_calibrate` +
+//! applied): 3,412 instructions, against 4,655 + 6,901 for `window_calibrate` +
 //! `centroid_cog1c_7x7` (general path with a perimeter median); `tracking_frame`, 30 of
-//! them: 105,277. What bounds it (QEMU `-d exec` trace of one call): the row loop (~900:
+//! them: 102,329. What bounds it (QEMU `-d exec` trace of one call): the row loop (~900:
 //! two runs of 3-4 samples a row, their loop set-up and register spills), the box set-up
 //! (~900: column biases, tile rows, the levels' bias sums, spills), the cells (~570 for
 //! four), the square roots (~150, libm), the defect-list search (~140) and the curve
@@ -361,17 +361,16 @@ fn fused_sums(
         [_, g2] => usize::from(g2.i0),
         _ => 0,
     };
-    // Tile rows: runs of rows with the same dark and flat tile row (in u32: a shift of 16,
-    // no map, would overflow a u16).
-    let key = |y: u16| (u32::from(y) >> dl, u32::from(y) >> fl);
+    // Tile rows: runs of rows ending at the next dark or flat tile edge (computed in usize:
+    // a shift of 16, no map, would overflow a u16; the edge is below 2^17).
+    let y_end = usize::from(b.y0) + usize::from(b.h);
     let mut r0 = 0u16;
     while r0 < b.h {
         let y0 = b.y0 + r0;
-        let k0 = key(y0);
-        let mut r1 = r0 + 1;
-        while r1 < b.h && key(b.y0 + r1) == k0 {
-            r1 += 1;
-        }
+        let y = usize::from(y0);
+        let stop = y_end.min(next_edge(y, dl)).min(next_edge(y, fl));
+        // stop - b.y0 <= b.h <= MB: fits u16; stop > y, so r1 > r0.
+        let r1 = (stop - usize::from(b.y0)) as u16;
         // Offsets (16 bias per output) and weights of the tile row's rows.
         let (mut bias0, mut bias1) = ([0i32; 3], [0i32; 3]);
         let mut rw = [0i32; 3];
