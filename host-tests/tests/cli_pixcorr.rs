@@ -148,8 +148,18 @@ fn calib_build_adds_the_curves_and_reports_them() {
     let s = setup();
     let bytes = std::fs::read(&s.with_curves).unwrap();
     let t = CalibTable::parse(&bytes).unwrap();
-    // Boxes 5 and 7, powers 1 and 2, one width: four curves, each reported.
-    assert_eq!(t.pixcorr().len(), 4);
+    // Boxes 5 and 7, powers 1 and 2, one width: four curves, each reported; plus the
+    // tracking path's given-background power-1 curves for the same boxes (two).
+    assert_eq!(t.pixcorr().len(), 6);
+    assert_eq!(
+        s.notes
+            .iter()
+            .filter(|n| n.starts_with("tracking curve (given background): a 0.6 px"))
+            .count(),
+        2,
+        "{:?}",
+        s.notes
+    );
     for c in t.pixcorr().iter() {
         let a = c.header().a_px.to_num::<f64>();
         assert!((a - A_PX).abs() <= 1.0 / 256.0, "curve a {a}");

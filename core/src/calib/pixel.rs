@@ -415,6 +415,27 @@ impl<'t> FrameCalibration<'t> {
         self.rows_have_defects(y, y.saturating_add(1))
     }
 
+    /// True when the table lists a hot or telegraph pixel inside `rect`: one binary search
+    /// per list, then a walk over the listed pixels of the rectangle's rows (none on most
+    /// rows).
+    pub(crate) fn rect_has_defects(&self, rect: Rect) -> bool {
+        let (y0, y1) = (rect.y0, rect.y0.saturating_add(rect.height));
+        if !self.rows_have_defects(y0, y1) {
+            return false;
+        }
+        let in_x = |x: u16| x >= rect.x0 && x - rect.x0 < rect.width;
+        let hot = self.table.hot_pixels();
+        let tel = self.table.telegraph_pixels();
+        (hot.lower_bound(0, y0)..hot.len())
+            .map_while(|i| hot.get(i))
+            .take_while(|h| h.y < y1)
+            .any(|h| in_x(h.x))
+            || (tel.lower_bound(0, y0)..tel.len())
+                .map_while(|i| tel.get(i))
+                .take_while(|(_, ty)| *ty < y1)
+                .any(|(x, _)| in_x(x))
+    }
+
     /// True when the table lists a hot or telegraph pixel on a row of `y0..y1`: the first
     /// entry at or after (0, y0) in (y, x) order is on a row before `y1`.
     fn rows_have_defects(&self, y0: u16, y1: u16) -> bool {

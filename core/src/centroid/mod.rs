@@ -54,6 +54,7 @@ pub mod iwc;
 pub mod math;
 pub mod pixcorr;
 pub mod quadratic;
+pub mod raw_cog;
 
 use crate::calib::PixelFlags;
 use crate::window::Window;
@@ -235,7 +236,7 @@ fn degenerate_in(x0: u16, y0: u16, width: u16, height: u16, flags: CentroidFlags
 }
 
 /// f32 level in e- to `Electrons` bits, saturating, NaN to 0.
-fn level_to_bits(level_e: f32) -> i64 {
+pub(crate) fn level_to_bits(level_e: f32) -> i64 {
     let b = level_e * 64.0;
     let r = if b >= 0.0 { b + 0.5 } else { b - 0.5 };
     // `as` saturates at the i32 range and maps NaN to 0.
@@ -250,7 +251,7 @@ pub(crate) fn pos(v: f32) -> f32 {
 }
 
 /// A finite, non-negative f32 or 0.
-fn sanitize_var(v: f32) -> f32 {
+pub(crate) fn sanitize_var(v: f32) -> f32 {
     if v.is_finite() && v > 0.0 { v } else { 0.0 }
 }
 

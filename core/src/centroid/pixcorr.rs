@@ -35,8 +35,11 @@
 //! `c(|m|)` by a Catmull-Rom cubic through the four nearest knots (a ghost knot by the odd
 //! symmetry at 0, a linear one past `m_max`), sign restored; past `m_max` (noise only) the
 //! end value, slope 0. The error estimate
-//! is scaled by the slope `dp/dm = 1 + c'(m)` of the same cubic. Per axis: one `floor`, about
-//! 20 flops, four knot reads; no division. A few tens of cycles per star on the M7.
+//! is scaled by the slope `dp/dm = 1 + c'(m)` of the same cubic. Per axis: a floor by integer
+//! conversion, about 20 flops, four knot reads (I1F15 to f32 by one multiply); no division
+//! (`(n - 1) / m_max`, the end knot and the ghost knot are computed once, by
+//! [`PixCorr::parse`]). Measured inside `centroid_cog1c_7x7` and `centroid_cog1c_raw_7x7`
+//! of `cargo m7-bench`.
 //!
 //! # Accuracy (host test `pixcorr`, 33 knots, true phases over the pixel in both axes)
 //! With a given background the corrected CoG's systematic error is at most 5e-5 px RMS for
@@ -63,7 +66,7 @@
 
 use super::cog::CogPower;
 use super::{Background, Centroid, CentroidFlags, MAX_SIDE};
-use fixed::types::{I1F15, U0F16, U8F8};
+use fixed::types::{U0F16, U8F8};
 
 /// Fewest knots a curve may have.
 pub const MIN_KNOTS: u8 = 5;
@@ -191,11 +194,39 @@ impl core::fmt::Display for PixCorrError {
 
 impl core::error::Error for PixCorrError {}
 
-/// One checked curve, borrowing its knots (little-endian `i16`, I1F15 px).
+/// One checked curve, borrowing its knots (little-endian `i16`, I1F15 px), with the
+/// constants [`PixCorr::correction`] needs precomputed at parse time (so a curve parsed once
+/// and reused costs no divide per call).
 #[derive(Clone, Copy, Debug)]
 pub struct PixCorr<'a> {
     header: CurveHeader,
     knots: &'a [u8],
+    /// `m_max`, px.
+    m_max: f32,
+    /// `(n - 1) / m_max`: knot intervals per px of measured phase.
+    scale: f32,
+    /// The last stored knot, px (the value past `m_max`).
+    last: f32,
+    /// The ghost knot past the last: `2 c(n-1) - c(n-2)`, px.
+    ghost: f32,
+}
+
+/// I1F15 bits to px: exact in f32 (the `fixed` conversion is a generic routine).
+#[inline(always)]
+fn i1f15(bits: i16) -> f32 {
+    f32::from(bits) * (1.0 / 32_768.0)
+}
+
+/// `floor(v)` by integer conversion (libm's `floorf` is a call): exact for every finite f32
+/// (values of magnitude 2^23 and above are integers already); 0 for NaN.
+#[inline(always)]
+fn floor_f32(v: f32) -> f32 {
+    if v.abs() >= 8_388_608.0 {
+        return v;
+    }
+    // |v| < 2^23: the conversion truncates towards zero and is exact back to f32.
+    let t = v as i32 as f32;
+    if t > v { t - 1.0 } else { t }
 }
 
 /// Reads knot `i` (bits) of a little-endian i16 slice.
@@ -249,10 +280,18 @@ impl<'a> PixCorr<'a> {
         if knot_bits(data, 0) != Some(0) {
             return Err(PixCorrError::FirstKnot);
         }
+        let n = usize::from(knots);
+        let last = i1f15(knot_bits(data, n - 1).unwrap_or(0));
+        let before = i1f15(knot_bits(data, n - 2).unwrap_or(0));
+        let m_max = header.phase_max_px.to_num::<f32>();
         Ok((
             Self {
                 header,
                 knots: data,
+                m_max,
+                scale: f32::from(knots - 1) / m_max,
+                last,
+                ghost: 2.0 * last - before,
             },
             len,
         ))
@@ -269,25 +308,9 @@ impl<'a> PixCorr<'a> {
     }
 
     /// Stored knot `k` in px (0 outside).
-    fn stored(&self, k: isize) -> f32 {
-        let bits = usize::try_from(k)
-            .ok()
-            .and_then(|i| knot_bits(self.knots, i))
-            .unwrap_or(0);
-        I1F15::from_bits(bits).to_num::<f32>()
-    }
-
-    /// Knot `k` in px, with a ghost knot on each side: `c(-h) = -c(h)` (odd symmetry) and a
-    /// linear continuation past the last.
-    fn knot(&self, k: isize) -> f32 {
-        let last = isize::from(self.header.knots) - 1;
-        if k < 0 {
-            -self.stored(-k)
-        } else if k > last {
-            2.0 * self.stored(last) - self.stored(last - 1)
-        } else {
-            self.stored(k)
-        }
+    #[inline(always)]
+    fn stored(&self, k: usize) -> f32 {
+        i1f15(knot_bits(self.knots, k).unwrap_or(0))
     }
 
     /// The correction `c(m)` and its slope `dc/dm` at measured phase `m` (px, taken modulo
@@ -296,30 +319,36 @@ impl<'a> PixCorr<'a> {
         if !m.is_finite() {
             return (0.0, 0.0);
         }
-        let m = m - libm::floorf(m + 0.5);
+        let m = m - floor_f32(m + 0.5);
         let (sign, u) = if m < 0.0 { (-1.0, -m) } else { (1.0, m) };
-        let span = f32::from(self.header.knots - 1);
-        let m_max = self.header.phase_max_px.to_num::<f32>();
-        if u >= m_max {
-            return (sign * self.stored(isize::from(self.header.knots) - 1), 0.0);
+        if u >= self.m_max {
+            return (sign * self.last, 0.0);
         }
-        let t = (u / m_max * span).clamp(0.0, span);
-        // t < span, so k <= knots - 2 and k + 1 is a stored knot.
-        let k = (libm::floorf(t) as isize).min(isize::from(self.header.knots) - 2);
+        let last = usize::from(self.header.knots) - 1;
+        // 0 <= t < n - 1 (up to rounding: k is capped so that k + 1 is a stored knot).
+        let t = u * self.scale;
+        let k = (t as usize).min(last - 1);
         let f = t - k as f32;
-        let (p0, p1, p2, p3) = (
-            self.knot(k - 1),
-            self.knot(k),
-            self.knot(k + 1),
-            self.knot(k + 2),
-        );
+        // Ghost knots: c(-h) = -c(h) (odd symmetry) before the first, a linear continuation
+        // past the last.
+        let p0 = if k == 0 {
+            -self.stored(1)
+        } else {
+            self.stored(k - 1)
+        };
+        let (p1, p2) = (self.stored(k), self.stored(k + 1));
+        let p3 = if k + 2 > last {
+            self.ghost
+        } else {
+            self.stored(k + 2)
+        };
         let (b, c, d) = (
             0.5 * (p2 - p0),
             p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3,
             1.5 * (p1 - p2) + 0.5 * (p3 - p0),
         );
         let value = p1 + f * (b + f * (c + f * d));
-        let slope = (b + f * (2.0 * c + 3.0 * f * d)) * span / m_max;
+        let slope = (b + f * (2.0 * c + 3.0 * f * d)) * self.scale;
         (sign * value, slope)
     }
 

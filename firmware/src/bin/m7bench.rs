@@ -28,7 +28,8 @@ use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::iwc::{IwcParams, iwc};
 use startrack_core::centroid::pixcorr::{CurveHeader, PixCorr, PixCorrBackground};
 use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
-use startrack_core::centroid::{Background, CentroidInput};
+use startrack_core::centroid::raw_cog::{RawCogParams, RawWindow, raw_cog};
+use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::detect::{DetectConfig, ScanDetector};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::{
@@ -514,8 +515,31 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         );
     }
 
-    // Tracking frame: TRACK_STARS 7x7 windows calibrated and centroided with the default
-    // method (CoG power 1 in the 7x7 box, perimeter-median background).
+    // The tracking path's pixel-phase curve (power 1, box 7, given background): 33 knots of
+    // an S-shaped correction (the values do not change the cost).
+    let mut track_curve_bytes = [0u8; 8 + 2 * 33];
+    track_curve_bytes[..8].copy_from_slice(
+        &CurveHeader {
+            power: CogPower::One,
+            box_side: 7,
+            background: PixCorrBackground::Given,
+            knots: 33,
+            a_px: U8F8::from_num(1.2),
+            phase_max_px: U0F16::from_num(0.45),
+        }
+        .to_bytes(),
+    );
+    for k in 1..33usize {
+        let v = (k as i32 * (32 - k as i32) * 3) as i16;
+        track_curve_bytes[8 + 2 * k..10 + 2 * k].copy_from_slice(&v.to_le_bytes());
+    }
+
+    // Tracking frame: TRACK_STARS 7x7 raw windows calibrated and centroided with the tracking
+    // path's default method, the fused raw-window CoG power 1 in the 7x7 box
+    // (`centroid::raw_cog`: the calibration folded into the sums), each star's background
+    // given (carried from its last measurement), pixel-phase curve applied. The general path
+    // (calibrate_window + cog with a perimeter median + curve) is measured by
+    // `window_calibrate` and `centroid_cog1c_7x7` below.
     {
         let mut wraw = [[0u16; 49]; TRACK_STARS];
         let mut wlevels = [[LineLevels::measure(&G, &raw).map_err(|_| "levels")?; 7]; TRACK_STARS];
@@ -548,24 +572,27 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         }
         let mut ok = true;
         let mut sum = 0.0f32;
+        let (track_curve, _) =
+            PixCorr::parse(&track_curve_bytes).map_err(|_| "pixel-phase curve (given)")?;
+        let params = RawCogParams {
+            box_side: 7,
+            level_e: 10.0,
+            variance_e2: 40.0,
+            curve: Some(track_curve),
+        };
         let t_track = measure(overhead, || {
             for ((w, lv), rect) in wraw.iter().zip(wlevels.iter()).zip(rects.iter()) {
-                let mut we = [Electrons::ZERO; 49];
-                let mut wf = [PixelFlags::empty(); 49];
-                if cal
-                    .calibrate_window(*rect, black_box(w), lv, &mut we, &mut wf)
-                    .is_err()
-                {
+                let win = RawWindow {
+                    rect: *rect,
+                    raw: black_box(w),
+                    levels: lv,
+                };
+                let anchor = (rect.x0 + 3, rect.y0 + 3);
+                let c = raw_cog(&cal, &win, anchor, &params).centroid;
+                if c.flags.contains(CentroidFlags::DEGENERATE) {
                     ok = false;
                 }
-                match Window::new(*rect, &we) {
-                    Some(win) => {
-                        let input = CentroidInput::new(win).with_pixel_flags(&wf);
-                        let c = cog(&input, &CogParams::new(CogPower::One, 7));
-                        sum += c.x_px + c.y_px;
-                    }
-                    None => ok = false,
-                }
+                sum += c.x_px + c.y_px;
             }
         });
         black_box(sum);
@@ -593,6 +620,15 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
     }
     let (curve, _) = PixCorr::parse(&curve_bytes).map_err(|_| "pixel-phase curve")?;
     let mut t_cog1c = 0u64;
+    let (curve_given, _) =
+        PixCorr::parse(&track_curve_bytes).map_err(|_| "pixel-phase curve (given)")?;
+    let raw_params = RawCogParams {
+        box_side: 7,
+        level_e: 10.0,
+        variance_e2: 40.0,
+        curve: Some(curve_given),
+    };
+    let mut t_cog1c_raw = 0u64;
 
     // Star windows: 7x7 around a star, calibrated from its 7 raw lines, then centroided.
     let mut t_window = 0u64;
@@ -623,6 +659,22 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
             r = cal.calibrate_window(rect, black_box(&wraw), &levels, &mut we, &mut wf);
         });
         r.map_err(|_| "calibrate_window failed")?;
+        // The fused path: raw window and levels to the corrected centroid, calibration
+        // included (the "window_calibrate + corrected CoG 7x7" as one stage).
+        let rw = RawWindow {
+            rect,
+            raw: &wraw,
+            levels: &levels,
+        };
+        let rw = black_box(&rw);
+        let mut fused = None;
+        t_cog1c_raw += measure(overhead, || {
+            fused = Some(raw_cog(&cal, rw, (sx as u16, sy as u16), &raw_params));
+        });
+        let fused = fused.ok_or("raw_cog")?;
+        if fused.centroid.flags.bits() != 0 || fused.general_path {
+            return Err("raw_cog flagged a clean star");
+        }
 
         // Centroids on the 7x7 window and on its central 5x5.
         let mut we5 = [Electrons::ZERO; 25];
@@ -671,6 +723,13 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         "centroid_cog1c_7x7",
         "star",
         t_cog1c,
+        WINDOW_REPS as u64,
+    );
+    row(
+        out,
+        "centroid_cog1c_raw_7x7",
+        "star",
+        t_cog1c_raw,
         WINDOW_REPS as u64,
     );
     for (side, acc) in [5u8, 7].iter().zip(t_centroid.iter()) {

@@ -34,7 +34,9 @@
 //!   window and the firmware's 9 px one) and per power in `--pixcorr-powers` (default 1,2),
 //!   all for the median-perimeter background both use. A combination the builder refuses
 //!   (CoG not invertible, or the wings reach the perimeter) is reported and skipped; at
-//!   most 16 curves fit the section.
+//!   most 16 curves fit the section. Then, while the section has room, one power-1 curve
+//!   per width and box up to 9 for a *given* background: the firmware's tracking path
+//!   (`centroid::raw_cog`, background carried from the star's last measurement) uses it.
 //!
 //! A missing map gives no section and is reported ("no dark map: no dark correction").
 //! Geometry: the CCD47-20 read through both outputs.
@@ -186,6 +188,39 @@ pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String
                         "no pixel-phase curve for a {a_px} px, box {box_side}, power {p}: {e}"
                     )),
                 }
+            }
+        }
+    }
+    // The firmware's tracking path (core `centroid::raw_cog`: power 1, a given background
+    // carried from the star's last measurement) needs curves made for a given background:
+    // one per width for each box the fused path takes (side <= 9), while the section has
+    // room (a note says when it had not).
+    for &a_px in &widths {
+        for &box_side in boxes.iter().filter(|b| **b <= 9) {
+            let spec = CurveSpec {
+                a_px,
+                box_side,
+                power: CogPower::One,
+                background: PixCorrBackground::Given,
+                knots: PIXCORR_KNOTS,
+            };
+            if curves.len() >= MAX_CURVES {
+                notes.push(format!(
+                    "no tracking curve (given background) for a {a_px} px, box {box_side}: the section is full"
+                ));
+                continue;
+            }
+            match build_curve(&spec) {
+                Ok(c) => {
+                    notes.push(format!(
+                        "tracking curve (given background): a {a_px} px, box {box_side}, power 1 (largest correction {:.4} px)",
+                        c.knots_px.iter().fold(0.0f64, |m, k| m.max(k.abs()))
+                    ));
+                    curves.push(c);
+                }
+                Err(e) => notes.push(format!(
+                    "no tracking curve (given background) for a {a_px} px, box {box_side}: {e}"
+                )),
             }
         }
     }

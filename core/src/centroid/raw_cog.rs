@@ -1,0 +1,769 @@
+//! The tracking path's corrected centre of gravity straight from a window's RAW samples:
+//! calibration and CoG power 1 fused, with a given background and an optional pixel-phase
+//! curve ([`super::pixcorr`]). It gives what `calibrate_window` + [`super::cog::cog`]
+//! (power 1, [`Background::Given`], box anchored on a given pixel) + [`PixCorr::apply`] give,
+//! without calibrating any pixel.
+//!
+//! # Formula
+//! The calibration ([`crate::calib::pixel`]) is affine in the raw sample inside a *cell*
+//! (pixels sharing output amplifier, dark tile and flat tile):
+//! ```text
+//! e = (d gamma / 16 - D) phi,   d = 16 raw - 16 bias(row, output) - 16 column_bias(col)
+//!   = A d - K,                  A = gamma phi / 16,  K = D phi
+//! ```
+//! (`gamma` the output's gain, `D` the dark term, `phi` the inverse flat). With
+//! `F = e - L` (`L` the given level) and a weight `w` of the pixel's offsets from the anchor
+//! (`dx`, `dy` in `-h..=h`, `h = side / 2`), every CoG sum is, exactly,
+//! ```text
+//! sum w F = sum_cells ( A Z_w - (K + L) W_w ),   Z_w = sum_cell w d,  W_w = sum_cell w
+//! ```
+//! for `w` in `1, dx, dx^2, dy, dy^2`. The raw part of `Z_w` is accumulated per row and
+//! *column run* (the box's columns of one cell: one run for a box inside a tile column, two
+//! when it crosses a tile edge or the output split) as three running sums, one add each per
+//! sample: `P = sum v`, `Q = sum_i P_i = sum u v`, `R = sum_i Q_i = sum u (u + 1) / 2 v`
+//! (`u = m - i` for the run's i-th of `m` columns). With `c` the `dx` just past the run,
+//! `dx = c - u`, so `sum dx v = c P - Q` and `sum dx^2 v = c^2 P - 2 c Q + 2 R - Q`, per
+//! cell, not per pixel; each row adds `P`, `Q`, `R`, `dy P`, `dy^2 P` to its run's cell. The
+//! offsets' part (`16 bias` per row and output, `16 column_bias` per column) is subtracted
+//! in closed form from sums over the rows and over the columns, which need no raw sample.
+//! Only the cell sums meet the calibration constants, in f32: one cell for a box inside one
+//! tile, usually 2 or 4 (2x2 tiles) with the 8x8-tiled table, more at the output split.
+//! Then, with `S_w = sum w F` and `n` pixels:
+//! ```text
+//! x = S_dx / S_1                                            (offset from the anchor)
+//! sigma_x^2 = [ max(S_dx2 - 2 x S_dx + x^2 S_1, 0)
+//!             + var_bg (sum dx^2 - 2 x sum dx + x^2 n) ] / S_1^2
+//! SNR = S_1 / sqrt(max(S_1, 0) + n var_bg),   flux = S_1
+//! ```
+//! The shot-noise term uses `F`, not `max(F, 0)` as [`super::cog`] does: `E[F] = mu`, so
+//! `sum (d - x)^2 F` is an unbiased estimate of `sum (d - x)^2 mu` (clamped at 0 because
+//! noise can make it negative), where `max(F, 0)` over-estimates the faint wings at low
+//! SNR. The position and flux are the general path's; only sigma and SNR differ by that.
+//!
+//! # Difference to the per-pixel calibrated sums
+//! The general path rounds every pixel to 1/64 e- (after truncating the signal term to
+//! 2^-16 e-): each calibrated pixel is within [`QUANTISATION_E`] of the formula's exact
+//! value, so its `sum w F` is within `sum |w| QUANTISATION_E` of the exact sum. The fused
+//! sums are exact integers (`Z_w`, `W_w`, see below) until the per-cell f32 step: converting
+//! `Z_w`, `W_w` and the constants (gain bits, dark bits) to f32 and the products and sums
+//! round by at most `2^-24` relative each, about ten roundings in a chain plus one per cell
+//! accumulated, so
+//! ```text
+//! |S_w(fused) - S_w(exact)| <= (10 + cells) 2^-24 M_w,
+//! M_w = sum_cells (|A Z_w| + |K W_w|) + |L sum w| <= sum |w| (|A d| + |K| + |L|)
+//! ```
+//! (the host test `raw_cog` checks this against an f64 evaluation of the formula, and the
+//! position against the general path with both bounds added). For a 7x7 box at the bias
+//! level plus 20,000 e- the f32 term is ~0.01 e-, below the general path's own rounding.
+//!
+//! # Integer ranges (no overflow for any 16-bit input)
+//! Box side at most [`MAX_BOX_SIDE`] = 9, so `|dx|, |dy| <= 4`, `sum |d| <= 20`,
+//! `sum d^2 <= 60` over a side, at most 81 pixels, all in i32:
+//! - running sums of a run of `m <= 9` samples over at most 9 rows: `P <= 81 * 65535
+//!   < 2^23`, `Q <= 9 P < 2^26`, `R <= 45 P < 2^29`; `|dy P| <= 4 P`, `dy^2 P <= 16 P`;
+//! - `|c| <= 5` (`c` is the last column's `dx` plus one), so `c^2 P < 2^28`, `2 |c| Q < 2^30`,
+//!   `2 R < 2^30`: the `dx^2` moment's terms and result stay below 2^31; the moments
+//!   themselves are below `60 * 9 * 65535 < 2^26`, times 16 below 2^30;
+//! - per pixel `|d| = |16 raw - offset| <= 2^20 + 2^15 < 2^21` (raw <= 65535, bias <= 65535
+//!   ADU, |column bias| < 2^11 ADU); the offsets' weighted sums are below
+//!   `540 * (2^20 + 2^15) < 2^30`, so a cell's `Z_w = sum w d` (`sum |w| <= 9 * 60 = 540`) is
+//!   below `540 * 2^21 < 2^31`; `W_w <= 540`.
+
+//! # Cost
+//! Per sample one load and three adds; per row and run the five cell sums (~50 instructions a
+//! row with the bookkeeping and spills); per cell the table look-ups (dark, flat), ~30
+//! integer operations and ten f32 multiply-adds (~220 instructions on the M7 with the
+//! look-ups); per star the column set-up (column biases), one divide, three square roots
+//! (`math::sqrt`), the defect-list search and the curve (two Catmull-Rom evaluations).
+//! `cargo m7-bench`, stage `centroid_cog1c_raw_7x7` (a 7x7 box crossing 2x2 tiles, curve
+//! applied): 3,412 instructions, against 4,655 + 6,901 for `window_calibrate` +
+//! `centroid_cog1c_7x7` (general path with a perimeter median); `tracking_frame`, 30 of
+//! them: 102,329. What bounds it (QEMU `-d exec` trace of one call): the row loop (~900:
+//! two runs of 3-4 samples a row, their loop set-up and register spills), the box set-up
+//! (~900: column biases, tile rows, the levels' bias sums, spills), the cells (~570 for
+//! four), the square roots (~150, libm), the defect-list search (~140) and the curve
+//! (~140).
+
+//! # Re-anchoring
+//! The pixel-phase curve holds only while the CoG lies within half a pixel of the anchor
+//! (its domain is the anchor pixel's phase). When it lands further, the box is moved once to
+//! the CoG's pixel (if it still fits the window unclipped) and the CoG measured again;
+//! [`CentroidFlags::NOT_CONVERGED`] when it still lands more than half a pixel off, or when
+//! the move would leave the window.
+//!
+//! # Where it fails (and what it does then)
+//! - A listed hot or telegraph pixel inside the box: the fused sums cannot apply its own
+//!   dark law or skip it, so the box goes through the general path (`calibrate_window` of
+//!   the box, `cog` with the given background, the curve): exact, slower.
+//! - A saturated sample (raw >= the table's saturation): [`CentroidFlags::SATURATED`], as
+//!   the general path (the value is a lower bound there too).
+//! - A box clipped by the window: [`CentroidFlags::EDGE_CLIPPED`], computed on the clipped
+//!   box like the general path (truncation bias; the curve was made for the full box).
+//! - Flux not positive, bad buffers, an anchor outside the window, a window outside the
+//!   active area, a side above [`MAX_BOX_SIDE`]: [`CentroidFlags::DEGENERATE`] with the
+//!   anchor pixel as position. Never a panic, never a NaN.
+//! - Everything [`super::cog`] and [`super::pixcorr`] list: pixelisation without a curve, a
+//!   PSF wider than the curve's, a background level that is wrong (it pulls the CoG towards
+//!   the box centre: the level is taken as exact).
+
+use super::cog::{Anchor, CogParams, CogPower, cog};
+use super::pixcorr::PixCorr;
+use super::{
+    Background, Centroid, CentroidFlags, CentroidInput, LOW_SNR_LIMIT, level_to_bits, math,
+    sanitize_var,
+};
+use crate::calib::pixel::{QUANTISATION_E as CALIB_QUANTISATION_E, offset_16ths};
+use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
+use crate::geometry::Output;
+use crate::units::{ColumnBiasAdu, Electrons};
+use crate::window::{Rect, Window};
+
+/// Largest box side the fused path takes (the integer ranges in the module docs hold up to
+/// it).
+pub const MAX_BOX_SIDE: u8 = 9;
+const MB: usize = MAX_BOX_SIDE as usize;
+const MB2: usize = MB * MB;
+
+/// Largest difference of a calibrated pixel to the formula's exact value (the general path's
+/// rounding; the fused path does not round per pixel), e-.
+pub const QUANTISATION_E: f64 = CALIB_QUANTISATION_E;
+
+/// A window of raw samples with the levels of its rows.
+#[derive(Clone, Copy, Debug)]
+pub struct RawWindow<'a> {
+    /// Where the window lies on the active area.
+    pub rect: Rect,
+    /// `rect.len()` raw samples (ADU), row-major.
+    pub raw: &'a [u16],
+    /// The levels of each row: `levels[r]` for active row `rect.y0 + r`.
+    pub levels: &'a [LineLevels],
+}
+
+/// Parameters of [`raw_cog`].
+#[derive(Clone, Copy, Debug)]
+pub struct RawCogParams<'c> {
+    /// Box side, px: odd (an even side is rounded up), at most [`MAX_BOX_SIDE`].
+    pub box_side: u8,
+    /// Background level, e- per pixel (quantised to 1/64 e- as the general path does).
+    pub level_e: f32,
+    /// Per-pixel background variance (read noise, sky and dark noise), e-^2.
+    pub variance_e2: f32,
+    /// Pixel-phase curve (power 1, this box, given background) applied to the result.
+    pub curve: Option<PixCorr<'c>>,
+}
+
+/// What [`raw_cog`] measured and how.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RawCog {
+    /// The (corrected) centroid, active-area coordinates.
+    pub centroid: Centroid,
+    /// The box held a listed defect: the general path measured it.
+    pub general_path: bool,
+    /// The box was moved once to the CoG's pixel.
+    pub reanchored: bool,
+    /// The pixel the measured box is centred on (after any move), active coordinates.
+    pub anchor: (u16, u16),
+}
+
+/// A box in active coordinates with its anchor.
+#[derive(Clone, Copy, Debug)]
+struct BoxAt {
+    x0: u16,
+    y0: u16,
+    w: u16,
+    h: u16,
+    ax: u16,
+    ay: u16,
+}
+
+impl BoxAt {
+    fn rect(&self) -> Rect {
+        Rect {
+            x0: self.x0,
+            y0: self.y0,
+            width: self.w,
+            height: self.h,
+        }
+    }
+}
+
+/// A measurement relative to the anchor, before the curve.
+#[derive(Clone, Copy, Debug)]
+struct Meas {
+    ox: f32,
+    oy: f32,
+    flux_e: f32,
+    snr: f32,
+    sigma_x: f32,
+    sigma_y: f32,
+    flags: CentroidFlags,
+}
+
+/// The side-`side` box around (ax, ay) clipped to `win`; `None` when the anchor is outside.
+fn box_around(win: Rect, ax: u16, ay: u16, side: u8) -> Option<(BoxAt, bool)> {
+    if !win.contains(ax, ay) {
+        return None;
+    }
+    let h = u16::from(side / 2);
+    let x0 = ax.saturating_sub(h).max(win.x0);
+    let y0 = ay.saturating_sub(h).max(win.y0);
+    // The window's end fits u32; the box's end is at most ax + h + 1.
+    let xe = (u32::from(ax) + u32::from(h) + 1).min(u32::from(win.x0) + u32::from(win.width));
+    let ye = (u32::from(ay) + u32::from(h) + 1).min(u32::from(win.y0) + u32::from(win.height));
+    let w = (xe - u32::from(x0)) as u16;
+    let hh = (ye - u32::from(y0)) as u16;
+    let clipped = w != 2 * h + 1 || hh != 2 * h + 1;
+    Some((
+        BoxAt {
+            x0,
+            y0,
+            w,
+            h: hh,
+            ax,
+            ay,
+        },
+        clipped,
+    ))
+}
+
+/// A run of box columns with equal calibration constants except the column bias: one
+/// output, one dark tile column, one flat tile column.
+#[derive(Clone, Copy, Default)]
+struct ColGroup {
+    /// First column's index in the box, and the run's length.
+    i0: u16,
+    m: u16,
+    /// Active column of the first column; on output 1.
+    x: u16,
+    out1: bool,
+    /// `dx` of the first column.
+    dx_a: i32,
+    /// `16 column_bias` summed with weights 1, dx, dx^2 (1/16 ADU).
+    cb: [i32; 3],
+    /// `sum dx`, `sum dx^2` over the run.
+    sdx: [i32; 2],
+}
+
+/// Raw sums of one column group over the rows of the current tile row: the prefix sums of
+/// [`row_sums`] (`P = sum v`, `Q = sum u v`, `R = sum u (u + 1) / 2 v` with `u = m - i` for
+/// the run's i-th column) added over rows, and `sum dy P`, `sum dy^2 P`.
+#[derive(Clone, Copy, Default)]
+struct GroupAcc {
+    p: i32,
+    q: i32,
+    r: i32,
+    yp: i32,
+    yyp: i32,
+}
+
+impl GroupAcc {
+    /// Adds one row's run sums at row offset `dy` (`dy2 = dy^2`).
+    #[inline(always)]
+    fn add(&mut self, p: i32, q: i32, r: i32, dy: i32, dy2: i32) {
+        self.p += p;
+        self.q += q;
+        self.r += r;
+        self.yp += dy * p;
+        self.yyp += dy2 * p;
+    }
+}
+
+/// `(P, Q, R)` of a run of samples (see [`GroupAcc`]): three adds a sample, no multiply;
+/// `sum dx v` and `sum dx^2 v` follow per cell in closed form.
+#[inline(always)]
+fn row_sums(seg: &[u16]) -> (i32, i32, i32) {
+    let (mut p, mut q, mut r) = (0i32, 0i32, 0i32);
+    for v in seg {
+        p += i32::from(*v);
+        q += p;
+        r += q;
+    }
+    (p, q, r)
+}
+
+/// The fused moments `S_w = sum w (e - level_e)` (e-) of the box, with the weight sums
+/// `sum w`, and whether a sample is saturated. `None` for buffers that do not match (checked
+/// by the caller).
+fn fused_sums(
+    cal: &FrameCalibration<'_>,
+    win: &RawWindow<'_>,
+    b: &BoxAt,
+    level_e: f32,
+) -> Option<([f32; 5], [i32; 5], bool)> {
+    let t = cal.table();
+    let g = t.geometry();
+    let shift =
+        |m: Option<crate::table::MapView<'_>>| m.map_or(16, |m| m.header().tile_log2.min(16));
+    let (dl, fl) = (shift(t.dark_map()), shift(t.flat_map()));
+    let bw = usize::from(b.w);
+    let ww = usize::from(win.rect.width);
+    let dx0 = i32::from(b.x0) - i32::from(b.ax);
+    let dy0 = i32::from(b.y0) - i32::from(b.ay);
+    // Column groups (runs ending at a dark or flat tile edge or the output split), with
+    // their column-bias sums.
+    let split = if g.outputs == 2 {
+        (g.line_len() / 2).saturating_sub(g.first_active_col())
+    } else {
+        usize::MAX
+    };
+    // A heapless vector: no zeroing of unused slots.
+    let mut groups: heapless::Vec<ColGroup, MB> = heapless::Vec::new();
+    let (x_start, x_end) = (usize::from(b.x0), usize::from(b.x0) + bw);
+    let mut x = x_start;
+    // x < 2^16 and the shifts are at most 16: the next tile edge is below 2^17.
+    let next_edge = |x: usize, l: u8| ((x >> l) + 1) << l;
+    while x < x_end {
+        let mut stop = x_end.min(next_edge(x, dl)).min(next_edge(x, fl));
+        if x < split {
+            stop = stop.min(split);
+        }
+        let i0 = x - x_start;
+        let dx_a = dx0 + i0 as i32;
+        let (mut cb, mut sdx) = ([0i32; 3], [0i32; 2]);
+        for (xc, dx) in (x..stop).zip(dx_a..) {
+            let c = i32::from(t.column_bias(g.raw_col_of_x(xc)).to_bits());
+            cb[0] += c;
+            cb[1] += dx * c;
+            cb[2] += dx * dx * c;
+            sdx[0] += dx;
+            sdx[1] += dx * dx;
+        }
+        // Box columns are below 2^16 and at most MB of them (so at most MB runs).
+        let gr = ColGroup {
+            i0: i0 as u16,
+            m: (stop - x) as u16,
+            x: x as u16,
+            out1: x >= split,
+            dx_a,
+            cb,
+            sdx,
+        };
+        groups.push(gr).ok()?;
+        x = stop;
+    }
+    let groups = groups.as_slice();
+    let gains = [t.gain(Output(0)), t.gain(Output(1))];
+    let sat = t.saturation_adu();
+    let mut saturated = false;
+    let mut e = [0f32; 5];
+    // Weight totals: rows, sum dy, sum dy^2 (the columns' from the groups).
+    let mut rows_w = [0i32; 3];
+    let col_off = usize::from(b.x0 - win.rect.x0);
+    let row_off = usize::from(b.y0 - win.rect.y0);
+    let levels = win.levels.get(row_off..row_off + usize::from(b.h))?;
+    let raw = win.raw.get(row_off * ww + col_off..)?;
+    // The outputs the groups read (the other's bias is not needed).
+    let use0 = groups.iter().any(|g| !g.out1);
+    let use1 = groups.iter().any(|g| g.out1);
+    // The column split of two groups (the box's width for one).
+    let split = match groups {
+        [_] => bw,
+        [_, g2] => usize::from(g2.i0),
+        _ => 0,
+    };
+    // Tile rows: runs of rows ending at the next dark or flat tile edge (computed in usize:
+    // a shift of 16, no map, would overflow a u16; the edge is below 2^17).
+    let y_end = usize::from(b.y0) + usize::from(b.h);
+    let mut r0 = 0u16;
+    while r0 < b.h {
+        let y0 = b.y0 + r0;
+        let y = usize::from(y0);
+        let stop = y_end.min(next_edge(y, dl)).min(next_edge(y, fl));
+        // stop - b.y0 <= b.h <= MB: fits u16; stop > y, so r1 > r0.
+        let r1 = (stop - usize::from(b.y0)) as u16;
+        // Offsets (16 bias per output) and weights of the tile row's rows.
+        let (mut bias0, mut bias1) = ([0i32; 3], [0i32; 3]);
+        let mut rw = [0i32; 3];
+        let (ra, rb) = (usize::from(r0), usize::from(r1));
+        let add = |acc: &mut [i32; 3], v: i32, dy: i32, dy2: i32| {
+            acc[0] += v;
+            acc[1] += dy * v;
+            acc[2] += dy2 * v;
+        };
+        for (lv, dy) in levels.get(ra..rb)?.iter().zip(dy0 + i32::from(r0)..) {
+            let dy2 = dy * dy;
+            if use0 {
+                add(
+                    &mut bias0,
+                    offset_16ths(lv.bias(Output(0)), ColumnBiasAdu::ZERO),
+                    dy,
+                    dy2,
+                );
+            }
+            if use1 {
+                add(
+                    &mut bias1,
+                    offset_16ths(lv.bias(Output(1)), ColumnBiasAdu::ZERO),
+                    dy,
+                    dy2,
+                );
+            }
+            add(&mut rw, 1, dy, dy2);
+        }
+        let bias = [bias0, bias1];
+        let rows = raw.get(ra * ww..)?.chunks(ww.max(1)).take(rb - ra);
+        if split > 0 {
+            // One or two column groups: both runs' sums in registers.
+            let [mut a1, mut a2] = [GroupAcc::default(); 2];
+            for (row, dy) in rows.zip(dy0 + i32::from(r0)..) {
+                let (left, right) = row.get(..bw)?.split_at_checked(split)?;
+                let (p1, q1, s1) = row_sums(left);
+                let (p2, q2, s2) = row_sums(right);
+                // A sample at or above saturation makes its run's sum reach it: test the
+                // samples only then.
+                if p1 + p2 >= i32::from(sat) {
+                    saturated |= left.iter().chain(right).any(|v| *v >= sat);
+                }
+                let dy2 = dy * dy;
+                a1.add(p1, q1, s1, dy, dy2);
+                a2.add(p2, q2, s2, dy, dy2);
+            }
+            let acc = [a1, a2];
+            let rg = RowGroup {
+                y: y0,
+                bias: &bias,
+                rw: &rw,
+            };
+            flush(cal, &gains, groups, &acc, &rg, level_e, &mut e);
+        } else {
+            let mut acc = [GroupAcc::default(); MB];
+            for (row, dy) in rows.zip(dy0 + i32::from(r0)..) {
+                let row = row.get(..bw)?;
+                for (gr, a) in groups.iter().zip(acc.iter_mut()) {
+                    let i0 = usize::from(gr.i0);
+                    let seg = row.get(i0..i0 + usize::from(gr.m))?;
+                    let (p, q, r) = row_sums(seg);
+                    if p >= i32::from(sat) {
+                        saturated |= seg.iter().any(|v| *v >= sat);
+                    }
+                    a.add(p, q, r, dy, dy * dy);
+                }
+            }
+            let rg = RowGroup {
+                y: y0,
+                bias: &bias,
+                rw: &rw,
+            };
+            flush(cal, &gains, groups, &acc, &rg, level_e, &mut e);
+        }
+        for (t, v) in rows_w.iter_mut().zip(rw) {
+            *t += v;
+        }
+        r0 = r1;
+    }
+    let (sdx, sdx2) = groups
+        .iter()
+        .fold((0, 0), |(a, b), g| (a + g.sdx[0], b + g.sdx[1]));
+    let [h, sdy, sdy2] = rows_w;
+    let w = bw as i32;
+    let wt = [w * h, h * sdx, h * sdx2, w * sdy, w * sdy2];
+    Some((e, wt, saturated))
+}
+
+/// A tile row's offsets and weights (see [`fused_sums`]).
+struct RowGroup<'r> {
+    /// First row (active).
+    y: u16,
+    bias: &'r [[i32; 3]; 2],
+    rw: &'r [i32; 3],
+}
+
+/// Ends one tile row of the box: each column group's raw sums become the cell's
+/// `Z_w = sum w d` (offsets subtracted in closed form), then its background-subtracted
+/// moments `A Z_w - (K + L) W_w` are added to `e` (`L` = `level_e`).
+#[inline(always)]
+fn flush(
+    cal: &FrameCalibration<'_>,
+    gains: &[crate::units::GainEPerAdu; 2],
+    groups: &[ColGroup],
+    acc: &[GroupAcc],
+    rg: &RowGroup<'_>,
+    level_e: f32,
+    e: &mut [f32; 5],
+) {
+    let t = cal.table();
+    let [g0, g1] = *gains;
+    let [n_r, sdy, sdy2] = *rg.rw;
+    for (gr, a) in groups.iter().zip(acc.iter()) {
+        let [b1, bdy, bdy2] = if gr.out1 { rg.bias[1] } else { rg.bias[0] };
+        let m = i32::from(gr.m);
+        // Raw moments of the cell from the prefix sums (u = m - i, dx = c - u).
+        let c = gr.dx_a + m;
+        let su2 = 2 * a.r - a.q;
+        let raw_x = c * a.p - a.q;
+        let raw_xx = c * c * a.p - 2 * c * a.q + su2;
+        // Offsets: 16 (bias(row) + column_bias(col)) summed with each weight.
+        let [cb0, cbx, cbxx] = gr.cb;
+        let [sdx, sdx2] = gr.sdx;
+        let z = [
+            16 * a.p - (m * b1 + n_r * cb0),
+            16 * raw_x - (sdx * b1 + n_r * cbx),
+            16 * raw_xx - (sdx2 * b1 + n_r * cbxx),
+            16 * a.yp - (m * bdy + sdy * cb0),
+            16 * a.yyp - (m * bdy2 + sdy2 * cb0),
+        ];
+        let w = [m * n_r, sdx * n_r, sdx2 * n_r, m * sdy, m * sdy2];
+        let gain = if gr.out1 { g1 } else { g0 };
+        let flat = t.flat_inv(gr.x, rg.y).to_bits() as f32;
+        // The dark term's two factors in f32 (an i64 product would convert through a call).
+        let dark = f32::from(t.dark_rel(gr.x, rg.y).to_bits()) * cal.dark_scale_bits() as f32;
+        // A = gain_bits flat_bits 2^-46 (e- per 1/16 ADU), K = dark_16 flat_bits 2^-30 (e-)
+        // with dark_16 = 16 dark_rel_bits dark_scale_bits.
+        let a_c = gain.to_bits() as f32 * flat * (1.0 / 70_368_744_177_664.0);
+        let kl = dark * flat * (1.0 / 67_108_864.0) + level_e;
+        for (ei, (zv, wv)) in e.iter_mut().zip(z.iter().zip(w.iter())) {
+            *ei += a_c * *zv as f32 - kl * *wv as f32;
+        }
+    }
+}
+
+/// The CoG of the box by the fused sums (see the module docs).
+fn fused_cog(
+    cal: &FrameCalibration<'_>,
+    win: &RawWindow<'_>,
+    b: &BoxAt,
+    level_bits: i64,
+    var_bg: f32,
+) -> Option<Meas> {
+    // The level is within i32 bits (level_to_bits saturates there).
+    let l = level_bits as i32 as f32 * (1.0 / 64.0);
+    let ([s, sx, sxx, sy, syy], wt, saturated) = fused_sums(cal, win, b, l)?;
+    let [n, wx, wxx, wy, wyy] = wt.map(|v| v as f32);
+    // No star: the flux is not positive (or not a number).
+    if s.is_nan() || s <= 0.0 {
+        return None;
+    }
+    let inv = 1.0 / s;
+    let ox = sx * inv;
+    let oy = sy * inv;
+    let axis = |o: f32, s1: f32, s2: f32, w1: f32, w2: f32| {
+        let shot = super::pos(s2 - 2.0 * o * s1 + o * o * s);
+        let bg = var_bg * (w2 - 2.0 * o * w1 + o * o * n);
+        math::sqrt(super::pos(shot + bg)) * inv
+    };
+    let snr = s / math::sqrt(s + n * var_bg).max(f32::MIN_POSITIVE);
+    let mut flags = CentroidFlags::empty();
+    if saturated {
+        flags |= CentroidFlags::SATURATED;
+    }
+    Some(Meas {
+        ox,
+        oy,
+        flux_e: s,
+        snr,
+        sigma_x: axis(ox, sx, sxx, wx, wxx),
+        sigma_y: axis(oy, sy, syy, wy, wyy),
+        flags,
+    })
+}
+
+/// The general path on the box: calibrate it, `cog` with the given background over the whole
+/// box; the result relative to the anchor.
+#[inline(never)]
+fn general_cog(
+    cal: &FrameCalibration<'_>,
+    win: &RawWindow<'_>,
+    b: &BoxAt,
+    side: u8,
+    level_e: f32,
+    var_bg: f32,
+) -> Option<Meas> {
+    let rect = b.rect();
+    let n = rect.len();
+    let mut raw = [0u16; MB2];
+    let ww = usize::from(win.rect.width);
+    let col_off = usize::from(b.x0 - win.rect.x0);
+    let row_off = usize::from(b.y0 - win.rect.y0);
+    let bw = usize::from(b.w);
+    for (r, dst) in raw.chunks_exact_mut(bw).take(usize::from(b.h)).enumerate() {
+        let start = (row_off + r) * ww + col_off;
+        dst.copy_from_slice(win.raw.get(start..start + bw)?);
+    }
+    let levels = win.levels.get(row_off..row_off + usize::from(b.h))?;
+    let mut e = [Electrons::ZERO; MB2];
+    let mut f = [PixelFlags::empty(); MB2];
+    let (raw, e, f) = (raw.get(..n)?, e.get_mut(..n)?, f.get_mut(..n)?);
+    cal.calibrate_window(rect, raw, levels, e, f).ok()?;
+    let window = Window::new(rect, e)?;
+    let input = CentroidInput::new(window).with_pixel_flags(f);
+    let c = cog(
+        &input,
+        &CogParams {
+            power: CogPower::One,
+            box_side: side,
+            anchor: Anchor::WindowCentre,
+            background: Background::Given {
+                level_e,
+                variance_e2: var_bg,
+            },
+        },
+    );
+    if c.flags.contains(CentroidFlags::DEGENERATE) {
+        return None;
+    }
+    Some(Meas {
+        ox: c.x_px - f32::from(b.ax),
+        oy: c.y_px - f32::from(b.ay),
+        flux_e: c.flux_e,
+        snr: c.snr,
+        sigma_x: c.sigma_x_px,
+        sigma_y: c.sigma_y_px,
+        // The window's own clip flag and LOW_SNR are set again below.
+        flags: c.flags & !(CentroidFlags::LOW_SNR | CentroidFlags::CLAMPED),
+    })
+}
+
+/// The anchor pixel as a degenerate centroid.
+fn degenerate(ax: u16, ay: u16, side: u8, flags: CentroidFlags) -> Centroid {
+    let half = f32::from(side) * 0.5;
+    Centroid {
+        x_px: f32::from(ax),
+        y_px: f32::from(ay),
+        flux_e: 0.0,
+        snr: 0.0,
+        sigma_x_px: half,
+        sigma_y_px: half,
+        flags: flags | CentroidFlags::DEGENERATE,
+    }
+}
+
+/// True when the window's buffers match it and it lies in the active area.
+fn window_ok(cal: &FrameCalibration<'_>, win: &RawWindow<'_>) -> bool {
+    let g = cal.table().geometry();
+    let r = win.rect;
+    !r.is_empty()
+        && win.raw.len() == r.len()
+        && win.levels.len() == usize::from(r.height)
+        && u32::from(r.x0) + u32::from(r.width) <= u32::from(g.active_cols)
+        && u32::from(r.y0) + u32::from(r.height) <= u32::from(g.active_rows)
+}
+
+/// The corrected CoG of the box of `params.box_side` around active pixel `anchor` of the raw
+/// window `win` (see the module docs).
+pub fn raw_cog(
+    cal: &FrameCalibration<'_>,
+    win: &RawWindow<'_>,
+    anchor: (u16, u16),
+    params: &RawCogParams<'_>,
+) -> RawCog {
+    let side = (params.box_side / 2).saturating_mul(2).saturating_add(1);
+    let (ax, ay) = anchor;
+    let fail = |flags| RawCog {
+        centroid: degenerate(ax, ay, side, flags),
+        general_path: false,
+        reanchored: false,
+        anchor,
+    };
+    if side > MAX_BOX_SIDE || !window_ok(cal, win) {
+        return fail(CentroidFlags::empty());
+    }
+    let Some((b, clipped)) = box_around(win.rect, ax, ay, side) else {
+        return fail(CentroidFlags::empty());
+    };
+    let level_bits = level_to_bits(params.level_e);
+    let var_bg = sanitize_var(params.variance_e2);
+    let level_e = level_bits as i32 as f32 * (1.0 / 64.0);
+    let mut general_path = false;
+    let mut measure = |b: &BoxAt| {
+        if cal.rect_has_defects(b.rect()) {
+            general_path = true;
+            general_cog(cal, win, b, side, level_e, var_bg)
+        } else {
+            fused_cog(cal, win, b, level_bits, var_bg)
+        }
+    };
+    let clip_flag = if clipped {
+        CentroidFlags::EDGE_CLIPPED
+    } else {
+        CentroidFlags::empty()
+    };
+    let Some(mut m) = measure(&b) else {
+        return RawCog {
+            centroid: degenerate(ax, ay, side, clip_flag),
+            general_path,
+            reanchored: false,
+            anchor,
+        };
+    };
+    let (mut ax, mut ay) = (ax, ay);
+    let mut reanchored = false;
+    let far = |m: &Meas| !(m.ox.abs() <= 0.5 && m.oy.abs() <= 0.5);
+    let mut flags = clip_flag;
+    if far(&m) {
+        // Move once to the CoG's pixel; offsets beyond the box are noise: at most h pixels.
+        let h = f32::from(side / 2);
+        let step = |o: f32| {
+            let o = o.clamp(-h, h);
+            (if o >= 0.0 { o + 0.5 } else { o - 0.5 }) as i32
+        };
+        let nx = i32::from(ax) + step(m.ox);
+        let ny = i32::from(ay) + step(m.oy);
+        let moved = u16::try_from(nx)
+            .ok()
+            .zip(u16::try_from(ny).ok())
+            .and_then(|(nx, ny)| box_around(win.rect, nx, ny, side))
+            .filter(|(_, c)| !*c || clipped);
+        match moved {
+            Some((nb, _)) => match measure(&nb) {
+                Some(m2) => {
+                    (ax, ay) = (nb.ax, nb.ay);
+                    m = m2;
+                    reanchored = true;
+                    if far(&m) {
+                        flags |= CentroidFlags::NOT_CONVERGED;
+                    }
+                }
+                None => flags |= CentroidFlags::NOT_CONVERGED,
+            },
+            None => flags |= CentroidFlags::NOT_CONVERGED,
+        }
+    }
+    let c = finish(win.rect, ax, ay, side, &m, flags | m.flags);
+    let centroid = match &params.curve {
+        Some(curve) => curve.apply(c),
+        None => c,
+    };
+    RawCog {
+        centroid,
+        general_path,
+        reanchored,
+        anchor: (ax, ay),
+    }
+}
+
+/// Active coordinates, clamped to the window (pixel edges), finite values, `LOW_SNR`.
+fn finish(win: Rect, ax: u16, ay: u16, side: u8, m: &Meas, flags: CentroidFlags) -> Centroid {
+    let x = f32::from(ax) + m.ox;
+    let y = f32::from(ay) + m.oy;
+    if !(x.is_finite() && y.is_finite()) {
+        return degenerate(ax, ay, side, flags);
+    }
+    let mut flags = flags;
+    let (lx, ly) = (f32::from(win.x0) - 0.5, f32::from(win.y0) - 0.5);
+    let (hx, hy) = (lx + f32::from(win.width), ly + f32::from(win.height));
+    let (cx, cy) = (x.clamp(lx, hx), y.clamp(ly, hy));
+    if cx != x || cy != y {
+        flags |= CentroidFlags::CLAMPED;
+    }
+    let half = f32::from(side) * 0.5;
+    let sigma = |v: f32| {
+        if v.is_finite() {
+            v.clamp(0.0, 2.0 * half)
+        } else {
+            half
+        }
+    };
+    let snr = if m.snr.is_finite() { m.snr } else { 0.0 };
+    if snr < LOW_SNR_LIMIT {
+        flags |= CentroidFlags::LOW_SNR;
+    }
+    Centroid {
+        x_px: cx,
+        y_px: cy,
+        flux_e: if m.flux_e.is_finite() { m.flux_e } else { 0.0 },
+        snr,
+        sigma_x_px: sigma(m.sigma_x),
+        sigma_y_px: sigma(m.sigma_y),
+        flags,
+    }
+}
