@@ -96,15 +96,23 @@ impl From<CalibError> for ScanError {
 /// Most chunks of a line.
 const MAX_CHUNKS: usize = MAX_SCAN_PX / CHUNK_PX;
 
-/// Per chunk: the worst-case calibration constants of the current tile row and `D`.
+/// `ChunkBound::dcb` of a chunk that is not filtered: with any bias (< 2^20 in 1/16 ADU) its
+/// `R` stays below -1, so every sample passes.
+const NO_FILTER: i32 = i32::MIN / 2;
+
+/// Per chunk: the worst-case bound of the current tile row and background.
 #[derive(Clone, Copy, Debug)]
 struct ChunkBound {
-    /// Smallest column bias of the chunk, 1/16 ADU.
+    /// Smallest column bias of the chunk, 1/16 ADU (|cb| < 2^15).
     cb_min_16: i32,
     /// Output of the chunk; `None` when two outputs read it (not filtered).
     output: Option<u8>,
-    /// Largest `d = 16 raw - offset` that cannot exceed the threshold; `None`: no filtering.
-    d_max: Option<i32>,
+    /// `d_max + cb_min_16` in 1/16 ADU, `d_max` the largest `d = 16 raw - offset` that cannot
+    /// exceed the threshold (|.| < 2^22), or [`NO_FILTER`]: the line's
+    /// `R = (dcb + 16 bias) >> 4` then costs one add and one shift.
+    dcb: i32,
+    /// Index (0 or 1) of the chunk's output in the line's bias pair.
+    out_ix: u8,
 }
 
 /// The streaming calibrate-and-detect pass with the raw pre-filter (see the module docs);
@@ -137,7 +145,8 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         let mut chunks = [ChunkBound {
             cb_min_16: 0,
             output: None,
-            d_max: None,
+            dcb: NO_FILTER,
+            out_ix: 0,
         }; MAX_CHUNKS];
         for (c, bound) in chunks.iter_mut().enumerate() {
             let x0 = c * CHUNK_PX;
@@ -148,6 +157,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             let (c0, c1) = (g.raw_col_of_x(x0), g.raw_col_of_x(x1 - 1));
             let (o0, o1) = (g.output_of_col(c0), g.output_of_col(c1));
             bound.output = (o0 == o1).then_some(o0.0);
+            bound.out_ix = u8::from(o0.0 != 0);
             bound.cb_min_16 = (c0..=c1)
                 .map(|c| i32::from(cal.table().column_bias(c).to_bits()))
                 .min()
@@ -225,75 +235,66 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         self.update_bounds(y);
         let first = g.first_active_col();
         let active = raw_line.get(first..first + w).unwrap_or(&[]);
-        let k = self.det.config().pixel_sigmas;
-        // The open run's start, carried across chunks.
-        let mut run: Option<usize> = None;
-        let sat = self.cal.table().saturation_adu();
-        let defects = self.cal.row_has_defects(y);
-        if !self.thr_valid {
-            self.thr = self.det.background().thresholds(k);
-            self.thr_valid = true;
-        }
-        let thr = self.thr;
-        for (c, (chunk, bound)) in active.chunks(CHUNK_PX).zip(self.chunks.iter()).enumerate() {
-            let x0 = c * CHUNK_PX;
-            if !chunk_passes(chunk, raw_threshold(bound, levels, sat)) {
-                if let Some(s) = run.take() {
-                    self.det
-                        .add_run(y, s as u16, (x0 - 1) as u16, &self.e, &self.flags);
+        // Each output's 16 bias, clamped as the bound's range needs (< 2^20).
+        let bias16 = |o: u8| {
+            let b: BiasAdu = levels.bias(crate::geometry::Output(o));
+            b.to_bits().min(65535 * 16) as i32
+        };
+        let bias_pair = [bias16(0), bias16(1)];
+        let sat_m1 = i32::from(self.cal.table().saturation_adu()) - 1;
+        let Self {
+            cal,
+            det,
+            e,
+            flags,
+            chunks,
+            thr,
+            calibrated_px,
+            ..
+        } = self;
+        let mut line = LineScan {
+            y,
+            raw_line,
+            levels,
+            defects: cal.row_has_defects(y),
+            run: None,
+            cal,
+            det,
+            e,
+            flags,
+            thr,
+            calibrated_px,
+        };
+        let (full, tail) = active.as_chunks::<CHUNK_PX>();
+        let mut x0 = 0usize;
+        for (a, bound) in full.iter().zip(chunks.iter()) {
+            let r = raw_threshold(bound, bias_pair, sat_m1);
+            if chunk_quiet(a, r) {
+                if let Some(s) = line.run.take() {
+                    line.det
+                        .add_run(y, s as u16, (x0 - 1) as u16, line.e, line.flags);
                 }
-                continue;
-            }
-            let r = raw_threshold(bound, levels, sat);
-            if defects {
-                // A row with listed defects: the whole exact path, from the first to the last
-                // sample above R (the others are quiet).
-                let first = chunk.iter().position(|&v| i32::from(v) > r).unwrap_or(0);
-                let last = chunk.iter().rposition(|&v| i32::from(v) > r).unwrap_or(0);
-                let (a, b) = (x0 + first, x0 + last + 1);
-                let (Some(ce), Some(cf)) = (self.e.get_mut(a..b), self.flags.get_mut(a..b)) else {
-                    continue;
-                };
-                self.cal
-                    .calibrate_span(y, a as u16, raw_line, levels, ce, cf)?;
-                self.calibrated_px += (b - a) as u32;
             } else {
-                // No defect on the row: only the samples above R, one by one.
-                for (x, &v) in (x0..).zip(chunk.iter()) {
-                    if i32::from(v) > r
-                        && let (Some(e), Some(f)) = (self.e.get_mut(x), self.flags.get_mut(x))
-                    {
-                        (*e, *f) = self.cal.calibrate_regular(x as u16, y, v, levels);
-                        self.calibrated_px += 1;
-                    }
-                }
+                line.exact_chunk(x0, a, r)?;
             }
-            for (x, &v) in (x0..).zip(chunk.iter()) {
-                let t = thr
-                    .get(self.det.background().block_of(x))
-                    .copied()
-                    .unwrap_or(i64::MAX);
-                let up = i32::from(v) > r && above_thr(t, &self.e, &self.flags, x);
-                match (up, run) {
-                    (true, None) => run = Some(x),
-                    (false, Some(s)) => {
-                        run = None;
-                        self.det
-                            .add_run(y, s as u16, (x - 1) as u16, &self.e, &self.flags);
-                    }
-                    _ => {}
-                }
-            }
+            x0 += CHUNK_PX;
         }
-        if let Some(s) = run {
-            self.det
-                .add_run(y, s as u16, (w - 1) as u16, &self.e, &self.flags);
+        if !tail.is_empty() {
+            // A short last chunk is not tested: its samples above R go the exact way.
+            let r = chunks
+                .get(x0 / CHUNK_PX)
+                .map_or(-1, |b| raw_threshold(b, bias_pair, sat_m1));
+            line.exact_chunk(x0, tail, r)?;
+        }
+        if let Some(s) = line.run {
+            line.det
+                .add_run(y, s as u16, (w - 1) as u16, line.e, line.flags);
         }
         self.det.end_line(y);
         Ok(())
     }
 
-    /// Recomputes each block's `D` when the tile row changed or the background was updated.
+    /// Recomputes each chunk's bound when the tile row changed or the background was updated.
     fn update_bounds(&mut self, y: u16) {
         let t = self.cal.table();
         let dl = t.dark_map().map_or(16, |m| m.header().tile_log2.min(16));
@@ -310,9 +311,10 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
                 .thresholds(self.det.config().pixel_sigmas);
             self.thr_valid = true;
         }
-        let thr = self.thr;
         let ds = self.cal.dark_scale_bits();
         let width = self.width;
+        let dstep = 1usize << dl.min(15);
+        let fstep = 1usize << fl.min(15);
         for (c, bound) in self.chunks.iter_mut().enumerate() {
             let x0 = c * CHUNK_PX;
             if x0 >= width {
@@ -320,13 +322,11 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             }
             let x1 = (x0 + CHUNK_PX).min(width);
             let Some(out) = bound.output else {
-                bound.d_max = None;
+                bound.dcb = NO_FILTER;
                 continue;
             };
             // Worst case over the block's tiles on this row: smallest dark term, largest
             // inverse flat.
-            let dstep = 1usize << dl.min(15);
-            let fstep = 1usize << fl.min(15);
             let dark_min = (x0..x1)
                 .step_by(dstep)
                 .map(|x| dark_16ths(t.dark_rel(x as u16, y), ds))
@@ -337,44 +337,176 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
                 .map(|x| t.flat_inv(x as u16, y))
                 .max()
                 .unwrap_or(FlatInv::ONE);
-            let thr = thr
+            let thr = self
+                .thr
                 .get(self.det.background().block_of(x0))
                 .copied()
                 .unwrap_or(i64::MAX);
             let gain = t.gain(crate::geometry::Output(out));
-            bound.d_max = largest_quiet_d(thr, gain, dark_min, flat_max);
+            bound.dcb = largest_quiet_d(thr, gain, dark_min, flat_max)
+                .map_or(NO_FILTER, |d| d + bound.cb_min_16);
         }
     }
 }
 
-/// The raw level at or below which no pixel of the block can be above the threshold, as
-/// i32 in `-1..sat` (-1: every sample passes).
-#[inline(always)]
-fn raw_threshold(bound: &ChunkBound, levels: &LineLevels, sat: u16) -> i32 {
-    let (Some(d), Some(o)) = (bound.d_max, bound.output) else {
-        return -1;
-    };
-    let bias: BiasAdu = levels.bias(crate::geometry::Output(o));
-    // offset = 16 bias + column bias; bias16 < 2^20, |cb| < 2^15, |d| <= 2^21: no overflow.
-    let off_min = (bias.to_bits().min(65535 * 16) as i32) + bound.cb_min_16;
-    // raw <= floor((d + off_min) / 16) implies 16 raw - offset <= d for every column.
-    ((d + off_min) >> 4).clamp(-1, i32::from(sat) - 1)
+/// One non-background line's state while its chunks are scanned, and the scan's parts it
+/// updates.
+struct LineScan<'a, 't, const N: usize> {
+    y: u16,
+    raw_line: &'a [u16],
+    levels: &'a LineLevels,
+    /// The table lists a hot or telegraph pixel on this row.
+    defects: bool,
+    /// The open run's start, carried across chunks.
+    run: Option<usize>,
+    cal: &'a FrameCalibration<'t>,
+    det: &'a mut LineDetector<N>,
+    e: &'a mut [Electrons; MAX_SCAN_PX],
+    flags: &'a mut [PixelFlags; MAX_SCAN_PX],
+    thr: &'a [i64; MAX_BLOCKS],
+    calibrated_px: &'a mut u32,
 }
 
-/// True when some sample of `chunk` is above `r`: `r - s` is negative for it (both fit
-/// i32, so the difference is exact), and OR keeps the sign bit.
+impl<const N: usize> LineScan<'_, '_, N> {
+    /// A chunk (at column `x0`, at most 32 samples) with a sample above `r`: calibrates the
+    /// samples above `r` (on a row with listed defects, the span from the first to the last
+    /// of them through `calibrate_span`, defects included) and adds the runs of those above
+    /// the join threshold, exactly as [`LineDetector::push_line`] would.
+    ///
+    /// Cost: a bit mask of the samples above `r` (~3 instructions a sample), then per set
+    /// bit one calibration and one threshold test, per run of set bits one `add_run`.
+    fn exact_chunk(&mut self, x0: usize, a: &[u16], r: i32) -> Result<(), ScanError> {
+        let mut above = 0u32;
+        for (i, &v) in a.iter().enumerate().take(32) {
+            above |= u32::from(i32::from(v) > r) << i;
+        }
+        let y = self.y;
+        if above != 0 && self.defects {
+            // A row with listed defects: the whole exact path, from the first to the last
+            // sample above R (the others are quiet).
+            let (lo, hi) = (above.trailing_zeros(), 32 - above.leading_zeros());
+            let (ax, bx) = (x0 + lo as usize, x0 + hi as usize);
+            if let (Some(ce), Some(cf)) = (self.e.get_mut(ax..bx), self.flags.get_mut(ax..bx)) {
+                self.cal
+                    .calibrate_span(y, ax as u16, self.raw_line, self.levels, ce, cf)?;
+                *self.calibrated_px += (bx - ax) as u32;
+            }
+        } else {
+            // No defect on the row: only the samples above R, one by one.
+            let mut m = above;
+            while m != 0 {
+                let i = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let x = x0 + i;
+                if let (Some(&v), Some(e), Some(f)) =
+                    (a.get(i), self.e.get_mut(x), self.flags.get_mut(x))
+                {
+                    (*e, *f) = self.cal.calibrate_regular(x as u16, y, v, self.levels);
+                    *self.calibrated_px += 1;
+                }
+            }
+        }
+        // The chunk lies in one background block (BLOCK_PX is a multiple of CHUNK_PX).
+        let t = self
+            .thr
+            .get(self.det.background().block_of(x0))
+            .copied()
+            .unwrap_or(i64::MAX);
+        let mut up = 0u32;
+        let mut m = above;
+        while m != 0 {
+            let i = m.trailing_zeros();
+            m &= m - 1;
+            if above_thr(t, self.e.as_slice(), self.flags.as_slice(), x0 + i as usize) {
+                up |= 1 << i;
+            }
+        }
+        // Runs of consecutive set bits; a run open at the chunk's start continues when bit 0
+        // is set and stays open when it reaches the chunk's end.
+        let n = a.len().min(32) as u32;
+        if up & 1 == 0
+            && let Some(start) = self.run.take()
+        {
+            self.det
+                .add_run(y, start as u16, (x0 - 1) as u16, self.e, self.flags);
+        }
+        let mut m = up;
+        while m != 0 {
+            let lo = m.trailing_zeros();
+            let len = (!(m >> lo)).trailing_zeros();
+            let hi = lo + len;
+            let start = match (lo, self.run.take()) {
+                (0, Some(open)) => open,
+                _ => x0 + lo as usize,
+            };
+            if hi >= n {
+                self.run = Some(start);
+                break;
+            }
+            self.det.add_run(
+                y,
+                start as u16,
+                (x0 + hi as usize - 1) as u16,
+                self.e,
+                self.flags,
+            );
+            m = m.checked_shr(hi).unwrap_or(0).checked_shl(hi).unwrap_or(0);
+        }
+        Ok(())
+    }
+}
+
+/// The raw level at or below which no pixel of the chunk can be above the threshold, at
+/// most `sat_m1` (below -1, or -1: every sample passes). `bias_pair`: each output's bias in
+/// 1/16 ADU.
 #[inline(always)]
-fn chunk_passes(chunk: &[u16], r: i32) -> bool {
-    // A whole chunk as an array: fully unrolled, ldrh / sub / orr per sample on the M7. A
-    // short last chunk always passes (it is calibrated).
-    let Ok(a) = <&[u16; CHUNK_PX]>::try_from(chunk) else {
-        return true;
+fn raw_threshold(bound: &ChunkBound, bias_pair: [i32; 2], sat_m1: i32) -> i32 {
+    let [b0, b1] = bias_pair;
+    let bias = if bound.out_ix == 0 { b0 } else { b1 };
+    // offset = 16 bias + column bias; |dcb| < 2^22 or NO_FILTER, bias < 2^20: no overflow.
+    // raw <= floor((d + off_min) / 16) implies 16 raw - offset <= d for every column.
+    ((bound.dcb + bias) >> 4).min(sat_m1)
+}
+
+/// True when no sample of `a` is above `r` (so the chunk is quiet).
+///
+/// First, two samples per 32-bit word: with `2^k <= r + 1` the largest such power and
+/// `base = r + 1 - 2^k`, `word - base * 0x10001` has each 16-bit lane equal to
+/// `sample - base` when every sample lies in `base..=r`, and a lane bit at or above `k` set
+/// otherwise (a lane above `r` is at least `2^k`; a lane below `base` borrows and wraps to
+/// at least `65536 - base >= 2^k`, as `r < 65536`; a borrow only disturbs a lane that is
+/// already flagged). So an OR of those differences without a bit outside the two lanes'
+/// low `k` bits proves the chunk quiet, for ~1.5 instructions a sample. When it does not
+/// (a sample above `r`, or far below it, under `r / 2`), the exact test: `r - sample` is
+/// negative for a sample above `r` and OR keeps the sign bit (3 instructions a sample).
+#[inline(always)]
+fn chunk_quiet(a: &[u16; CHUNK_PX], r: i32) -> bool {
+    let Ok(ru) = u32::try_from(r) else {
+        return false;
     };
+    // r < 2^16 - 1 (below the saturation level), so 1 <= r + 1 < 2^16 and 0 <= k <= 15.
+    let k = 31 - (ru + 1).leading_zeros();
+    let span = 1u32 << k;
+    let base = ru + 1 - span;
+    let bb = base * 0x1_0001;
+    let keep = (span - 1) * 0x1_0001;
+    let mut acc = 0u32;
+    for p in a.as_chunks::<2>().0 {
+        let [s0, s1] = *p;
+        acc |= (u32::from(s0) | (u32::from(s1) << 16)).wrapping_sub(bb);
+    }
+    acc & !keep == 0 || chunk_quiet_exact(a, r)
+}
+
+/// The exact test of [`chunk_quiet`], out of line: inlined, the compiler kept the words
+/// loaded for the fast test on the stack for it (~8 stores a chunk).
+#[inline(never)]
+fn chunk_quiet_exact(a: &[u16; CHUNK_PX], r: i32) -> bool {
     let mut acc = 0i32;
     for &s in a {
         acc |= r - i32::from(s);
     }
-    acc < 0
+    acc >= 0
 }
 
 /// The largest `d` in the calibration's range (|d| < 2^21) with
@@ -392,17 +524,15 @@ fn largest_quiet_d(thr: i64, gain: GainEPerAdu, dark: i64, flat: FlatInv) -> Opt
         return None;
     }
     let e = |d: i32| i64::from(pixel_bits(d, gain, dark, flat));
-    if e(D_MIN) > thr {
-        return None;
-    }
-    if e(D_MAX) <= thr {
-        return Some(D_MAX);
-    }
     // The f32 inverse of the formula without its roundings,
     // d* = (thr 2^24 / flat + dark) 2^16 / gain, is where e(d) reaches thr; step below it
     // until the exact formula confirms (each failure doubles the step), so the result is
-    // exact-safe whatever the float error, and at most ~1/2 ADU below the true limit.
-    let est = ((thr as f32 * 16_777_216.0 / f32::from(flat.to_bits()).max(1.0)) + dark as f32)
+    // exact-safe whatever the float error, and at most ~1/2 ADU below the true limit. One
+    // exact evaluation when the estimate holds. i64 to f32 is a library call on the M7, so
+    // both go through i32 (saturated): a saturated estimate is only further from the limit,
+    // which the stepping absorbs (the exact check decides, never the estimate).
+    let to_f32 = |v: i64| v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32 as f32;
+    let est = ((to_f32(thr) * 16_777_216.0 / f32::from(flat.to_bits()).max(1.0)) + to_f32(dark))
         * 65_536.0
         / (gain.to_bits() as f32).max(1.0);
     let mut d = if est.is_finite() {
@@ -413,9 +543,67 @@ fn largest_quiet_d(thr: i64, gain: GainEPerAdu, dark: i64, flat: FlatInv) -> Opt
     let mut step = 8i32;
     loop {
         d = d.saturating_sub(step).max(D_MIN);
-        if d == D_MIN || e(d) <= thr {
+        if e(d) <= thr {
             return Some(d);
         }
+        if d == D_MIN {
+            // Even the smallest d exceeds the threshold.
+            return None;
+        }
         step = step.saturating_mul(2);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `chunk_quiet` against its definition (no sample above `r`) on chunks around every
+    /// power-of-two window edge: samples at `base - 1`, `base`, `r`, `r + 1`, 0 and 65535 in
+    /// either lane of a word, for `r` over the whole range.
+    #[test]
+    #[allow(clippy::indexing_slicing)]
+    fn chunk_quiet_is_exact() {
+        let mut state = 0x1234_5678u32;
+        let mut next = move || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            state >> 8
+        };
+        let mut checked = 0u32;
+        let fixed: [i32; 14] = [
+            -3, -1, 0, 1, 2, 3, 62, 63, 64, 1000, 1023, 1024, 65_533, 65_534,
+        ];
+        for i in 0..fixed.len() + 200 {
+            // The edge cases, then random levels below the saturation level.
+            let r = fixed
+                .get(i)
+                .copied()
+                .unwrap_or_else(|| (next() % 65_535) as i32);
+            let ru = r.max(0) as u32;
+            let span = 1u32 << (31 - (ru + 1).leading_zeros());
+            let base = (ru + 1 - span) as i32;
+            let specials = [base - 1, base, base + 1, r - 1, r, r + 1, 0, 65_535];
+            for _ in 0..200 {
+                // Mostly inside the window, a few specials at random places.
+                let mut a = [0u16; CHUNK_PX];
+                for s in a.iter_mut() {
+                    let v = if r >= 0 {
+                        base + (next() % span) as i32
+                    } else {
+                        0
+                    };
+                    *s = v.clamp(0, 65_535) as u16;
+                }
+                for _ in 0..(next() % 3) {
+                    let i = (next() as usize) % CHUNK_PX;
+                    let v = specials[(next() as usize) % specials.len()];
+                    a[i] = v.clamp(0, 65_535) as u16;
+                }
+                let want = a.iter().all(|&s| i32::from(s) <= r);
+                assert_eq!(chunk_quiet(&a, r), want, "r {r} chunk {a:?}");
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 214 * 200);
     }
 }
