@@ -269,13 +269,18 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         let mut x0 = 0usize;
         for (a, bound) in full.iter().zip(chunks.iter()) {
             let r = raw_threshold(bound, bias_pair, sat_m1);
-            if chunk_quiet(a, r) {
+            let above = if window_quiet(a, r) {
+                0
+            } else {
+                above_mask(a, r)
+            };
+            if above == 0 {
                 if let Some(s) = line.run.take() {
                     line.det
                         .add_run(y, s as u16, (x0 - 1) as u16, line.e, line.flags);
                 }
             } else {
-                line.exact_chunk(x0, a, r)?;
+                line.exact_chunk(x0, a, above)?;
             }
             x0 += CHUNK_PX;
         }
@@ -284,7 +289,11 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             let r = chunks
                 .get(x0 / CHUNK_PX)
                 .map_or(-1, |b| raw_threshold(b, bias_pair, sat_m1));
-            line.exact_chunk(x0, tail, r)?;
+            let mut above = 0u32;
+            for (i, &v) in tail.iter().enumerate().take(CHUNK_PX) {
+                above |= u32::from(i32::from(v) > r) << i;
+            }
+            line.exact_chunk(x0, tail, above)?;
         }
         if let Some(s) = line.run {
             line.det
@@ -368,18 +377,14 @@ struct LineScan<'a, 't, const N: usize> {
 }
 
 impl<const N: usize> LineScan<'_, '_, N> {
-    /// A chunk (at column `x0`, at most 32 samples) with a sample above `r`: calibrates the
-    /// samples above `r` (on a row with listed defects, the span from the first to the last
+    /// A chunk (at column `x0`, at most 16 samples) with samples above its `R` (bit `i` of
+    /// `above` set for sample `i`): calibrates those samples (on a row with listed defects, the span from the first to the last
     /// of them through `calibrate_span`, defects included) and adds the runs of those above
     /// the join threshold, exactly as [`LineDetector::push_line`] would.
     ///
-    /// Cost: a bit mask of the samples above `r` (~3 instructions a sample), then per set
-    /// bit one calibration and one threshold test, per run of set bits one `add_run`.
-    fn exact_chunk(&mut self, x0: usize, a: &[u16], r: i32) -> Result<(), ScanError> {
-        let mut above = 0u32;
-        for (i, &v) in a.iter().enumerate().take(32) {
-            above |= u32::from(i32::from(v) > r) << i;
-        }
+    /// Cost: per set bit one calibration and one threshold test, per run of set bits one
+    /// `add_run`.
+    fn exact_chunk(&mut self, x0: usize, a: &[u16], above: u32) -> Result<(), ScanError> {
         let y = self.y;
         if above != 0 && self.defects {
             // A row with listed defects: the whole exact path, from the first to the last
@@ -423,7 +428,7 @@ impl<const N: usize> LineScan<'_, '_, N> {
         }
         // Runs of consecutive set bits; a run open at the chunk's start continues when bit 0
         // is set and stays open when it reaches the chunk's end.
-        let n = a.len().min(32) as u32;
+        let n = a.len().min(CHUNK_PX) as u32;
         if up & 1 == 0
             && let Some(start) = self.run.take()
         {
@@ -468,19 +473,19 @@ fn raw_threshold(bound: &ChunkBound, bias_pair: [i32; 2], sat_m1: i32) -> i32 {
     ((bound.dcb + bias) >> 4).min(sat_m1)
 }
 
-/// True when no sample of `a` is above `r` (so the chunk is quiet).
+/// The pre-filter's fast test: true when every sample of `a` lies in `base..=r`, so the
+/// chunk is quiet; false when a sample is above `r` or far below it (under `r / 2`), or `r`
+/// is negative (then [`above_mask`] decides).
 ///
-/// First, two samples per 32-bit word: with `2^k <= r + 1` the largest such power and
+/// Two samples per 32-bit word: with `2^k <= r + 1` the largest such power and
 /// `base = r + 1 - 2^k`, `word - base * 0x10001` has each 16-bit lane equal to
 /// `sample - base` when every sample lies in `base..=r`, and a lane bit at or above `k` set
 /// otherwise (a lane above `r` is at least `2^k`; a lane below `base` borrows and wraps to
 /// at least `65536 - base >= 2^k`, as `r < 65536`; a borrow only disturbs a lane that is
 /// already flagged). So an OR of those differences without a bit outside the two lanes'
-/// low `k` bits proves the chunk quiet, for ~1.5 instructions a sample. When it does not
-/// (a sample above `r`, or far below it, under `r / 2`), the exact test: `r - sample` is
-/// negative for a sample above `r` and OR keeps the sign bit (3 instructions a sample).
+/// low `k` bits proves the chunk quiet: load, subtract and OR per two samples.
 #[inline(always)]
-fn chunk_quiet(a: &[u16; CHUNK_PX], r: i32) -> bool {
+fn window_quiet(a: &[u16; CHUNK_PX], r: i32) -> bool {
     let Ok(ru) = u32::try_from(r) else {
         return false;
     };
@@ -495,18 +500,19 @@ fn chunk_quiet(a: &[u16; CHUNK_PX], r: i32) -> bool {
         let [s0, s1] = *p;
         acc |= (u32::from(s0) | (u32::from(s1) << 16)).wrapping_sub(bb);
     }
-    acc & !keep == 0 || chunk_quiet_exact(a, r)
+    acc & !keep == 0
 }
 
-/// The exact test of [`chunk_quiet`], out of line: inlined, the compiler kept the words
-/// loaded for the fast test on the stack for it (~8 stores a chunk).
+/// The exact test: bit `i` set when sample `i` is above `r` (the sign of `r - sample`, both
+/// fit i32). Out of line: inlined, the compiler kept the words loaded for
+/// [`window_quiet`] on the stack for it (~8 stores a chunk).
 #[inline(never)]
-fn chunk_quiet_exact(a: &[u16; CHUNK_PX], r: i32) -> bool {
-    let mut acc = 0i32;
-    for &s in a {
-        acc |= r - i32::from(s);
+fn above_mask(a: &[u16; CHUNK_PX], r: i32) -> u32 {
+    let mut m = 0u32;
+    for (i, &s) in a.iter().enumerate() {
+        m |= ((r - i32::from(s)) as u32 >> 31) << i;
     }
-    acc >= 0
+    m
 }
 
 /// The largest `d` in the calibration's range (|d| < 2^21) with
@@ -558,12 +564,12 @@ fn largest_quiet_d(thr: i64, gain: GainEPerAdu, dark: i64, flat: FlatInv) -> Opt
 mod tests {
     use super::*;
 
-    /// `chunk_quiet` against its definition (no sample above `r`) on chunks around every
+    /// `window_quiet` and `above_mask` against their definitions on chunks around every
     /// power-of-two window edge: samples at `base - 1`, `base`, `r`, `r + 1`, 0 and 65535 in
     /// either lane of a word, for `r` over the whole range.
     #[test]
     #[allow(clippy::indexing_slicing)]
-    fn chunk_quiet_is_exact() {
+    fn quiet_tests_are_exact() {
         let mut state = 0x1234_5678u32;
         let mut next = move || {
             state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
@@ -600,7 +606,16 @@ mod tests {
                     a[i] = v.clamp(0, 65_535) as u16;
                 }
                 let want = a.iter().all(|&s| i32::from(s) <= r);
-                assert_eq!(chunk_quiet(&a, r), want, "r {r} chunk {a:?}");
+                let mask = a
+                    .iter()
+                    .enumerate()
+                    .fold(0u32, |m, (i, &s)| m | (u32::from(i32::from(s) > r) << i));
+                assert_eq!(above_mask(&a, r), mask, "r {r} chunk {a:?}");
+                // The fast test never calls a chunk with a sample above r quiet.
+                assert!(!window_quiet(&a, r) || want, "r {r} chunk {a:?}");
+                // ...and calls it quiet whenever every sample lies in base..=r.
+                let inside = a.iter().all(|&s| (base..=r).contains(&i32::from(s)));
+                assert_eq!(window_quiet(&a, r), inside, "r {r} chunk {a:?}");
                 checked += 1;
             }
         }
