@@ -265,7 +265,11 @@ impl<const N: usize> LineDetector<N> {
         }
         let due = self.background_due(y);
         self.begin_line(y)?;
-        if !self.background.is_primed() {
+        // The first line primes the estimate with its own values; folding the same line in
+        // again after it would leave every block unchanged (its median and sigma equal the
+        // estimate), so it is not repeated.
+        let priming = !self.background.is_primed();
+        if priming {
             self.background.update(pixels_e, flags);
         }
         let thr = self.background.thresholds(self.config.pixel_sigmas);
@@ -291,7 +295,7 @@ impl<const N: usize> LineDetector<N> {
             x += 1;
         }
         self.end_line(y);
-        if due {
+        if due && !priming {
             self.background.update(pixels_e, flags);
         }
         Ok(())
