@@ -49,7 +49,7 @@ use super::blobs::above_thr;
 use super::{DetectConfig, DetectError, Detection, LineDetector};
 use crate::calib::pixel::{dark_16ths, pixel_bits_d as pixel_bits};
 use crate::calib::{CalibError, FrameCalibration, LineLevels, PixelFlags};
-use crate::units::{BiasAdu, Electrons, FlatInv, GainEPerAdu};
+use crate::units::{BiasAdu, DarkRel, Electrons, FlatInv, GainEPerAdu};
 
 /// Samples tested together by the pre-filter.
 pub const CHUNK_PX: usize = 16;
@@ -324,6 +324,14 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         let width = self.width;
         let dstep = 1usize << dl.min(15);
         let fstep = 1usize << fl.min(15);
+        // First tile of row y in each map (row-major tiles).
+        let (dmap, fmap) = (t.dark_map(), t.flat_map());
+        let tile_row = |m: Option<crate::table::MapView<'_>>, l: u8| {
+            m.map_or(0, |m| {
+                (usize::from(y) >> l) * usize::from(m.header().tiles_x)
+            })
+        };
+        let (drow, frow) = (tile_row(dmap, dl), tile_row(fmap, fl));
         for (c, bound) in self.chunks.iter_mut().enumerate() {
             let x0 = c * CHUNK_PX;
             if x0 >= width {
@@ -335,15 +343,25 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
                 continue;
             };
             // Worst case over the block's tiles on this row: smallest dark term, largest
-            // inverse flat.
+            // inverse flat. The tiles by index in the row's tile range (x < active columns
+            // and y < active rows: the values `dark_rel` / `flat_inv` give, without their
+            // per-pixel index and range checks, ~50 instructions each).
             let dark_min = (x0..x1)
                 .step_by(dstep)
-                .map(|x| dark_16ths(t.dark_rel(x as u16, y), ds))
+                .map(|x| {
+                    let rel = dmap
+                        .and_then(|m| m.tile_bits(drow + (x >> dl)))
+                        .map_or(DarkRel::ONE, |b| DarkRel::from_bits(b as u8));
+                    dark_16ths(rel, ds)
+                })
                 .min()
                 .unwrap_or(0);
             let flat_max = (x0..x1)
                 .step_by(fstep)
-                .map(|x| t.flat_inv(x as u16, y))
+                .map(|x| {
+                    fmap.and_then(|m| m.tile_bits(frow + (x >> fl)))
+                        .map_or(FlatInv::ONE, |b| FlatInv::from_bits(b as u16))
+                })
                 .max()
                 .unwrap_or(FlatInv::ONE);
             let thr = self
