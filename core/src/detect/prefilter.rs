@@ -111,8 +111,12 @@ struct ChunkBound {
     /// exceed the threshold (|.| < 2^22), or [`NO_FILTER`]: the line's
     /// `R = (dcb + 16 bias) >> 4` then costs one add and one shift.
     dcb: i32,
-    /// Index (0 or 1) of the chunk's output in the line's bias pair.
-    out_ix: u8,
+    /// `1 - 2^k` of the quiet test's window (see [`window_quiet`]), with `2^k` the largest
+    /// power of two at most half of `R + 1` for the line the bound was computed on, so the
+    /// window stays valid while the bias moves by less than `R / 2`.
+    c1: i32,
+    /// `(2^k - 1) * 0x10001`: the window's low bits in both 16-bit lanes.
+    keep: u32,
 }
 
 /// The streaming calibrate-and-detect pass with the raw pre-filter (see the module docs);
@@ -125,6 +129,9 @@ pub struct ScanDetector<'t, const N: usize> {
     e: [Electrons; MAX_SCAN_PX],
     flags: [PixelFlags; MAX_SCAN_PX],
     chunks: [ChunkBound; MAX_CHUNKS],
+    /// First chunk read by the second output (its chunks take output 1's bias; the chunk
+    /// the outputs share is not filtered).
+    split_chunk: usize,
     /// Tile row (`y >> tile_log2` of both maps) the bounds were computed for, and whether the
     /// background changed since.
     bounds_key: Option<(u32, u32)>,
@@ -146,8 +153,10 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             cb_min_16: 0,
             output: None,
             dcb: NO_FILTER,
-            out_ix: 0,
+            c1: 0,
+            keep: 0,
         }; MAX_CHUNKS];
+        let mut split_chunk = MAX_CHUNKS;
         for (c, bound) in chunks.iter_mut().enumerate() {
             let x0 = c * CHUNK_PX;
             if x0 >= width {
@@ -157,7 +166,9 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             let (c0, c1) = (g.raw_col_of_x(x0), g.raw_col_of_x(x1 - 1));
             let (o0, o1) = (g.output_of_col(c0), g.output_of_col(c1));
             bound.output = (o0 == o1).then_some(o0.0);
-            bound.out_ix = u8::from(o0.0 != 0);
+            if o0.0 != 0 {
+                split_chunk = split_chunk.min(c);
+            }
             bound.cb_min_16 = (c0..=c1)
                 .map(|c| i32::from(cal.table().column_bias(c).to_bits()))
                 .min()
@@ -170,6 +181,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             e: [Electrons::ZERO; MAX_SCAN_PX],
             flags: [PixelFlags::empty(); MAX_SCAN_PX],
             chunks,
+            split_chunk,
             bounds_key: None,
             thr: [0; MAX_BLOCKS],
             thr_valid: false,
@@ -232,9 +244,6 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             return Err(CalibError::OutsideActiveArea.into());
         }
         self.det.begin_line(y)?;
-        self.update_bounds(y);
-        let first = g.first_active_col();
-        let active = raw_line.get(first..first + w).unwrap_or(&[]);
         // Each output's 16 bias, clamped as the bound's range needs (< 2^20).
         let bias16 = |o: u8| {
             let b: BiasAdu = levels.bias(crate::geometry::Output(o));
@@ -242,6 +251,9 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         };
         let bias_pair = [bias16(0), bias16(1)];
         let sat_m1 = i32::from(self.cal.table().saturation_adu()) - 1;
+        self.update_bounds(y, bias_pair, sat_m1);
+        let first = g.first_active_col();
+        let active = raw_line.get(first..first + w).unwrap_or(&[]);
         let Self {
             cal,
             det,
@@ -250,6 +262,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             chunks,
             thr,
             calibrated_px,
+            split_chunk,
             ..
         } = self;
         let mut line = LineScan {
@@ -266,29 +279,24 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             calibrated_px,
         };
         let (full, tail) = active.as_chunks::<CHUNK_PX>();
-        let mut x0 = 0usize;
-        for (a, bound) in full.iter().zip(chunks.iter()) {
-            let r = raw_threshold(bound, bias_pair, sat_m1);
-            let above = if window_quiet(a, r) {
-                0
-            } else {
-                above_mask(a, r)
-            };
-            if above == 0 {
-                if let Some(s) = line.run.take() {
-                    line.det
-                        .add_run(y, s as u16, (x0 - 1) as u16, line.e, line.flags);
-                }
-            } else {
-                line.exact_chunk(x0, a, above)?;
-            }
-            x0 += CHUNK_PX;
-        }
+        // Each output's chunks with its bias: no per-chunk output select.
+        let split = (*split_chunk).min(full.len());
+        let (full0, full1) = full.split_at(split);
+        let (bounds0, bounds1) = chunks.split_at(split);
+        let [bias0, bias1] = bias_pair;
+        line.scan_chunks(0, full0, bounds0, bias0, sat_m1)?;
+        line.scan_chunks(split * CHUNK_PX, full1, bounds1, bias1, sat_m1)?;
+        let x0 = full.len() * CHUNK_PX;
         if !tail.is_empty() {
             // A short last chunk is not tested: its samples above R go the exact way.
+            let bias = if full.len() < *split_chunk {
+                bias0
+            } else {
+                bias1
+            };
             let r = chunks
                 .get(x0 / CHUNK_PX)
-                .map_or(-1, |b| raw_threshold(b, bias_pair, sat_m1));
+                .map_or(-1, |b| raw_threshold(b, bias, sat_m1));
             let mut above = 0u32;
             for (i, &v) in tail.iter().enumerate().take(CHUNK_PX) {
                 above |= u32::from(i32::from(v) > r) << i;
@@ -304,7 +312,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
     }
 
     /// Recomputes each chunk's bound when the tile row changed or the background was updated.
-    fn update_bounds(&mut self, y: u16) {
+    fn update_bounds(&mut self, y: u16, [bias0, bias1]: [i32; 2], sat_m1: i32) {
         let t = self.cal.table();
         let dl = t.dark_map().map_or(16, |m| m.header().tile_log2.min(16));
         let fl = t.flat_map().map_or(16, |m| m.header().tile_log2.min(16));
@@ -340,6 +348,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             let x1 = (x0 + CHUNK_PX).min(width);
             let Some(out) = bound.output else {
                 bound.dcb = NO_FILTER;
+                (bound.c1, bound.keep) = (0, 0);
                 continue;
             };
             // Worst case over the block's tiles on this row: smallest dark term, largest
@@ -372,6 +381,18 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             let gain = t.gain(crate::geometry::Output(out));
             bound.dcb = largest_quiet_d(thr, gain, dark_min, flat_max)
                 .map_or(NO_FILTER, |d| d + bound.cb_min_16);
+            // The quiet test's window for this line's R (any window is exact; one too wide
+            // for a later line's R only sends its chunks to the exact mask).
+            let bias = if c < self.split_chunk { bias0 } else { bias1 };
+            let r = raw_threshold(bound, bias, sat_m1);
+            let half = u32::try_from(r).map_or(0, |r| r.div_ceil(2));
+            let span = if half == 0 {
+                1
+            } else {
+                1u32 << (31 - half.leading_zeros())
+            };
+            bound.c1 = 1 - span as i32;
+            bound.keep = (span - 1) * 0x1_0001;
         }
     }
 }
@@ -395,6 +416,37 @@ struct LineScan<'a, 't, const N: usize> {
 }
 
 impl<const N: usize> LineScan<'_, '_, N> {
+    /// The full chunks `data` of one output, from column `x0`, with their bounds and the
+    /// output's bias (1/16 ADU): per chunk `R`, the window test, and for a chunk that fails
+    /// it the exact mask and [`Self::exact_chunk`].
+    fn scan_chunks(
+        &mut self,
+        mut x0: usize,
+        data: &[[u16; CHUNK_PX]],
+        bounds: &[ChunkBound],
+        bias: i32,
+        sat_m1: i32,
+    ) -> Result<(), ScanError> {
+        for (a, bound) in data.iter().zip(bounds) {
+            let r = raw_threshold(bound, bias, sat_m1);
+            // base = R + 1 - span; negative (R far below the bound's line, or no filter):
+            // the exact mask decides.
+            let base = r + bound.c1;
+            let quiet = u32::try_from(base).is_ok_and(|b| window_quiet(a, b, bound.keep));
+            let above = if quiet { 0 } else { above_mask(a, r) };
+            if above == 0 {
+                if let Some(s) = self.run.take() {
+                    self.det
+                        .add_run(self.y, s as u16, (x0 - 1) as u16, self.e, self.flags);
+                }
+            } else {
+                self.exact_chunk(x0, a, above)?;
+            }
+            x0 += CHUNK_PX;
+        }
+        Ok(())
+    }
+
     /// A chunk (at column `x0`, at most 16 samples) with samples above its `R` (bit `i` of
     /// `above` set for sample `i`): calibrates those samples (on a row with listed defects, the span from the first to the last
     /// of them through `calibrate_span`, defects included) and adds the runs of those above
@@ -480,39 +532,29 @@ impl<const N: usize> LineScan<'_, '_, N> {
 }
 
 /// The raw level at or below which no pixel of the chunk can be above the threshold, at
-/// most `sat_m1` (below -1, or -1: every sample passes). `bias_pair`: each output's bias in
-/// 1/16 ADU.
+/// most `sat_m1` (below -1, or -1: every sample passes). `bias`: the chunk's output's bias
+/// in 1/16 ADU.
 #[inline(always)]
-fn raw_threshold(bound: &ChunkBound, bias_pair: [i32; 2], sat_m1: i32) -> i32 {
-    let [b0, b1] = bias_pair;
-    let bias = if bound.out_ix == 0 { b0 } else { b1 };
+fn raw_threshold(bound: &ChunkBound, bias: i32, sat_m1: i32) -> i32 {
     // offset = 16 bias + column bias; |dcb| < 2^22 or NO_FILTER, bias < 2^20: no overflow.
     // raw <= floor((d + off_min) / 16) implies 16 raw - offset <= d for every column.
     ((bound.dcb + bias) >> 4).min(sat_m1)
 }
 
-/// The pre-filter's fast test: true when every sample of `a` lies in `base..=r`, so the
-/// chunk is quiet; false when a sample is above `r` or far below it (under `r / 2`), or `r`
-/// is negative (then [`above_mask`] decides).
+/// The pre-filter's fast test: true when every sample of `a` lies in
+/// `base..=base + span - 1`, with `keep = (span - 1) * 0x10001`, `span` a power of two and
+/// `base + span <= 65536`; so the chunk is quiet when `base + span - 1 <= R`.
 ///
-/// Two samples per 32-bit word: with `2^k <= r + 1` the largest such power and
-/// `base = r + 1 - 2^k`, `word - base * 0x10001` has each 16-bit lane equal to
-/// `sample - base` when every sample lies in `base..=r`, and a lane bit at or above `k` set
-/// otherwise (a lane above `r` is at least `2^k`; a lane below `base` borrows and wraps to
-/// at least `65536 - base >= 2^k`, as `r < 65536`; a borrow only disturbs a lane that is
-/// already flagged). So an OR of those differences without a bit outside the two lanes'
-/// low `k` bits proves the chunk quiet: load, subtract and OR per two samples.
+/// Two samples per 32-bit word: `word - base * 0x10001` has each 16-bit lane equal to
+/// `sample - base` when every sample lies in the window, and a lane bit at or above `k`
+/// (`span = 2^k`) set otherwise (a lane above the window is at least `span`; a lane below
+/// `base` borrows and wraps to at least `65536 - base >= span`; a borrow only disturbs a
+/// lane that is already flagged). So an OR of those differences without a bit outside the
+/// two lanes' low `k` bits proves every sample in the window: load, subtract and OR per
+/// two samples.
 #[inline(always)]
-fn window_quiet(a: &[u16; CHUNK_PX], r: i32) -> bool {
-    let Ok(ru) = u32::try_from(r) else {
-        return false;
-    };
-    // r < 2^16 - 1 (below the saturation level), so 1 <= r + 1 < 2^16 and 0 <= k <= 15.
-    let k = 31 - (ru + 1).leading_zeros();
-    let span = 1u32 << k;
-    let base = ru + 1 - span;
-    let bb = base * 0x1_0001;
-    let keep = (span - 1) * 0x1_0001;
+fn window_quiet(a: &[u16; CHUNK_PX], base: u32, keep: u32) -> bool {
+    let bb = base | (base << 16);
     let mut acc = 0u32;
     for p in a.as_chunks::<2>().0 {
         let [s0, s1] = *p;
@@ -582,9 +624,9 @@ fn largest_quiet_d(thr: i64, gain: GainEPerAdu, dark: i64, flat: FlatInv) -> Opt
 mod tests {
     use super::*;
 
-    /// `window_quiet` and `above_mask` against their definitions on chunks around every
-    /// power-of-two window edge: samples at `base - 1`, `base`, `r`, `r + 1`, 0 and 65535 in
-    /// either lane of a word, for `r` over the whole range.
+    /// `window_quiet` and `above_mask` against their definitions on chunks around the edges
+    /// of power-of-two windows ending at `r`: samples at `base - 1`, `base`, `r`, `r + 1`, 0
+    /// and 65535 in either lane of a word, for `r` over the whole range.
     #[test]
     #[allow(clippy::indexing_slicing)]
     fn quiet_tests_are_exact() {
@@ -604,8 +646,16 @@ mod tests {
                 .copied()
                 .unwrap_or_else(|| (next() % 65_535) as i32);
             let ru = r.max(0) as u32;
-            let span = 1u32 << (31 - (ru + 1).leading_zeros());
+            // Any power-of-two window ending at r: the largest, or a random smaller one.
+            let k_max = 31 - (ru + 1).leading_zeros();
+            let k = if i % 2 == 0 {
+                k_max
+            } else {
+                next() % (k_max + 1)
+            };
+            let span = 1u32 << k;
             let base = (ru + 1 - span) as i32;
+            let keep = (span - 1) * 0x1_0001;
             let specials = [base - 1, base, base + 1, r - 1, r, r + 1, 0, 65_535];
             for _ in 0..200 {
                 // Mostly inside the window, a few specials at random places.
@@ -629,11 +679,14 @@ mod tests {
                     .enumerate()
                     .fold(0u32, |m, (i, &s)| m | (u32::from(i32::from(s) > r) << i));
                 assert_eq!(above_mask(&a, r), mask, "r {r} chunk {a:?}");
-                // The fast test never calls a chunk with a sample above r quiet.
-                assert!(!window_quiet(&a, r) || want, "r {r} chunk {a:?}");
-                // ...and calls it quiet whenever every sample lies in base..=r.
-                let inside = a.iter().all(|&s| (base..=r).contains(&i32::from(s)));
-                assert_eq!(window_quiet(&a, r), inside, "r {r} chunk {a:?}");
+                if r >= 0 {
+                    // The fast test calls a chunk quiet exactly when every sample lies in
+                    // base..=r (so never with a sample above r).
+                    let quiet = window_quiet(&a, base as u32, keep);
+                    assert!(!quiet || want, "r {r} chunk {a:?}");
+                    let inside = a.iter().all(|&s| (base..=r).contains(&i32::from(s)));
+                    assert_eq!(quiet, inside, "r {r} span {span} chunk {a:?}");
+                }
                 checked += 1;
             }
         }
