@@ -115,8 +115,9 @@ struct ChunkBound {
     /// power of two at most half of `R + 1` for the line the bound was computed on, so the
     /// window stays valid while the bias moves by less than `R / 2`.
     c1: i32,
-    /// `(2^k - 1) * 0x10001`: the window's low bits in both 16-bit lanes.
-    keep: u32,
+    /// `!((2^k - 1) * 0x10001)`: the bits outside the window's low bits in both 16-bit
+    /// lanes.
+    outside: u32,
 }
 
 /// The streaming calibrate-and-detect pass with the raw pre-filter (see the module docs);
@@ -154,7 +155,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             output: None,
             dcb: NO_FILTER,
             c1: 0,
-            keep: 0,
+            outside: u32::MAX,
         }; MAX_CHUNKS];
         let mut split_chunk = MAX_CHUNKS;
         for (c, bound) in chunks.iter_mut().enumerate() {
@@ -348,7 +349,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             let x1 = (x0 + CHUNK_PX).min(width);
             let Some(out) = bound.output else {
                 bound.dcb = NO_FILTER;
-                (bound.c1, bound.keep) = (0, 0);
+                (bound.c1, bound.outside) = (0, u32::MAX);
                 continue;
             };
             // Worst case over the block's tiles on this row: smallest dark term, largest
@@ -392,7 +393,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
                 1u32 << (31 - half.leading_zeros())
             };
             bound.c1 = 1 - span as i32;
-            bound.keep = (span - 1) * 0x1_0001;
+            bound.outside = !((span - 1) * 0x1_0001);
         }
     }
 }
@@ -432,10 +433,12 @@ impl<const N: usize> LineScan<'_, '_, N> {
             // base = R + 1 - span; negative (R far below the bound's line, or no filter):
             // the exact mask decides.
             let base = r + bound.c1;
-            let quiet = u32::try_from(base).is_ok_and(|b| window_quiet(a, b, bound.keep));
+            let quiet = u32::try_from(base).is_ok_and(|b| window_quiet(a, b, bound.outside));
             let above = if quiet { 0 } else { above_mask(a, r) };
             if above == 0 {
-                if let Some(s) = self.run.take() {
+                // Test before taking: `take` would store `None` on every quiet chunk.
+                if let Some(s) = self.run {
+                    self.run = None;
                     self.det
                         .add_run(self.y, s as u16, (x0 - 1) as u16, self.e, self.flags);
                 }
@@ -542,8 +545,8 @@ fn raw_threshold(bound: &ChunkBound, bias: i32, sat_m1: i32) -> i32 {
 }
 
 /// The pre-filter's fast test: true when every sample of `a` lies in
-/// `base..=base + span - 1`, with `keep = (span - 1) * 0x10001`, `span` a power of two and
-/// `base + span <= 65536`; so the chunk is quiet when `base + span - 1 <= R`.
+/// `base..=base + span - 1`, with `outside = !((span - 1) * 0x10001)`, `span` a power of two
+/// and `base + span <= 65536`; so the chunk is quiet when `base + span - 1 <= R`.
 ///
 /// Two samples per 32-bit word: `word - base * 0x10001` has each 16-bit lane equal to
 /// `sample - base` when every sample lies in the window, and a lane bit at or above `k`
@@ -553,14 +556,14 @@ fn raw_threshold(bound: &ChunkBound, bias: i32, sat_m1: i32) -> i32 {
 /// two lanes' low `k` bits proves every sample in the window: load, subtract and OR per
 /// two samples.
 #[inline(always)]
-fn window_quiet(a: &[u16; CHUNK_PX], base: u32, keep: u32) -> bool {
+fn window_quiet(a: &[u16; CHUNK_PX], base: u32, outside: u32) -> bool {
     let bb = base | (base << 16);
     let mut acc = 0u32;
     for p in a.as_chunks::<2>().0 {
         let [s0, s1] = *p;
         acc |= (u32::from(s0) | (u32::from(s1) << 16)).wrapping_sub(bb);
     }
-    acc & !keep == 0
+    acc & outside == 0
 }
 
 /// The exact test: bit `i` set when sample `i` is above `r` (the sign of `r - sample`, both
@@ -682,7 +685,7 @@ mod tests {
                 if r >= 0 {
                     // The fast test calls a chunk quiet exactly when every sample lies in
                     // base..=r (so never with a sample above r).
-                    let quiet = window_quiet(&a, base as u32, keep);
+                    let quiet = window_quiet(&a, base as u32, !keep);
                     assert!(!quiet || want, "r {r} chunk {a:?}");
                     let inside = a.iter().all(|&s| (base..=r).contains(&i32::from(s)));
                     assert_eq!(quiet, inside, "r {r} span {span} chunk {a:?}");
