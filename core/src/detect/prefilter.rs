@@ -596,19 +596,32 @@ fn largest_quiet_d(thr: i64, gain: GainEPerAdu, dark: i64, flat: FlatInv) -> Opt
     // The f32 inverse of the formula without its roundings,
     // d* = (thr 2^24 / flat + dark) 2^16 / gain, is where e(d) reaches thr; step below it
     // until the exact formula confirms (each failure doubles the step), so the result is
-    // exact-safe whatever the float error, and at most ~1/2 ADU below the true limit. One
-    // exact evaluation when the estimate holds. i64 to f32 is a library call on the M7, so
+    // exact-safe whatever the float error. One or two exact evaluations when the estimate
+    // holds. i64 to f32 is a library call on the M7, so
     // both go through i32 (saturated): a saturated estimate is only further from the limit,
     // which the stepping absorbs (the exact check decides, never the estimate).
     let to_f32 = |v: i64| v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32 as f32;
     let est = ((to_f32(thr) * 16_777_216.0 / f32::from(flat.to_bits()).max(1.0)) + to_f32(dark))
         * 65_536.0
         / (gain.to_bits() as f32).max(1.0);
-    let mut d = if est.is_finite() {
+    let d_est = if est.is_finite() {
         (est as i32).clamp(D_MIN, D_MAX)
     } else {
         D_MIN
     };
+    // The estimate is within a unit or two of the limit (the f32 error and the formula's
+    // roundings are each below one unit of d, 1/16 ADU): try just above it, then just
+    // below, before stepping down (the first try that holds is the bound: the closer to the
+    // limit, the fewer quiet chunks fail the pre-filter).
+    for d in [
+        d_est.saturating_add(1).min(D_MAX),
+        d_est.saturating_sub(1).max(D_MIN),
+    ] {
+        if e(d) <= thr {
+            return Some(d);
+        }
+    }
+    let mut d = d_est;
     let mut step = 8i32;
     loop {
         d = d.saturating_sub(step).max(D_MIN);
