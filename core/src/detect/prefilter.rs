@@ -352,8 +352,10 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         }
         let ds = self.cal.dark_scale_bits();
         let width = self.width;
-        let dstep = 1usize << dl.min(15);
-        let fstep = 1usize << fl.min(15);
+        let gains = [
+            t.gain(crate::geometry::Output(0)),
+            t.gain(crate::geometry::Output(1)),
+        ];
         // First tile of row y in each map (row-major tiles).
         let (dmap, fmap) = (t.dark_map(), t.flat_map());
         let (drow, frow) = (tile_row_start(dmap, dl, y), tile_row_start(fmap, fl, y));
@@ -368,24 +370,24 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
                 (bound.c1, bound.outside) = (0, u32::MAX);
                 continue;
             };
-            // Worst case over the block's tiles on this row: smallest dark term, largest
-            // inverse flat. The tiles by index in the row's tile range (x < active columns
-            // and y < active rows: the values `dark_rel` / `flat_inv` give, without their
-            // per-pixel index and range checks, ~50 instructions each).
-            let dark_min = (x0..x1)
-                .step_by(dstep)
-                .map(|x| {
+            // Worst case over the chunk's tiles on this row: smallest dark term, largest
+            // inverse flat. The tiles by index, `x0 >> l ..= (x1 - 1) >> l` in the row's tile
+            // range (x < active columns and y < active rows: the values `dark_rel` /
+            // `flat_inv` give, without their per-pixel index and range checks).
+            let (dt0, dt1) = (drow + (x0 >> dl), drow + ((x1 - 1) >> dl));
+            let dark_min = (dt0..=dt1)
+                .map(|i| {
                     let rel = dmap
-                        .and_then(|m| m.tile_bits(drow + (x >> dl)))
+                        .and_then(|m| m.tile_bits(i))
                         .map_or(DarkRel::ONE, |b| DarkRel::from_bits(b as u8));
                     dark_16ths(rel, ds)
                 })
                 .min()
                 .unwrap_or(0);
-            let flat_max = (x0..x1)
-                .step_by(fstep)
-                .map(|x| {
-                    fmap.and_then(|m| m.tile_bits(frow + (x >> fl)))
+            let (ft0, ft1) = (frow + (x0 >> fl), frow + ((x1 - 1) >> fl));
+            let flat_max = (ft0..=ft1)
+                .map(|i| {
+                    fmap.and_then(|m| m.tile_bits(i))
                         .map_or(FlatInv::ONE, |b| FlatInv::from_bits(b as u16))
                 })
                 .max()
@@ -395,7 +397,8 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
                 .get(self.det.background().block_of(x0))
                 .copied()
                 .unwrap_or(i64::MAX);
-            let gain = t.gain(crate::geometry::Output(out));
+            let [g0, g1] = gains;
+            let gain = if out == 0 { g0 } else { g1 };
             bound.dcb = largest_quiet_d(thr, gain, dark_min, flat_max)
                 .map_or(NO_FILTER, |d| d + bound.cb_min_16);
             // The quiet test's window for this line's R (any window is exact; one too wide
