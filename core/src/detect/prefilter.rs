@@ -14,25 +14,34 @@
 //! `D` changes only when the background or the tile row changes; `R` follows each line's
 //! bias with one add and one shift per chunk.
 //!
-//! The scan then reads the raw active samples in chunks of [`CHUNK_PX`]: `OR` of `R - raw`
-//! over the chunk (3 instructions a pixel: load, subtract, or) is negative exactly when one
-//! sample exceeds `R`. In such a chunk only the samples above `R` are calibrated (by the
-//! regular formula, bit for bit as `FrameCalibration::calibrate_span`; on a row where the
-//! table lists a hot or telegraph pixel, by `calibrate_span` itself, defects included) and
-//! thresholded exactly as [`LineDetector::push_line`] does. Pixels of
+//! The scan then reads the raw active samples in chunks of [`CHUNK_PX`]. The fast test
+//! (`window_quiet`) takes two samples per 32-bit word: with a power-of-two window
+//! `base..=R` fixed per tile row, `word - base * 0x10001` keeps every lane inside the
+//! window's low bits exactly when both samples lie in it, so load, subtract and OR per two
+//! samples prove a chunk quiet. A chunk that fails it (a sample above `R`, or one below
+//! `base`, under `R / 2`) gets the exact test, a bit mask of the samples above `R`
+//! (`above_mask`); only those samples are calibrated (the regular formula with the line's
+//! constants hoisted, bit for bit as `FrameCalibration::calibrate_regular` and
+//! `calibrate_span`; on a row where the table lists a hot or telegraph pixel, by
+//! `calibrate_span` itself, defects included) and thresholded exactly as
+//! [`LineDetector::push_line`] does, runs taken from consecutive set bits. Pixels of
 //! the other chunks are provably not above the threshold (hot, telegraph and saturated
 //! pixels included: `R` is below the saturation level, and listed defects never join a
 //! blob), so **the candidates are exactly those of a [`LineDetector`] with the same
 //! background stride fed every calibrated line**; the host test `scan` checks it bit for bit
-//! on simulated frames.
+//! on simulated frames and random tables.
 //!
 //! The background needs every pixel of a line: rows with `y % background_stride == 0` (and
 //! the first row) are calibrated whole and go through [`LineDetector::push_line`].
 //!
 //! # Cost
-//! Quiet pixel: ~3 instructions; per chunk and line: the `R` update; per tile row and chunk:
-//! the tile look-ups and the inversion (one exact evaluation when the estimate holds); per background row: a full calibration and the
-//! background sort. `cargo m7-bench` reports `scan_detect` per pixel (README).
+//! On the M7 (`cargo m7-bench`, `scan_detect`, 128 rows, 10 stars, stride 64), per pixel:
+//! a quiet chunk ~46 instructions (24 for its 16 samples, ~22 of bound, window and loop:
+//! ~2.9 a pixel); the bounds, per tile row and chunk ~300 (two dark and two flat tiles, the
+//! f32 inverse and one or two exact evaluations: ~2.3 a pixel at 8-row tiles); the chunks
+//! noise sends to the exact path (~9 % at the 2.5-sigma join level) ~4 a pixel (mask,
+//! ~75 a calibrated sample, runs and blobs); background rows (calibrated whole at ~74 a
+//! pixel, two selections per block) ~2.5 a pixel at stride 64.
 //!
 //! # Where it fails (is slow, never wrong)
 //! A chunk whose threshold is at or below 0 e- or that two outputs read is not filtered
