@@ -84,9 +84,15 @@ pub(crate) fn threshold_bits(l: super::background::BlockLevel, k: f32) -> i64 {
 /// ([`threshold_bits`]), or saturated, and not a listed hot or telegraph pixel.
 #[inline(always)]
 pub(crate) fn above_thr(thr: i64, pixels_e: &[Electrons], flags: &[PixelFlags], x: usize) -> bool {
-    let (Some(e), Some(f)) = (pixels_e.get(x), flags.get(x)) else {
+    let (Some(&e), Some(&f)) = (pixels_e.get(x), flags.get(x)) else {
         return false;
     };
+    px_above_thr(thr, e, f)
+}
+
+/// [`above_thr`] for one pixel's value and flags.
+#[inline(always)]
+pub(crate) fn px_above_thr(thr: i64, e: Electrons, f: PixelFlags) -> bool {
     if f.is_excluded() || f.contains(PixelFlags::HOT_CORRECTED) {
         return false;
     }

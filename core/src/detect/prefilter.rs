@@ -54,7 +54,7 @@
 //! constant over the chunk's two tiles.
 
 use super::background::MAX_BLOCKS;
-use super::blobs::above_thr;
+use super::blobs::{above_thr, px_above_thr};
 use super::{DetectConfig, DetectError, Detection, LineDetector};
 use crate::calib::pixel::{dark_16ths, pixel_bits_d as pixel_bits};
 use crate::calib::{CalibError, FrameCalibration, LineLevels, PixelFlags};
@@ -555,6 +555,15 @@ impl<const N: usize> LineScan<'_, '_, N> {
         output: Option<u8>,
     ) -> Result<(), ScanError> {
         let y = self.y;
+        // The chunk lies in one background block (BLOCK_PX is a multiple of CHUNK_PX).
+        let t = self
+            .thr
+            .get(self.det.background().block_of(x0))
+            .copied()
+            .unwrap_or(i64::MAX);
+        // Bit i: sample i joins a blob (above R, and above the join threshold once
+        // calibrated).
+        let mut up = 0u32;
         if above != 0 && self.defects {
             // A row with listed defects: the whole exact path, from the first to the last
             // sample above R (the others are quiet).
@@ -565,39 +574,34 @@ impl<const N: usize> LineScan<'_, '_, N> {
                     .calibrate_span(y, ax as u16, self.raw_line, self.levels, ce, cf)?;
                 *self.calibrated_px += (bx - ax) as u32;
             }
-        } else {
-            // No defect on the row: only the samples above R, one by one.
             let mut m = above;
             while m != 0 {
-                let i = m.trailing_zeros() as usize;
+                let i = m.trailing_zeros();
                 m &= m - 1;
-                let x = x0 + i;
-                let Some(&v) = a.get(i) else {
+                if above_thr(t, self.e.as_slice(), self.flags.as_slice(), x0 + i as usize) {
+                    up |= 1 << i;
+                }
+            }
+        } else {
+            // No defect on the row: only the samples above R, one by one, thresholded as
+            // they are calibrated.
+            let mut m = above;
+            while m != 0 {
+                let i = m.trailing_zeros();
+                m &= m - 1;
+                let x = x0 + i as usize;
+                let Some(&v) = a.get(i as usize) else {
                     continue;
                 };
-                let ef = match output {
+                let (ev, fv) = match output {
                     Some(o) => self.calibrate(x, v, o),
                     None => self.cal.calibrate_regular(x as u16, y, v, self.levels),
                 };
                 if let (Some(e), Some(f)) = (self.e.get_mut(x), self.flags.get_mut(x)) {
-                    (*e, *f) = ef;
+                    (*e, *f) = (ev, fv);
                     *self.calibrated_px += 1;
+                    up |= u32::from(px_above_thr(t, ev, fv)) << i;
                 }
-            }
-        }
-        // The chunk lies in one background block (BLOCK_PX is a multiple of CHUNK_PX).
-        let t = self
-            .thr
-            .get(self.det.background().block_of(x0))
-            .copied()
-            .unwrap_or(i64::MAX);
-        let mut up = 0u32;
-        let mut m = above;
-        while m != 0 {
-            let i = m.trailing_zeros();
-            m &= m - 1;
-            if above_thr(t, self.e.as_slice(), self.flags.as_slice(), x0 + i as usize) {
-                up |= 1 << i;
             }
         }
         // Runs of consecutive set bits; a run open at the chunk's start continues when bit 0
