@@ -150,6 +150,13 @@ pub struct ScanDetector<'t, const N: usize> {
     thr: [i64; MAX_BLOCKS],
     thr_valid: bool,
     calibrated_px: u32,
+    /// Row `defect_from`'s `FrameCalibration::row_has_defects`, and the first row after
+    /// it where the table lists a hot or telegraph pixel (`u32::MAX`: none): the rows
+    /// between have none, so the searches of the defect lists run once per listed row
+    /// instead of once per row.
+    defect_from: u32,
+    defect_from_has: bool,
+    next_defect: u32,
 }
 
 impl<'t, const N: usize> ScanDetector<'t, N> {
@@ -197,6 +204,9 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             thr: [0; MAX_BLOCKS],
             thr_valid: false,
             calibrated_px: 0,
+            defect_from: u32::MAX,
+            defect_from_has: false,
+            next_defect: 0,
         }
     }
 
@@ -274,9 +284,28 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             thr,
             calibrated_px,
             split_chunk,
+            defect_from,
+            defect_from_has,
+            next_defect,
             ..
         } = self;
         let t = cal.table();
+        let yu = u32::from(y);
+        if yu < *defect_from || yu >= *next_defect {
+            // The next listed row after y: the first entry at or after (0, y + 1).
+            let after = y.saturating_add(1);
+            let (hot, tel) = (t.hot_pixels(), t.telegraph_pixels());
+            let h = hot
+                .get(hot.lower_bound(0, after))
+                .map_or(u32::MAX, |h| u32::from(h.y));
+            let g = tel
+                .get(tel.lower_bound(0, after))
+                .map_or(u32::MAX, |(_, ty)| u32::from(ty));
+            *defect_from = yu;
+            *defect_from_has = cal.row_has_defects(y);
+            *next_defect = if y == u16::MAX { u32::MAX } else { h.min(g) };
+        }
+        let defects = yu == *defect_from && *defect_from_has;
         let (dmap, fmap) = (t.dark_map(), t.flat_map());
         let (dl, fl) = (tile_log2(dmap), tile_log2(fmap));
         let consts = LineConsts {
@@ -300,7 +329,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             raw_line,
             levels,
             consts,
-            defects: cal.row_has_defects(y),
+            defects,
             run: None,
             cal,
             det,
