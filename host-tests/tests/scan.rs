@@ -178,8 +178,8 @@ mod random_tables {
         stride: u16,
         uniform: bool,
     ) -> Result<(), TestCaseError> {
-        // Uniform maps make the pre-filter's bound tight (within its 1/2 ADU margin), so a
-        // bound that is too high shows; random maps test it under any spread.
+        // Uniform maps make the pre-filter's bound tight (a unit or two of 1/16 ADU from the
+        // limit), so a bound that is too high shows; random maps test it under any spread.
         let (column_bias, dark, flat) = if uniform {
             (
                 vec![column_bias[0]; column_bias.len()],

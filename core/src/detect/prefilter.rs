@@ -570,9 +570,10 @@ impl<const N: usize> LineScan<'_, '_, N> {
     }
 
     /// A chunk (at column `x0`, at most 16 samples) with samples above its `R` (bit `i` of
-    /// `above` set for sample `i`): calibrates those samples (on a row with listed defects, the span from the first to the last
-    /// of them through `calibrate_span`, defects included) and adds the runs of those above
-    /// the join threshold, exactly as [`LineDetector::push_line`] would.
+    /// `above` set for sample `i`): calibrates those samples (on a row with listed defects,
+    /// the span from the first to the last of them through `calibrate_span`, defects
+    /// included) and adds the runs of those above the join threshold, exactly as
+    /// [`LineDetector::push_line`] would.
     ///
     /// Cost: per set bit one calibration and one threshold test, per run of set bits one
     /// `add_run`.
