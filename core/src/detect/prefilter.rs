@@ -735,7 +735,8 @@ fn largest_quiet_d(thr: i64, gain: GainEPerAdu, dark: i64, flat: FlatInv) -> Opt
     // holds. i64 to f32 is a library call on the M7, so
     // both go through i32 (saturated): a saturated estimate is only further from the limit,
     // which the stepping absorbs (the exact check decides, never the estimate).
-    let to_f32 = |v: i64| v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32 as f32;
+    let to_f32 =
+        |v: i64| i32::try_from(v).unwrap_or(if v < 0 { i32::MIN } else { i32::MAX }) as f32;
     let est = ((to_f32(thr) * 16_777_216.0 / f32::from(flat.to_bits()).max(1.0)) + to_f32(dark))
         * 65_536.0
         / (gain.to_bits() as f32).max(1.0);
