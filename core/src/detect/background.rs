@@ -81,15 +81,22 @@ impl Background {
         let first = !self.primed;
         for (b, level) in self.blocks.iter_mut().enumerate().take(self.n_blocks) {
             let start = b * BLOCK_PX;
+            let end = (start + BLOCK_PX).min(pixels_e.len()).min(flags.len());
+            let (Some(es), Some(fs)) = (pixels_e.get(start..end), flags.get(start..end)) else {
+                continue;
+            };
+            // The usable values (not excluded, not saturated), without a branch per pixel:
+            // each value is stored at the next free slot, which only advances for a usable
+            // one (the iterator chain with `skip` and `filter` cost ~60 instructions a pixel
+            // on the M7).
+            let unusable = PixelFlags::HOT_EXCLUDED | PixelFlags::TELEGRAPH | PixelFlags::SATURATED;
             let mut v = [0i32; BLOCK_PX];
             let mut n = 0;
-            let px = pixels_e.iter().zip(flags).skip(start).take(BLOCK_PX);
-            for (e, _) in px.filter(|(_, f)| !f.is_excluded() && !f.contains(PixelFlags::SATURATED))
-            {
+            for (e, f) in es.iter().zip(fs) {
                 if let Some(slot) = v.get_mut(n) {
                     *slot = e.to_bits();
-                    n += 1;
                 }
+                n += usize::from(!f.intersects(unusable));
             }
             if n < 4 {
                 continue;

@@ -78,8 +78,9 @@ impl<'a> MapView<'a> {
         }
     }
 
-    /// The element bits of tile `i` in row-major tile order.
-    fn tile_bits(&self, i: usize) -> Option<u32> {
+    /// The element bits of tile `i` in row-major tile order (the raw pre-filter reads a tile
+    /// row's tiles by index: `detect::prefilter`).
+    pub(crate) fn tile_bits(&self, i: usize) -> Option<u32> {
         match self.elem_bytes {
             1 => self.data.get(i).map(|b| u32::from(*b)),
             _ => u16_at(self.data, i.checked_mul(2)?).map(u32::from),
