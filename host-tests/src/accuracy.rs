@@ -23,7 +23,7 @@
 //! `1 / sqrt(4 N)` ([`rms_relative_se`]): 1.1 % for N = 2000. The tests add 3.5 of these to
 //! their bounds.
 //!
-//! Cost: a cell is `trials` x 2 method runs plus the bound; the whole default table (17
+//! Cost: a cell is `trials` x 2 method runs plus the bound; the whole default table (15
 //! methods, 4 widths, 3 SNRs, 2000 trials) takes about 7 s of CPU in release.
 
 use crate::pixcorr::{CurveSpec, build_curve};
@@ -33,9 +33,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson};
 use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
-use startrack_core::centroid::iwc::{IwcParams, iwc};
 use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
-use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
+use startrack_core::centroid::quadratic::{QuadraticParams, quadratic};
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
@@ -53,10 +52,8 @@ pub enum Method {
         /// With the pixel-phase correction for the star's `a`.
         corrected: bool,
     },
-    /// Gaussian-windowed centroid, weight sigma the PSF's, 9x9 window.
-    Iwc,
-    /// Three-point peak fit per axis, 5x5 window.
-    Quadratic(QuadraticKind),
+    /// Three-point parabolic peak fit per axis, 5x5 window.
+    Quadratic,
     /// Pixel-integrated Gaussian fit, PSF sigma known, on an `n x n` window.
     GaussFit {
         /// Window side.
@@ -66,7 +63,7 @@ pub enum Method {
 
 impl Method {
     /// Every method of the table: CoG power 1 and 2 in 3/5/7 boxes, plain and corrected,
-    /// IWC, parabolic and log-parabolic peaks, the Gauss fit on 5x5 and 7x7.
+    /// the parabolic 3-point peak, the Gauss fit on 5x5 and 7x7.
     pub fn all() -> Vec<Method> {
         let mut v = Vec::new();
         for corrected in [false, true] {
@@ -80,9 +77,7 @@ impl Method {
                 }
             }
         }
-        v.push(Method::Iwc);
-        v.push(Method::Quadratic(QuadraticKind::Parabolic));
-        v.push(Method::Quadratic(QuadraticKind::Gaussian));
+        v.push(Method::Quadratic);
         v.push(Method::GaussFit { window: 5 });
         v.push(Method::GaussFit { window: 7 });
         v
@@ -100,9 +95,7 @@ impl Method {
                 if *power == CogPower::One { 1 } else { 2 },
                 if *corrected { " corrected" } else { "" }
             ),
-            Method::Iwc => "iwc 9x9".into(),
-            Method::Quadratic(QuadraticKind::Parabolic) => "quadratic 3-point".into(),
-            Method::Quadratic(QuadraticKind::Gaussian) => "log-quadratic 3-point".into(),
+            Method::Quadratic => "quadratic 3-point".into(),
             Method::GaussFit { window } => format!("gauss fit {window}x{window}"),
         }
     }
@@ -111,8 +104,7 @@ impl Method {
     pub fn window_side(&self) -> u16 {
         match self {
             Method::Cog { box_side, .. } => u16::from(*box_side) + 2,
-            Method::Iwc => 9,
-            Method::Quadratic(_) => 5,
+            Method::Quadratic => 5,
             Method::GaussFit { window } => u16::from(*window),
         }
     }
@@ -300,17 +292,9 @@ impl Prepared {
                     _ => c,
                 }
             }
-            Method::Iwc => iwc(
-                input,
-                &IwcParams {
-                    background: self.background,
-                    ..IwcParams::new(s)
-                },
-            ),
-            Method::Quadratic(kind) => quadratic(
+            Method::Quadratic => quadratic(
                 input,
                 &QuadraticParams {
-                    kind,
                     background: self.background,
                 },
             ),

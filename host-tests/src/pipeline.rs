@@ -9,7 +9,7 @@
 //! 4. For each candidate, a `window` x `window` window centred on its brightest pixel (clipped
 //!    at the active area's edge), calibrated with [`FrameCalibration::calibrate_window`] and
 //!    centroided with the chosen [`Method`]. Methods that use a box (CoG, and the starting
-//!    CoG of IWC and the Gauss fit) use `window - 2`, so the window's one-pixel perimeter
+//!    CoG of the Gauss fit) use `window - 2`, so the window's one-pixel perimeter
 //!    measures the background (median).
 //!
 //! Cost: one pass over the frame (levels, calibration and detection of 1033 x 1072 samples)
@@ -35,9 +35,8 @@ use startrack_core::calib::{
 };
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
-use startrack_core::centroid::iwc::{IwcParams, iwc};
 use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground, PixCorrSet};
-use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
+use startrack_core::centroid::quadratic::{QuadraticParams, quadratic};
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput, MAX_SIDE};
 use startrack_core::detect::{DetectConfig, DetectError, Detection, DetectionFlags, LineDetector};
 use startrack_core::table::CalibTable;
@@ -59,12 +58,8 @@ pub enum Method {
     Cog1,
     /// Centre of gravity, power 2, noise-unbiased (paper eq. 6).
     Cog2,
-    /// Iteratively (Gaussian-) weighted centroid.
-    Iwc,
     /// 3-point parabolic peak per axis.
     Quadratic,
-    /// 3-point parabola through the logarithms (a Gaussian peak).
-    LogQuadratic,
     /// Gauss-Newton fit of a pixel-integrated Gaussian.
     GaussFit,
 }
@@ -76,7 +71,7 @@ pub struct PipelineConfig {
     pub method: Method,
     /// Window side, px: odd, 3..=31.
     pub window_px: u16,
-    /// PSF Gaussian sigma, px (IWC weight and Gauss-fit model; `sqrt(0.31) a`).
+    /// PSF Gaussian sigma, px (Gauss-fit model; `sqrt(0.31) a`).
     pub psf_sigma_px: f32,
     /// Detection settings.
     pub detect: DetectConfig,
@@ -375,21 +370,9 @@ pub fn centroid(input: &CentroidInput<'_>, config: &PipelineConfig) -> Centroid 
     match config.method {
         Method::Cog1 => cog(input, &CogParams::new(CogPower::One, inner)),
         Method::Cog2 => cog(input, &CogParams::new(CogPower::Two, inner)),
-        Method::Iwc => iwc(
-            input,
-            &IwcParams {
-                start_box: inner,
-                ..IwcParams::new(config.psf_sigma_px)
-            },
-        ),
-        Method::Quadratic | Method::LogQuadratic => quadratic(
+        Method::Quadratic => quadratic(
             input,
             &QuadraticParams {
-                kind: if config.method == Method::Quadratic {
-                    QuadraticKind::Parabolic
-                } else {
-                    QuadraticKind::Gaussian
-                },
                 background: Background::PerimeterMedian,
             },
         ),

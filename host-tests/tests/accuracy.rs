@@ -10,7 +10,6 @@
 //! 1/sqrt(4000) = 1.6 % ([`rms_relative_se`]); the ratio tests hold by many standard errors.
 
 use startrack_core::centroid::cog::CogPower;
-use startrack_core::centroid::quadratic::QuadraticKind;
 use startrack_host::accuracy::{
     Cell, Method, Noise, crlb_x_px, flux_for_snr, markdown, rms_relative_se, run,
 };
@@ -89,12 +88,7 @@ fn estimate_should_hold(c: &Cell) -> bool {
             f64::from(box_side) >= 3.0 * c.a_px
                 && !(power == CogPower::Two && c.a_px < 1.0 && c.snr < 30.0)
         }
-        // The Gaussian window locks the centroid to pixel centres when the star is
-        // undersampled (iwc.rs): the noise moves it between lock points.
-        Method::Iwc => c.a_px >= 1.0,
-        // ln of the faint side pixels at SNR 10 has heavy tails.
-        Method::Quadratic(QuadraticKind::Gaussian) => c.snr >= 30.0,
-        Method::Quadratic(QuadraticKind::Parabolic) | Method::GaussFit { .. } => true,
+        Method::Quadratic | Method::GaussFit { .. } => true,
     }
 }
 

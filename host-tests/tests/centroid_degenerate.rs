@@ -9,8 +9,7 @@ use psf::{Star, Win, render, sigma_of_a, to_electrons};
 use startrack_core::calib::PixelFlags;
 use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
-use startrack_core::centroid::iwc::{IwcParams, iwc};
-use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
+use startrack_core::centroid::quadratic::{QuadraticParams, quadratic};
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
@@ -45,28 +44,8 @@ fn all_methods(input: &CentroidInput<'_>) -> Vec<(String, Centroid)> {
                 }
             }
         }
-        for kind in [QuadraticKind::Parabolic, QuadraticKind::Gaussian] {
-            let p = QuadraticParams {
-                kind,
-                background: bg,
-            };
-            out.push((format!("{p:?}"), quadratic(input, &p)));
-        }
-        for (sw, iters, start) in [
-            (1.0, 20, 5),
-            (0.0, 3, 0),
-            (f32::NAN, 255, 255),
-            (1e30, 1, 3),
-        ] {
-            let p = IwcParams {
-                weight_sigma_px: sw,
-                max_iterations: iters,
-                tolerance_px: 1e-4,
-                start_box: start,
-                background: bg,
-            };
-            out.push((format!("{p:?}"), iwc(input, &p)));
-        }
+        let p = QuadraticParams { background: bg };
+        out.push((format!("{p:?}"), quadratic(input, &p)));
         for (s, iters, fit_background) in [
             (1.0, 8, true),
             (0.0, 3, false),
@@ -375,23 +354,7 @@ fn usual_methods(
         ),
         (
             "quadratic",
-            quadratic(
-                input,
-                &QuadraticParams {
-                    kind: QuadraticKind::Gaussian,
-                    background,
-                },
-            ),
-        ),
-        (
-            "iwc",
-            iwc(
-                input,
-                &IwcParams {
-                    background,
-                    ..IwcParams::new(sigma)
-                },
-            ),
+            quadratic(input, &QuadraticParams { background }),
         ),
         (
             "gauss fit",
@@ -423,14 +386,25 @@ fn every_method_at_the_calibrated_maximum() {
         flux: (peak - bg) / frac0,
     };
     let e = to_electrons(&render(win, star, bg));
-    let faint = to_electrons(&render(
+    let faint_q = render(
         win,
         Star {
             flux: star.flux * 1e-3,
             ..star
         },
         0.0,
-    ));
+    );
+    let faint = to_electrons(&faint_q);
+    // The parabolic 3-point peak's own systematic error (0.04 px RMS at a = 1.5) exceeds the
+    // 0.01 px asked of the others: it is held to its f64 reference on the faint star instead.
+    let (pc, pr) = psf::peak(&faint_q, win.w);
+    let (pc, pr) = (usize::from(pc), usize::from(pr));
+    let at = |c: usize, r: usize| faint_q[r * usize::from(win.w) + c];
+    let quad = |a: f64, b: f64, c: f64| psf::ref_quad3(a, b, c).clamp(-0.5, 0.5);
+    let quad_ref = (
+        f64::from(win.x0) + pc as f64 + quad(at(pc - 1, pr), at(pc, pr), at(pc + 1, pr)),
+        f64::from(win.y0) + pr as f64 + quad(at(pc, pr - 1), at(pc, pr), at(pc, pr + 1)),
+    );
     let given = |level_e: f64| Background::Given {
         level_e: level_e as f32,
         variance_e2: 0.0,
@@ -456,10 +430,15 @@ fn every_method_at_the_calibrated_maximum() {
             (c.x_px - f.x_px).abs() < 1e-3 && (c.y_px - f.y_px).abs() < 1e-3,
             "{name}: {c:?} vs {f:?}"
         );
-        let err = (f64::from(c.x_px) - star.x)
+        let (want, tol) = if name == "quadratic" {
+            (quad_ref, 1e-3)
+        } else {
+            ((star.x, star.y), 0.01)
+        };
+        let err = (f64::from(c.x_px) - want.0)
             .abs()
-            .max((f64::from(c.y_px) - star.y).abs());
-        assert!(err < 0.01, "{name}: {c:?}");
+            .max((f64::from(c.y_px) - want.1).abs());
+        assert!(err < tol, "{name}: {c:?} vs {want:?}");
         assert!(c.snr > 1000.0, "{name}: {c:?}");
     }
 }

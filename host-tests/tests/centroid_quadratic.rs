@@ -1,5 +1,6 @@
-//! The core's 3-point peak fits against the f64 reference (noise-free, across pixel phases and
-//! PSF widths), their systematic error against the truth, and their error estimate under noise.
+//! The core's 3-point parabolic peak fit against the f64 reference (noise-free, across pixel
+//! phases and PSF widths), its systematic error against the truth, and its error estimate
+//! under noise.
 //!
 //! `-- --nocapture` prints the systematic RMS error (over phases) and the noise results.
 
@@ -10,19 +11,16 @@ use psf::{
     MonteCarlo, Star, Sweep, WIDTHS_A, Win, flux_for_snr, mean_std, ref_quad3, render, sigma_of_a,
     to_electrons,
 };
-use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
+use startrack_core::centroid::quadratic::{QuadraticParams, quadratic};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::window::Window;
 
 /// Reference fit on the quantised window values (window-relative).
-fn reference(q: &[f64], w: usize, kind: QuadraticKind) -> (f64, f64) {
+fn reference(q: &[f64], w: usize) -> (f64, f64) {
     let (pc, pr) = psf::peak(q, w as u16);
     let (pc, pr) = (usize::from(pc), usize::from(pr));
     let at = |c: usize, r: usize| q[r * w + c];
-    let fit = |a: f64, b: f64, c: f64| {
-        let log = kind == QuadraticKind::Gaussian && a > 0.0 && c > 0.0;
-        ref_quad3(a, b, c, log).clamp(-0.5, 0.5)
-    };
+    let fit = |a: f64, b: f64, c: f64| ref_quad3(a, b, c).clamp(-0.5, 0.5);
     (
         pc as f64 + fit(at(pc - 1, pr), at(pc, pr), at(pc + 1, pr)),
         pr as f64 + fit(at(pc, pr - 1), at(pc, pr), at(pc, pr + 1)),
@@ -39,27 +37,21 @@ fn matches_f64_reference_noise_free() {
         forbidden: CentroidFlags::DEGENERATE | CentroidFlags::PEAK_AT_EDGE,
     };
     let mut worst: f64 = 0.0;
-    for kind in [QuadraticKind::Parabolic, QuadraticKind::Gaussian] {
-        let params = QuadraticParams {
-            kind,
-            background: Background::Given {
-                level_e: 0.0,
-                variance_e2: 0.0,
-            },
-        };
-        for a in WIDTHS_A {
-            let r = sweep.run(
-                a,
-                &format!("{kind:?}"),
-                |w| quadratic(&CentroidInput::new(w), &params),
-                |q, _| reference(q, 7, kind),
-            );
-            worst = worst.max(r.worst_px);
-            eprintln!(
-                "systematic rms {kind:?} a {a:4.2} px: {:.4} px",
-                r.systematic_rms_px
-            );
-        }
+    let params = QuadraticParams {
+        background: Background::Given {
+            level_e: 0.0,
+            variance_e2: 0.0,
+        },
+    };
+    for a in WIDTHS_A {
+        let r = sweep.run(
+            a,
+            "parabolic",
+            |w| quadratic(&CentroidInput::new(w), &params),
+            |q, _| reference(q, 7),
+        );
+        worst = worst.max(r.worst_px);
+        eprintln!("systematic rms a {a:4.2} px: {:.4} px", r.systematic_rms_px);
     }
     eprintln!("largest |core - f64 reference|: {worst:.2e} px");
 }
@@ -79,26 +71,23 @@ fn peak_on_the_border_keeps_the_pixel_centre() {
         flux: 1e4,
     };
     let e = to_electrons(&render(win, star, 0.0));
-    for kind in [QuadraticKind::Parabolic, QuadraticKind::Gaussian] {
-        let params = QuadraticParams {
-            kind,
-            background: Background::Given {
-                level_e: 0.0,
-                variance_e2: 0.0,
-            },
-        };
-        let c = quadratic(
-            &CentroidInput::new(Window::new(win.rect(), &e).unwrap()).with_clipped(true),
-            &params,
-        );
-        assert!(
-            c.flags
-                .contains(CentroidFlags::PEAK_AT_EDGE | CentroidFlags::EDGE_CLIPPED),
-            "{c:?}"
-        );
-        assert_eq!(c.x_px, 0.0);
-        assert!((f64::from(c.y_px) - 12.2).abs() < 0.1, "{c:?}");
-    }
+    let params = QuadraticParams {
+        background: Background::Given {
+            level_e: 0.0,
+            variance_e2: 0.0,
+        },
+    };
+    let c = quadratic(
+        &CentroidInput::new(Window::new(win.rect(), &e).unwrap()).with_clipped(true),
+        &params,
+    );
+    assert!(
+        c.flags
+            .contains(CentroidFlags::PEAK_AT_EDGE | CentroidFlags::EDGE_CLIPPED),
+        "{c:?}"
+    );
+    assert_eq!(c.x_px, 0.0);
+    assert!((f64::from(c.y_px) - 12.2).abs() < 0.1, "{c:?}");
 }
 
 #[test]
@@ -106,7 +95,7 @@ fn error_estimate_matches_scatter() {
     const BG: f64 = 100.0;
     const VAR_BG: f64 = 125.0;
     let win = Win::centred(100, 100, 7);
-    for kind in [QuadraticKind::Parabolic, QuadraticKind::Gaussian] {
+    {
         for (snr, seed) in [(20.0, 21u64), (50.0, 22), (100.0, 23)] {
             let star = Star {
                 x: 100.2,
@@ -115,7 +104,6 @@ fn error_estimate_matches_scatter() {
                 flux: flux_for_snr(snr, 3.0, VAR_BG),
             };
             let params = QuadraticParams {
-                kind,
                 background: Background::PerimeterMean,
             };
             let r = MonteCarlo {
@@ -135,12 +123,12 @@ fn error_estimate_matches_scatter() {
             let (dx, e) = (&r.dx, r.estimate_rms());
             let (m, s) = mean_std(dx);
             eprintln!(
-                "{kind:?} SNR(3x3) {snr:5.1}: mean error {m:+.4} px, scatter {s:.4} px, estimate {e:.4} px (ratio {:.3})",
+                "SNR(3x3) {snr:5.1}: mean error {m:+.4} px, scatter {s:.4} px, estimate {e:.4} px (ratio {:.3})",
                 e / s
             );
             assert!(
                 (e / s - 1.0).abs() < 0.2,
-                "{kind:?} SNR {snr}: estimate {e} vs scatter {s}"
+                "SNR {snr}: estimate {e} vs scatter {s}"
             );
         }
     }

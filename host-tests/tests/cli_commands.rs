@@ -431,9 +431,7 @@ fn every_method_measures_every_star() {
     for method in [
         Method::Cog1,
         Method::Cog2,
-        Method::Iwc,
         Method::Quadratic,
-        Method::LogQuadratic,
         Method::GaussFit,
     ] {
         let result = measure(&ProcessArgs {
@@ -552,4 +550,36 @@ fn measured_maps_carry_the_noise_of_n_frames_and_still_calibrate() {
         );
     }
     assert!(result.stars.len() <= truth.len() + 1);
+}
+
+/// The removed methods (IWC, the log-parabolic peak) are no `--method` value any more: the
+/// argument parser refuses them before any file is read, naming the valid values, with a
+/// non-zero exit and no panic. (clap's usage error: its first line says what is wrong, the
+/// next lists the possible values.)
+#[test]
+fn removed_methods_are_refused_by_the_parser() {
+    for method in ["iwc", "log-quadratic"] {
+        let args = [
+            "process",
+            "none.fits",
+            "--calib",
+            "none.bin",
+            "--method",
+            method,
+        ];
+        let (ok, stdout, stderr) = startrack(&args);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(stdout.is_empty(), "{args:?} printed {stdout}");
+        let first = stderr.lines().next().unwrap_or_default();
+        assert!(
+            first.starts_with("error: invalid value") && first.contains(method),
+            "{stderr}"
+        );
+        assert!(
+            stderr.contains("cog1, cog2, quadratic, gauss-fit"),
+            "{stderr}"
+        );
+        assert!(!stderr.contains("none.fits"), "read a file: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
 }

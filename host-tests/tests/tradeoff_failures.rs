@@ -1,5 +1,5 @@
 //! Failure-map cells pinned on each side of a boundary (host-tests/src/tradeoff/failures.rs
-//! defines the cells): IWC and the 3-point quadratic are biased below a ~ 1 px and not at
+//! defines the cells): the 3-point quadratic peak is biased below a ~ 1 px and not at
 //! 2 px; every method fails at SNR 1; the Gauss fit passes at SNR 30, a = 1 px; an
 //! uncorrected hot pixel and a close pair break it, their absence does not.
 //!
@@ -9,7 +9,6 @@
 //! error is a bounded function of the uniform pixel phase, whose RMS varies less between
 //! samples than a Gaussian's: the same RMS margin is conservative for it.
 
-use startrack_core::centroid::quadratic::QuadraticKind;
 use startrack_host::accuracy::{Method, rms_relative_se};
 use startrack_host::tradeoff::failures::{
     BIAS_LIMIT_PX, DETECT_LIMIT, FailCell, Perturb, RMS_OVER_CRLB_LIMIT, Scene, Stats, run_scene,
@@ -57,14 +56,13 @@ fn passes(s: &Stats) -> bool {
 }
 
 #[test]
-fn iwc_and_quadratic_are_biased_below_one_pixel_not_at_two() {
-    for m in [Method::Iwc, Method::Quadratic(QuadraticKind::Parabolic)] {
-        let small = cell(m, 0.6, 100.0, Perturb::None);
-        assert!(biased(&small), "{} at a = 0.6", m.name());
-        assert!(small.fails());
-        let wide = cell(m, 2.0, 100.0, Perturb::None);
-        assert!(unbiased(&wide), "{} at a = 2", m.name());
-    }
+fn quadratic_is_biased_below_one_pixel_not_at_two() {
+    let m = Method::Quadratic;
+    let small = cell(m, 0.6, 100.0, Perturb::None);
+    assert!(biased(&small), "{} at a = 0.6", m.name());
+    assert!(small.fails());
+    let wide = cell(m, 2.0, 100.0, Perturb::None);
+    assert!(unbiased(&wide), "{} at a = 2", m.name());
 }
 
 #[test]

@@ -172,30 +172,6 @@ impl AxisSums {
     }
 }
 
-/// The shared start of the iterative methods (IWC, Gauss fit): the prepared window, the
-/// power-1 CoG in a `start_box` square around the brightest pixel, and `EDGE_CLIPPED` when
-/// that square was clipped; or the finished degenerate centroid.
-pub(crate) fn cog_start<'a>(
-    input: &CentroidInput<'a>,
-    background: Background,
-    start_box: u8,
-) -> Result<(Prepared<'a>, Measured, CentroidFlags), Centroid> {
-    let p = Prepared::new(input, background)?;
-    let Some((pc, pr)) = p.peak() else {
-        return Err(p.degenerate(CentroidFlags::empty()));
-    };
-    let (bx, clipped) = p.box_around(pc, pr, start_box);
-    let extra = if clipped {
-        CentroidFlags::EDGE_CLIPPED
-    } else {
-        CentroidFlags::empty()
-    };
-    match cog_in_box(&p, bx, (pc, pr), CogPower::One) {
-        Some(start) => Ok((p, start, extra)),
-        None => Err(p.degenerate(extra)),
-    }
-}
-
 /// A caller's PSF or weight sigma made usable: at least 0.1 px, 1 px when not finite.
 pub(crate) fn usable_sigma_px(sigma_px: f32) -> f32 {
     if sigma_px.is_finite() {

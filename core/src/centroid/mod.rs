@@ -4,14 +4,12 @@
 //! | method | module | cost | systematic error, noise-free (RMS over phases) | random error |
 //! |---|---|---|---|---|
 //! | centre of gravity, power 1 (eq. 2) and 2 (eq. 6) | [`cog`] | ~10 flops/pixel | 5x5: 0.049 px at a = 0.5, < 0.001 at a = 1, 0.047 at a = 2 (power 1) | 0.86..1.1 of the CRLB-limited scatter |
-//! | Gaussian-windowed (XWIN) centroid | [`iwc`] | ~30 flops/pixel/iteration | 0.29 px at a = 0.5 (locks to pixels), < 5e-3 for a >= 1.5 | efficiency 0.86..0.98 |
-//! | 3-point parabolic / log-parabolic peak | [`quadratic`] | ~20 flops/star | parabolic 0.08 px at a = 1; Gaussian 0.026 at a = 0.5, < 3e-3 for a >= 1 | - |
+//! | 3-point parabolic peak | [`quadratic`] | ~20 flops/star | 0.08 px at a = 1 | - |
 //! | pixel-integrated Gaussian fit | [`gauss_fit`] | ~200 flops/pixel for 4 steps | < 1e-5 px (model exact) | efficiency 0.97..1.00 |
 //!
 //! (a = the paper's 80 %-energy radius, s = sqrt(0.31) a; numbers from the host tests
-//! `centroid_cog`, `centroid_cog_noise`, `centroid_iwc`, `centroid_quadratic`,
-//! `centroid_gauss_fit` run with `--nocapture`; costs are operation counts, not M7
-//! measurements.) None of them yet applies the paper's pixelisation correction table.
+//! `centroid_cog`, `centroid_cog_noise`, `centroid_quadratic`, `centroid_gauss_fit` run with
+//! `--nocapture`; costs are operation counts, not M7 measurements.) None of them yet applies the paper's pixelisation correction table.
 //!
 //! # Arithmetic: f32, with an exact integer background subtraction
 //! Every method works in `f32`, the Cortex-M7's hardware float type for the
@@ -50,7 +48,6 @@
 
 pub mod cog;
 pub mod gauss_fit;
-pub mod iwc;
 pub mod math;
 pub mod pixcorr;
 pub mod quadratic;

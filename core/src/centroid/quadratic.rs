@@ -1,61 +1,45 @@
-//! Three-point peak fits per axis around the brightest pixel: a parabola through the pixel
-//! values, or through their logarithms (exact for a sampled, not integrated, Gaussian).
+//! Three-point parabolic peak fit per axis around the brightest pixel.
 //!
 //! # Formula
 //! With `a, b, c` the background-subtracted values left of, at, and right of the brightest
 //! pixel (rows likewise for y), the vertex offset from the brightest pixel is
 //! ```text
-//! parabolic: d = (a - c) / (2 (a - 2b + c))
-//! Gaussian:  the same on ln a, ln b, ln c (all three must be positive)
+//! d = (a - c) / (2 (a - 2b + c))
 //! ```
 //! clamped to +-1/2 (the vertex of a concave parabola through a maximum lies within half a
-//! pixel of it). The parabolic form is independent of the background level; the Gaussian one
-//! falls back to the parabolic on an axis where a neighbour is not positive.
+//! pixel of it). It is independent of the background level.
 //!
 //! # Error estimate
 //! First-order propagation: `d(d)/da = (c - b)/D^2`, `d(d)/db = (a - c)/D^2`,
 //! `d(d)/dc = (b - a)/D^2` with `D = a - 2b + c`, times each pixel's variance
-//! (`max(F, 0) + var_bg`); for the Gaussian form the values are logarithms, of variance
-//! `var / F^2`, plus the background level's error through the logarithms. An axis without a
-//! usable fit reports 1/sqrt(12) px (the pixel's own quantisation). Flux and SNR are those of
-//! the 3x3 box around the peak.
+//! (`max(F, 0) + var_bg`). An axis without a usable fit reports 1/sqrt(12) px (the pixel's
+//! own quantisation). Flux and SNR are those of the 3x3 box around the peak.
 //!
 //! # Cost
 //! Per star: a pass over the window for the peak (and the perimeter for the background), then
-//! 9 pixels, 2 divides per axis (Gaussian: 3 logarithms per axis). The cheapest method here.
+//! 9 pixels, 2 divides per axis. The cheapest method here.
 //!
 //! # Where it fails
-//! - The parabolic form is biased towards the peak pixel, most for compact stars. Measured
-//!   RMS over phases (host test `centroid_quadratic`): 0.156 px at a = 0.5, 0.080 at 1,
-//!   0.043 at 1.5, 0.026 at 2, 0.012 at 3.
-//! - The Gaussian form is exact for a sampled Gaussian; pixel integration leaves 0.026 px at
-//!   a = 0.5, 0.008 at 0.75, 0.002 at 1, < 3e-4 for a >= 1.5.
+//! - Biased towards the peak pixel, most for compact stars. Measured RMS over phases (host
+//!   test `centroid_quadratic`): 0.156 px at a = 0.5, 0.080 at 1, 0.043 at 1.5, 0.026 at 2,
+//!   0.012 at 3.
 //! - Wide PSFs: three points see only the flat top, so the random error grows (it uses 3 of
 //!   the star's pixels per axis); the error estimate matched the scatter within 7 % at SNR
 //!   20..100 (a = 1.5).
-//! - Faint stars: the peak pixel may be a noise spike; the log form needs positive
-//!   neighbours.
+//! - Faint stars: the peak pixel may be a noise spike.
 //! - A peak on the window border or next to an excluded pixel: that axis keeps the peak
 //!   pixel's centre (flags `PEAK_AT_EDGE`, `EXCLUDED_PIXEL`).
+//!
+//! (The log-parabolic "Gaussian" variant and the Gaussian-windowed IWC centroid were removed:
+//! on the Cortex-M7 they sat on the speed/accuracy frontier in no scene; see the README's
+//! method list.)
 
 use super::{Background, Centroid, CentroidFlags, CentroidInput, Measured, Prepared, math};
-
-/// The shape fitted through the three points.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum QuadraticKind {
-    /// A parabola through the values.
-    Parabolic,
-    /// A parabola through the logarithms of the values (a Gaussian).
-    Gaussian,
-}
 
 /// Parameters of [`quadratic`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct QuadraticParams {
-    /// Fitted shape.
-    pub kind: QuadraticKind,
     /// Background source.
     pub background: Background,
 }
@@ -64,34 +48,14 @@ pub struct QuadraticParams {
 const PIXEL_SIGMA: f32 = 0.288_675_13;
 
 /// A fitted axis: offset and its standard deviation; `None` when no fit was possible.
-fn fit_axis(
-    a: f32,
-    b: f32,
-    c: f32,
-    var: impl Fn(f32) -> f32,
-    var_level: f32,
-    kind: QuadraticKind,
-) -> Option<(f32, f32)> {
-    let parabolic = |a: f32, b: f32, c: f32| {
-        let d = a - 2.0 * b + c;
-        if d.is_nan() || d >= 0.0 {
-            return None;
-        }
-        let off = (0.5 * (a - c) / d).clamp(-0.5, 0.5);
-        let d2 = d * d;
-        let (ga, gb, gc) = ((c - b) / d2, (a - c) / d2, (b - a) / d2);
-        Some((off, (ga, gb, gc)))
-    };
-    if kind == QuadraticKind::Gaussian && a > 0.0 && b > 0.0 && c > 0.0 {
-        let (la, lb, lc) = (math::ln(a), math::ln(b), math::ln(c));
-        let (off, (ga, gb, gc)) = parabolic(la, lb, lc)?;
-        // Var(ln F) = var / F^2; a background error e changes ln F by -e / F.
-        let v =
-            ga * ga * var(a) / (a * a) + gb * gb * var(b) / (b * b) + gc * gc * var(c) / (c * c);
-        let lev = ga / a + gb / b + gc / c;
-        return Some((off, math::sqrt(v + lev * lev * var_level)));
+fn fit_axis(a: f32, b: f32, c: f32, var: impl Fn(f32) -> f32) -> Option<(f32, f32)> {
+    let d = a - 2.0 * b + c;
+    if d.is_nan() || d >= 0.0 {
+        return None;
     }
-    let (off, (ga, gb, gc)) = parabolic(a, b, c)?;
+    let off = (0.5 * (a - c) / d).clamp(-0.5, 0.5);
+    let d2 = d * d;
+    let (ga, gb, gc) = ((c - b) / d2, (a - c) / d2, (b - a) / d2);
     let v = ga * ga * var(a) + gb * gb * var(b) + gc * gc * var(c);
     Some((off, math::sqrt(v)))
 }
@@ -120,9 +84,7 @@ pub fn quadratic(input: &CentroidInput<'_>, params: &QuadraticParams) -> Centroi
             }
         };
         match (p.signal(l.0, l.1), p.signal(r.0, r.1)) {
-            (Some(a), Some(c)) => {
-                fit_axis(a, b, c, var, var_level, params.kind).unwrap_or((0.0, PIXEL_SIGMA))
-            }
+            (Some(a), Some(c)) => fit_axis(a, b, c, var).unwrap_or((0.0, PIXEL_SIGMA)),
             _ => (0.0, PIXEL_SIGMA),
         }
     };

@@ -25,9 +25,8 @@ use startrack_core::calib::{
 };
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
-use startrack_core::centroid::iwc::{IwcParams, iwc};
 use startrack_core::centroid::pixcorr::{CurveHeader, PixCorr, PixCorrBackground};
-use startrack_core::centroid::quadratic::{QuadraticKind, QuadraticParams, quadratic};
+use startrack_core::centroid::quadratic::{QuadraticParams, quadratic};
 use startrack_core::centroid::raw_cog::{RawCogParams, RawWindow, raw_cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::detect::{DetectConfig, ScanDetector};
@@ -744,82 +743,57 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
     Ok(())
 }
 
-const METHODS: usize = 10;
+const METHODS: usize = 7;
 const METHOD_NAMES: [&str; METHODS] = [
     "cog1",
     "cog2",
     "cog1_given_bg",
-    "iwc",
     "quadratic_parabolic",
-    "quadratic_gaussian",
     "gauss_fit",
     "quadratic_parabolic_given_bg",
-    "quadratic_gaussian_given_bg",
     "gauss_fit_given_bg",
 ];
 /// The PSF's sigma of the synthetic stars, px.
 const PSF_SIGMA_PX: f32 = 1.0;
 
-/// Runs centroid method `m` over the whole window (box = window side).
+/// Runs centroid method `m` (an index into [`METHOD_NAMES`]) over the whole window
+/// (box = window side).
 #[inline(never)]
 fn run_method(m: usize, side: u8, input: &CentroidInput<'_>) -> f32 {
+    // The detector's background estimate, as `startrack accuracy` and the trade-off chart
+    // give it to the `_given_bg` stages.
+    let given = Background::Given {
+        level_e: 10.0,
+        variance_e2: 40.0,
+    };
     let c = match m {
         0 => cog(input, &CogParams::new(CogPower::One, side)),
         1 => cog(input, &CogParams::new(CogPower::Two, side)),
         2 => cog(
             input,
             &CogParams {
-                background: Background::Given {
-                    level_e: 10.0,
-                    variance_e2: 40.0,
-                },
+                background: given,
                 ..CogParams::new(CogPower::One, side)
             },
         ),
-        3 => iwc(input, &IwcParams::new(PSF_SIGMA_PX)),
-        4 => quadratic(
+        3 => quadratic(
             input,
             &QuadraticParams {
-                kind: QuadraticKind::Parabolic,
                 background: Background::PerimeterMedian,
             },
         ),
-        5 => quadratic(
-            input,
-            &QuadraticParams {
-                kind: QuadraticKind::Gaussian,
-                background: Background::PerimeterMedian,
-            },
-        ),
-        6 => gauss_fit(input, &GaussFitParams::new(PSF_SIGMA_PX)),
+        4 => gauss_fit(input, &GaussFitParams::new(PSF_SIGMA_PX)),
+        // The 3-point peak with the detector's background: no perimeter median.
+        5 => quadratic(input, &QuadraticParams { background: given }),
         // The near-CRLB method as `startrack accuracy` runs it: background given and held
         // (not fitted), start box the window's side capped at 5.
-        9 => gauss_fit(
+        _ => gauss_fit(
             input,
             &GaussFitParams {
                 fit_background: false,
-                background: Background::Given {
-                    level_e: 10.0,
-                    variance_e2: 40.0,
-                },
+                background: given,
                 start_box: side.min(5),
                 ..GaussFitParams::new(PSF_SIGMA_PX)
-            },
-        ),
-        // The 3-point peaks with the detector's background, as `startrack accuracy` and the
-        // trade-off chart run them: no perimeter median.
-        m => quadratic(
-            input,
-            &QuadraticParams {
-                kind: if m == 7 {
-                    QuadraticKind::Parabolic
-                } else {
-                    QuadraticKind::Gaussian
-                },
-                background: Background::Given {
-                    level_e: 10.0,
-                    variance_e2: 40.0,
-                },
             },
         ),
     };

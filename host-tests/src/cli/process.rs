@@ -4,7 +4,7 @@
 //! The frame's shape must be the table's geometry (lines x line length, 1033 x 1072 for the
 //! CCD47-20). Exposure and temperature (for hot pixels' own dark law) come from the options,
 //! else from the frame's `EXPTIME` (s) and `CCDTEMP` (K) keywords, else 1 s and 293 K.
-//! The PSF width (IWC weight, Gauss-fit model, and which pixel-phase curve `cog1`/`cog2`
+//! The PSF width (Gauss-fit model, and which pixel-phase curve `cog1`/`cog2`
 //! use) comes from `--psf-a-px` (80 %-energy radius) or `--psf-sigma`, else the frame's
 //! `PSFA` keyword (px, written by `startrack simulate`), else sigma 0.8 px (a = 1.44 px).
 
@@ -28,12 +28,12 @@ pub struct ProcessArgs {
     /// Window side, px (odd, 3 to 31); box methods use window - 2 inside it.
     #[arg(long, default_value_t = pipeline::DEFAULT_WINDOW_PX)]
     pub window: u16,
-    /// PSF Gaussian sigma, px (IWC weight, Gauss-fit model): sqrt(0.31) x the 80 % radius
+    /// PSF Gaussian sigma, px (Gauss-fit model): sqrt(0.31) x the 80 % radius
     /// (default: from --psf-a-px, else the frame's PSFA keyword, else 0.8).
     #[arg(long, conflicts_with = "psf_a_px")]
     pub psf_sigma: Option<f32>,
     /// PSF 80 %-energy radius, px: picks the table's pixel-phase curve for cog1/cog2 and
-    /// sets the sigma of iwc and gauss-fit (sigma = sqrt(0.31) a).
+    /// sets the sigma of gauss-fit (sigma = sqrt(0.31) a).
     #[arg(long)]
     pub psf_a_px: Option<f32>,
     /// Exposure, s (default: the frame's EXPTIME keyword, else 1).

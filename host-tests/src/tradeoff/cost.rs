@@ -8,7 +8,7 @@
 //! 5x5 or 7x7 window as its box and (except the `_given_bg` stages) a perimeter-median
 //! background,
 //! while the accuracy experiment runs a CoG box two pixels narrower than its window with the
-//! background given, IWC on 9x9 and the quadratic on 5x5. [`m7_cost`] maps each method to the
+//! background given and the quadratic on 5x5. [`m7_cost`] maps each method to the
 //! nearest measurement and says how in a `basis` string:
 //! - `measured`: the stage of the same method, box and background;
 //! - `perimeter bg`: the measured stage uses a perimeter-median background (an upper bound:
@@ -17,8 +17,7 @@
 //!   background (one more parameter per step; an upper bound), used only when the CSV lacks
 //!   the `centroid_gauss_fit_given_bg` stages (the Monte Carlo's configuration: background
 //!   given and held, start box `min(window, 5)`; basis `measured`);
-//! - `extrapolated`: linear in the pixel count through the 5x5 and 7x7 stages (3x3 boxes,
-//!   IWC 9x9);
+//! - `extrapolated`: linear in the pixel count through the 5x5 and 7x7 stages (3x3 boxes);
 //! - `power-2 extra added`: CoG power 2 with a given background = `cog1_given_bg` plus the
 //!   measured difference `cog2 - cog1` of the perimeter stages;
 //! - `correction added (7x7 measurement)`: a corrected CoG costs its uncorrected CoG plus
@@ -26,7 +25,7 @@
 //!   interpolation, independent of the box);
 //! - `correction not counted`: the same with a bench CSV that lacks `centroid_cog1c_7x7`.
 //!
-//! The 3-point peaks use their `_given_bg` stages (the background the Monte Carlo gives
+//! The 3-point peak uses its `_given_bg` stages (the background the Monte Carlo gives
 //! them) when the CSV has them, else the perimeter-median stages (`perimeter bg`).
 //!
 //! # Host time
@@ -161,19 +160,8 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
                 Some((cost, what))
             }
         }
-        Method::Iwc => {
-            let (c, ex) = t.by_side("centroid_iwc", method.window_side())?;
-            Some((c, basis(ex, "perimeter bg")))
-        }
-        Method::Quadratic(kind) => {
-            let stage = match kind {
-                startrack_core::centroid::quadratic::QuadraticKind::Parabolic => {
-                    "centroid_quadratic_parabolic"
-                }
-                startrack_core::centroid::quadratic::QuadraticKind::Gaussian => {
-                    "centroid_quadratic_gaussian"
-                }
-            };
+        Method::Quadratic => {
+            let stage = "centroid_quadratic_parabolic";
             // The given-background stage is what the Monte Carlo runs; older bench CSVs only
             // have the perimeter-median one, an upper bound.
             let given = format!("{stage}_given_bg");

@@ -180,43 +180,9 @@ pub fn ref_cog(
 }
 
 /// Reference 3-point fit of one axis: vertex offset of a parabola through (-1, a), (0, b),
-/// (1, c); with `log`, through the logarithms (a Gaussian's exact peak).
-pub fn ref_quad3(a: f64, b: f64, c: f64, log: bool) -> f64 {
-    let (a, b, c) = if log {
-        (a.ln(), b.ln(), c.ln())
-    } else {
-        (a, b, c)
-    };
+/// (1, c).
+pub fn ref_quad3(a: f64, b: f64, c: f64) -> f64 {
     0.5 * (a - c) / (a - 2.0 * b + c)
-}
-
-/// Reference Gaussian-windowed centroid (the fixed point of the XWIN iteration) on `v - bg`,
-/// window-relative, from `start`, `iters` iterations of gain `gain` (1 is slow but safe).
-pub fn ref_iwc(
-    v: &[f64],
-    w: u16,
-    bg: f64,
-    start: (f64, f64),
-    sw: f64,
-    iters: usize,
-    gain: f64,
-) -> (f64, f64) {
-    let (mut x, mut y) = start;
-    for _ in 0..iters {
-        let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
-        for (i, val) in v.iter().enumerate() {
-            let c = (i % usize::from(w)) as f64;
-            let r = (i / usize::from(w)) as f64;
-            let wt = (-((c - x).powi(2) + (r - y).powi(2)) / (2.0 * sw * sw)).exp();
-            let f = val - bg;
-            s += wt * f;
-            sx += wt * f * (c - x);
-            sy += wt * f * (r - y);
-        }
-        x += gain * sx / s;
-        y += gain * sy / s;
-    }
-    (x, y)
 }
 
 /// Cramer-Rao bound on x for the pixelated Gaussian in `win` (accuracy-theory.md), px: the
