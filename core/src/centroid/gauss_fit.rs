@@ -406,7 +406,7 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
     fit_general(&p, params)
 }
 
-/// The starting CoG of `cog::cog_start` on an already prepared window: the power-1 CoG of a
+/// The starting CoG on an already prepared window: the power-1 CoG of a
 /// `start_box` around the peak, and `EDGE_CLIPPED` when the box was clipped.
 fn start_cog(p: &Prepared<'_>, start_box: u8) -> Result<(Measured, CentroidFlags), Centroid> {
     let Some((pc, pr)) = p.peak() else {

@@ -1,7 +1,7 @@
 //! The few f32 functions the centroid methods need, for `no_std` (core has no `sqrt`, `exp`
-//! or `ln` for floats, and the core forbids `unsafe`, so no `vsqrt` intrinsic; `micromath`'s
-//! `sqrt` is documented as a ~5 % approximation and its `exp`/`ln` state no accuracy, too
-//! loose a basis for sub-millipixel work). `ln` and `erfc` are `libm` (rust-lang's port of
+//! or `erfc` for floats, and the core forbids `unsafe`, so no `vsqrt` intrinsic; `micromath`'s
+//! `sqrt` is documented as a ~5 % approximation and its `exp` states no accuracy, too
+//! loose a basis for sub-millipixel work). `erfc` is `libm` (rust-lang's port of
 //! musl's libm, about 1 ulp); `sqrt` and `exp` are written here for the Cortex-M7, where
 //! libm's versions cost ~50 instructions a call (its `sqrtf` is a bit-by-bit software root).
 //! All are total wrappers that give a finite value for any input; the host test
@@ -11,7 +11,6 @@
 //! |---|---|---|
 //! | [`sqrt`] | bit-pattern first guess, 2 Newton steps on `1/sqrt`, one Heron step (one divide) | 2.5e-7 relative |
 //! | [`exp`] | `2^k e^r`, `|r| <= ln 2 / 2` (Cody-Waite), degree-7 Taylor polynomial | 5e-7 relative |
-//! | [`ln`] | `libm::logf` | 2e-7 (1 + abs ln x) |
 //! | [`erfc`] | `libm::erfcf` | 6e-7 absolute |
 //! | [`pixel_fraction`] | difference of two `erfc`, taken on the tail side | 6e-7 absolute |
 //! | [`erfc_abs_and_gauss`] | Abramowitz & Stegun 7.1.26 and the `exp` it shares | 1.35e-6 / 5e-7 absolute |
@@ -86,15 +85,6 @@ pub fn exp(x: f32) -> f32 {
     let k_lo = k - k_hi;
     let pow2 = |e: i32| f32::from_bits(((e + 127) as u32) << 23);
     p * pow2(k_hi) * pow2(k_lo)
-}
-
-/// Natural logarithm; `-104` (below ln of the smallest positive f32) for zero, negative or
-/// NaN input, `f32::MAX.ln()` for +inf.
-pub fn ln(x: f32) -> f32 {
-    if x.is_nan() || x <= 0.0 {
-        return -104.0;
-    }
-    libm::logf(x.min(f32::MAX))
 }
 
 /// The complementary error function, Abramowitz & Stegun 7.1.26:
