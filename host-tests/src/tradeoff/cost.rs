@@ -23,7 +23,12 @@
 //! - `correction added (7x7 measurement)`: a corrected CoG costs its uncorrected CoG plus
 //!   the measured `centroid_cog1c_7x7 - centroid_cog1_7x7` (the curve's look-up and
 //!   interpolation, independent of the box);
-//! - `correction not counted`: the same with a bench CSV that lacks `centroid_cog1c_7x7`.
+//! - `correction not counted`: the same with a bench CSV that lacks `centroid_cog1c_7x7`;
+//! - `fused raw path, calibration included`: a corrected power-1 CoG (given background) is
+//!   charged the `centroid_cog1c_raw_<n>x<n>` stage, `centroid::raw_cog`, which computes the
+//!   same position from the raw window with the calibration fused in: an upper bound for the
+//!   centroid alone, and what the firmware's tracking runs (used when the CSV has the 5x5 and
+//!   7x7 rows).
 //!
 //! The 3-point peak uses its `_given_bg` stages (the background the Monte Carlo gives
 //! them) when the CSV has them, else the perimeter-median stages (`perimeter bg`).
@@ -137,6 +142,14 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
             corrected,
         } => {
             let n = u16::from(box_side);
+            // A corrected power-1 CoG with a given background is what the fused raw-window
+            // path computes (`centroid::raw_cog`: same position, calibration included).
+            if power == CogPower::One
+                && corrected
+                && let Some((c, ex)) = t.by_side("centroid_cog1c_raw", n)
+            {
+                return Some((c, basis(ex, "fused raw path, calibration included")));
+            }
             let (c1, ex) = t.by_side("centroid_cog1_given_bg", n)?;
             let (cost, what) = match power {
                 CogPower::One => (c1, basis(ex, "measured")),
