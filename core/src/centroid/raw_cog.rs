@@ -253,8 +253,6 @@ struct RowRun {
     r1: u8,
     /// Active row of the first row.
     y: u16,
-    /// Row weights: number of rows, `sum dy`, `sum dy^2`.
-    rw: [i32; 3],
 }
 
 /// A cell's calibration constants: `A` (e- per 1/16 ADU) and `K` (e-), see the module docs.
@@ -374,12 +372,74 @@ impl RawCogPlan {
         anchor: (u16, u16),
         box_side: u8,
     ) -> Result<Self, PlanError> {
+        let mut p = Self::EMPTY;
+        p.rebuild(cal, win, anchor, box_side)?;
+        Ok(p)
+    }
+
+    /// A plan of nothing (every application is stale): storage to [`Self::rebuild`].
+    pub const EMPTY: Self = Self {
+        key: PlanKey {
+            win: Rect {
+                x0: 0,
+                y0: 0,
+                width: 0,
+                height: 0,
+            },
+            anchor: (0, 0),
+            side: 0,
+            dark_scale_bits: 0,
+            table_len: 0,
+            saturation_adu: 0,
+            gain_bits: [0; 2],
+        },
+        b: BoxAt {
+            x0: 0,
+            y0: 0,
+            w: 0,
+            h: 0,
+            ax: 0,
+            ay: 0,
+        },
+        clipped: false,
+        defects: false,
+        groups: [ColGroup {
+            i0: 0,
+            m: 0,
+            out1: false,
+            x: 0,
+            dx_a: 0,
+            cb: [0; 3],
+            sdx: [0; 2],
+        }; MB],
+        n_groups: 0,
+        rows: [RowRun { r0: 0, r1: 0, y: 0 }; MB],
+        n_rows: 0,
+        cells: [CellConst { a: 0.0, k: 0.0 }; PLAN_CELLS],
+        cells_held: false,
+        use_out: [false; 2],
+        wt: [0; 5],
+    };
+
+    /// [`Self::new`] in place (no copy of the plan: what the firmware does when a tracked
+    /// star moves to another anchor pixel). On an error the plan is left stale for every
+    /// input ([`Self::EMPTY`]'s key).
+    pub fn rebuild(
+        &mut self,
+        cal: &FrameCalibration<'_>,
+        win: Rect,
+        anchor: (u16, u16),
+        box_side: u8,
+    ) -> Result<(), PlanError> {
+        self.key = Self::EMPTY.key;
         let side = (box_side / 2).saturating_mul(2).saturating_add(1);
         if side > MAX_BOX_SIDE || !rect_ok(cal, win) {
             return Err(PlanError::BadInput);
         }
         let (b, clipped) = box_around(win, anchor.0, anchor.1, side).ok_or(PlanError::BadInput)?;
-        Self::of_box(cal, key_of(cal, win, anchor, side), b, clipped).ok_or(PlanError::BadInput)
+        self.fill(cal, b, clipped).ok_or(PlanError::BadInput)?;
+        self.key = key_of(cal, win, anchor, side);
+        Ok(())
     }
 
     /// True when the plan was built for this calibration, window position, anchor and side
@@ -405,7 +465,8 @@ impl RawCogPlan {
         self.key.anchor
     }
 
-    fn of_box(cal: &FrameCalibration<'_>, key: PlanKey, b: BoxAt, clipped: bool) -> Option<Self> {
+    #[inline(never)]
+    fn fill(&mut self, cal: &FrameCalibration<'_>, b: BoxAt, clipped: bool) -> Option<()> {
         let t = cal.table();
         let g = t.geometry();
         let shift =
@@ -423,7 +484,7 @@ impl RawCogPlan {
         let next_edge = |x: usize, l: u8| ((x >> l) + 1) << l;
         // Column groups (runs ending at a dark or flat tile edge or the output split), with
         // their column-bias sums.
-        let mut groups = [ColGroup::default(); MB];
+        let groups = &mut self.groups;
         let mut n_groups = 0usize;
         let (x_start, x_end) = (usize::from(b.x0), usize::from(b.x0) + bw);
         let mut x = x_start;
@@ -456,9 +517,8 @@ impl RawCogPlan {
             n_groups += 1;
             x = stop;
         }
-        let gs = groups.get(..n_groups)?;
         // Tile rows (computed in usize: a shift of 16, no map, would overflow a u16).
-        let mut rows = [RowRun::default(); MB];
+        let rows = &mut self.rows;
         let mut n_rows = 0usize;
         let y_end = usize::from(b.y0) + usize::from(b.h);
         let mut r0 = 0usize;
@@ -468,54 +528,45 @@ impl RawCogPlan {
             let stop = y_end.min(next_edge(y, dl)).min(next_edge(y, fl));
             // stop - b.y0 <= b.h <= MB; stop > y, so r1 > r0.
             let r1 = stop - usize::from(b.y0);
-            let mut rw = [0i32; 3];
             for dy in (dy0 + r0 as i32..).take(r1 - r0) {
-                rw[0] += 1;
-                rw[1] += dy;
-                rw[2] += dy * dy;
-            }
-            for (t, v) in wt_rows.iter_mut().zip(rw) {
-                *t += v;
+                wt_rows[0] += 1;
+                wt_rows[1] += dy;
+                wt_rows[2] += dy * dy;
             }
             *rows.get_mut(n_rows)? = RowRun {
                 r0: r0 as u8,
                 r1: r1 as u8,
                 y: y as u16,
-                rw,
             };
             n_rows += 1;
             r0 = r1;
         }
-        let rs = rows.get(..n_rows)?;
-        let mut cells = [CellConst::default(); PLAN_CELLS];
-        let cells_held = n_groups * n_rows <= PLAN_CELLS;
-        if cells_held {
-            for (c, (rr, gr)) in cells
+        self.cells_held = n_groups * n_rows <= PLAN_CELLS;
+        if self.cells_held {
+            let gs = self.groups.get(..n_groups)?;
+            let rs = self.rows.get(..n_rows)?;
+            for (c, (rr, gr)) in self
+                .cells
                 .iter_mut()
                 .zip(rs.iter().flat_map(|r| gs.iter().map(move |g| (r, g))))
             {
                 *c = cell_const(cal, gr.x, rr.y, gr.out1);
             }
         }
+        let gs = self.groups.get(..n_groups)?;
         let (sdx, sdx2) = gs
             .iter()
             .fold((0, 0), |(a, b), g| (a + g.sdx[0], b + g.sdx[1]));
         let [h, sdy, sdy2] = wt_rows;
         let w = bw as i32;
-        Some(Self {
-            key,
-            b,
-            clipped,
-            defects: cal.rect_has_defects(b.rect()),
-            groups,
-            n_groups: n_groups as u8,
-            rows,
-            n_rows: n_rows as u8,
-            cells,
-            cells_held,
-            use_out: [gs.iter().any(|g| !g.out1), gs.iter().any(|g| g.out1)],
-            wt: [w * h, h * sdx, h * sdx2, w * sdy, w * sdy2],
-        })
+        self.use_out = [gs.iter().any(|g| !g.out1), gs.iter().any(|g| g.out1)];
+        self.wt = [w * h, h * sdx, h * sdx2, w * sdy, w * sdy2];
+        self.n_groups = n_groups as u8;
+        self.n_rows = n_rows as u8;
+        self.b = b;
+        self.clipped = clipped;
+        self.defects = cal.rect_has_defects(b.rect());
+        Some(())
     }
 
     /// The corrected CoG of the plan's box in the raw window `win` (this frame's samples
@@ -596,8 +647,9 @@ impl RawCogPlan {
                 .ok()
                 .zip(u16::try_from(ny).ok())
                 .and_then(|(nx, ny)| {
-                    let (nb, c) = box_around(win.rect, nx, ny, side)?;
-                    Self::of_box(cal, key_of(cal, win.rect, (nx, ny), side), nb, c)
+                    let mut np = Self::EMPTY;
+                    np.rebuild(cal, win.rect, (nx, ny), side).ok()?;
+                    Some(np)
                 })
                 .filter(|p| !p.clipped || self.clipped);
             match moved {
@@ -698,6 +750,7 @@ fn fused_sums(
         let (ra, rb) = (usize::from(run.r0), usize::from(run.r1));
         // Offsets (16 bias per output) of the tile row's rows.
         let (mut bias0, mut bias1) = ([0i32; 3], [0i32; 3]);
+        let mut rw = [0i32; 3];
         let add = |acc: &mut [i32; 3], v: i32, dy: i32, dy2: i32| {
             acc[0] += v;
             acc[1] += dy * v;
@@ -721,6 +774,7 @@ fn fused_sums(
                     dy2,
                 );
             }
+            add(&mut rw, 1, dy, dy2);
         }
         let bias = [bias0, bias1];
         let rows = raw.get(ra * ww..)?.chunks(ww.max(1)).take(rb - ra);
@@ -745,7 +799,16 @@ fn fused_sums(
                 a1.add(p1, q1, s1, dy, dy2);
                 a2.add(p2, q2, s2, dy, dy2);
             }
-            flush(cal, groups, &[a1, a2], cells, run, &bias, level_e, &mut e);
+            flush(
+                cal,
+                groups,
+                &[a1, a2],
+                cells,
+                (run.y, rw),
+                &bias,
+                level_e,
+                &mut e,
+            );
         } else {
             let mut acc = [GroupAcc::default(); MB];
             for (row, dy) in rows.zip(dy0 + ra as i32..) {
@@ -760,7 +823,16 @@ fn fused_sums(
                     a.add(p, q, r, dy, dy * dy);
                 }
             }
-            flush(cal, groups, &acc, cells, run, &bias, level_e, &mut e);
+            flush(
+                cal,
+                groups,
+                &acc,
+                cells,
+                (run.y, rw),
+                &bias,
+                level_e,
+                &mut e,
+            );
         }
     }
     Some((e, saturated))
@@ -768,9 +840,10 @@ fn fused_sums(
 
 /// Ends one tile row of the box: each column group's raw sums become the cell's
 /// `Z_w = sum w d` (offsets subtracted in closed form), then its background-subtracted
-/// moments `A Z_w - (K + L) W_w` are added to `e` (`L` = `level_e`). The cells' constants
-/// come from the plan (`cells`, this tile row's first) or, when it does not hold them, from
-/// the table.
+/// moments `A Z_w - (K + L) W_w` are added to `e` (`L` = `level_e`); `y` is the tile row's
+/// first active row, `rw` its row weights (rows, `sum dy`, `sum dy^2`). The cells'
+/// constants come from the plan (`cells`, this tile row's first) or, when it does not hold
+/// them, from the table.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn flush(
@@ -778,12 +851,12 @@ fn flush(
     groups: &[ColGroup],
     acc: &[GroupAcc],
     cells: Option<&[CellConst]>,
-    run: &RowRun,
+    (y, rw): (u16, [i32; 3]),
     bias: &[[i32; 3]; 2],
     level_e: f32,
     e: &mut [f32; 5],
 ) {
-    let [n_r, sdy, sdy2] = run.rw;
+    let [n_r, sdy, sdy2] = rw;
     for (k, (gr, a)) in groups.iter().zip(acc.iter()).enumerate() {
         let [b1, bdy, bdy2] = if gr.out1 { bias[1] } else { bias[0] };
         let m = i32::from(gr.m);
@@ -805,7 +878,7 @@ fn flush(
         let w = [m * n_r, sdx * n_r, sdx2 * n_r, m * sdy, m * sdy2];
         let cc = match cells.and_then(|c| c.get(k)) {
             Some(cc) => *cc,
-            None => cell_const(cal, gr.x, run.y, gr.out1),
+            None => cell_const(cal, gr.x, y, gr.out1),
         };
         let kl = cc.k + level_e;
         for (ei, (zv, wv)) in e.iter_mut().zip(z.iter().zip(w.iter())) {
@@ -937,8 +1010,9 @@ pub fn raw_cog(
     anchor: (u16, u16),
     params: &RawCogParams<'_>,
 ) -> RawCog {
-    match RawCogPlan::new(cal, win.rect, anchor, params.box_side) {
-        Ok(plan) => plan.apply_checked(cal, win, params),
+    let mut plan = RawCogPlan::EMPTY;
+    match plan.rebuild(cal, win.rect, anchor, params.box_side) {
+        Ok(()) => plan.apply_checked(cal, win, params),
         Err(_) => {
             let side = (params.box_side / 2).saturating_mul(2).saturating_add(1);
             RawCog {
