@@ -44,7 +44,7 @@ use crate::lines::{GEOMETRY, LINE_LEN, LineBuf};
 use startrack_core::calib::{FrameCalibration, LineLevels, PixelFlags};
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
-use startrack_core::centroid::raw_cog::{RawCogParams, RawWindow, raw_cog};
+use startrack_core::centroid::raw_cog::{PlanError, RawCogParams, RawCogPlan, RawWindow};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput, estimate_background};
 use startrack_core::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
 use startrack_core::detect::{
@@ -126,19 +126,23 @@ pub fn tracking_curve<'t>(calibration: &FrameCalibration<'t>) -> Option<PixCorr<
 }
 
 /// A star's background as last measured (perimeter median of its window): level e-/px and
-/// per-pixel variance e-^2; the tracking path's fused CoG takes it as given.
+/// per-pixel variance e-^2; the tracking path's fused CoG takes it as given. With it the
+/// slot of [`StarPipeline`]'s `plans` the fused CoG last measured the star with (`None`
+/// after a full-path measurement).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct StarBackground {
     level_e: f32,
     variance_e2: f32,
+    plan_slot: Option<u8>,
 }
 
 /// What a tracking window carries from the last frame: its star's pixel (the fused CoG's
-/// anchor) and background.
+/// anchor) and background, and the slot of `plans` its fused CoG uses this frame.
 #[derive(Clone, Copy, Debug)]
 struct TrackedStar {
     anchor: (u16, u16),
     background: Option<StarBackground>,
+    slot: u8,
 }
 
 /// The table's pixel-phase curve for the firmware's CoG, if it has one.
@@ -240,6 +244,11 @@ pub struct StarPipeline {
     prev_bgs: heapless::Vec<Option<StarBackground>, MAX_STARS>,
     /// Per tracking window (capture index): its star's anchor and background.
     tracked: heapless::Vec<TrackedStar, MAX_STARS>,
+    /// The fused CoG's box plans (`RawCogPlan`, ~460 B each), kept across frames: a star
+    /// measured by the fused path keeps its slot (in its `StarBackground`), and the slot's
+    /// plan is rebuilt only when the star's anchor pixel (so its window), the table or the
+    /// dark scale changed (`RawCogPlan::apply` refuses a stale plan).
+    plans: [RawCogPlan; MAX_STARS],
     stats: FrameStats,
     scratch: Scratch,
 }
@@ -275,6 +284,7 @@ impl StarPipeline {
             prev_stars: heapless::Vec::new(),
             prev_bgs: heapless::Vec::new(),
             tracked: heapless::Vec::new(),
+            plans: [RawCogPlan::EMPTY; MAX_STARS],
             stats: FrameStats::default(),
             scratch: Scratch {
                 raw: [0; CAPTURE_MAX_PX],
@@ -307,6 +317,15 @@ impl StarPipeline {
             }
             Mode::Tracking => {
                 self.capture.reset();
+                // Plan slots: a star keeps its last one (each slot served one window last
+                // frame, so at most one star holds it); the others take a free one.
+                let mut used = 0u64;
+                for bg in self.prev_bgs.iter().flatten() {
+                    if let Some(k) = bg.plan_slot.filter(|k| usize::from(*k) < MAX_STARS) {
+                        used |= 1 << k;
+                    }
+                }
+                let mut free = !used;
                 for (s, bg) in self.prev_stars.iter().zip(self.prev_bgs.iter()) {
                     let anchor = (
                         pixel_of(s.x_px, GEOMETRY.active_cols),
@@ -322,10 +341,21 @@ impl StarPipeline {
                     match self.capture.add(rect, clipped) {
                         Ok(_) => {
                             self.stats.track_windows += 1;
+                            let slot = match bg.and_then(|b| b.plan_slot) {
+                                Some(k) if usize::from(k) < MAX_STARS => k,
+                                // At most MAX_STARS windows: a free slot is left (the
+                                // lowest set bit of `free`; its plan is rebuilt).
+                                _ => {
+                                    let k = free.trailing_zeros().min(MAX_STARS as u32 - 1) as u8;
+                                    free &= !(1 << k);
+                                    k
+                                }
+                            };
                             // Capture indices follow the adds: same capacity, cannot fail.
                             let _ = self.tracked.push(TrackedStar {
                                 anchor,
                                 background: *bg,
+                                slot,
                             });
                         }
                         Err(e) => defmt::warn!("stars: tracking window refused: {}", e),
@@ -552,9 +582,11 @@ impl StarPipeline {
     /// The fused raw-window CoG of tracking window `i` (see the module docs), with the
     /// star's carried background; `None` when the path does not apply (no given-background
     /// curve, no background yet, rows missing) or flags its result, so that the full path
-    /// measures the window.
+    /// measures the window. The window's plan (slot `plans[tracked[i].slot]`) is applied,
+    /// and rebuilt first when it is stale (the star moved to another pixel, or the table or
+    /// dark scale changed).
     fn fused(
-        &self,
+        &mut self,
         calibration: &FrameCalibration<'_>,
         i: usize,
     ) -> Option<(StarRecord, StarBackground)> {
@@ -576,7 +608,16 @@ impl StarPipeline {
             variance_e2: bg.variance_e2,
             curve: Some(curve),
         };
-        let res = raw_cog(calibration, &win, t.anchor, &params);
+        let plan = self.plans.get_mut(usize::from(t.slot))?;
+        let res = match plan.apply(calibration, &win, &params) {
+            Ok(r) => r,
+            Err(PlanError::Stale) => {
+                plan.rebuild(calibration, w.rect, t.anchor, COG_BOX_PX)
+                    .ok()?;
+                plan.apply(calibration, &win, &params).ok()?
+            }
+            Err(PlanError::BadInput) => return None,
+        };
         let c = res.centroid;
         let full_path = CentroidFlags::LOW_SNR
             | CentroidFlags::SATURATED
@@ -599,7 +640,10 @@ impl StarPipeline {
                 sigma_y_px: c.sigma_y_px,
                 flags: u32::from(c.flags.bits()) | (u32::from(pipeline) << 24),
             },
-            bg,
+            StarBackground {
+                plan_slot: Some(t.slot),
+                ..bg
+            },
         ))
     }
 
@@ -614,6 +658,7 @@ impl StarPipeline {
         Some(StarBackground {
             level_e: b.level_e(),
             variance_e2: b.variance_e2,
+            plan_slot: None,
         })
     }
 
