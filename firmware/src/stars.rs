@@ -17,8 +17,11 @@
 //!   as in acquisition. Full lines are not calibrated. When the table has a given-background
 //!   curve ([`tracking_curve`]) and the star's background is known from its last full
 //!   measurement, the window first goes through the fused raw-window CoG
-//!   ([`startrack_core::centroid::raw_cog`]: no pixel is calibrated, ~3,800 instructions a
-//!   star against ~11,500 for the full path) anchored on the star's last pixel; only a result
+//!   ([`startrack_core::centroid::raw_cog`]: no pixel is calibrated) anchored on the star's
+//!   last pixel, through the star's `RawCogPlan` (kept across frames in a slot carried with
+//!   the star, rebuilt only when the star moves to another pixel or the table or dark scale
+//!   changes: ~1,300 instructions; applied every frame: ~2,600 instructions a star against
+//!   ~11,500 for the full path; `cargo m7-bench`); only a result
 //!   it flags (low SNR, saturated, a listed defect, clipped, re-anchoring failed, degenerate)
 //!   goes through the full path (calibration, `track_detect`, CoG), which also refreshes the
 //!   star's background. Stars measured by the fused path carry [`flags::FUSED`]. With fewer than [`MIN_TRACK_STARS`]
@@ -34,8 +37,9 @@
 //!   [`flags::UNCORRECTED`] says so. Cost per star: a scan of at most 16 curve headers and
 //!   a few tens of flops per axis.
 //!
-//! Memory: the ring 16 x 1072 x 2 = 34 KB, the capture list 32 x ~600 B = 19 KB, one window's
-//! scratch buffers (15 x 15 pixels), the detector and the star lists: ~60 KB of the AXI SRAM.
+//! Memory: the ring 16 x 1072 x 2 = 34 KB, the capture list 32 x ~600 B = 19 KB, the fused
+//! CoG's plans 32 x ~470 B = 15 KB, one window's scratch buffers (15 x 15 pixels), the
+//! detector and the star lists: ~75 KB of the AXI SRAM.
 //! Cost per acquisition line: a 2 KB copy into the ring and the candidate list's copy
 //! (32 x 28 B); per star: a 9x9 window copy, its calibration and a CoG (a few thousand
 //! operations). Per tracking line: a row test per window and the rows that fall in windows.

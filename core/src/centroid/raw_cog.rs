@@ -70,19 +70,25 @@
 //!   below `540 * 2^21 < 2^31`; `W_w <= 540`.
 
 //! # Cost
-//! Per sample one load and three adds; per row and run the five cell sums (~50 instructions a
-//! row with the bookkeeping and spills); per cell the table look-ups (dark, flat), ~30
-//! integer operations and ten f32 multiply-adds (~220 instructions on the M7 with the
-//! look-ups); per star the column set-up (column biases), one divide, three square roots
-//! (`math::sqrt`), the defect-list search and the curve (two Catmull-Rom evaluations).
-//! `cargo m7-bench`, stage `centroid_cog1c_raw_7x7` (a 7x7 box crossing 2x2 tiles, curve
-//! applied): 3,412 instructions, against 4,655 + 6,901 for `window_calibrate` +
-//! `centroid_cog1c_7x7` (general path with a perimeter median); `tracking_frame`, 30 of
-//! them: 102,329. What bounds it (QEMU `-d exec` trace of one call): the row loop (~900:
-//! two runs of 3-4 samples a row, their loop set-up and register spills), the box set-up
-//! (~900: column biases, tile rows, the levels' bias sums, spills), the cells (~570 for
-//! four), the square roots (~150, libm), the defect-list search (~140) and the curve
-//! (~140).
+//! Split in two ([`RawCogPlan`]): what depends only on the table, the dark scale and the
+//! box position (column groups and their column-bias sums, tile rows, the cells' `A` and
+//! `K` from the gain, dark and flat look-ups, the defect-list search, the saturation level)
+//! is built once per box position; each frame then pays per sample one load and three
+//! adds, per row and run the five cell sums (~120 instructions a row of a 7x7 box with the
+//! bookkeeping and register spills), per tile row the line levels' bias sums, per cell
+//! ~30 integer operations and ten f32 multiply-adds, per star one divide, three square
+//! roots (`math::sqrt`) and the curve (two Catmull-Rom evaluations). `cargo m7-bench`
+//! (7x7 box crossing 2x2 tiles, curve applied): `centroid_cog1c_raw_planned_7x7` (apply)
+//! 2,568 instructions, `raw_cog_plan_7x7` (plan build, in place) 1,308,
+//! `centroid_cog1c_raw_7x7` (one-shot [`raw_cog`] = build + apply) 4,028, against 4,655 +
+//! 6,805 for `window_calibrate` + `centroid_cog1c_7x7` (general path with a perimeter
+//! median); `tracking_frame`, 30 applications: 77,651. What bounds the application (QEMU
+//! `-d exec` trace, per call): the fused sums and CoG ~1,970 (of which the row loop ~850:
+//! two runs of 3-4 samples a row with their set-up and spilled accumulators; the bias sums
+//! and tile-row bookkeeping ~300; the four cells ~370), the curve ~280, the rest (plan
+//! check, re-anchoring test, clamps) ~250. An unrolled 7-wide row loop (per-column prefix
+//! sums over the rows: 21 accumulators, spilled) and a column-major loop (strided
+//! `step_by`) were both slower (2,667 and 3,659) and were not kept.
 
 //! # Re-anchoring
 //! The pixel-phase curve holds only while the CoG lies within half a pixel of the anchor
@@ -297,10 +303,11 @@ struct PlanKey {
 /// frame's dark scale, the window's position and the box (side, anchor): the box, its
 /// column groups with their column-bias sums, its tile rows with their row weights, the
 /// cells' constants `A`, `K`, whether it holds a listed defect, the saturation level. Built
-/// once per box position ([`RawCogPlan::new`], ~1,000 instructions on the M7: the table
-/// look-ups and the defect-list search), then applied to each frame's raw samples and line
-/// levels ([`RawCogPlan::apply`]). Size: about 440 bytes (`size_of`, checked by the host
-/// test `plan_is_small`).
+/// once per box position ([`RawCogPlan::rebuild`] in place, 1,308 instructions on the M7
+/// for a 7x7 box: the table look-ups and the defect-list search), then applied to each
+/// frame's raw samples and line levels ([`RawCogPlan::apply`], 2,568). Size: 472 bytes on
+/// a 64-bit host, a little less on the M7 (`size_of`; the host test `plan_is_small` keeps it
+/// at most 480).
 ///
 /// Staleness: the plan keeps what it was built for (window rectangle, anchor, side, the
 /// frame calibration's dark scale and a fingerprint of the table) and `apply` refuses
