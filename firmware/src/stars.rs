@@ -17,8 +17,11 @@
 //!   as in acquisition. Full lines are not calibrated. When the table has a given-background
 //!   curve ([`tracking_curve`]) and the star's background is known from its last full
 //!   measurement, the window first goes through the fused raw-window CoG
-//!   ([`startrack_core::centroid::raw_cog`]: no pixel is calibrated, ~3,800 instructions a
-//!   star against ~11,500 for the full path) anchored on the star's last pixel; only a result
+//!   ([`startrack_core::centroid::raw_cog`]: no pixel is calibrated) anchored on the star's
+//!   last pixel, through the star's `RawCogPlan` (kept across frames in a slot carried with
+//!   the star, rebuilt only when the star moves to another pixel or the table or dark scale
+//!   changes: ~1,300 instructions; applied every frame: ~2,600 instructions a star against
+//!   ~11,500 for the full path; `cargo m7-bench`); only a result
 //!   it flags (low SNR, saturated, a listed defect, clipped, re-anchoring failed, degenerate)
 //!   goes through the full path (calibration, `track_detect`, CoG), which also refreshes the
 //!   star's background. Stars measured by the fused path carry [`flags::FUSED`]. With fewer than [`MIN_TRACK_STARS`]
@@ -34,8 +37,9 @@
 //!   [`flags::UNCORRECTED`] says so. Cost per star: a scan of at most 16 curve headers and
 //!   a few tens of flops per axis.
 //!
-//! Memory: the ring 16 x 1072 x 2 = 34 KB, the capture list 32 x ~600 B = 19 KB, one window's
-//! scratch buffers (15 x 15 pixels), the detector and the star lists: ~60 KB of the AXI SRAM.
+//! Memory: the ring 16 x 1072 x 2 = 34 KB, the capture list 32 x ~600 B = 19 KB, the fused
+//! CoG's plans 32 x ~470 B = 15 KB, one window's scratch buffers (15 x 15 pixels), the
+//! detector and the star lists: ~75 KB of the AXI SRAM.
 //! Cost per acquisition line: a 2 KB copy into the ring and the candidate list's copy
 //! (32 x 28 B); per star: a 9x9 window copy, its calibration and a CoG (a few thousand
 //! operations). Per tracking line: a row test per window and the rows that fall in windows.
@@ -44,7 +48,7 @@ use crate::lines::{GEOMETRY, LINE_LEN, LineBuf};
 use startrack_core::calib::{FrameCalibration, LineLevels, PixelFlags};
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
-use startrack_core::centroid::raw_cog::{RawCogParams, RawWindow, raw_cog};
+use startrack_core::centroid::raw_cog::{PlanError, RawCogParams, RawCogPlan, RawWindow};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput, estimate_background};
 use startrack_core::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
 use startrack_core::detect::{
@@ -126,19 +130,23 @@ pub fn tracking_curve<'t>(calibration: &FrameCalibration<'t>) -> Option<PixCorr<
 }
 
 /// A star's background as last measured (perimeter median of its window): level e-/px and
-/// per-pixel variance e-^2; the tracking path's fused CoG takes it as given.
+/// per-pixel variance e-^2; the tracking path's fused CoG takes it as given. With it the
+/// slot of [`StarPipeline`]'s `plans` the fused CoG last measured the star with (`None`
+/// after a full-path measurement).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct StarBackground {
     level_e: f32,
     variance_e2: f32,
+    plan_slot: Option<u8>,
 }
 
 /// What a tracking window carries from the last frame: its star's pixel (the fused CoG's
-/// anchor) and background.
+/// anchor) and background, and the slot of `plans` its fused CoG uses this frame.
 #[derive(Clone, Copy, Debug)]
 struct TrackedStar {
     anchor: (u16, u16),
     background: Option<StarBackground>,
+    slot: u8,
 }
 
 /// The table's pixel-phase curve for the firmware's CoG, if it has one.
@@ -240,6 +248,11 @@ pub struct StarPipeline {
     prev_bgs: heapless::Vec<Option<StarBackground>, MAX_STARS>,
     /// Per tracking window (capture index): its star's anchor and background.
     tracked: heapless::Vec<TrackedStar, MAX_STARS>,
+    /// The fused CoG's box plans (`RawCogPlan`, ~460 B each), kept across frames: a star
+    /// measured by the fused path keeps its slot (in its `StarBackground`), and the slot's
+    /// plan is rebuilt only when the star's anchor pixel (so its window), the table or the
+    /// dark scale changed (`RawCogPlan::apply` refuses a stale plan).
+    plans: [RawCogPlan; MAX_STARS],
     stats: FrameStats,
     scratch: Scratch,
 }
@@ -275,6 +288,7 @@ impl StarPipeline {
             prev_stars: heapless::Vec::new(),
             prev_bgs: heapless::Vec::new(),
             tracked: heapless::Vec::new(),
+            plans: [RawCogPlan::EMPTY; MAX_STARS],
             stats: FrameStats::default(),
             scratch: Scratch {
                 raw: [0; CAPTURE_MAX_PX],
@@ -307,6 +321,15 @@ impl StarPipeline {
             }
             Mode::Tracking => {
                 self.capture.reset();
+                // Plan slots: a star keeps its last one (each slot served one window last
+                // frame, so at most one star holds it); the others take a free one.
+                let mut used = 0u64;
+                for bg in self.prev_bgs.iter().flatten() {
+                    if let Some(k) = bg.plan_slot.filter(|k| usize::from(*k) < MAX_STARS) {
+                        used |= 1 << k;
+                    }
+                }
+                let mut free = !used;
                 for (s, bg) in self.prev_stars.iter().zip(self.prev_bgs.iter()) {
                     let anchor = (
                         pixel_of(s.x_px, GEOMETRY.active_cols),
@@ -322,10 +345,21 @@ impl StarPipeline {
                     match self.capture.add(rect, clipped) {
                         Ok(_) => {
                             self.stats.track_windows += 1;
+                            let slot = match bg.and_then(|b| b.plan_slot) {
+                                Some(k) if usize::from(k) < MAX_STARS => k,
+                                // At most MAX_STARS windows: a free slot is left (the
+                                // lowest set bit of `free`; its plan is rebuilt).
+                                _ => {
+                                    let k = free.trailing_zeros().min(MAX_STARS as u32 - 1) as u8;
+                                    free &= !(1 << k);
+                                    k
+                                }
+                            };
                             // Capture indices follow the adds: same capacity, cannot fail.
                             let _ = self.tracked.push(TrackedStar {
                                 anchor,
                                 background: *bg,
+                                slot,
                             });
                         }
                         Err(e) => defmt::warn!("stars: tracking window refused: {}", e),
@@ -552,9 +586,11 @@ impl StarPipeline {
     /// The fused raw-window CoG of tracking window `i` (see the module docs), with the
     /// star's carried background; `None` when the path does not apply (no given-background
     /// curve, no background yet, rows missing) or flags its result, so that the full path
-    /// measures the window.
+    /// measures the window. The window's plan (slot `plans[tracked[i].slot]`) is applied,
+    /// and rebuilt first when it is stale (the star moved to another pixel, or the table or
+    /// dark scale changed).
     fn fused(
-        &self,
+        &mut self,
         calibration: &FrameCalibration<'_>,
         i: usize,
     ) -> Option<(StarRecord, StarBackground)> {
@@ -576,7 +612,16 @@ impl StarPipeline {
             variance_e2: bg.variance_e2,
             curve: Some(curve),
         };
-        let res = raw_cog(calibration, &win, t.anchor, &params);
+        let plan = self.plans.get_mut(usize::from(t.slot))?;
+        let res = match plan.apply(calibration, &win, &params) {
+            Ok(r) => r,
+            Err(PlanError::Stale) => {
+                plan.rebuild(calibration, w.rect, t.anchor, COG_BOX_PX)
+                    .ok()?;
+                plan.apply(calibration, &win, &params).ok()?
+            }
+            Err(PlanError::BadInput) => return None,
+        };
         let c = res.centroid;
         let full_path = CentroidFlags::LOW_SNR
             | CentroidFlags::SATURATED
@@ -599,7 +644,10 @@ impl StarPipeline {
                 sigma_y_px: c.sigma_y_px,
                 flags: u32::from(c.flags.bits()) | (u32::from(pipeline) << 24),
             },
-            bg,
+            StarBackground {
+                plan_slot: Some(t.slot),
+                ..bg
+            },
         ))
     }
 
@@ -614,6 +662,7 @@ impl StarPipeline {
         Some(StarBackground {
             level_e: b.level_e(),
             variance_e2: b.variance_e2,
+            plan_slot: None,
         })
     }
 

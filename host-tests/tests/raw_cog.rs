@@ -2,7 +2,9 @@
 //! calibration formula and against the general path (`calibrate_window` + `cog` with the given
 //! background, box anchored on the same pixel), over random tables, levels and raw samples of
 //! the full 16-bit range; its fall-backs and flags; its error estimate against the scatter of
-//! a seeded Monte Carlo; and no panic on arbitrary input.
+//! a seeded Monte Carlo; and no panic on arbitrary input. The per-box plan
+//! (`RawCogPlan`): plan + apply equals the one-shot `raw_cog` bit for bit, a stale plan is
+//! refused.
 
 #[path = "common/psf.rs"]
 mod psf;
@@ -13,7 +15,7 @@ use psf::{Rng, Star, Win, add_noise, render, sigma_of_a};
 use startrack_core::calib::{FrameCalibration, FrameConditions, LineLevels, PixelFlags};
 use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
 use startrack_core::centroid::raw_cog::{
-    MAX_BOX_SIDE, QUANTISATION_E, RawCog, RawCogParams, RawWindow, raw_cog,
+    MAX_BOX_SIDE, PlanError, QUANTISATION_E, RawCog, RawCogParams, RawCogPlan, RawWindow, raw_cog,
 };
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use startrack_core::geometry::ReadoutGeometry;
@@ -344,6 +346,8 @@ proptest! {
         };
         let win = RawWindow { rect: b, raw: &raw, levels: &levels };
         let got = raw_cog(&cal, &win, anchor, &params);
+        let plan = RawCogPlan::new(&cal, b, anchor, params.box_side).expect("plan builds");
+        prop_assert!(same(&plan.apply(&cal, &win, &params).expect("fresh plan"), &got));
         let c = got.centroid;
         prop_assert!(!got.general_path);
         prop_assert!(c.x_px.is_finite() && c.y_px.is_finite() && c.sigma_x_px.is_finite());
@@ -418,9 +422,23 @@ proptest! {
         let rect = Rect { x0: rect.0, y0: rect.1, width: rect.2, height: rect.3 };
         let win = RawWindow { rect, raw: &raw, levels: &levels };
         let params = RawCogParams { box_side: side, level_e, variance_e2: var, curve: None };
-        let c = raw_cog(&cal, &win, anchor, &params).centroid;
+        let got = raw_cog(&cal, &win, anchor, &params);
+        let c = got.centroid;
         for v in [c.x_px, c.y_px, c.flux_e, c.snr, c.sigma_x_px, c.sigma_y_px] {
             prop_assert!(v.is_finite());
+        }
+        // The plan of the same inputs: refused (and the one-shot degenerate) or the same
+        // result bit for bit; never a panic.
+        match RawCogPlan::new(&cal, rect, anchor, side) {
+            Ok(plan) => {
+                prop_assert!(plan.is_for(&cal, rect, anchor, side));
+                let r = plan.apply(&cal, &win, &params);
+                prop_assert!(r.is_ok_and(|r| same(&r, &got)), "{r:?} vs {got:?}");
+            }
+            Err(e) => {
+                prop_assert_eq!(e, PlanError::BadInput);
+                prop_assert!(c.flags.contains(CentroidFlags::DEGENERATE));
+            }
         }
     }
 }
@@ -676,4 +694,90 @@ fn sigma_estimate_matches_the_scatter() {
             );
         }
     }
+}
+
+/// Bit-for-bit equality of two results (`-0.0` and `0.0` told apart).
+fn same(a: &RawCog, b: &RawCog) -> bool {
+    let bits = |c: &Centroid| {
+        [c.x_px, c.y_px, c.flux_e, c.snr, c.sigma_x_px, c.sigma_y_px].map(f32::to_bits)
+    };
+    bits(&a.centroid) == bits(&b.centroid)
+        && a.centroid.flags == b.centroid.flags
+        && a.general_path == b.general_path
+        && a.reanchored == b.reanchored
+        && a.anchor == b.anchor
+}
+
+/// A plan is refused for a frame calibration (dark scale, table), window, or box side other
+/// than its own, and works again once rebuilt; a failed rebuild leaves it refusing.
+#[test]
+fn stale_plans_are_refused() {
+    let mut maps = Maps::plain(1.5);
+    maps.dark_scale_bits = 1000;
+    let cal = cal_of(&maps);
+    let w = Win::centred(20, 12, 11);
+    let raw = star_raw(w, (20.2, 11.9), 1.2, 50_000.0, 20.0, 1.5);
+    let levels = vec![levels_for([1000, 1000]); 11];
+    let win = RawWindow {
+        rect: w.rect(),
+        raw: &raw,
+        levels: &levels,
+    };
+    let params = RawCogParams {
+        box_side: 7,
+        level_e: 20.0,
+        variance_e2: 45.0,
+        curve: None,
+    };
+    let mut plan = RawCogPlan::new(&cal, w.rect(), (20, 12), 7).expect("plan");
+    let fresh = plan.apply(&cal, &win, &params).expect("fresh");
+    assert!(same(&fresh, &raw_cog(&cal, &win, (20, 12), &params)));
+    assert!(!fresh.centroid.flags.contains(CentroidFlags::DEGENERATE));
+    // Another dark scale (next frame's exposure or temperature).
+    let mut other = maps.clone();
+    other.dark_scale_bits = 5000;
+    let cal_ds = cal_of(&other);
+    assert_eq!(plan.apply(&cal_ds, &win, &params), Err(PlanError::Stale));
+    assert!(!plan.is_for(&cal_ds, w.rect(), (20, 12), 7));
+    // Another table (other gains).
+    let cal_gain = cal_of(&Maps::plain(1.25));
+    assert_eq!(plan.apply(&cal_gain, &win, &params), Err(PlanError::Stale));
+    // The window moved (the star's anchor moved with it).
+    let w2 = Win::centred(21, 12, 11);
+    let raw2 = star_raw(w2, (20.2, 11.9), 1.2, 50_000.0, 20.0, 1.5);
+    let win2 = RawWindow {
+        rect: w2.rect(),
+        raw: &raw2,
+        levels: &levels,
+    };
+    assert_eq!(plan.apply(&cal, &win2, &params), Err(PlanError::Stale));
+    // Another box side.
+    let p5 = RawCogParams {
+        box_side: 5,
+        ..params
+    };
+    assert_eq!(plan.apply(&cal, &win, &p5), Err(PlanError::Stale));
+    // Rebuilt for the moved window: accepted, and equal to the one-shot there.
+    plan.rebuild(&cal, w2.rect(), (21, 12), 7).expect("rebuild");
+    assert!(plan.is_for(&cal, w2.rect(), (21, 12), 7));
+    let moved = plan.apply(&cal, &win2, &params).expect("rebuilt");
+    assert!(same(&moved, &raw_cog(&cal, &win2, (21, 12), &params)));
+    assert_eq!(plan.apply(&cal, &win, &params), Err(PlanError::Stale));
+    // A failed rebuild (anchor outside the window) leaves the plan refusing everything.
+    assert_eq!(
+        plan.rebuild(&cal, w2.rect(), (0, 0), 7),
+        Err(PlanError::BadInput)
+    );
+    assert_eq!(plan.apply(&cal, &win2, &params), Err(PlanError::Stale));
+    assert_eq!(
+        RawCogPlan::EMPTY.apply(&cal, &win, &params),
+        Err(PlanError::Stale)
+    );
+}
+
+/// The plan's size as documented (the firmware keeps one per tracked star).
+#[test]
+fn plan_is_small() {
+    let n = std::mem::size_of::<RawCogPlan>();
+    assert!(n <= 480, "RawCogPlan is {n} bytes");
 }

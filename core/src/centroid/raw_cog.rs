@@ -70,19 +70,25 @@
 //!   below `540 * 2^21 < 2^31`; `W_w <= 540`.
 
 //! # Cost
-//! Per sample one load and three adds; per row and run the five cell sums (~50 instructions a
-//! row with the bookkeeping and spills); per cell the table look-ups (dark, flat), ~30
-//! integer operations and ten f32 multiply-adds (~220 instructions on the M7 with the
-//! look-ups); per star the column set-up (column biases), one divide, three square roots
-//! (`math::sqrt`), the defect-list search and the curve (two Catmull-Rom evaluations).
-//! `cargo m7-bench`, stage `centroid_cog1c_raw_7x7` (a 7x7 box crossing 2x2 tiles, curve
-//! applied): 3,412 instructions, against 4,655 + 6,901 for `window_calibrate` +
-//! `centroid_cog1c_7x7` (general path with a perimeter median); `tracking_frame`, 30 of
-//! them: 102,329. What bounds it (QEMU `-d exec` trace of one call): the row loop (~900:
-//! two runs of 3-4 samples a row, their loop set-up and register spills), the box set-up
-//! (~900: column biases, tile rows, the levels' bias sums, spills), the cells (~570 for
-//! four), the square roots (~150, libm), the defect-list search (~140) and the curve
-//! (~140).
+//! Split in two ([`RawCogPlan`]): what depends only on the table, the dark scale and the
+//! box position (column groups and their column-bias sums, tile rows, the cells' `A` and
+//! `K` from the gain, dark and flat look-ups, the defect-list search, the saturation level)
+//! is built once per box position; each frame then pays per sample one load and three
+//! adds, per row and run the five cell sums (~120 instructions a row of a 7x7 box with the
+//! bookkeeping and register spills), per tile row the line levels' bias sums, per cell
+//! ~30 integer operations and ten f32 multiply-adds, per star one divide, three square
+//! roots (`math::sqrt`) and the curve (two Catmull-Rom evaluations). `cargo m7-bench`
+//! (7x7 box crossing 2x2 tiles, curve applied): `centroid_cog1c_raw_planned_7x7` (apply)
+//! 2,568 instructions, `raw_cog_plan_7x7` (plan build, in place) 1,308,
+//! `centroid_cog1c_raw_7x7` (one-shot [`raw_cog`] = build + apply) 4,028, against 4,655 +
+//! 6,805 for `window_calibrate` + `centroid_cog1c_7x7` (general path with a perimeter
+//! median); `tracking_frame`, 30 applications: 77,651. What bounds the application (QEMU
+//! `-d exec` trace, per call): the fused sums and CoG ~1,970 (of which the row loop ~850:
+//! two runs of 3-4 samples a row with their set-up and spilled accumulators; the bias sums
+//! and tile-row bookkeeping ~300; the four cells ~370), the curve ~280, the rest (plan
+//! check, re-anchoring test, clamps) ~250. An unrolled 7-wide row loop (per-column prefix
+//! sums over the rows: 21 accumulators, spilled) and a column-major loop (strided
+//! `step_by`) were both slower (2,667 and 3,659) and were not kept.
 
 //! # Re-anchoring
 //! The pixel-phase curve holds only while the CoG lies within half a pixel of the anchor
@@ -228,20 +234,458 @@ fn box_around(win: Rect, ax: u16, ay: u16, side: u8) -> Option<(BoxAt, bool)> {
 
 /// A run of box columns with equal calibration constants except the column bias: one
 /// output, one dark tile column, one flat tile column.
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Copy, Debug, Default)]
 struct ColGroup {
-    /// First column's index in the box, and the run's length.
-    i0: u16,
-    m: u16,
-    /// Active column of the first column; on output 1.
-    x: u16,
+    /// First column's index in the box, and the run's length (both at most [`MB`]).
+    i0: u8,
+    m: u8,
+    /// On output 1.
     out1: bool,
+    /// Active column of the first column.
+    x: u16,
     /// `dx` of the first column.
     dx_a: i32,
     /// `16 column_bias` summed with weights 1, dx, dx^2 (1/16 ADU).
     cb: [i32; 3],
     /// `sum dx`, `sum dx^2` over the run.
     sdx: [i32; 2],
+}
+
+/// A run of box rows in one dark and one flat tile row.
+#[derive(Clone, Copy, Debug, Default)]
+struct RowRun {
+    /// First and one-past-last row index in the box (at most [`MB`]).
+    r0: u8,
+    r1: u8,
+    /// Active row of the first row.
+    y: u16,
+}
+
+/// A cell's calibration constants: `A` (e- per 1/16 ADU) and `K` (e-), see the module docs.
+#[derive(Clone, Copy, Debug, Default)]
+struct CellConst {
+    a: f32,
+    k: f32,
+}
+
+/// Cells whose constants a plan holds (a 9x9 box over 8-pixel tiles at the output split has
+/// at most 4 column groups x 2 tile rows); a box with more (tiles below 8 pixels) looks its
+/// constants up at every application instead (same values, slower).
+pub const PLAN_CELLS: usize = 8;
+
+/// Why a [`RawCogPlan`] cannot be built or applied.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PlanError {
+    /// A box side above [`MAX_BOX_SIDE`], an anchor outside the window, or a window not on
+    /// the active area.
+    BadInput,
+    /// The plan was built for another window position, anchor, box side, table or dark scale
+    /// than the application's: build a new one.
+    Stale,
+}
+
+/// What a plan was built for; an application checks it against its own inputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct PlanKey {
+    win: Rect,
+    anchor: (u16, u16),
+    side: u8,
+    dark_scale_bits: i32,
+    /// A fingerprint of the table: its length, saturation and both gains (a table with the
+    /// same four values but other maps is not told apart: the firmware loads one table).
+    table_len: usize,
+    saturation_adu: u16,
+    gain_bits: [u32; 2],
+}
+
+/// Everything of the fused CoG (see the module docs) that depends only on the table, the
+/// frame's dark scale, the window's position and the box (side, anchor): the box, its
+/// column groups with their column-bias sums, its tile rows with their row weights, the
+/// cells' constants `A`, `K`, whether it holds a listed defect, the saturation level. Built
+/// once per box position ([`RawCogPlan::rebuild`] in place, 1,308 instructions on the M7
+/// for a 7x7 box: the table look-ups and the defect-list search), then applied to each
+/// frame's raw samples and line levels ([`RawCogPlan::apply`], 2,568). Size: 472 bytes on
+/// a 64-bit host, a little less on the M7 (`size_of`; the host test `plan_is_small` keeps it
+/// at most 480).
+///
+/// Staleness: the plan keeps what it was built for (window rectangle, anchor, side, the
+/// frame calibration's dark scale and a fingerprint of the table) and `apply` refuses
+/// ([`PlanError::Stale`]) any other; the check is a few compares.
+#[derive(Clone, Copy, Debug)]
+pub struct RawCogPlan {
+    key: PlanKey,
+    b: BoxAt,
+    clipped: bool,
+    /// The box holds a listed defect: the general path measures it.
+    defects: bool,
+    groups: [ColGroup; MB],
+    n_groups: u8,
+    rows: [RowRun; MB],
+    n_rows: u8,
+    /// `cells[run * n_groups + group]`, when `n_groups * n_rows <= PLAN_CELLS`.
+    cells: [CellConst; PLAN_CELLS],
+    cells_held: bool,
+    /// The outputs the groups read.
+    use_out: [bool; 2],
+    /// The weight sums `sum w` of the box, for w in 1, dx, dx^2, dy, dy^2.
+    wt: [i32; 5],
+}
+
+/// The key of a frame calibration, window, anchor and side.
+fn key_of(cal: &FrameCalibration<'_>, win: Rect, anchor: (u16, u16), side: u8) -> PlanKey {
+    let t = cal.table();
+    PlanKey {
+        win,
+        anchor,
+        side,
+        dark_scale_bits: cal.dark_scale_bits(),
+        table_len: t.len_bytes(),
+        saturation_adu: t.saturation_adu(),
+        gain_bits: [t.gain(Output(0)).to_bits(), t.gain(Output(1)).to_bits()],
+    }
+}
+
+/// True when `r` lies in the active area (and is not empty).
+fn rect_ok(cal: &FrameCalibration<'_>, r: Rect) -> bool {
+    let g = cal.table().geometry();
+    !r.is_empty()
+        && u32::from(r.x0) + u32::from(r.width) <= u32::from(g.active_cols)
+        && u32::from(r.y0) + u32::from(r.height) <= u32::from(g.active_rows)
+}
+
+/// A cell's constants at active pixel (x, y) on output 1 or 0.
+#[inline(always)]
+fn cell_const(cal: &FrameCalibration<'_>, x: u16, y: u16, out1: bool) -> CellConst {
+    let t = cal.table();
+    let gain = t.gain(Output(u8::from(out1)));
+    let flat = t.flat_inv(x, y).to_bits() as f32;
+    // The dark term's two factors in f32 (an i64 product would convert through a call).
+    let dark = f32::from(t.dark_rel(x, y).to_bits()) * cal.dark_scale_bits() as f32;
+    // A = gain_bits flat_bits 2^-46 (e- per 1/16 ADU), K = dark_16 flat_bits 2^-30 (e-)
+    // with dark_16 = 16 dark_rel_bits dark_scale_bits.
+    CellConst {
+        a: gain.to_bits() as f32 * flat * (1.0 / 70_368_744_177_664.0),
+        k: dark * flat * (1.0 / 67_108_864.0),
+    }
+}
+
+impl RawCogPlan {
+    /// The plan of the `box_side` box (odd; an even side is rounded up) around active pixel
+    /// `anchor` of a window at `win` (clipped to it), for this table and dark scale.
+    pub fn new(
+        cal: &FrameCalibration<'_>,
+        win: Rect,
+        anchor: (u16, u16),
+        box_side: u8,
+    ) -> Result<Self, PlanError> {
+        let mut p = Self::EMPTY;
+        p.rebuild(cal, win, anchor, box_side)?;
+        Ok(p)
+    }
+
+    /// A plan of nothing (every application is stale): storage to [`Self::rebuild`].
+    pub const EMPTY: Self = Self {
+        key: PlanKey {
+            win: Rect {
+                x0: 0,
+                y0: 0,
+                width: 0,
+                height: 0,
+            },
+            anchor: (0, 0),
+            side: 0,
+            dark_scale_bits: 0,
+            table_len: 0,
+            saturation_adu: 0,
+            gain_bits: [0; 2],
+        },
+        b: BoxAt {
+            x0: 0,
+            y0: 0,
+            w: 0,
+            h: 0,
+            ax: 0,
+            ay: 0,
+        },
+        clipped: false,
+        defects: false,
+        groups: [ColGroup {
+            i0: 0,
+            m: 0,
+            out1: false,
+            x: 0,
+            dx_a: 0,
+            cb: [0; 3],
+            sdx: [0; 2],
+        }; MB],
+        n_groups: 0,
+        rows: [RowRun { r0: 0, r1: 0, y: 0 }; MB],
+        n_rows: 0,
+        cells: [CellConst { a: 0.0, k: 0.0 }; PLAN_CELLS],
+        cells_held: false,
+        use_out: [false; 2],
+        wt: [0; 5],
+    };
+
+    /// [`Self::new`] in place (no copy of the plan: what the firmware does when a tracked
+    /// star moves to another anchor pixel). On an error the plan is left stale for every
+    /// input ([`Self::EMPTY`]'s key).
+    pub fn rebuild(
+        &mut self,
+        cal: &FrameCalibration<'_>,
+        win: Rect,
+        anchor: (u16, u16),
+        box_side: u8,
+    ) -> Result<(), PlanError> {
+        self.key = Self::EMPTY.key;
+        let side = (box_side / 2).saturating_mul(2).saturating_add(1);
+        if side > MAX_BOX_SIDE || !rect_ok(cal, win) {
+            return Err(PlanError::BadInput);
+        }
+        let (b, clipped) = box_around(win, anchor.0, anchor.1, side).ok_or(PlanError::BadInput)?;
+        self.fill(cal, b, clipped).ok_or(PlanError::BadInput)?;
+        self.key = key_of(cal, win, anchor, side);
+        Ok(())
+    }
+
+    /// True when the plan was built for this calibration, window position, anchor and side
+    /// (`apply` would take it).
+    pub fn is_for(
+        &self,
+        cal: &FrameCalibration<'_>,
+        win: Rect,
+        anchor: (u16, u16),
+        box_side: u8,
+    ) -> bool {
+        let side = (box_side / 2).saturating_mul(2).saturating_add(1);
+        self.key == key_of(cal, win, anchor, side)
+    }
+
+    /// The box side the plan was built for.
+    pub fn box_side(&self) -> u8 {
+        self.key.side
+    }
+
+    /// The anchor the plan was built for.
+    pub fn anchor(&self) -> (u16, u16) {
+        self.key.anchor
+    }
+
+    #[inline(never)]
+    fn fill(&mut self, cal: &FrameCalibration<'_>, b: BoxAt, clipped: bool) -> Option<()> {
+        let t = cal.table();
+        let g = t.geometry();
+        let shift =
+            |m: Option<crate::table::MapView<'_>>| m.map_or(16, |m| m.header().tile_log2.min(16));
+        let (dl, fl) = (shift(t.dark_map()), shift(t.flat_map()));
+        let bw = usize::from(b.w);
+        let dx0 = i32::from(b.x0) - i32::from(b.ax);
+        let dy0 = i32::from(b.y0) - i32::from(b.ay);
+        let split = if g.outputs == 2 {
+            (g.line_len() / 2).saturating_sub(g.first_active_col())
+        } else {
+            usize::MAX
+        };
+        // x < 2^16 and the shifts are at most 16: the next tile edge is below 2^17.
+        let next_edge = |x: usize, l: u8| ((x >> l) + 1) << l;
+        // Column groups (runs ending at a dark or flat tile edge or the output split), with
+        // their column-bias sums.
+        let groups = &mut self.groups;
+        let mut n_groups = 0usize;
+        let (x_start, x_end) = (usize::from(b.x0), usize::from(b.x0) + bw);
+        let mut x = x_start;
+        while x < x_end {
+            let mut stop = x_end.min(next_edge(x, dl)).min(next_edge(x, fl));
+            if x < split {
+                stop = stop.min(split);
+            }
+            let i0 = x - x_start;
+            let dx_a = dx0 + i0 as i32;
+            let (mut cb, mut sdx) = ([0i32; 3], [0i32; 2]);
+            for (xc, dx) in (x..stop).zip(dx_a..) {
+                let c = i32::from(t.column_bias(g.raw_col_of_x(xc)).to_bits());
+                cb[0] += c;
+                cb[1] += dx * c;
+                cb[2] += dx * dx * c;
+                sdx[0] += dx;
+                sdx[1] += dx * dx;
+            }
+            // Box columns are below 2^16 and at most MB of them (so at most MB runs).
+            *groups.get_mut(n_groups)? = ColGroup {
+                i0: i0 as u8,
+                m: (stop - x) as u8,
+                out1: x >= split,
+                x: x as u16,
+                dx_a,
+                cb,
+                sdx,
+            };
+            n_groups += 1;
+            x = stop;
+        }
+        // Tile rows (computed in usize: a shift of 16, no map, would overflow a u16).
+        let rows = &mut self.rows;
+        let mut n_rows = 0usize;
+        let y_end = usize::from(b.y0) + usize::from(b.h);
+        let mut r0 = 0usize;
+        let mut wt_rows = [0i32; 3];
+        while r0 < usize::from(b.h) {
+            let y = usize::from(b.y0) + r0;
+            let stop = y_end.min(next_edge(y, dl)).min(next_edge(y, fl));
+            // stop - b.y0 <= b.h <= MB; stop > y, so r1 > r0.
+            let r1 = stop - usize::from(b.y0);
+            for dy in (dy0 + r0 as i32..).take(r1 - r0) {
+                wt_rows[0] += 1;
+                wt_rows[1] += dy;
+                wt_rows[2] += dy * dy;
+            }
+            *rows.get_mut(n_rows)? = RowRun {
+                r0: r0 as u8,
+                r1: r1 as u8,
+                y: y as u16,
+            };
+            n_rows += 1;
+            r0 = r1;
+        }
+        self.cells_held = n_groups * n_rows <= PLAN_CELLS;
+        if self.cells_held {
+            let gs = self.groups.get(..n_groups)?;
+            let rs = self.rows.get(..n_rows)?;
+            for (c, (rr, gr)) in self
+                .cells
+                .iter_mut()
+                .zip(rs.iter().flat_map(|r| gs.iter().map(move |g| (r, g))))
+            {
+                *c = cell_const(cal, gr.x, rr.y, gr.out1);
+            }
+        }
+        let gs = self.groups.get(..n_groups)?;
+        let (sdx, sdx2) = gs
+            .iter()
+            .fold((0, 0), |(a, b), g| (a + g.sdx[0], b + g.sdx[1]));
+        let [h, sdy, sdy2] = wt_rows;
+        let w = bw as i32;
+        self.use_out = [gs.iter().any(|g| !g.out1), gs.iter().any(|g| g.out1)];
+        self.wt = [w * h, h * sdx, h * sdx2, w * sdy, w * sdy2];
+        self.n_groups = n_groups as u8;
+        self.n_rows = n_rows as u8;
+        self.b = b;
+        self.clipped = clipped;
+        self.defects = cal.rect_has_defects(b.rect());
+        Some(())
+    }
+
+    /// The corrected CoG of the plan's box in the raw window `win` (this frame's samples
+    /// and line levels), as [`raw_cog`] gives it (bit for bit: `raw_cog` is `new` +
+    /// `apply`). [`PlanError::Stale`] when `cal`, `win.rect` or `params.box_side` differ
+    /// from the plan's; a window whose buffers do not match its rectangle gives a
+    /// [`CentroidFlags::DEGENERATE`] centroid. A re-anchoring move builds the moved box's
+    /// plan on the spot (one-shot cost).
+    pub fn apply(
+        &self,
+        cal: &FrameCalibration<'_>,
+        win: &RawWindow<'_>,
+        params: &RawCogParams<'_>,
+    ) -> Result<RawCog, PlanError> {
+        let side = (params.box_side / 2).saturating_mul(2).saturating_add(1);
+        if self.key != key_of(cal, win.rect, self.key.anchor, side) {
+            return Err(PlanError::Stale);
+        }
+        Ok(self.apply_checked(cal, win, params))
+    }
+
+    fn apply_checked(
+        &self,
+        cal: &FrameCalibration<'_>,
+        win: &RawWindow<'_>,
+        params: &RawCogParams<'_>,
+    ) -> RawCog {
+        let side = self.key.side;
+        let anchor = self.key.anchor;
+        let (ax, ay) = anchor;
+        let clip_flag = if self.clipped {
+            CentroidFlags::EDGE_CLIPPED
+        } else {
+            CentroidFlags::empty()
+        };
+        if !buffers_ok(win) {
+            return RawCog {
+                centroid: degenerate(ax, ay, side, CentroidFlags::empty()),
+                general_path: false,
+                reanchored: false,
+                anchor,
+            };
+        }
+        let level_bits = level_to_bits(params.level_e);
+        let var_bg = sanitize_var(params.variance_e2);
+        let mut general_path = false;
+        let mut measure = |p: &RawCogPlan| {
+            if p.defects {
+                general_path = true;
+                let level_e = level_bits as i32 as f32 * (1.0 / 64.0);
+                general_cog(cal, win, &p.b, side, level_e, var_bg)
+            } else {
+                fused_cog(cal, p, win, level_bits, var_bg)
+            }
+        };
+        let Some(mut m) = measure(self) else {
+            return RawCog {
+                centroid: degenerate(ax, ay, side, clip_flag),
+                general_path,
+                reanchored: false,
+                anchor,
+            };
+        };
+        let (mut ax, mut ay) = (ax, ay);
+        let mut reanchored = false;
+        let far = |m: &Meas| !(m.ox.abs() <= 0.5 && m.oy.abs() <= 0.5);
+        let mut flags = clip_flag;
+        if far(&m) {
+            // Move once to the CoG's pixel; offsets beyond the box are noise: at most h pixels.
+            let h = f32::from(side / 2);
+            let step = |o: f32| {
+                let o = o.clamp(-h, h);
+                (if o >= 0.0 { o + 0.5 } else { o - 0.5 }) as i32
+            };
+            let nx = i32::from(ax) + step(m.ox);
+            let ny = i32::from(ay) + step(m.oy);
+            let moved = u16::try_from(nx)
+                .ok()
+                .zip(u16::try_from(ny).ok())
+                .and_then(|(nx, ny)| {
+                    let mut np = Self::EMPTY;
+                    np.rebuild(cal, win.rect, (nx, ny), side).ok()?;
+                    Some(np)
+                })
+                .filter(|p| !p.clipped || self.clipped);
+            match moved {
+                Some(np) => match measure(&np) {
+                    Some(m2) => {
+                        (ax, ay) = (np.b.ax, np.b.ay);
+                        m = m2;
+                        reanchored = true;
+                        if far(&m) {
+                            flags |= CentroidFlags::NOT_CONVERGED;
+                        }
+                    }
+                    None => flags |= CentroidFlags::NOT_CONVERGED,
+                },
+                None => flags |= CentroidFlags::NOT_CONVERGED,
+            }
+        }
+        let c = finish(win.rect, ax, ay, side, &m, flags | m.flags);
+        let centroid = match &params.curve {
+            Some(curve) => curve.apply(c),
+            None => c,
+        };
+        RawCog {
+            centroid,
+            general_path,
+            reanchored,
+            anchor: (ax, ay),
+        }
+    }
 }
 
 /// Raw sums of one column group over the rows of the current tile row: the prefix sums of
@@ -281,106 +725,45 @@ fn row_sums(seg: &[u16]) -> (i32, i32, i32) {
     (p, q, r)
 }
 
-/// The fused moments `S_w = sum w (e - level_e)` (e-) of the box, with the weight sums
-/// `sum w`, and whether a sample is saturated. `None` for buffers that do not match (checked
-/// by the caller).
+/// The fused moments `S_w = sum w (e - level_e)` (e-) of the plan's box, with the weight
+/// sums `sum w`, and whether a sample is saturated. `None` for buffers that do not match.
 fn fused_sums(
     cal: &FrameCalibration<'_>,
+    plan: &RawCogPlan,
     win: &RawWindow<'_>,
-    b: &BoxAt,
     level_e: f32,
-) -> Option<([f32; 5], [i32; 5], bool)> {
-    let t = cal.table();
-    let g = t.geometry();
-    let shift =
-        |m: Option<crate::table::MapView<'_>>| m.map_or(16, |m| m.header().tile_log2.min(16));
-    let (dl, fl) = (shift(t.dark_map()), shift(t.flat_map()));
+) -> Option<([f32; 5], bool)> {
+    let b = &plan.b;
     let bw = usize::from(b.w);
     let ww = usize::from(win.rect.width);
-    let dx0 = i32::from(b.x0) - i32::from(b.ax);
     let dy0 = i32::from(b.y0) - i32::from(b.ay);
-    // Column groups (runs ending at a dark or flat tile edge or the output split), with
-    // their column-bias sums.
-    let split = if g.outputs == 2 {
-        (g.line_len() / 2).saturating_sub(g.first_active_col())
-    } else {
-        usize::MAX
-    };
-    // A heapless vector: no zeroing of unused slots.
-    let mut groups: heapless::Vec<ColGroup, MB> = heapless::Vec::new();
-    let (x_start, x_end) = (usize::from(b.x0), usize::from(b.x0) + bw);
-    let mut x = x_start;
-    // x < 2^16 and the shifts are at most 16: the next tile edge is below 2^17.
-    let next_edge = |x: usize, l: u8| ((x >> l) + 1) << l;
-    while x < x_end {
-        let mut stop = x_end.min(next_edge(x, dl)).min(next_edge(x, fl));
-        if x < split {
-            stop = stop.min(split);
-        }
-        let i0 = x - x_start;
-        let dx_a = dx0 + i0 as i32;
-        let (mut cb, mut sdx) = ([0i32; 3], [0i32; 2]);
-        for (xc, dx) in (x..stop).zip(dx_a..) {
-            let c = i32::from(t.column_bias(g.raw_col_of_x(xc)).to_bits());
-            cb[0] += c;
-            cb[1] += dx * c;
-            cb[2] += dx * dx * c;
-            sdx[0] += dx;
-            sdx[1] += dx * dx;
-        }
-        // Box columns are below 2^16 and at most MB of them (so at most MB runs).
-        let gr = ColGroup {
-            i0: i0 as u16,
-            m: (stop - x) as u16,
-            x: x as u16,
-            out1: x >= split,
-            dx_a,
-            cb,
-            sdx,
-        };
-        groups.push(gr).ok()?;
-        x = stop;
-    }
-    let groups = groups.as_slice();
-    let gains = [t.gain(Output(0)), t.gain(Output(1))];
-    let sat = t.saturation_adu();
+    let groups = plan.groups.get(..usize::from(plan.n_groups))?;
+    let runs = plan.rows.get(..usize::from(plan.n_rows))?;
+    let sat = plan.key.saturation_adu;
     let mut saturated = false;
     let mut e = [0f32; 5];
-    // Weight totals: rows, sum dy, sum dy^2 (the columns' from the groups).
-    let mut rows_w = [0i32; 3];
     let col_off = usize::from(b.x0 - win.rect.x0);
     let row_off = usize::from(b.y0 - win.rect.y0);
     let levels = win.levels.get(row_off..row_off + usize::from(b.h))?;
     let raw = win.raw.get(row_off * ww + col_off..)?;
-    // The outputs the groups read (the other's bias is not needed).
-    let use0 = groups.iter().any(|g| !g.out1);
-    let use1 = groups.iter().any(|g| g.out1);
+    let [use0, use1] = plan.use_out;
     // The column split of two groups (the box's width for one).
     let split = match groups {
         [_] => bw,
         [_, g2] => usize::from(g2.i0),
         _ => 0,
     };
-    // Tile rows: runs of rows ending at the next dark or flat tile edge (computed in usize:
-    // a shift of 16, no map, would overflow a u16; the edge is below 2^17).
-    let y_end = usize::from(b.y0) + usize::from(b.h);
-    let mut r0 = 0u16;
-    while r0 < b.h {
-        let y0 = b.y0 + r0;
-        let y = usize::from(y0);
-        let stop = y_end.min(next_edge(y, dl)).min(next_edge(y, fl));
-        // stop - b.y0 <= b.h <= MB: fits u16; stop > y, so r1 > r0.
-        let r1 = (stop - usize::from(b.y0)) as u16;
-        // Offsets (16 bias per output) and weights of the tile row's rows.
+    for (k, run) in runs.iter().enumerate() {
+        let (ra, rb) = (usize::from(run.r0), usize::from(run.r1));
+        // Offsets (16 bias per output) of the tile row's rows.
         let (mut bias0, mut bias1) = ([0i32; 3], [0i32; 3]);
         let mut rw = [0i32; 3];
-        let (ra, rb) = (usize::from(r0), usize::from(r1));
         let add = |acc: &mut [i32; 3], v: i32, dy: i32, dy2: i32| {
             acc[0] += v;
             acc[1] += dy * v;
             acc[2] += dy2 * v;
         };
-        for (lv, dy) in levels.get(ra..rb)?.iter().zip(dy0 + i32::from(r0)..) {
+        for (lv, dy) in levels.get(ra..rb)?.iter().zip(dy0 + ra as i32..) {
             let dy2 = dy * dy;
             if use0 {
                 add(
@@ -402,10 +785,15 @@ fn fused_sums(
         }
         let bias = [bias0, bias1];
         let rows = raw.get(ra * ww..)?.chunks(ww.max(1)).take(rb - ra);
+        let cells = if plan.cells_held {
+            plan.cells.get(k * groups.len()..)
+        } else {
+            None
+        };
         if split > 0 {
             // One or two column groups: both runs' sums in registers.
             let [mut a1, mut a2] = [GroupAcc::default(); 2];
-            for (row, dy) in rows.zip(dy0 + i32::from(r0)..) {
+            for (row, dy) in rows.zip(dy0 + ra as i32..) {
                 let (left, right) = row.get(..bw)?.split_at_checked(split)?;
                 let (p1, q1, s1) = row_sums(left);
                 let (p2, q2, s2) = row_sums(right);
@@ -418,16 +806,19 @@ fn fused_sums(
                 a1.add(p1, q1, s1, dy, dy2);
                 a2.add(p2, q2, s2, dy, dy2);
             }
-            let acc = [a1, a2];
-            let rg = RowGroup {
-                y: y0,
-                bias: &bias,
-                rw: &rw,
-            };
-            flush(cal, &gains, groups, &acc, &rg, level_e, &mut e);
+            flush(
+                cal,
+                groups,
+                &[a1, a2],
+                cells,
+                (run.y, rw),
+                &bias,
+                level_e,
+                &mut e,
+            );
         } else {
             let mut acc = [GroupAcc::default(); MB];
-            for (row, dy) in rows.zip(dy0 + i32::from(r0)..) {
+            for (row, dy) in rows.zip(dy0 + ra as i32..) {
                 let row = row.get(..bw)?;
                 for (gr, a) in groups.iter().zip(acc.iter_mut()) {
                     let i0 = usize::from(gr.i0);
@@ -439,53 +830,42 @@ fn fused_sums(
                     a.add(p, q, r, dy, dy * dy);
                 }
             }
-            let rg = RowGroup {
-                y: y0,
-                bias: &bias,
-                rw: &rw,
-            };
-            flush(cal, &gains, groups, &acc, &rg, level_e, &mut e);
+            flush(
+                cal,
+                groups,
+                &acc,
+                cells,
+                (run.y, rw),
+                &bias,
+                level_e,
+                &mut e,
+            );
         }
-        for (t, v) in rows_w.iter_mut().zip(rw) {
-            *t += v;
-        }
-        r0 = r1;
     }
-    let (sdx, sdx2) = groups
-        .iter()
-        .fold((0, 0), |(a, b), g| (a + g.sdx[0], b + g.sdx[1]));
-    let [h, sdy, sdy2] = rows_w;
-    let w = bw as i32;
-    let wt = [w * h, h * sdx, h * sdx2, w * sdy, w * sdy2];
-    Some((e, wt, saturated))
-}
-
-/// A tile row's offsets and weights (see [`fused_sums`]).
-struct RowGroup<'r> {
-    /// First row (active).
-    y: u16,
-    bias: &'r [[i32; 3]; 2],
-    rw: &'r [i32; 3],
+    Some((e, saturated))
 }
 
 /// Ends one tile row of the box: each column group's raw sums become the cell's
 /// `Z_w = sum w d` (offsets subtracted in closed form), then its background-subtracted
-/// moments `A Z_w - (K + L) W_w` are added to `e` (`L` = `level_e`).
+/// moments `A Z_w - (K + L) W_w` are added to `e` (`L` = `level_e`); `y` is the tile row's
+/// first active row, `rw` its row weights (rows, `sum dy`, `sum dy^2`). The cells'
+/// constants come from the plan (`cells`, this tile row's first) or, when it does not hold
+/// them, from the table.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn flush(
     cal: &FrameCalibration<'_>,
-    gains: &[crate::units::GainEPerAdu; 2],
     groups: &[ColGroup],
     acc: &[GroupAcc],
-    rg: &RowGroup<'_>,
+    cells: Option<&[CellConst]>,
+    (y, rw): (u16, [i32; 3]),
+    bias: &[[i32; 3]; 2],
     level_e: f32,
     e: &mut [f32; 5],
 ) {
-    let t = cal.table();
-    let [g0, g1] = *gains;
-    let [n_r, sdy, sdy2] = *rg.rw;
-    for (gr, a) in groups.iter().zip(acc.iter()) {
-        let [b1, bdy, bdy2] = if gr.out1 { rg.bias[1] } else { rg.bias[0] };
+    let [n_r, sdy, sdy2] = rw;
+    for (k, (gr, a)) in groups.iter().zip(acc.iter()).enumerate() {
+        let [b1, bdy, bdy2] = if gr.out1 { bias[1] } else { bias[0] };
         let m = i32::from(gr.m);
         // Raw moments of the cell from the prefix sums (u = m - i, dx = c - u).
         let c = gr.dx_a + m;
@@ -503,32 +883,29 @@ fn flush(
             16 * a.yyp - (m * bdy2 + sdy2 * cb0),
         ];
         let w = [m * n_r, sdx * n_r, sdx2 * n_r, m * sdy, m * sdy2];
-        let gain = if gr.out1 { g1 } else { g0 };
-        let flat = t.flat_inv(gr.x, rg.y).to_bits() as f32;
-        // The dark term's two factors in f32 (an i64 product would convert through a call).
-        let dark = f32::from(t.dark_rel(gr.x, rg.y).to_bits()) * cal.dark_scale_bits() as f32;
-        // A = gain_bits flat_bits 2^-46 (e- per 1/16 ADU), K = dark_16 flat_bits 2^-30 (e-)
-        // with dark_16 = 16 dark_rel_bits dark_scale_bits.
-        let a_c = gain.to_bits() as f32 * flat * (1.0 / 70_368_744_177_664.0);
-        let kl = dark * flat * (1.0 / 67_108_864.0) + level_e;
+        let cc = match cells.and_then(|c| c.get(k)) {
+            Some(cc) => *cc,
+            None => cell_const(cal, gr.x, y, gr.out1),
+        };
+        let kl = cc.k + level_e;
         for (ei, (zv, wv)) in e.iter_mut().zip(z.iter().zip(w.iter())) {
-            *ei += a_c * *zv as f32 - kl * *wv as f32;
+            *ei += cc.a * *zv as f32 - kl * *wv as f32;
         }
     }
 }
 
-/// The CoG of the box by the fused sums (see the module docs).
+/// The CoG of the plan's box by the fused sums (see the module docs).
 fn fused_cog(
     cal: &FrameCalibration<'_>,
+    plan: &RawCogPlan,
     win: &RawWindow<'_>,
-    b: &BoxAt,
     level_bits: i64,
     var_bg: f32,
 ) -> Option<Meas> {
     // The level is within i32 bits (level_to_bits saturates there).
     let l = level_bits as i32 as f32 * (1.0 / 64.0);
-    let ([s, sx, sxx, sy, syy], wt, saturated) = fused_sums(cal, win, b, l)?;
-    let [n, wx, wxx, wy, wyy] = wt.map(|v| v as f32);
+    let ([s, sx, sxx, sy, syy], saturated) = fused_sums(cal, plan, win, l)?;
+    let [n, wx, wxx, wy, wyy] = plan.wt.map(|v| v as f32);
     // No star: the flux is not positive (or not a number).
     if s.is_nan() || s <= 0.0 {
         return None;
@@ -627,107 +1004,31 @@ fn degenerate(ax: u16, ay: u16, side: u8, flags: CentroidFlags) -> Centroid {
     }
 }
 
-/// True when the window's buffers match it and it lies in the active area.
-fn window_ok(cal: &FrameCalibration<'_>, win: &RawWindow<'_>) -> bool {
-    let g = cal.table().geometry();
-    let r = win.rect;
-    !r.is_empty()
-        && win.raw.len() == r.len()
-        && win.levels.len() == usize::from(r.height)
-        && u32::from(r.x0) + u32::from(r.width) <= u32::from(g.active_cols)
-        && u32::from(r.y0) + u32::from(r.height) <= u32::from(g.active_rows)
+/// True when the window's buffers match its rectangle.
+fn buffers_ok(win: &RawWindow<'_>) -> bool {
+    win.raw.len() == win.rect.len() && win.levels.len() == usize::from(win.rect.height)
 }
 
 /// The corrected CoG of the box of `params.box_side` around active pixel `anchor` of the raw
-/// window `win` (see the module docs).
+/// window `win` (see the module docs): [`RawCogPlan::new`] then [`RawCogPlan::apply`].
 pub fn raw_cog(
     cal: &FrameCalibration<'_>,
     win: &RawWindow<'_>,
     anchor: (u16, u16),
     params: &RawCogParams<'_>,
 ) -> RawCog {
-    let side = (params.box_side / 2).saturating_mul(2).saturating_add(1);
-    let (ax, ay) = anchor;
-    let fail = |flags| RawCog {
-        centroid: degenerate(ax, ay, side, flags),
-        general_path: false,
-        reanchored: false,
-        anchor,
-    };
-    if side > MAX_BOX_SIDE || !window_ok(cal, win) {
-        return fail(CentroidFlags::empty());
-    }
-    let Some((b, clipped)) = box_around(win.rect, ax, ay, side) else {
-        return fail(CentroidFlags::empty());
-    };
-    let level_bits = level_to_bits(params.level_e);
-    let var_bg = sanitize_var(params.variance_e2);
-    let level_e = level_bits as i32 as f32 * (1.0 / 64.0);
-    let mut general_path = false;
-    let mut measure = |b: &BoxAt| {
-        if cal.rect_has_defects(b.rect()) {
-            general_path = true;
-            general_cog(cal, win, b, side, level_e, var_bg)
-        } else {
-            fused_cog(cal, win, b, level_bits, var_bg)
+    let mut plan = RawCogPlan::EMPTY;
+    match plan.rebuild(cal, win.rect, anchor, params.box_side) {
+        Ok(()) => plan.apply_checked(cal, win, params),
+        Err(_) => {
+            let side = (params.box_side / 2).saturating_mul(2).saturating_add(1);
+            RawCog {
+                centroid: degenerate(anchor.0, anchor.1, side, CentroidFlags::empty()),
+                general_path: false,
+                reanchored: false,
+                anchor,
+            }
         }
-    };
-    let clip_flag = if clipped {
-        CentroidFlags::EDGE_CLIPPED
-    } else {
-        CentroidFlags::empty()
-    };
-    let Some(mut m) = measure(&b) else {
-        return RawCog {
-            centroid: degenerate(ax, ay, side, clip_flag),
-            general_path,
-            reanchored: false,
-            anchor,
-        };
-    };
-    let (mut ax, mut ay) = (ax, ay);
-    let mut reanchored = false;
-    let far = |m: &Meas| !(m.ox.abs() <= 0.5 && m.oy.abs() <= 0.5);
-    let mut flags = clip_flag;
-    if far(&m) {
-        // Move once to the CoG's pixel; offsets beyond the box are noise: at most h pixels.
-        let h = f32::from(side / 2);
-        let step = |o: f32| {
-            let o = o.clamp(-h, h);
-            (if o >= 0.0 { o + 0.5 } else { o - 0.5 }) as i32
-        };
-        let nx = i32::from(ax) + step(m.ox);
-        let ny = i32::from(ay) + step(m.oy);
-        let moved = u16::try_from(nx)
-            .ok()
-            .zip(u16::try_from(ny).ok())
-            .and_then(|(nx, ny)| box_around(win.rect, nx, ny, side))
-            .filter(|(_, c)| !*c || clipped);
-        match moved {
-            Some((nb, _)) => match measure(&nb) {
-                Some(m2) => {
-                    (ax, ay) = (nb.ax, nb.ay);
-                    m = m2;
-                    reanchored = true;
-                    if far(&m) {
-                        flags |= CentroidFlags::NOT_CONVERGED;
-                    }
-                }
-                None => flags |= CentroidFlags::NOT_CONVERGED,
-            },
-            None => flags |= CentroidFlags::NOT_CONVERGED,
-        }
-    }
-    let c = finish(win.rect, ax, ay, side, &m, flags | m.flags);
-    let centroid = match &params.curve {
-        Some(curve) => curve.apply(c),
-        None => c,
-    };
-    RawCog {
-        centroid,
-        general_path,
-        reanchored,
-        anchor: (ax, ay),
     }
 }
 

@@ -27,7 +27,7 @@ use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::pixcorr::{CurveHeader, PixCorr, PixCorrBackground};
 use startrack_core::centroid::quadratic::{QuadraticParams, quadratic};
-use startrack_core::centroid::raw_cog::{RawCogParams, RawWindow, raw_cog};
+use startrack_core::centroid::raw_cog::{RawCogParams, RawCogPlan, RawWindow, raw_cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::detect::{DetectConfig, ScanDetector};
 use startrack_core::geometry::ReadoutGeometry;
@@ -533,10 +533,15 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         track_curve_bytes[8 + 2 * k..10 + 2 * k].copy_from_slice(&v.to_le_bytes());
     }
 
-    // Tracking frame: TRACK_STARS 7x7 raw windows calibrated and centroided with the tracking
-    // path's default method, the fused raw-window CoG power 1 in the 7x7 box
-    // (`centroid::raw_cog`: the calibration folded into the sums), each star's background
-    // given (carried from its last measurement), pixel-phase curve applied. The general path
+    // Tracking frame: the per-frame cost of the firmware's tracking (firmware/src/stars.rs)
+    // for TRACK_STARS 7x7 raw windows, each calibrated and centroided by applying its
+    // window's `RawCogPlan` (the fused raw-window CoG power 1 in the 7x7 box,
+    // `centroid::raw_cog`: the calibration folded into the sums; each star's background
+    // given, carried from its last measurement; pixel-phase curve applied). The plans are
+    // built beforehand, untimed: the firmware rebuilds a window's plan only when its star
+    // moves to another anchor pixel (stage `raw_cog_plan_7x7` gives that cost per move;
+    // `centroid_cog1c_raw_7x7` the one-shot plan + apply). Not included: the window capture
+    // of the raw lines and the full-path fallback on flags. The general path
     // (calibrate_window + cog with a perimeter median + curve) is measured by
     // `window_calibrate` and `centroid_cog1c_7x7` below.
     {
@@ -579,19 +584,31 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
             variance_e2: 40.0,
             curve: Some(track_curve),
         };
+        let mut plans = [None; TRACK_STARS];
+        for (p, rect) in plans.iter_mut().zip(rects.iter()) {
+            *p = RawCogPlan::new(&cal, *rect, (rect.x0 + 3, rect.y0 + 3), 7).ok();
+        }
         let t_track = measure(overhead, || {
-            for ((w, lv), rect) in wraw.iter().zip(wlevels.iter()).zip(rects.iter()) {
+            for (((w, lv), rect), plan) in wraw
+                .iter()
+                .zip(wlevels.iter())
+                .zip(rects.iter())
+                .zip(plans.iter())
+            {
                 let win = RawWindow {
                     rect: *rect,
                     raw: black_box(w),
                     levels: lv,
                 };
-                let anchor = (rect.x0 + 3, rect.y0 + 3);
-                let c = raw_cog(&cal, &win, anchor, &params).centroid;
-                if c.flags.contains(CentroidFlags::DEGENERATE) {
-                    ok = false;
+                match plan.as_ref().map(|p| p.apply(&cal, &win, &params)) {
+                    Some(Ok(r)) => {
+                        if r.centroid.flags.contains(CentroidFlags::DEGENERATE) {
+                            ok = false;
+                        }
+                        sum += r.centroid.x_px + r.centroid.y_px;
+                    }
+                    _ => ok = false,
                 }
-                sum += c.x_px + c.y_px;
             }
         });
         black_box(sum);
@@ -628,6 +645,8 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         curve: Some(curve_given),
     };
     let mut t_cog1c_raw = 0u64;
+    let mut t_raw_plan = 0u64;
+    let mut t_raw_planned = 0u64;
 
     // Star windows: 7x7 around a star, calibrated from its 7 raw lines, then centroided.
     let mut t_window = 0u64;
@@ -673,6 +692,28 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         let fused = fused.ok_or("raw_cog")?;
         if fused.centroid.flags.bits() != 0 || fused.general_path {
             return Err("raw_cog flagged a clean star");
+        }
+        // The same box as a plan (built once per box move) and its application per frame.
+        let anchor = (sx as u16, sy as u16);
+        // Rebuilt in place, as the firmware keeps a plan per tracking window.
+        let mut plan = RawCogPlan::EMPTY;
+        let mut built = Err(());
+        t_raw_plan += measure(overhead, || {
+            built = plan
+                .rebuild(&cal, black_box(rect), anchor, 7)
+                .map_err(|_| ());
+        });
+        built.map_err(|_| "raw_cog plan")?;
+        let plan = black_box(&plan);
+        let mut planned = None;
+        t_raw_planned += measure(overhead, || {
+            planned = Some(plan.apply(&cal, rw, &raw_params));
+        });
+        let planned = planned
+            .ok_or("raw_cog planned")?
+            .map_err(|_| "raw_cog planned")?;
+        if planned != fused {
+            return Err("raw_cog plan + apply differs from the one-shot");
         }
 
         // Centroids on the 7x7 window and on its central 5x5.
@@ -729,6 +770,22 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         "centroid_cog1c_raw_7x7",
         "star",
         t_cog1c_raw,
+        WINDOW_REPS as u64,
+    );
+    // The fused path split as the firmware's tracking runs it: the plan of a box (built when
+    // the star moves to another anchor pixel) and its application to a frame's raw window.
+    row(
+        out,
+        "raw_cog_plan_7x7",
+        "box",
+        t_raw_plan,
+        WINDOW_REPS as u64,
+    );
+    row(
+        out,
+        "centroid_cog1c_raw_planned_7x7",
+        "star",
+        t_raw_planned,
         WINDOW_REPS as u64,
     );
     for (side, acc) in [5u8, 7].iter().zip(t_centroid.iter()) {
