@@ -644,7 +644,24 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         variance_e2: 40.0,
         curve: Some(curve_given),
     };
+    // The same for a 5x5 box (the trade-off chart's corrected 5x5 CoG): its own curve.
+    let mut curve5_bytes = track_curve_bytes;
+    curve5_bytes[..8].copy_from_slice(
+        &CurveHeader {
+            box_side: 5,
+            ..curve_given.header()
+        }
+        .to_bytes(),
+    );
+    let (curve_given5, _) =
+        PixCorr::parse(&curve5_bytes).map_err(|_| "pixel-phase curve (given, 5x5)")?;
+    let raw_params5 = RawCogParams {
+        box_side: 5,
+        curve: Some(curve_given5),
+        ..raw_params
+    };
     let mut t_cog1c_raw = 0u64;
+    let mut t_cog1c_raw5 = 0u64;
     let mut t_raw_plan = 0u64;
     let mut t_raw_planned = 0u64;
 
@@ -689,6 +706,14 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         t_cog1c_raw += measure(overhead, || {
             fused = Some(raw_cog(&cal, rw, (sx as u16, sy as u16), &raw_params));
         });
+        let mut fused5 = None;
+        t_cog1c_raw5 += measure(overhead, || {
+            fused5 = Some(raw_cog(&cal, rw, (sx as u16, sy as u16), &raw_params5));
+        });
+        let fused5 = fused5.ok_or("raw_cog 5x5")?;
+        if fused5.centroid.flags.bits() != 0 || fused5.general_path {
+            return Err("raw_cog 5x5 flagged a clean star");
+        }
         let fused = fused.ok_or("raw_cog")?;
         if fused.centroid.flags.bits() != 0 || fused.general_path {
             return Err("raw_cog flagged a clean star");
@@ -770,6 +795,13 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         "centroid_cog1c_raw_7x7",
         "star",
         t_cog1c_raw,
+        WINDOW_REPS as u64,
+    );
+    row(
+        out,
+        "centroid_cog1c_raw_5x5",
+        "star",
+        t_cog1c_raw5,
         WINDOW_REPS as u64,
     );
     // The fused path split as the firmware's tracking runs it: the plan of a box (built when
