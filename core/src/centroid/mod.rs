@@ -530,39 +530,16 @@ impl<'a> Prepared<'a> {
     }
 
     /// Builds the output from a window-relative measurement: clamps the position to the
-    /// window, replaces any non-finite value, sets `LOW_SNR`.
+    /// window, replaces any non-finite value, sets `LOW_SNR` ([`finish_in`]).
     pub(crate) fn finish(&self, m: Measured, extra: CentroidFlags) -> Centroid {
-        if !(m.col.is_finite() && m.row.is_finite()) {
-            return self.degenerate(extra);
-        }
-        let mut flags = self.flags | extra;
-        let (wmax, hmax) = (f32::from(self.width) - 0.5, f32::from(self.height) - 0.5);
-        let col = m.col.clamp(-0.5, wmax);
-        let row = m.row.clamp(-0.5, hmax);
-        if col != m.col || row != m.row {
-            flags |= CentroidFlags::CLAMPED;
-        }
         let half = f32::from(self.width.max(self.height)) * 0.5;
-        let sigma = |v: f32| {
-            if v.is_finite() {
-                v.clamp(0.0, 2.0 * half)
-            } else {
-                half
-            }
+        let area = crate::window::Rect {
+            x0: self.x0,
+            y0: self.y0,
+            width: self.width,
+            height: self.height,
         };
-        let snr = if m.snr.is_finite() { m.snr } else { 0.0 };
-        if snr < LOW_SNR_LIMIT {
-            flags |= CentroidFlags::LOW_SNR;
-        }
-        Centroid {
-            x_px: f32::from(self.x0) + col,
-            y_px: f32::from(self.y0) + row,
-            flux_e: if m.flux_e.is_finite() { m.flux_e } else { 0.0 },
-            snr,
-            sigma_x_px: sigma(m.sigma_col),
-            sigma_y_px: sigma(m.sigma_row),
-            flags,
-        }
+        finish_in(area, &m, half, self.flags | extra).unwrap_or_else(|| self.degenerate(extra))
     }
 
     /// Iterates the usable pixels of the box `col0..=col1`, `row0..=row1` (window-relative,
@@ -666,6 +643,50 @@ impl Iterator for Perimeter<'_, '_> {
         }
         None
     }
+}
+
+/// Every method's output step: `m`'s position (relative to `area`'s corner) clamped to
+/// `area`'s pixel edges, `x0 - 1/2 ..= x0 + width - 1/2` ([`CentroidFlags::CLAMPED`] when the
+/// clamp acted), each sigma bounded to `0..=2 half` (`half` when not finite), a non-finite
+/// flux or SNR replaced by 0, [`CentroidFlags::LOW_SNR`] below [`LOW_SNR_LIMIT`]; `None` for
+/// a non-finite position (the caller returns its degenerate centroid).
+#[inline(always)]
+pub(crate) fn finish_in(
+    area: crate::window::Rect,
+    m: &Measured,
+    half: f32,
+    flags: CentroidFlags,
+) -> Option<Centroid> {
+    if !(m.col.is_finite() && m.row.is_finite()) {
+        return None;
+    }
+    let mut flags = flags;
+    let (wmax, hmax) = (f32::from(area.width) - 0.5, f32::from(area.height) - 0.5);
+    let col = m.col.clamp(-0.5, wmax);
+    let row = m.row.clamp(-0.5, hmax);
+    if col != m.col || row != m.row {
+        flags |= CentroidFlags::CLAMPED;
+    }
+    let sigma = |v: f32| {
+        if v.is_finite() {
+            v.clamp(0.0, 2.0 * half)
+        } else {
+            half
+        }
+    };
+    let snr = if m.snr.is_finite() { m.snr } else { 0.0 };
+    if snr < LOW_SNR_LIMIT {
+        flags |= CentroidFlags::LOW_SNR;
+    }
+    Some(Centroid {
+        x_px: f32::from(area.x0) + col,
+        y_px: f32::from(area.y0) + row,
+        flux_e: if m.flux_e.is_finite() { m.flux_e } else { 0.0 },
+        snr,
+        sigma_x_px: sigma(m.sigma_col),
+        sigma_y_px: sigma(m.sigma_row),
+        flags,
+    })
 }
 
 /// A method's result in window-relative coordinates, before [`Prepared::finish`].

@@ -115,7 +115,7 @@
 use super::cog::{Anchor, CogParams, CogPower, cog};
 use super::pixcorr::PixCorr;
 use super::{
-    Background, Centroid, CentroidFlags, CentroidInput, LOW_SNR_LIMIT, level_to_bits, math,
+    Background, Centroid, CentroidFlags, CentroidInput, Measured, finish_in, level_to_bits, math,
     sanitize_var,
 };
 use crate::calib::pixel::{QUANTISATION_E as CALIB_QUANTISATION_E, offset_16ths};
@@ -1034,37 +1034,16 @@ pub fn raw_cog(
 
 /// Active coordinates, clamped to the window (pixel edges), finite values, `LOW_SNR`.
 fn finish(win: Rect, ax: u16, ay: u16, side: u8, m: &Meas, flags: CentroidFlags) -> Centroid {
-    let x = f32::from(ax) + m.ox;
-    let y = f32::from(ay) + m.oy;
-    if !(x.is_finite() && y.is_finite()) {
-        return degenerate(ax, ay, side, flags);
-    }
-    let mut flags = flags;
-    let (lx, ly) = (f32::from(win.x0) - 0.5, f32::from(win.y0) - 0.5);
-    let (hx, hy) = (lx + f32::from(win.width), ly + f32::from(win.height));
-    let (cx, cy) = (x.clamp(lx, hx), y.clamp(ly, hy));
-    if cx != x || cy != y {
-        flags |= CentroidFlags::CLAMPED;
-    }
-    let half = f32::from(side) * 0.5;
-    let sigma = |v: f32| {
-        if v.is_finite() {
-            v.clamp(0.0, 2.0 * half)
-        } else {
-            half
-        }
+    // The anchor relative to the window's corner (inside it: checked by the box set-up).
+    let rel = |a: u16, o: u16| f32::from(a.saturating_sub(o));
+    let rel_m = Measured {
+        col: rel(ax, win.x0) + m.ox,
+        row: rel(ay, win.y0) + m.oy,
+        flux_e: m.flux_e,
+        snr: m.snr,
+        sigma_col: m.sigma_x,
+        sigma_row: m.sigma_y,
     };
-    let snr = if m.snr.is_finite() { m.snr } else { 0.0 };
-    if snr < LOW_SNR_LIMIT {
-        flags |= CentroidFlags::LOW_SNR;
-    }
-    Centroid {
-        x_px: cx,
-        y_px: cy,
-        flux_e: if m.flux_e.is_finite() { m.flux_e } else { 0.0 },
-        snr,
-        sigma_x_px: sigma(m.sigma_x),
-        sigma_y_px: sigma(m.sigma_y),
-        flags,
-    }
+    finish_in(win, &rel_m, f32::from(side) * 0.5, flags)
+        .unwrap_or_else(|| degenerate(ax, ay, side, flags))
 }
