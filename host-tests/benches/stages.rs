@@ -9,7 +9,10 @@
 //! - `frame/calibrated_detect`: the same with every active pixel calibrated and fed to
 //!   `LineDetector` (the reference path), for comparison.
 //! - `line_calibrate` (1024 px), `window_calibrate` (7x7), `centroid_cog1_7x7`,
-//!   `centroid_gauss_fit_7x7`, `tracking_frame` (30 windows calibrated + CoG 7x7).
+//!   `centroid_gauss_fit_7x7`, `centroid_gauss_fit_given_bg_5x5` (the near-CRLB fit as
+//!   `startrack accuracy` runs it), `centroid_cog1c_raw_7x7` (the fused raw-window corrected
+//!   CoG, one-shot), `tracking_frame` (the firmware's tracking: 30 windows, each a
+//!   `RawCogPlan` built beforehand and applied to the frame's raw samples).
 //!
 //! Run: `cargo bench -p startrack-host --bench stages` (one group: append its name).
 
@@ -17,13 +20,16 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use startrack_core::calib::{
     DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
 };
-use startrack_core::centroid::CentroidInput;
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
+use startrack_core::centroid::raw_cog::{RawCogParams, RawCogPlan, RawWindow, raw_cog};
+use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::detect::{DetectConfig, LineDetector, ScanDetector};
 use startrack_core::table::CalibTable;
 use startrack_core::units::{Electrons, Kelvin};
 use startrack_core::window::{Rect, Window};
+use startrack_host::pixcorr::{CurveSpec, build_curve};
 use startrack_host::sim::truth::TruthSections;
 use startrack_host::sim::{SensorParams, Simulator, Star};
 use std::hint::black_box;
@@ -194,15 +200,71 @@ fn stages(c: &mut Criterion) {
     c.bench_function("centroid_gauss_fit_7x7", |b| {
         b.iter(|| gauss_fit(black_box(&input), &GaussFitParams::new(1.0)))
     });
+    c.bench_function("centroid_gauss_fit_given_bg_5x5", |b| {
+        let (we5, _) = calibrate(&windows[0]);
+        // The central 5x5 of the window, as the M7 bench cuts it.
+        let c5: Vec<Electrons> = (1..6)
+            .flat_map(|r| we5[7 * r + 1..7 * r + 6].to_vec())
+            .collect();
+        let r5 = Rect {
+            x0: windows[0].0.x0 + 1,
+            y0: windows[0].0.y0 + 1,
+            width: 5,
+            height: 5,
+        };
+        let input5 = CentroidInput::new(Window::new(r5, &c5).unwrap());
+        let params = GaussFitParams {
+            fit_background: false,
+            background: Background::Given {
+                level_e: 0.0,
+                variance_e2: 40.0,
+            },
+            ..GaussFitParams::new(1.0)
+        };
+        b.iter(|| gauss_fit(black_box(&input5), &params))
+    });
+    // The fused tracking path with a given-background curve (a = 1.2 px, box 7).
+    let curve = build_curve(&CurveSpec {
+        a_px: 1.2,
+        box_side: 7,
+        power: CogPower::One,
+        background: PixCorrBackground::Given,
+        knots: 33,
+    })
+    .unwrap();
+    let (curve, _) = PixCorr::parse(&curve.bytes).unwrap();
+    let params = RawCogParams {
+        box_side: 7,
+        level_e: 0.0,
+        variance_e2: 40.0,
+        curve: Some(curve),
+    };
+    let raw_windows: Vec<(RawWindow<'_>, (u16, u16))> = windows
+        .iter()
+        .map(|w| {
+            let rw = RawWindow {
+                rect: w.0,
+                raw: &w.1,
+                levels: &w.2,
+            };
+            (rw, (w.0.x0 + 3, w.0.y0 + 3))
+        })
+        .collect();
+    c.bench_function("centroid_cog1c_raw_7x7", |b| {
+        let (rw, anchor) = &raw_windows[0];
+        b.iter(|| raw_cog(&cal, black_box(rw), *anchor, &params))
+    });
+    let plans: Vec<RawCogPlan> = raw_windows
+        .iter()
+        .map(|(rw, anchor)| RawCogPlan::new(&cal, rw.rect, *anchor, 7).unwrap())
+        .collect();
     c.bench_function("tracking_frame_30_stars", |b| {
         b.iter(|| {
             let mut s = 0.0f32;
-            for w in &windows {
-                let (we, wf) = calibrate(black_box(w));
-                let input =
-                    CentroidInput::new(Window::new(w.0, &we).unwrap()).with_pixel_flags(&wf);
-                let c = cog(&input, &CogParams::new(CogPower::One, 7));
-                s += c.x_px + c.y_px;
+            for ((rw, _), plan) in raw_windows.iter().zip(&plans) {
+                if let Ok(r) = plan.apply(&cal, black_box(rw), &params) {
+                    s += r.centroid.x_px + r.centroid.y_px;
+                }
             }
             s
         })
