@@ -2,7 +2,8 @@
 //! (`LineDetector` fed every calibrated line, same background stride): the candidates must be
 //! identical, bit for bit, on simulated CCD47-20 frames, including maps with a large spread
 //! of dark, flat and column bias; and the scan must calibrate only a small part of a quiet
-//! frame (otherwise it is no faster).
+//! frame (otherwise it is no faster). The closed-blob reports of acquisition
+//! (`push_raw_line_closed` against `LineDetector::push_line_closed`) must agree line by line.
 
 use startrack_core::calib::{FrameCalibration, FrameConditions, LineLevels, PixelFlags};
 use startrack_core::detect::{DetectConfig, LineDetector, ScanDetector};
@@ -41,32 +42,73 @@ fn frame(params: SensorParams, n_stars: usize, tile_log2: u8) -> Frame {
     }
 }
 
-/// Runs both paths; returns (reference candidates, scan candidates, calibrated fraction).
-fn both(f: &Frame, stride: u16) -> (LineDetector<256>, ScanDetector<'_, 256>, f64) {
+/// Runs both paths, the reference through `LineDetector::push_line_closed` and the scan
+/// through `ScanDetector::push_raw_line_closed` (as the firmware's acquisition), checking
+/// line by line that both report the same closed candidates and dropped counts, and that the
+/// scan's whole calibrated line (background rows only) is the reference's. With
+/// `dark_steps`, the dark scale changes every 5 lines (as the firmware's first frame, which
+/// calibrates each line with the running estimate): the reference calibrates each line with
+/// it, the scan gets it through `set_conditions`. Returns (reference, scan, calibrated
+/// fraction).
+fn both(
+    f: &Frame,
+    stride: u16,
+    dark_steps: bool,
+) -> (LineDetector<256>, ScanDetector<'_, 256>, f64) {
     let g = f.params.geometry;
     let table = CalibTable::parse(&f.table).unwrap();
-    let cal = FrameCalibration::new(
-        table,
-        FrameConditions {
-            dark_scale_e: f.dark_scale_e,
-            exposure_ms: 1000,
-            temperature_k: Kelvin::from_num(293),
+    let conditions = |y: usize| FrameConditions {
+        dark_scale_e: if dark_steps {
+            // Steps of about +-1.5 % around the frame's estimate.
+            f.dark_scale_e * Electrons::from_num(1.0 + 0.015 * ((y / 5) % 3) as f64 - 0.015)
+        } else {
+            f.dark_scale_e
         },
-    );
+        exposure_ms: 1000,
+        temperature_k: Kelvin::from_num(293),
+    };
     let mut reference =
         LineDetector::<256>::new(DetectConfig::default(), g.active_cols, g.active_rows)
             .with_background_stride(stride);
-    let mut scan = ScanDetector::<256>::new(cal, DetectConfig::default(), stride);
+    let mut scan = ScanDetector::<256>::new(
+        FrameCalibration::new(table, conditions(0)),
+        DetectConfig::default(),
+        stride,
+    );
     let mut e = vec![Electrons::ZERO; usize::from(g.active_cols)];
     let mut fl = vec![PixelFlags::empty(); e.len()];
+    let (mut closed_ref, mut closed_scan) = (Default::default(), Default::default());
+    let mut closed_total = 0usize;
     for (y, (raw, lv)) in f.lines.iter().enumerate().take(usize::from(g.active_rows)) {
+        let cal = FrameCalibration::new(table, conditions(y));
         cal.calibrate_span(y as u16, 0, raw, lv, &mut e, &mut fl)
             .unwrap();
-        reference.push_line(y as u16, &e, &fl).unwrap();
-        scan.push_raw_line(y as u16, raw, lv).unwrap();
+        let whole = reference.background_due(y as u16);
+        reference
+            .push_line_closed(y as u16, &e, &fl, &mut closed_ref)
+            .unwrap();
+        scan.set_conditions(conditions(y));
+        scan.push_raw_line_closed(y as u16, raw, lv, &mut closed_scan)
+            .unwrap();
+        assert_eq!(sorted(&closed_ref), sorted(&closed_scan), "line {y}");
+        assert_eq!(reference.dropped(), scan.detector().dropped(), "line {y}");
+        closed_total += closed_ref.len();
+        match scan.whole_line() {
+            Some((se, sf)) => {
+                assert!(whole, "line {y}: a whole line off the background rows");
+                assert_eq!((se, sf), (&e[..], &fl[..]), "line {y}");
+            }
+            None => assert!(!whole, "line {y}: background row not reported whole"),
+        }
     }
-    reference.finish();
-    scan.finish();
+    reference.finish_closed(&mut closed_ref);
+    scan.finish_closed(&mut closed_scan);
+    assert_eq!(sorted(&closed_ref), sorted(&closed_scan), "finish");
+    closed_total += closed_ref.len();
+    // Every candidate was reported once, when it closed (the list never overflows here).
+    if reference.dropped() == 0 {
+        assert_eq!(closed_total, reference.candidates().len());
+    }
     let total = f64::from(g.active_cols) * f64::from(g.active_rows);
     let frac = f64::from(scan.calibrated_px()) / total;
     (reference, scan, frac)
@@ -89,7 +131,7 @@ fn scan_equals_calibrated_path_on_simulated_frames() {
             60,
             3,
         );
-        let (reference, scan, frac) = both(&f, stride);
+        let (reference, scan, frac) = both(&f, stride, seed == 7);
         assert!(
             reference.candidates().len() >= 40,
             "seed {seed}: only {} candidates",
@@ -133,7 +175,7 @@ fn scan_equals_calibrated_path_with_large_map_spread() {
         40,
         0,
     );
-    let (reference, scan, frac) = both(&f, 16);
+    let (reference, scan, frac) = both(&f, 16, true);
     assert_eq!(sorted(reference.candidates()), sorted(scan.candidates()));
     println!(
         "large spread: {:.2} % of the pixels calibrated",
@@ -169,7 +211,7 @@ fn scan_equals_calibrated_path_when_the_bias_jumps() {
         *lv = LineLevels::measure(&g, raw).unwrap();
     }
     for stride in [8u16, 64] {
-        let (reference, scan, frac) = both(&f, stride);
+        let (reference, scan, frac) = both(&f, stride, false);
         assert!(
             reference.candidates().len() >= 20,
             "only {} candidates",
@@ -311,6 +353,7 @@ mod random_tables {
         let mut scan = ScanDetector::<256>::new(cal, config, stride);
         let mut e = vec![Electrons::ZERO; usize::from(G.active_cols)];
         let mut fl = vec![PixelFlags::empty(); e.len()];
+        let (mut closed_ref, mut closed_scan) = (Default::default(), Default::default());
         let mut k = 0usize;
         for y in 0..G.active_rows {
             let line: Vec<u16> = (0..G.line_len())
@@ -335,11 +378,17 @@ mod random_tables {
             let lv = LineLevels::measure(&G, &line).unwrap();
             cal.calibrate_span(y, 0, &line, &lv, &mut e, &mut fl)
                 .unwrap();
-            reference.push_line(y, &e, &fl).unwrap();
-            scan.push_raw_line(y, &line, &lv).unwrap();
+            reference
+                .push_line_closed(y, &e, &fl, &mut closed_ref)
+                .unwrap();
+            scan.push_raw_line_closed(y, &line, &lv, &mut closed_scan)
+                .unwrap();
+            prop_assert_eq!(sorted(&closed_ref), sorted(&closed_scan), "line {}", y);
+            prop_assert_eq!(reference.dropped(), scan.detector().dropped());
         }
-        reference.finish();
-        scan.finish();
+        reference.finish_closed(&mut closed_ref);
+        scan.finish_closed(&mut closed_scan);
+        prop_assert_eq!(sorted(&closed_ref), sorted(&closed_scan));
         prop_assert_eq!(sorted(reference.candidates()), sorted(scan.candidates()));
         Ok(())
     }
