@@ -32,7 +32,8 @@
 //! on simulated frames and random tables.
 //!
 //! The background needs every pixel of a line: rows with `y % background_stride == 0` (and
-//! the first row) are calibrated whole and go through [`LineDetector::push_line`].
+//! the first row, and the warm-up rows of [`ScanDetector::with_background_warmup`]) are
+//! calibrated whole and go through [`LineDetector::push_line`].
 //!
 //! # Cost
 //! On the M7 (`cargo m7-bench`, `scan_detect`, 128 rows, 10 stars, stride 64), per pixel:
@@ -236,8 +237,8 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
     }
 
     /// The last line pushed, calibrated (electrons and flags of every active pixel), when it
-    /// was calibrated whole: a background row (`y % background_stride == 0`, and the first
-    /// row); `None` after any other line, whose quiet pixels were never calibrated.
+    /// was calibrated whole: a background row (`y % background_stride == 0`, the first row
+    /// and the warm-up rows: [`LineDetector::background_due`]); `None` after any other line, whose quiet pixels were never calibrated.
     pub fn whole_line(&self) -> Option<(&[Electrons], &[PixelFlags])> {
         if !self.whole {
             return None;
@@ -296,6 +297,16 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
                 let _ = closed.push(*c);
             }
         }
+    }
+
+    /// Also updates the background on every row `y < rows` (those are calibrated whole):
+    /// [`LineDetector::with_background_warmup`]. With a long stride the background otherwise
+    /// rests on the first row's own noise estimate for hundreds of rows, and noise
+    /// candidates multiply (host test `scan`); 16 rows cost 16 whole-row calibrations a
+    /// frame.
+    pub fn with_background_warmup(mut self, rows: u16) -> Self {
+        self.det = self.det.with_background_warmup(rows);
+        self
     }
 
     /// The detector (candidates, dropped counts, background).
