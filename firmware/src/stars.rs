@@ -4,8 +4,8 @@
 //!   pre-filtered [`ScanDetector`] (`detect::prefilter`): per chunk of 16 samples a raw-ADU
 //!   test against the chunk's worst-case level proves most chunks below the 2.5-sigma join
 //!   threshold, and only the samples above that level are calibrated and thresholded; the
-//!   background rows (every [`ACQ_BACKGROUND_STRIDE`]th, and the first) are calibrated
-//!   whole and update the background. The candidates are bit for bit those of a
+//!   background rows (every [`ACQ_BACKGROUND_STRIDE`]th, and the first
+//!   [`ACQ_BACKGROUND_WARMUP_ROWS`]) are calibrated whole and update the background. The candidates are bit for bit those of a
 //!   `LineDetector` with the same background stride fed every calibrated row (host test
 //!   `scan`). The raw line and its levels also go into a ring of the last [`RING_LINES`]
 //!   lines ([`Ring`], in `.bss` = AXI SRAM). When the scan closes a blob
@@ -89,6 +89,10 @@ pub const REACQUIRE_EVERY: u32 = 16;
 /// raw pre-filter. The telemetry's summary lines, which report a row's mean, are exactly
 /// these rows ([`crate::telemetry::LINE_SUMMARY_EVERY`]).
 pub const ACQ_BACKGROUND_STRIDE: u16 = crate::telemetry::LINE_SUMMARY_EVERY;
+/// Acquisition's first rows that all update the background (calibrated whole): without
+/// them the first row's own noise estimate would set the thresholds for hundreds of rows
+/// at stride 64 and fill some blocks with noise candidates (host test `scan`).
+pub const ACQ_BACKGROUND_WARMUP_ROWS: u16 = 16;
 
 /// The raw-line ring of acquisition.
 pub type Ring = LineRing<RING_LINES, LINE_LEN>;
@@ -365,11 +369,10 @@ impl StarPipeline {
         if let Some(scan) = self.scan.as_mut() {
             scan.set_conditions(*calibration.conditions());
         } else {
-            self.scan = Some(ScanDetector::new(
-                *calibration,
-                DetectConfig::default(),
-                ACQ_BACKGROUND_STRIDE,
-            ));
+            self.scan = Some(
+                ScanDetector::new(*calibration, DetectConfig::default(), ACQ_BACKGROUND_STRIDE)
+                    .with_background_warmup(ACQ_BACKGROUND_WARMUP_ROWS),
+            );
         }
         let taken = match self.scan.as_mut() {
             Some(scan) => scan.push_raw_line_closed(y, samples, levels, &mut self.closed),
@@ -384,7 +387,8 @@ impl StarPipeline {
     }
 
     /// The last acquisition line's calibrated pixels and flags when it was calibrated whole
-    /// (a background row, every [`ACQ_BACKGROUND_STRIDE`]th); `None` for the other rows,
+    /// (a background row: every [`ACQ_BACKGROUND_STRIDE`]th and the first
+    /// [`ACQ_BACKGROUND_WARMUP_ROWS`]); `None` for the other rows,
     /// whose quiet pixels were never calibrated.
     pub fn whole_line(&self) -> Option<(&[Electrons], &[PixelFlags])> {
         self.scan.as_ref()?.whole_line()
