@@ -40,16 +40,24 @@
 //!   [`flags::UNCORRECTED`] says so. Cost per star: a scan of at most 16 curve headers and
 //!   a few tens of flops per axis.
 //!
-//! Memory: the ring 16 x 1072 x 2 = 34 KB, the capture list 32 x ~600 B = 19 KB, one window's
-//! scratch buffers (15 x 15 pixels), the scan detector (its `LineDetector` plus ~13 KB of
-//! per-line buffers: electrons and flags for up to 2048 columns, 128 chunk bounds) and the
-//! star lists: ~70 KB of the AXI SRAM, all in the process task's `.bss`.
-//! Cost per acquisition line (M7, `cargo m7-bench` stage `scan_detect`, which includes the
-//! background rows): ~13 instructions a pixel, ~14,000 a 1024-pixel line, against ~74 a
-//! pixel (~76,000 a line) for calibrating the row whole before (`line_calibrate`) plus the
-//! detector's own pass; plus a 2 KB copy into the ring and the candidate list's copy
-//! (32 x 28 B); per star: a 9x9 window copy, its calibration and a CoG (a few thousand
-//! operations). Per tracking line: a row test per window and the rows that fall in windows.
+//! Memory (`.bss`, `llvm-size` of `cargo fw`): the ring 16 x 1072 x 2 = 34 KB, the capture
+//! list 32 x ~600 B = 19 KB, and the process task's state, 33.5 KB: this pipeline (the scan
+//! detector, i.e. its `LineDetector` plus ~13 KB of per-line buffers, electrons and flags
+//! for up to 2048 columns and 128 chunk bounds; one window's scratch buffers, 15 x 15
+//! pixels; the star lists) and the processor: ~87 KB of the AXI SRAM. The scan replaced the
+//! processor's 5 KB calibrated row; `.bss` grew by 8.4 KB against the whole-row path.
+//!
+//! Cost per acquisition line (M7, `cargo m7-bench` stage `scan_detect`, 13.17 instructions
+//! a pixel with 2 of its 128 rows calibrated whole): ~13,500 instructions a 1024-pixel
+//! line, plus ~1.1 a pixel over the frame for its ~31 whole rows of 1024 (16 warm-up rows,
+//! every 64th row), against ~74 a pixel (~76,000 a line) for calibrating every row whole
+//! before (`line_calibrate`) plus the detector's own pass. The very first frame after
+//! start-up calibrates each line with the running dark-scale estimate, which moves from
+//! line to line: the chunk bounds are then recomputed on every line (~300 instructions a
+//! chunk, ~19 a pixel more) until the frame ends. Per line also a 2 KB copy into the ring
+//! and the candidate list's copy (32 x 28 B); per star: a 9x9 window copy, its calibration
+//! and a CoG (a few thousand operations). Per tracking line: a row test per window and the
+//! rows that fall in windows.
 
 use crate::lines::{GEOMETRY, LINE_LEN, LineBuf};
 use startrack_core::calib::{FrameCalibration, LineLevels, PixelFlags};
