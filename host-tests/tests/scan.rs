@@ -46,7 +46,7 @@ fn frame(params: SensorParams, n_stars: usize, tile_log2: u8) -> Frame {
 /// through `ScanDetector::push_raw_line_closed` (as the firmware's acquisition), checking
 /// line by line that both report the same closed candidates and dropped counts, and that the
 /// scan's whole calibrated line (background rows only) is the reference's. With
-/// `dark_steps`, the dark scale changes every 5 lines (as the firmware's first frame, which
+/// `dark_steps`, the dark scale changes every 3 lines (as the firmware's first frame, which
 /// calibrates each line with the running estimate): the reference calibrates each line with
 /// it, the scan gets it through `set_conditions`. Returns (reference, scan, calibrated
 /// fraction). `warmup`: rows that all update the background (`with_background_warmup`).
@@ -60,8 +60,10 @@ fn both(
     let table = CalibTable::parse(&f.table).unwrap();
     let conditions = |y: usize| FrameConditions {
         dark_scale_e: if dark_steps {
-            // Steps of about +-1.5 % around the frame's estimate.
-            f.dark_scale_e * Electrons::from_num(1.0 + 0.015 * ((y / 5) % 3) as f64 - 0.015)
+            // Steps of -80 %, 0 and +80 % around the frame's estimate, every 3 lines (inside
+            // tile rows of 8): far more than the running estimate moves, so that bounds
+            // kept from another dark scale would show.
+            f.dark_scale_e * Electrons::from_num(0.2 + 0.8 * ((y / 3) % 3) as f64)
         } else {
             f.dark_scale_e
         },
