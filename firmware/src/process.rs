@@ -1,18 +1,19 @@
 //! Per-line processing: turns each raw line from the readout into bias levels, feeds the
-//! frame's dark-scale estimate, calibrates the active pixels into electrons with the core,
-//! and reports a summary (see [`crate::telemetry`]).
+//! frame's dark-scale estimate, hands active rows to the star pipeline (which calibrates
+//! what it needs with the core), and reports a summary (see [`crate::telemetry`]).
 //!
 //! Per line, with a checked table:
 //! 1. bias of each output from the line's over-scan ([`LineLevels::measure`]);
 //! 2. the line's covered columns into the frame's [`DarkScaleEstimator`];
-//! 3. for an active row, its 1024 pixels to electrons ([`FrameCalibration::calibrate_span`])
-//!    into a buffer owned by this task;
-//! 4. the calibrated row and its raw line into the star pipeline ([`crate::stars`]): the
-//!    streaming detector, the raw-line ring, and a centroid per star when its window's last
-//!    row has streamed. In a tracking frame, steps 3-4 are replaced by copying the rows of
-//!    the predicted windows, which are calibrated, checked and centroided on their own.
-//!    The frame's stars (at most [`crate::stars::MAX_STARS`], the brightest kept) are
-//!    reported when the frame ends.
+//! 3. for an active row of an acquisition frame, the raw line and its levels into the star
+//!    pipeline ([`crate::stars`]): the raw-line ring and the core's pre-filtered
+//!    `ScanDetector`, which calibrates only the chunks of 16 pixels that may be above the
+//!    detection threshold, and whole only the background rows (every
+//!    [`crate::stars::ACQ_BACKGROUND_STRIDE`]th, which are the summary lines: their mean is
+//!    reported); a centroid per star when its window's last row has streamed;
+//! 4. in a tracking frame, step 3 is replaced by copying the rows of the predicted windows,
+//!    which are calibrated, checked and centroided on their own. The frame's stars (at most
+//!    [`crate::stars::MAX_STARS`], the brightest kept) are reported when the frame ends.
 //!
 //! Without a table (none in flash, or rejected) the firmware runs *uncalibrated*: the bias is
 //! still measured and the summary reports the active pixels' mean above bias in ADU; no
@@ -57,8 +58,6 @@ pub struct Processor {
     estimator: DarkScaleEstimator,
     /// The last complete frame's dark scale.
     prev_dark_scale: Option<Electrons>,
-    electrons: [Electrons; ACTIVE_COLS],
-    flags: [PixelFlags; ACTIVE_COLS],
     /// The conditions the current frame's rows were calibrated with.
     conditions: Option<FrameConditions>,
     stars: StarPipeline,
@@ -73,8 +72,6 @@ impl Processor {
             lines_in_frame: 0,
             estimator: DarkScaleEstimator::new(),
             prev_dark_scale: None,
-            electrons: [Electrons::ZERO; ACTIVE_COLS],
-            flags: [PixelFlags::empty(); ACTIVE_COLS],
             conditions: None,
             stars,
         }
@@ -168,30 +165,24 @@ impl Processor {
                 windows_done,
             };
         }
-        let flags = match calibration.calibrate_span(
-            line,
-            0,
-            samples,
-            levels,
-            &mut self.electrons,
-            &mut self.flags,
-        ) {
-            Ok(flags) => flags,
-            Err(e) => {
-                defmt::error!("process: calibration, line {}: {}", line, e);
-                return LineOutcome::Failed;
-            }
+        if self
+            .stars
+            .acquisition_line(&calibration, line, samples, levels)
+            .is_err()
+        {
+            // Logged by the star pipeline.
+            return LineOutcome::Failed;
+        }
+        // Only the background rows (every `ACQ_BACKGROUND_STRIDE`th, the summary lines) were
+        // calibrated whole: their mean is reported; the others saw only the chunks that may
+        // hold a star.
+        let Some((electrons, pixel_flags)) = self.stars.whole_line() else {
+            return LineOutcome::Scanned { dark_scale_e };
         };
-        self.stars.acquisition_line(
-            &calibration,
-            line,
-            samples,
-            levels,
-            &self.electrons,
-            &self.flags,
-        );
         let (mut sum, mut used, mut saturated) = (0i64, 0i64, 0u16);
-        for (e, f) in self.electrons.iter().zip(self.flags.iter()) {
+        let mut flags = PixelFlags::empty();
+        for (e, f) in electrons.iter().zip(pixel_flags.iter()) {
+            flags |= *f;
             if !f.is_excluded() {
                 sum += i64::from(e.to_bits());
                 used += 1;

@@ -1,9 +1,15 @@
 //! Stars per frame: detection, windows, calibration and centroids, in two modes.
 //!
-//! - **Acquisition** (no prior knowledge): every active row is calibrated whole and streamed
-//!   into the core's [`LineDetector`]; the raw line and its levels also go into a ring of the
-//!   last [`RING_LINES`] lines ([`Ring`], in `.bss` = AXI SRAM). When the detector closes a
-//!   blob ([`LineDetector::push_line_closed`]), an [`ACQ_WINDOW_PX`]-square window around its
+//! - **Acquisition** (no prior knowledge): every active raw line streams through the core's
+//!   pre-filtered [`ScanDetector`] (`detect::prefilter`): per chunk of 16 samples a raw-ADU
+//!   test against the chunk's worst-case level proves most chunks below the 2.5-sigma join
+//!   threshold, and only the samples above that level are calibrated and thresholded; the
+//!   background rows (every [`ACQ_BACKGROUND_STRIDE`]th, and the first
+//!   [`ACQ_BACKGROUND_WARMUP_ROWS`]) are calibrated whole and update the background. The candidates are bit for bit those of a
+//!   `LineDetector` with the same background stride fed every calibrated row (host test
+//!   `scan`). The raw line and its levels also go into a ring of the last [`RING_LINES`]
+//!   lines ([`Ring`], in `.bss` = AXI SRAM). When the scan closes a blob
+//!   ([`ScanDetector::push_raw_line_closed`]), an [`ACQ_WINDOW_PX`]-square window around its
 //!   peak waits until its last row has streamed, is copied from the ring, calibrated
 //!   ([`FrameCalibration::calibrate_window`]) and centroided (CoG power 1, a
 //!   [`COG_BOX_PX`] box, background from the window's perimeter median). A window whose
@@ -37,12 +43,25 @@
 //!   [`flags::UNCORRECTED`] says so. Cost per star: a scan of at most 16 curve headers and
 //!   a few tens of flops per axis.
 //!
-//! Memory: the ring 16 x 1072 x 2 = 34 KB, the capture list 32 x ~600 B = 19 KB, the fused
-//! CoG's plans 32 x ~470 B = 15 KB, one window's scratch buffers (15 x 15 pixels), the
-//! detector and the star lists: ~75 KB of the AXI SRAM.
-//! Cost per acquisition line: a 2 KB copy into the ring and the candidate list's copy
-//! (32 x 28 B); per star: a 9x9 window copy, its calibration and a CoG (a few thousand
-//! operations). Per tracking line: a row test per window and the rows that fall in windows.
+//! Memory (`.bss`, `llvm-size` of `cargo fw`): the ring 16 x 1072 x 2 = 34 KB, the capture
+//! list 32 x ~600 B = 19 KB, the fused CoG's plans 32 x ~470 B = 15 KB, and the process
+//! task's state: this pipeline (the scan detector, i.e. its `LineDetector` plus ~13 KB of
+//! per-line buffers, electrons and flags for up to 2048 columns and 128 chunk bounds; one
+//! window's scratch buffers, 15 x 15 pixels; the star lists) and the processor (sizes as
+//! `.ci/test` prints them: README, "Firmware"). The scan replaced the
+//! processor's 5 KB calibrated row; `.bss` grew by 8.4 KB against the whole-row path.
+//!
+//! Cost per acquisition line (M7, `cargo m7-bench` stage `scan_detect`, 13.17 instructions
+//! a pixel with 2 of its 128 rows calibrated whole): ~13,500 instructions a 1024-pixel
+//! line, plus ~1.1 a pixel over the frame for its ~31 whole rows of 1024 (16 warm-up rows,
+//! every 64th row), against ~74 a pixel (~76,000 a line) for calibrating every row whole
+//! before (`line_calibrate`) plus the detector's own pass. The very first frame after
+//! start-up calibrates each line with the running dark-scale estimate, which moves from
+//! line to line: the chunk bounds are then recomputed on every line (~300 instructions a
+//! chunk, ~19 a pixel more) until the frame ends. Per line also a 2 KB copy into the ring
+//! and the candidate list's copy (32 x 28 B); per star: a 9x9 window copy, its calibration
+//! and a CoG (a few thousand operations). Per tracking line: a row test per window and the
+//! rows that fall in windows.
 
 use crate::lines::{GEOMETRY, LINE_LEN, LineBuf};
 use startrack_core::calib::{FrameCalibration, LineLevels, PixelFlags};
@@ -52,7 +71,8 @@ use startrack_core::centroid::raw_cog::{PlanError, RawCogParams, RawCogPlan, Raw
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput, estimate_background};
 use startrack_core::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
 use startrack_core::detect::{
-    DetectConfig, Detection, LineDetector, LineRing, TrackConfig, WindowCapture, track_detect,
+    DetectConfig, Detection, LineRing, ScanDetector, ScanError, TrackConfig, WindowCapture,
+    track_detect,
 };
 use startrack_core::units::{BiasAdu, Electrons};
 use startrack_core::window::{Rect, Window};
@@ -76,6 +96,15 @@ pub const MAX_STARS: usize = 32;
 pub const MIN_TRACK_STARS: usize = 3;
 /// Every this many frames in a row of tracking, one acquisition frame.
 pub const REACQUIRE_EVERY: u32 = 16;
+/// Acquisition's background stride: rows `y % ACQ_BACKGROUND_STRIDE == 0` (and the first)
+/// are calibrated whole and update the detector's background, the others go through the
+/// raw pre-filter. The telemetry's summary lines, which report a row's mean, are exactly
+/// these rows ([`crate::telemetry::LINE_SUMMARY_EVERY`]).
+pub const ACQ_BACKGROUND_STRIDE: u16 = crate::telemetry::LINE_SUMMARY_EVERY;
+/// Acquisition's first rows that all update the background (calibrated whole): without
+/// them the first row's own noise estimate would set the thresholds for hundreds of rows
+/// at stride 64 and fill some blocks with noise candidates (host test `scan`).
+pub const ACQ_BACKGROUND_WARMUP_ROWS: u16 = 16;
 
 /// The raw-line ring of acquisition.
 pub type Ring = LineRing<RING_LINES, LINE_LEN>;
@@ -236,7 +265,9 @@ pub struct StarPipeline {
     mode: Mode,
     next_mode: Mode,
     tracking_frames: u32,
-    detector: LineDetector<MAX_STARS>,
+    /// Acquisition's detector, built on the frame's first acquisition line (it holds the
+    /// frame's calibration); `None` in tracking frames.
+    scan: Option<ScanDetector<'static, MAX_STARS>>,
     closed: heapless::Vec<Detection, MAX_STARS>,
     pending: heapless::Vec<Pending, MAX_STARS>,
     ring: &'static mut Ring,
@@ -257,14 +288,6 @@ pub struct StarPipeline {
     scratch: Scratch,
 }
 
-fn new_detector() -> LineDetector<MAX_STARS> {
-    LineDetector::new(
-        DetectConfig::default(),
-        GEOMETRY.active_cols,
-        GEOMETRY.active_rows,
-    )
-}
-
 /// Nearest pixel of a position, inside the active area.
 fn pixel_of(v: f32, size: u16) -> u16 {
     let v = if v.is_finite() { v + 0.5 } else { 0.0 };
@@ -278,7 +301,7 @@ impl StarPipeline {
             mode: Mode::Acquisition,
             next_mode: Mode::Acquisition,
             tracking_frames: 0,
-            detector: new_detector(),
+            scan: None,
             closed: heapless::Vec::new(),
             pending: heapless::Vec::new(),
             ring,
@@ -314,9 +337,9 @@ impl StarPipeline {
         self.tracked.clear();
         self.pending.clear();
         self.stats = FrameStats::default();
+        self.scan = None;
         match self.mode {
             Mode::Acquisition => {
-                self.detector = new_detector();
                 self.ring.clear();
             }
             Mode::Tracking => {
@@ -369,28 +392,48 @@ impl StarPipeline {
         }
     }
 
-    /// An acquisition row: `electrons`/`flags` is the calibrated row `y`, `samples` its raw
-    /// line.
+    /// An acquisition row: `samples` is raw line `y` (the whole line, over-scan included),
+    /// `levels` its bias levels, `calibration` this line's (the first frame's dark scale
+    /// moves from line to line). The raw line goes into the ring and through the
+    /// pre-filtered scan, which calibrates only the chunks that may hold a star (and the
+    /// background rows whole, see [`Self::whole_line`]); the windows of the blobs it closes
+    /// are measured once their last row has streamed.
     pub fn acquisition_line(
         &mut self,
-        calibration: &FrameCalibration<'_>,
+        calibration: &FrameCalibration<'static>,
         y: u16,
         samples: &LineBuf,
         levels: &LineLevels,
-        electrons: &[Electrons],
-        flags: &[PixelFlags],
-    ) {
+    ) -> Result<(), ScanError> {
         if let Err(e) = self.ring.push(y, samples, levels) {
             defmt::error!("stars: ring, line {}: {}", y, e);
         }
-        match self
-            .detector
-            .push_line_closed(y, electrons, flags, &mut self.closed)
-        {
+        if let Some(scan) = self.scan.as_mut() {
+            scan.set_conditions(*calibration.conditions());
+        } else {
+            self.scan = Some(
+                ScanDetector::new(*calibration, DetectConfig::default(), ACQ_BACKGROUND_STRIDE)
+                    .with_background_warmup(ACQ_BACKGROUND_WARMUP_ROWS),
+            );
+        }
+        let taken = match self.scan.as_mut() {
+            Some(scan) => scan.push_raw_line_closed(y, samples, levels, &mut self.closed),
+            None => Ok(()),
+        };
+        match taken {
             Ok(()) => self.queue_closed(),
             Err(e) => defmt::error!("stars: detection, line {}: {}", y, e),
         }
         self.serve_pending(calibration, Some(y));
+        taken
+    }
+
+    /// The last acquisition line's calibrated pixels and flags when it was calibrated whole
+    /// (a background row: every [`ACQ_BACKGROUND_STRIDE`]th and the first
+    /// [`ACQ_BACKGROUND_WARMUP_ROWS`]); `None` for the other rows,
+    /// whose quiet pixels were never calibrated.
+    pub fn whole_line(&self) -> Option<(&[Electrons], &[PixelFlags])> {
+        self.scan.as_ref()?.whole_line()
     }
 
     /// A tracking row: copies the windows' pixels and measures the windows it completes.
@@ -425,10 +468,12 @@ impl StarPipeline {
     ) -> (&[StarRecord], FrameStats) {
         match (self.mode, calibration) {
             (Mode::Acquisition, Some(c)) => {
-                self.detector.finish_closed(&mut self.closed);
-                self.queue_closed();
+                if let Some(scan) = self.scan.as_mut() {
+                    scan.finish_closed(&mut self.closed);
+                    self.stats.candidates_dropped = scan.detector().dropped();
+                    self.queue_closed();
+                }
                 self.serve_pending(c, None);
-                self.stats.candidates_dropped = self.detector.dropped();
             }
             (Mode::Tracking, Some(c)) => {
                 for i in self.capture.finish() {

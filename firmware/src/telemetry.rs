@@ -33,6 +33,14 @@ pub enum LineOutcome {
         /// Pixels at or above the table's saturation level.
         saturated: u16,
     },
+    /// An active row of an acquisition frame off the background rows: streamed raw through
+    /// the pre-filtered scan, which calibrated only the chunks that may hold a star, so there
+    /// is no row mean (the background rows, every `stars::ACQ_BACKGROUND_STRIDE`th, which
+    /// are the summary lines, are calibrated whole and reported as `Calibrated`).
+    Scanned {
+        /// The dark scale the row's calibrated chunks used, electrons.
+        dark_scale_e: Electrons,
+    },
     /// An active row with no usable table: only the over-scan bias is taken off.
     Uncalibrated {
         /// Mean of the row's active samples minus their output's bias, ADU.

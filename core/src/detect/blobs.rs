@@ -195,6 +195,8 @@ pub struct LineDetector<const N: usize> {
     dropped_pixels: u32,
     /// The background is updated on rows `y` with `y % bg_stride == 0` (1: every row).
     bg_stride: u16,
+    /// Rows `y < bg_warmup` all update the background, whatever the stride (0: none).
+    bg_warmup: u16,
     /// Every open blob has an index below this (the per-row loops stop there).
     open_end: usize,
 }
@@ -215,6 +217,7 @@ impl<const N: usize> LineDetector<N> {
             dropped: 0,
             dropped_pixels: 0,
             bg_stride: 1,
+            bg_warmup: 0,
             open_end: 0,
         }
     }
@@ -229,9 +232,19 @@ impl<const N: usize> LineDetector<N> {
         self
     }
 
+    /// With a background stride, also updates the background on every row `y < rows`, so
+    /// that the estimate is smoothed over [`super::background::SMOOTH_LINES`]-scale many
+    /// lines before the stride starts: without it, the first line's own noise estimate
+    /// (32 lower-half samples a block) dominates the first few hundred rows at stride 64,
+    /// and a block whose sigma it underestimates fills with noise candidates.
+    pub fn with_background_warmup(mut self, rows: u16) -> Self {
+        self.bg_warmup = rows;
+        self
+    }
+
     /// True when row `y`'s pixels update the background (every pixel of it is then needed).
     pub fn background_due(&self, y: u16) -> bool {
-        !self.background.is_primed() || y.is_multiple_of(self.bg_stride)
+        !self.background.is_primed() || y < self.bg_warmup || y.is_multiple_of(self.bg_stride)
     }
 
     /// The running background and noise estimate.

@@ -32,7 +32,8 @@
 //! on simulated frames and random tables.
 //!
 //! The background needs every pixel of a line: rows with `y % background_stride == 0` (and
-//! the first row) are calibrated whole and go through [`LineDetector::push_line`].
+//! the first row, and the warm-up rows of [`ScanDetector::with_background_warmup`]) are
+//! calibrated whole and go through [`LineDetector::push_line`].
 //!
 //! # Cost
 //! On the M7 (`cargo m7-bench`, `scan_detect`, 128 rows, 10 stars, stride 64), per pixel:
@@ -57,7 +58,7 @@ use super::background::MAX_BLOCKS;
 use super::blobs::{above_thr, px_above_thr};
 use super::{DetectConfig, DetectError, Detection, LineDetector};
 use crate::calib::pixel::{dark_16ths, pixel_bits_d as pixel_bits};
-use crate::calib::{CalibError, FrameCalibration, LineLevels, PixelFlags};
+use crate::calib::{CalibError, FrameCalibration, FrameConditions, LineLevels, PixelFlags};
 use crate::table::MapView;
 use crate::units::{BiasAdu, DarkRel, Electrons, FlatInv, GainEPerAdu};
 
@@ -157,6 +158,9 @@ pub struct ScanDetector<'t, const N: usize> {
     defect_from: u32,
     defect_from_has: bool,
     next_defect: u32,
+    /// The last line pushed was calibrated whole (a background row): `e` and `flags` hold
+    /// it (see [`Self::whole_line`]).
+    whole: bool,
 }
 
 impl<'t, const N: usize> ScanDetector<'t, N> {
@@ -207,7 +211,102 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             defect_from: u32::MAX,
             defect_from_has: false,
             next_defect: 0,
+            whole: false,
         }
+    }
+
+    /// The calibration the following lines use: the same table with new frame conditions
+    /// (the firmware's first frame calibrates each line with the running dark-scale
+    /// estimate). The chunks' bounds are recomputed on the next line when the dark scale
+    /// changed (they depend on it through the dark term); the table, hence the column-bias
+    /// minima, is kept. Cost: a compare when nothing changed.
+    pub fn set_conditions(&mut self, conditions: FrameConditions) {
+        if *self.cal.conditions() == conditions {
+            return;
+        }
+        let cal = FrameCalibration::new(*self.cal.table(), conditions);
+        if cal.dark_scale_bits() != self.cal.dark_scale_bits() {
+            self.bounds_key = None;
+        }
+        self.cal = cal;
+    }
+
+    /// The calibration in use.
+    pub fn calibration(&self) -> &FrameCalibration<'t> {
+        &self.cal
+    }
+
+    /// The last line pushed, calibrated (electrons and flags of every active pixel), when it
+    /// was calibrated whole: a background row (`y % background_stride == 0`, the first row
+    /// and the warm-up rows: [`LineDetector::background_due`]); `None` after any other line, whose quiet pixels were never calibrated.
+    pub fn whole_line(&self) -> Option<(&[Electrons], &[PixelFlags])> {
+        if !self.whole {
+            return None;
+        }
+        Some((self.e.get(..self.width)?, self.flags.get(..self.width)?))
+    }
+
+    /// [`Self::push_raw_line`], then writes into `closed` the candidates that this line
+    /// completed and the list kept, exactly as [`LineDetector::push_line_closed`] does with
+    /// the calibrated line (a new candidate, or one that replaced a fainter one; a candidate
+    /// the full list refused is not reported, it is counted in [`LineDetector::dropped`]).
+    /// On an error `closed` is empty. Cost: a copy of the candidate list per line.
+    pub fn push_raw_line_closed(
+        &mut self,
+        y: u16,
+        raw_line: &[u16],
+        levels: &LineLevels,
+        closed: &mut heapless::Vec<Detection, N>,
+    ) -> Result<(), ScanError> {
+        closed.clear();
+        let before = self.candidate_copy();
+        self.push_raw_line(y, raw_line, levels)?;
+        self.changed_since(&before, closed);
+        Ok(())
+    }
+
+    /// [`Self::finish`], reporting the candidates it completed like
+    /// [`Self::push_raw_line_closed`] (as [`LineDetector::finish_closed`]).
+    pub fn finish_closed(&mut self, closed: &mut heapless::Vec<Detection, N>) {
+        closed.clear();
+        let before = self.candidate_copy();
+        self.finish();
+        self.changed_since(&before, closed);
+    }
+
+    /// The candidate list as it is (same capacity: the copy is whole).
+    fn candidate_copy(&self) -> heapless::Vec<Detection, N> {
+        let mut v = heapless::Vec::new();
+        for c in self.det.candidates() {
+            // Same capacity as the detector's list: cannot fail.
+            let _ = v.push(*c);
+        }
+        v
+    }
+
+    /// The candidates that differ from `before` at their index (as
+    /// `LineDetector::changed_since`: the list only grows or replaces in place).
+    fn changed_since(
+        &self,
+        before: &heapless::Vec<Detection, N>,
+        closed: &mut heapless::Vec<Detection, N>,
+    ) {
+        for (i, c) in self.det.candidates().iter().enumerate() {
+            if before.get(i) != Some(c) {
+                // `closed` has the list's capacity, so this cannot fail.
+                let _ = closed.push(*c);
+            }
+        }
+    }
+
+    /// Also updates the background on every row `y < rows` (those are calibrated whole):
+    /// [`LineDetector::with_background_warmup`]. With a long stride the background otherwise
+    /// rests on the first row's own noise estimate for hundreds of rows, and noise
+    /// candidates multiply (host test `scan`); 16 rows cost 16 whole-row calibrations a
+    /// frame.
+    pub fn with_background_warmup(mut self, rows: u16) -> Self {
+        self.det = self.det.with_background_warmup(rows);
+        self
     }
 
     /// The detector (candidates, dropped counts, background).
@@ -237,6 +336,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         raw_line: &[u16],
         levels: &LineLevels,
     ) -> Result<(), ScanError> {
+        self.whole = false;
         let w = self.width;
         if w > MAX_SCAN_PX {
             return Err(ScanError::TooWide);
@@ -248,6 +348,7 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             self.cal.calibrate_span(y, 0, raw_line, levels, e, f)?;
             self.calibrated_px += w as u32;
             self.det.push_line(y, e, f)?;
+            self.whole = true;
             // The background changed: the thresholds and bounds must be recomputed.
             self.bounds_key = None;
             self.thr_valid = false;
