@@ -243,13 +243,15 @@ fn bad_m7_file_is_a_one_line_error() {
 }
 
 #[test]
-fn corrected_power_1_cog_is_charged_the_fused_raw_stage() {
-    // With the fused path's stages in the CSV, a corrected power-1 CoG costs that stage
-    // (calibration included); power 2 and the uncorrected CoG keep their own mapping.
+fn corrected_power_1_cog_costs_the_cheaper_of_the_fused_and_general_paths() {
+    // The fused raw path (calibration included) against the CoG on a calibrated window plus
+    // the correction (cog1c_7x7 - cog1_7x7 = 1000 here): 7x7 fused 1640 < 980 + 1000; 5x5
+    // fused 1520 > 500 + 1000.
     let text = "centroid_cog1_5x5,star,1000\ncentroid_cog1_7x7,star,1960\n\
                 centroid_cog2_5x5,star,1100\ncentroid_cog2_7x7,star,2100\n\
                 centroid_cog1_given_bg_5x5,star,500\ncentroid_cog1_given_bg_7x7,star,980\n\
-                centroid_cog1c_raw_5x5,star,400\ncentroid_cog1c_raw_7x7,star,640\n";
+                centroid_cog1c_7x7,star,2960\n\
+                centroid_cog1c_raw_5x5,star,1520\ncentroid_cog1c_raw_7x7,star,1640\n";
     let t = M7Table::parse(text).unwrap();
     let cog = |power, box_side, corrected| Method::Cog {
         power,
@@ -259,13 +261,20 @@ fn corrected_power_1_cog_is_charged_the_fused_raw_stage() {
     let (c, basis) = m7_cost(&cog(CogPower::One, 7, true), &t).unwrap();
     assert_eq!(
         (c, basis.as_str()),
-        (640.0, "fused raw path, calibration included")
+        (1640.0, "fused raw path, calibration included")
     );
-    // 3x3: linear in the pixel count, 400 + (640 - 400) / 24 * (9 - 25) = 240.
+    let (c, basis) = m7_cost(&cog(CogPower::One, 5, true), &t).unwrap();
+    assert_eq!(
+        (c, basis.as_str()),
+        (1500.0, "measured; correction added (7x7 measurement)")
+    );
+    // 3x3: both extrapolated linearly in the pixel count; fused 1520 - 120 / 24 * 16 = 1440
+    // against 500 - 480 / 24 * 16 + 1000 = 1180.
     let (c, basis) = m7_cost(&cog(CogPower::One, 3, true), &t).unwrap();
-    assert!((c - 240.0).abs() < 1e-9, "{c}");
-    assert_eq!(basis, "extrapolated; fused raw path, calibration included");
+    assert!((c - 1180.0).abs() < 1e-9, "{c}");
+    assert_eq!(basis, "extrapolated; correction added (7x7 measurement)");
+    // The uncorrected and power-2 CoGs never take the fused path.
     assert_eq!(m7_cost(&cog(CogPower::One, 7, false), &t).unwrap().0, 980.0);
-    let (_, basis) = m7_cost(&cog(CogPower::Two, 7, true), &t).unwrap();
-    assert!(basis.contains("correction not counted"), "{basis}");
+    let (c, _) = m7_cost(&cog(CogPower::Two, 7, true), &t).unwrap();
+    assert!((c - (980.0 + 140.0 + 1000.0)).abs() < 1e-9, "{c}");
 }

@@ -24,11 +24,11 @@
 //!   the measured `centroid_cog1c_7x7 - centroid_cog1_7x7` (the curve's look-up and
 //!   interpolation, independent of the box);
 //! - `correction not counted`: the same with a bench CSV that lacks `centroid_cog1c_7x7`;
-//! - `fused raw path, calibration included`: a corrected power-1 CoG (given background) is
-//!   charged the `centroid_cog1c_raw_<n>x<n>` stage, `centroid::raw_cog`, which computes the
-//!   same position from the raw window with the calibration fused in: an upper bound for the
-//!   centroid alone, and what the firmware's tracking runs (used when the CSV has the 5x5 and
-//!   7x7 rows).
+//! - `fused raw path, calibration included`: a corrected power-1 CoG (given background) can
+//!   also be computed by `centroid::raw_cog` from the raw window, calibration fused in (stage
+//!   `centroid_cog1c_raw_<n>x<n>`, one-shot); the method is charged the cheaper of that and
+//!   the path above (the fused path wins where its cost, calibration included, is below the
+//!   CoG's on a calibrated window).
 //!
 //! The 3-point peak uses its `_given_bg` stages (the background the Monte Carlo gives
 //! them) when the CSV has them, else the perimeter-median stages (`perimeter bg`).
@@ -130,11 +130,6 @@ impl M7Table {
 /// M7 instructions per star of `method` and how they were obtained (module docs); `None`
 /// when the table lacks the stages.
 pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
-    let basis = |extrapolated: bool, what: &str| match (extrapolated, what) {
-        (true, "measured") => "extrapolated".to_string(),
-        (true, _) => format!("extrapolated; {what}"),
-        (false, _) => what.to_string(),
-    };
     match *method {
         Method::Cog {
             power,
@@ -142,35 +137,17 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
             corrected,
         } => {
             let n = u16::from(box_side);
-            // A corrected power-1 CoG with a given background is what the fused raw-window
-            // path computes (`centroid::raw_cog`: same position, calibration included).
-            if power == CogPower::One
-                && corrected
-                && let Some((c, ex)) = t.by_side("centroid_cog1c_raw", n)
-            {
-                return Some((c, basis(ex, "fused raw path, calibration included")));
-            }
-            let (c1, ex) = t.by_side("centroid_cog1_given_bg", n)?;
-            let (cost, what) = match power {
-                CogPower::One => (c1, basis(ex, "measured")),
-                CogPower::Two => {
-                    let (p1, _) = t.by_side("centroid_cog1", n)?;
-                    let (p2, _) = t.by_side("centroid_cog2", n)?;
-                    (c1 + (p2 - p1).max(0.0), basis(ex, "power-2 extra added"))
-                }
-            };
-            if corrected {
-                // The correction's own cost: the bench's corrected CoG 7x7 less the plain one
-                // (the curve look-up and interpolation do not depend on the box).
-                match (t.get("centroid_cog1c_7x7"), t.get("centroid_cog1_7x7")) {
-                    (Some(c), Some(p)) => Some((
-                        cost + (c - p).max(0.0),
-                        format!("{what}; correction added (7x7 measurement)"),
-                    )),
-                    _ => Some((cost, format!("{what}; correction not counted"))),
-                }
-            } else {
-                Some((cost, what))
+            // A corrected power-1 CoG with a given background is also what the fused
+            // raw-window path computes (`centroid::raw_cog`: same position, calibration
+            // included): the method costs the cheaper of the two paths.
+            let fused = (power == CogPower::One && corrected)
+                .then(|| t.by_side("centroid_cog1c_raw", n))
+                .flatten()
+                .map(|(c, ex)| (c, basis(ex, "fused raw path, calibration included")));
+            let general = general_cog_cost(t, power, n, corrected);
+            match (fused, general) {
+                (Some(f), Some(g)) => Some(if f.0 < g.0 { f } else { g }),
+                (f, g) => f.or(g),
             }
         }
         Method::Quadratic => {
@@ -199,6 +176,47 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
                 }
             }
         }
+    }
+}
+
+/// The `m7_basis` text: `what`, marked extrapolated when it is.
+fn basis(extrapolated: bool, what: &str) -> String {
+    match (extrapolated, what) {
+        (true, "measured") => "extrapolated".to_string(),
+        (true, _) => format!("extrapolated; {what}"),
+        (false, _) => what.to_string(),
+    }
+}
+
+/// A CoG's cost on a calibrated window: the given-background stage of its box, power 2's
+/// extra and the correction's cost added as the module docs say.
+fn general_cog_cost(
+    t: &M7Table,
+    power: CogPower,
+    n: u16,
+    corrected: bool,
+) -> Option<(f64, String)> {
+    let (c1, ex) = t.by_side("centroid_cog1_given_bg", n)?;
+    let (cost, what) = match power {
+        CogPower::One => (c1, basis(ex, "measured")),
+        CogPower::Two => {
+            let (p1, _) = t.by_side("centroid_cog1", n)?;
+            let (p2, _) = t.by_side("centroid_cog2", n)?;
+            (c1 + (p2 - p1).max(0.0), basis(ex, "power-2 extra added"))
+        }
+    };
+    if corrected {
+        // The correction's own cost: the bench's corrected CoG 7x7 less the plain one
+        // (the curve look-up and interpolation do not depend on the box).
+        match (t.get("centroid_cog1c_7x7"), t.get("centroid_cog1_7x7")) {
+            (Some(c), Some(p)) => Some((
+                cost + (c - p).max(0.0),
+                format!("{what}; correction added (7x7 measurement)"),
+            )),
+            _ => Some((cost, format!("{what}; correction not counted"))),
+        }
+    } else {
+        Some((cost, what))
     }
 }
 
