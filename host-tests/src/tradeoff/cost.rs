@@ -24,7 +24,7 @@
 //!   the measured `centroid_cog1c_7x7 - centroid_cog1_7x7` (the curve's look-up and
 //!   interpolation, independent of the box);
 //! - `correction not counted`: the same with a bench CSV that lacks `centroid_cog1c_7x7`;
-//! - `fused raw path, calibration included`: a corrected power-1 CoG (given background) can
+//! - `fused raw path (calibration included)`: a corrected power-1 CoG (given background) can
 //!   also be computed by `centroid::raw_cog` from the raw window, calibration fused in (stage
 //!   `centroid_cog1c_raw_<n>x<n>`, one-shot); the method is charged the cheaper of that and
 //!   the path above (the fused path wins where its cost, calibration included, is below the
@@ -143,7 +143,7 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
             let fused = (power == CogPower::One && corrected)
                 .then(|| t.by_side("centroid_cog1c_raw", n))
                 .flatten()
-                .map(|(c, ex)| (c, basis(ex, "fused raw path, calibration included")));
+                .map(|(c, ex)| (c, basis(ex, "fused raw path (calibration included)")));
             let general = general_cog_cost(t, power, n, corrected);
             match (fused, general) {
                 (Some(f), Some(g)) => Some(if f.0 < g.0 { f } else { g }),
