@@ -547,10 +547,10 @@ fn measured_maps_carry_the_noise_of_n_frames_and_still_calibrate() {
     assert!(result.stars.len() <= truth.len() + 1);
 }
 
-/// The removed methods (IWC, the log-parabolic and the parabolic 3-point peaks) are no `--method` value any more: the
-/// argument parser refuses them before any file is read, naming the valid values, with a
-/// non-zero exit and no panic. (clap's usage error: its first line says what is wrong, the
-/// next lists the possible values.)
+/// The removed methods (IWC, the log-parabolic and the parabolic 3-point peaks) are no
+/// `--method` value any more: the argument parser refuses them before any file is read,
+/// naming the valid values, with a non-zero exit and no panic. (clap's usage error: its
+/// first line says what is wrong, the next lists the possible values.)
 #[test]
 fn removed_methods_are_refused_by_the_parser() {
     for method in ["iwc", "log-quadratic", "quadratic"] {
