@@ -34,7 +34,6 @@ use rand_distr::{Distribution, Normal, Poisson};
 use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
-use startrack_core::centroid::quadratic::{QuadraticParams, quadratic};
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
@@ -52,8 +51,6 @@ pub enum Method {
         /// With the pixel-phase correction for the star's `a`.
         corrected: bool,
     },
-    /// Three-point parabolic peak fit per axis, 5x5 window.
-    Quadratic,
     /// Pixel-integrated Gaussian fit, PSF sigma known, on an `n x n` window.
     GaussFit {
         /// Window side.
@@ -63,7 +60,7 @@ pub enum Method {
 
 impl Method {
     /// Every method of the table: CoG power 1 and 2 in 3/5/7 boxes, plain and corrected,
-    /// the parabolic 3-point peak, the Gauss fit on 5x5 and 7x7.
+    /// the Gauss fit on 5x5 and 7x7.
     pub fn all() -> Vec<Method> {
         let mut v = Vec::new();
         for corrected in [false, true] {
@@ -77,7 +74,6 @@ impl Method {
                 }
             }
         }
-        v.push(Method::Quadratic);
         v.push(Method::GaussFit { window: 5 });
         v.push(Method::GaussFit { window: 7 });
         v
@@ -95,7 +91,6 @@ impl Method {
                 if *power == CogPower::One { 1 } else { 2 },
                 if *corrected { " corrected" } else { "" }
             ),
-            Method::Quadratic => "quadratic 3-point".into(),
             Method::GaussFit { window } => format!("gauss fit {window}x{window}"),
         }
     }
@@ -104,7 +99,6 @@ impl Method {
     pub fn window_side(&self) -> u16 {
         match self {
             Method::Cog { box_side, .. } => u16::from(*box_side) + 2,
-            Method::Quadratic => 5,
             Method::GaussFit { window } => u16::from(*window),
         }
     }
@@ -292,12 +286,6 @@ impl Prepared {
                     _ => c,
                 }
             }
-            Method::Quadratic => quadratic(
-                input,
-                &QuadraticParams {
-                    background: self.background,
-                },
-            ),
             Method::GaussFit { window } => gauss_fit(
                 input,
                 &GaussFitParams {

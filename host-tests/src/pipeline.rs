@@ -36,8 +36,7 @@ use startrack_core::calib::{
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground, PixCorrSet};
-use startrack_core::centroid::quadratic::{QuadraticParams, quadratic};
-use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput, MAX_SIDE};
+use startrack_core::centroid::{Centroid, CentroidFlags, CentroidInput, MAX_SIDE};
 use startrack_core::detect::{DetectConfig, DetectError, Detection, DetectionFlags, LineDetector};
 use startrack_core::table::CalibTable;
 use startrack_core::units::{Electrons, Kelvin};
@@ -58,8 +57,6 @@ pub enum Method {
     Cog1,
     /// Centre of gravity, power 2, noise-unbiased (paper eq. 6).
     Cog2,
-    /// 3-point parabolic peak per axis.
-    Quadratic,
     /// Gauss-Newton fit of a pixel-integrated Gaussian.
     GaussFit,
 }
@@ -157,7 +154,11 @@ pub const FLAG_BITS: [(u32, &str, &str); 15] = [
         "degenerate: no position, window centre reported",
     ),
     (13, "centroid", "not converged (iterative methods)"),
-    (14, "centroid", "brightest pixel on the window border"),
+    (
+        14,
+        "centroid",
+        "reserved, set by no method (was the removed 3-point peak's: brightest pixel on the window border)",
+    ),
     (15, "centroid", "position clamped to the window"),
     (
         16,
@@ -370,12 +371,6 @@ pub fn centroid(input: &CentroidInput<'_>, config: &PipelineConfig) -> Centroid 
     match config.method {
         Method::Cog1 => cog(input, &CogParams::new(CogPower::One, inner)),
         Method::Cog2 => cog(input, &CogParams::new(CogPower::Two, inner)),
-        Method::Quadratic => quadratic(
-            input,
-            &QuadraticParams {
-                background: Background::PerimeterMedian,
-            },
-        ),
         Method::GaussFit => gauss_fit(
             input,
             &GaussFitParams {

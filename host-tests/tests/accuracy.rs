@@ -88,7 +88,7 @@ fn estimate_should_hold(c: &Cell) -> bool {
             f64::from(box_side) >= 3.0 * c.a_px
                 && !(power == CogPower::Two && c.a_px < 1.0 && c.snr < 30.0)
         }
-        Method::Quadratic | Method::GaussFit { .. } => true,
+        Method::GaussFit { .. } => true,
     }
 }
 

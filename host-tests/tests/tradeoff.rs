@@ -72,8 +72,14 @@ fn m7_costs_map_measured_extrapolated_and_estimated_stages() {
         m7_cost(&Method::GaussFit { window: 7 }, &t).unwrap().0,
         90000.0
     );
-    // A stage missing from the table (no 3-point peak stage here) gives no cost.
-    assert!(m7_cost(&Method::Quadratic, &t).is_none());
+    // A method whose stages the table lacks (the Gauss fit without its 7x7 stage) gives no
+    // cost, and the chart's cost column says so.
+    let partial = M7Table::parse("centroid_gauss_fit_5x5,star,50000\n").unwrap();
+    let fit = Method::GaussFit { window: 5 };
+    assert!(m7_cost(&fit, &partial).is_none());
+    let costs = chart::costs(&[fit], &partial, 0);
+    assert_eq!(costs[0].0, None);
+    assert_eq!(costs[0].1, "not in the M7 table");
 }
 
 #[test]
@@ -160,8 +166,11 @@ fn small_run(dir: &std::path::Path) {
             box_side: 5,
             corrected: true,
         },
-        // Without a stage in the test table: a row without a cost.
-        Method::Quadratic,
+        Method::Cog {
+            power: CogPower::Two,
+            box_side: 3,
+            corrected: false,
+        },
         Method::GaussFit { window: 5 },
     ];
     let noise = Noise {

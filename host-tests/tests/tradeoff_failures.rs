@@ -1,6 +1,6 @@
 //! Failure-map cells pinned on each side of a boundary (host-tests/src/tradeoff/failures.rs
-//! defines the cells): the 3-point quadratic peak is biased below a ~ 1 px and not at
-//! 2 px; every method fails at SNR 1; the Gauss fit passes at SNR 30, a = 1 px; an
+//! defines the cells): the plain power-2 CoG 5x5 (pixelisation) is biased below a ~ 1 px
+//! and not at 2 px; every method fails at SNR 1; the Gauss fit passes at SNR 30, a = 1 px; an
 //! uncorrected hot pixel and a close pair break it, their absence does not.
 //!
 //! Tolerances from the trial count N (x and y pooled): an RMS has a relative standard error
@@ -9,6 +9,7 @@
 //! error is a bounded function of the uniform pixel phase, whose RMS varies less between
 //! samples than a Gaussian's: the same RMS margin is conservative for it.
 
+use startrack_core::centroid::cog::CogPower;
 use startrack_host::accuracy::{Method, rms_relative_se};
 use startrack_host::tradeoff::failures::{
     BIAS_LIMIT_PX, DETECT_LIMIT, FailCell, Perturb, RMS_OVER_CRLB_LIMIT, Scene, Stats, run_scene,
@@ -56,8 +57,12 @@ fn passes(s: &Stats) -> bool {
 }
 
 #[test]
-fn quadratic_is_biased_below_one_pixel_not_at_two() {
-    let m = Method::Quadratic;
+fn plain_power_2_cog_is_biased_below_one_pixel_not_at_two() {
+    let m = Method::Cog {
+        power: CogPower::Two,
+        box_side: 5,
+        corrected: false,
+    };
     let small = cell(m, 0.6, 100.0, Perturb::None);
     assert!(biased(&small), "{} at a = 0.6", m.name());
     assert!(small.fails());

@@ -4,12 +4,15 @@
 //! | method | module | cost | systematic error, noise-free (RMS over phases) | random error |
 //! |---|---|---|---|---|
 //! | centre of gravity, power 1 (eq. 2) and 2 (eq. 6) | [`cog`] | ~10 flops/pixel | 5x5: 0.049 px at a = 0.5, < 0.001 at a = 1, 0.047 at a = 2 (power 1) | 0.86..1.1 of the CRLB-limited scatter |
-//! | 3-point parabolic peak | [`quadratic`] | ~20 flops/star | 0.08 px at a = 1 | - |
 //! | pixel-integrated Gaussian fit | [`gauss_fit`] | ~200 flops/pixel for 4 steps | < 1e-5 px (model exact) | efficiency 0.97..1.00 |
 //!
 //! (a = the paper's 80 %-energy radius, s = sqrt(0.31) a; numbers from the host tests
-//! `centroid_cog`, `centroid_cog_noise`, `centroid_quadratic`, `centroid_gauss_fit` run with
+//! `centroid_cog`, `centroid_cog_noise`, `centroid_gauss_fit` run with
 //! `--nocapture`; costs are operation counts, not M7 measurements.) None of them yet applies the paper's pixelisation correction table.
+//!
+//! (The 3-point peak fits, parabolic and log-parabolic, and the Gaussian-windowed IWC
+//! centroid were removed: on the Cortex-M7 they sat on the speed/accuracy frontier in no
+//! scene; see the README's method list.)
 //!
 //! # Arithmetic: f32, with an exact integer background subtraction
 //! Every method works in `f32`, the Cortex-M7's hardware float type for the
@@ -50,7 +53,6 @@ pub mod cog;
 pub mod gauss_fit;
 pub mod math;
 pub mod pixcorr;
-pub mod quadratic;
 pub mod raw_cog;
 
 use crate::calib::PixelFlags;
@@ -88,8 +90,10 @@ bitflags::bitflags! {
         /// An iterative method did not converge within its iterations, or diverged and fell
         /// back to its starting point.
         const NOT_CONVERGED = 64;
-        /// The brightest pixel lies on the window border, so a peak fit had no neighbour on
-        /// one side.
+        /// Set by no method now (it was the removed 3-point peak fit's: the brightest pixel
+        /// lay on the window border, so the fit had no neighbour on one side). The bit stays
+        /// reserved, not reused or renumbered, because telemetry and `stars.csv` carry the
+        /// flag bits.
         const PEAK_AT_EDGE = 128;
         /// The computed position fell outside the window and was clamped to its edge.
         const CLAMPED = 256;

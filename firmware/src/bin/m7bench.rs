@@ -26,7 +26,6 @@ use startrack_core::calib::{
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::pixcorr::{CurveHeader, PixCorr, PixCorrBackground};
-use startrack_core::centroid::quadratic::{QuadraticParams, quadratic};
 use startrack_core::centroid::raw_cog::{RawCogParams, RawCogPlan, RawWindow, raw_cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::detect::{DetectConfig, ScanDetector};
@@ -832,14 +831,12 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
     Ok(())
 }
 
-const METHODS: usize = 7;
+const METHODS: usize = 5;
 const METHOD_NAMES: [&str; METHODS] = [
     "cog1",
     "cog2",
     "cog1_given_bg",
-    "quadratic_parabolic",
     "gauss_fit",
-    "quadratic_parabolic_given_bg",
     "gauss_fit_given_bg",
 ];
 /// The PSF's sigma of the synthetic stars, px.
@@ -865,15 +862,7 @@ fn run_method(m: usize, side: u8, input: &CentroidInput<'_>) -> f32 {
                 ..CogParams::new(CogPower::One, side)
             },
         ),
-        3 => quadratic(
-            input,
-            &QuadraticParams {
-                background: Background::PerimeterMedian,
-            },
-        ),
-        4 => gauss_fit(input, &GaussFitParams::new(PSF_SIGMA_PX)),
-        // The 3-point peak with the detector's background: no perimeter median.
-        5 => quadratic(input, &QuadraticParams { background: given }),
+        3 => gauss_fit(input, &GaussFitParams::new(PSF_SIGMA_PX)),
         // The near-CRLB method as `startrack accuracy` runs it: background given and held
         // (not fitted), start box the window's side capped at 5.
         _ => gauss_fit(

@@ -8,7 +8,7 @@
 //! 5x5 or 7x7 window as its box and (except the `_given_bg` stages) a perimeter-median
 //! background,
 //! while the accuracy experiment runs a CoG box two pixels narrower than its window with the
-//! background given and the quadratic on 5x5. [`m7_cost`] maps each method to the
+//! background given. [`m7_cost`] maps each method to the
 //! nearest measurement and says how in a `basis` string:
 //! - `measured`: the stage of the same method, box and background;
 //! - `perimeter bg`: the measured stage uses a perimeter-median background (an upper bound:
@@ -29,9 +29,6 @@
 //!   `centroid_cog1c_raw_<n>x<n>`, one-shot); the method is charged the cheaper of that and
 //!   the path above (the fused path wins where its cost, calibration included, is below the
 //!   CoG's on a calibrated window).
-//!
-//! The 3-point peak uses its `_given_bg` stages (the background the Monte Carlo gives
-//! them) when the CSV has them, else the perimeter-median stages (`perimeter bg`).
 //!
 //! # Host time
 //! [`host_ns_per_star`] runs the method on a fixed set of noisy stars (seeded) in repeated
@@ -148,19 +145,6 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
             match (fused, general) {
                 (Some(f), Some(g)) => Some(if f.0 < g.0 { f } else { g }),
                 (f, g) => f.or(g),
-            }
-        }
-        Method::Quadratic => {
-            let stage = "centroid_quadratic_parabolic";
-            // The given-background stage is what the Monte Carlo runs; older bench CSVs only
-            // have the perimeter-median one, an upper bound.
-            let given = format!("{stage}_given_bg");
-            match t.by_side(&given, method.window_side()) {
-                Some((c, ex)) => Some((c, basis(ex, "measured"))),
-                None => {
-                    let (c, ex) = t.by_side(stage, method.window_side())?;
-                    Some((c, basis(ex, "perimeter bg")))
-                }
             }
         }
         Method::GaussFit { window } => {

@@ -1,7 +1,6 @@
 //! f64 references for the centroid tests: the paper's pixel-integrated Gaussian PSF (eq. 3 and
-//! 5), reference centroids (CoG power 1 and 2, 3-point quadratic fits, Gaussian-windowed
-//! centroid), the Cramer-Rao bound (from the library, shared with `startrack accuracy`), and a
-//! seeded Gaussian noise source.
+//! 5), reference centroids (CoG power 1 and 2), the Cramer-Rao bound (from the library,
+//! shared with `startrack accuracy`), and a seeded Gaussian noise source.
 //!
 //! Self-contained (no `libm`): erf/erfc are a Taylor series below |x| = 2.5 and a continued
 //! fraction above, both good to ~1e-14, checked in `centroid_math`.
@@ -177,12 +176,6 @@ pub fn ref_cog(
         }
     }
     (s > 0.0).then(|| (sx / s, sy / s))
-}
-
-/// Reference 3-point fit of one axis: vertex offset of a parabola through (-1, a), (0, b),
-/// (1, c).
-pub fn ref_quad3(a: f64, b: f64, c: f64) -> f64 {
-    0.5 * (a - c) / (a - 2.0 * b + c)
 }
 
 /// Cramer-Rao bound on x for the pixelated Gaussian in `win` (accuracy-theory.md), px: the
