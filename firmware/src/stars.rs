@@ -218,6 +218,19 @@ pub struct StarRecord {
 }
 
 impl StarRecord {
+    /// A centroid as reported, with the pipeline's flags in bits 24..31 (bits 16..23 empty).
+    fn from_centroid(c: &startrack_core::centroid::Centroid, pipeline: u8) -> Self {
+        Self {
+            x_px: c.x_px,
+            y_px: c.y_px,
+            flux_e: c.flux_e,
+            snr: c.snr,
+            sigma_x_px: c.sigma_x_px,
+            sigma_y_px: c.sigma_y_px,
+            flags: u32::from(c.flags.bits()) | (u32::from(pipeline) << 24),
+        }
+    }
+
     /// True when the position is a centroid that may be used for attitude.
     pub fn is_centroid(&self) -> bool {
         let pipeline = (self.flags >> 24) as u8;
@@ -680,15 +693,7 @@ impl StarPipeline {
         }
         let pipeline = flags::TRACKED | flags::FUSED;
         Some((
-            StarRecord {
-                x_px: c.x_px,
-                y_px: c.y_px,
-                flux_e: c.flux_e,
-                snr: c.snr,
-                sigma_x_px: c.sigma_x_px,
-                sigma_y_px: c.sigma_y_px,
-                flags: u32::from(c.flags.bits()) | (u32::from(pipeline) << 24),
-            },
+            StarRecord::from_centroid(&c, pipeline),
             StarBackground {
                 plan_slot: Some(t.slot),
                 ..bg
@@ -748,15 +753,7 @@ impl StarPipeline {
             Some(curve) => (curve.apply(c), 0),
             None => (c, flags::UNCORRECTED),
         };
-        Some(StarRecord {
-            x_px: c.x_px,
-            y_px: c.y_px,
-            flux_e: c.flux_e,
-            snr: c.snr,
-            sigma_x_px: c.sigma_x_px,
-            sigma_y_px: c.sigma_y_px,
-            flags: u32::from(c.flags.bits()) | (u32::from(pipeline) << 24),
-        })
+        Some(StarRecord::from_centroid(&c, pipeline))
     }
 
     /// Adds a star (and its background); when the list is full the faintest is replaced by a

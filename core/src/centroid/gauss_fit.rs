@@ -406,6 +406,14 @@ pub fn gauss_fit(input: &CentroidInput<'_>, params: &GaussFitParams) -> Centroid
     fit_general(&p, params)
 }
 
+/// True when a Gauss-Newton step left the position inside the window's pixel edges
+/// (`-1/2 ..= wmax`, `-1/2 ..= hmax`, window-relative) and the flux positive: else the fit
+/// gives up (module docs, failure policy).
+#[inline(always)]
+fn step_usable(x: f32, y: f32, flux: f32, wmax: f32, hmax: f32) -> bool {
+    (-0.5..=wmax).contains(&x) && (-0.5..=hmax).contains(&y) && flux > 0.0
+}
+
 /// The starting CoG on an already prepared window: the power-1 CoG of a
 /// `start_box` around the peak, and `EDGE_CLIPPED` when the box was clipped.
 fn start_cog(p: &Prepared<'_>, start_box: u8) -> Result<(Measured, CentroidFlags), Centroid> {
@@ -460,11 +468,7 @@ fn fit_general(p: &Prepared<'_>, params: &GaussFitParams) -> Centroid {
             vget(&theta, B) + vget(&step, B),
         ];
         let (x, y, flux) = (vget(&theta, X), vget(&theta, Y), vget(&theta, N));
-        if !(-0.5..=wmax).contains(&x)
-            || !(-0.5..=hmax).contains(&y)
-            || flux.is_nan()
-            || flux <= 0.0
-        {
+        if !step_usable(x, y, flux, wmax, hmax) {
             return give_up(extra);
         }
         if sx.abs() < params.tolerance_px && sy.abs() < params.tolerance_px {
@@ -731,11 +735,7 @@ mod held {
             let (sx, sy) = (dx.clamp(-1.0, 1.0), dy.clamp(-1.0, 1.0));
             theta = (theta.0 + sx, theta.1 + sy, theta.2 + dn);
             let (x, y, flux) = theta;
-            if !(-0.5..=wmax).contains(&x)
-                || !(-0.5..=hmax).contains(&y)
-                || flux.is_nan()
-                || flux <= 0.0
-            {
+            if !super::step_usable(x, y, flux, wmax, hmax) {
                 return give_up(extra);
             }
             if sx.abs() < params.tolerance_px && sy.abs() < params.tolerance_px {
