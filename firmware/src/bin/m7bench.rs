@@ -513,24 +513,29 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         );
     }
 
-    // The tracking path's pixel-phase curve (power 1, box 7, given background): 33 knots of
-    // an S-shaped correction (the values do not change the cost).
-    let mut track_curve_bytes = [0u8; 8 + 2 * 33];
-    track_curve_bytes[..8].copy_from_slice(
-        &CurveHeader {
-            power: CogPower::One,
-            box_side: 7,
-            background: PixCorrBackground::Given,
-            knots: 33,
-            a_px: U8F8::from_num(1.2),
-            phase_max_px: U0F16::from_num(0.45),
-        }
-        .to_bytes(),
-    );
-    for k in 1..33usize {
-        let v = (k as i32 * (32 - k as i32) * 3) as i16;
-        track_curve_bytes[8 + 2 * k..10 + 2 * k].copy_from_slice(&v.to_le_bytes());
-    }
+    // The pixel-phase curves the stages apply (power 1; the knots do not change the cost):
+    // the tracking path's (box 7, given background), its 5x5 twin (the trade-off chart's
+    // corrected 5x5 CoG) and the general path's (box 7, perimeter median).
+    let track_curve_bytes = s_curve_bytes(7, PixCorrBackground::Given);
+    let curve5_bytes = s_curve_bytes(5, PixCorrBackground::Given);
+    let median_curve_bytes = s_curve_bytes(7, PixCorrBackground::PerimeterMedian);
+    let (track_curve, _) =
+        PixCorr::parse(&track_curve_bytes).map_err(|_| "pixel-phase curve (given)")?;
+    let (curve_given5, _) =
+        PixCorr::parse(&curve5_bytes).map_err(|_| "pixel-phase curve (given, 5x5)")?;
+    let (curve, _) = PixCorr::parse(&median_curve_bytes).map_err(|_| "pixel-phase curve")?;
+    // The fused path's parameters: each star's background given, the curve applied.
+    let raw_params = RawCogParams {
+        box_side: 7,
+        level_e: 10.0,
+        variance_e2: 40.0,
+        curve: Some(track_curve),
+    };
+    let raw_params5 = RawCogParams {
+        box_side: 5,
+        curve: Some(curve_given5),
+        ..raw_params
+    };
 
     // Tracking frame: the per-frame cost of the firmware's tracking (firmware/src/stars.rs)
     // for TRACK_STARS 7x7 raw windows, each calibrated and centroided by applying its
@@ -575,14 +580,6 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         }
         let mut ok = true;
         let mut sum = 0.0f32;
-        let (track_curve, _) =
-            PixCorr::parse(&track_curve_bytes).map_err(|_| "pixel-phase curve (given)")?;
-        let params = RawCogParams {
-            box_side: 7,
-            level_e: 10.0,
-            variance_e2: 40.0,
-            curve: Some(track_curve),
-        };
         let mut plans = [None; TRACK_STARS];
         for (p, rect) in plans.iter_mut().zip(rects.iter()) {
             *p = RawCogPlan::new(&cal, *rect, (rect.x0 + 3, rect.y0 + 3), 7).ok();
@@ -599,7 +596,7 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
                     raw: black_box(w),
                     levels: lv,
                 };
-                match plan.as_ref().map(|p| p.apply(&cal, &win, &params)) {
+                match plan.as_ref().map(|p| p.apply(&cal, &win, &raw_params)) {
                     Some(Ok(r)) => {
                         if r.centroid.flags.contains(CentroidFlags::DEGENERATE) {
                             ok = false;
@@ -617,48 +614,7 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         row(out, "tracking_frame", "frame_30_stars", t_track, 1);
     }
 
-    // A pixel-phase curve for the firmware's CoG (power 1, box 7, perimeter median): 33
-    // knots of an S-shaped correction (the values do not change the cost).
-    let mut curve_bytes = [0u8; 8 + 2 * 33];
-    let header = CurveHeader {
-        power: CogPower::One,
-        box_side: 7,
-        background: PixCorrBackground::PerimeterMedian,
-        knots: 33,
-        a_px: U8F8::from_num(1.2),
-        phase_max_px: U0F16::from_num(0.45),
-    };
-    curve_bytes[..8].copy_from_slice(&header.to_bytes());
-    for k in 1..33usize {
-        let v = (k as i32 * (32 - k as i32) * 3) as i16;
-        curve_bytes[8 + 2 * k..10 + 2 * k].copy_from_slice(&v.to_le_bytes());
-    }
-    let (curve, _) = PixCorr::parse(&curve_bytes).map_err(|_| "pixel-phase curve")?;
     let mut t_cog1c = 0u64;
-    let (curve_given, _) =
-        PixCorr::parse(&track_curve_bytes).map_err(|_| "pixel-phase curve (given)")?;
-    let raw_params = RawCogParams {
-        box_side: 7,
-        level_e: 10.0,
-        variance_e2: 40.0,
-        curve: Some(curve_given),
-    };
-    // The same for a 5x5 box (the trade-off chart's corrected 5x5 CoG): its own curve.
-    let mut curve5_bytes = track_curve_bytes;
-    curve5_bytes[..8].copy_from_slice(
-        &CurveHeader {
-            box_side: 5,
-            ..curve_given.header()
-        }
-        .to_bytes(),
-    );
-    let (curve_given5, _) =
-        PixCorr::parse(&curve5_bytes).map_err(|_| "pixel-phase curve (given, 5x5)")?;
-    let raw_params5 = RawCogParams {
-        box_side: 5,
-        curve: Some(curve_given5),
-        ..raw_params
-    };
     let mut t_cog1c_raw = 0u64;
     let mut t_cog1c_raw5 = 0u64;
     let mut t_raw_plan = 0u64;
@@ -841,6 +797,26 @@ const METHOD_NAMES: [&str; METHODS] = [
 ];
 /// The PSF's sigma of the synthetic stars, px.
 const PSF_SIGMA_PX: f32 = 1.0;
+
+/// A pixel-phase curve's bytes (power 1, `box_side`, `background`, a = 1.2 px): 33 knots of
+/// an S-shaped correction; the values do not change the cost.
+fn s_curve_bytes(box_side: u8, background: PixCorrBackground) -> [u8; 8 + 2 * 33] {
+    let mut bytes = [0u8; 8 + 2 * 33];
+    let header = CurveHeader {
+        power: CogPower::One,
+        box_side,
+        background,
+        knots: 33,
+        a_px: U8F8::from_num(1.2),
+        phase_max_px: U0F16::from_num(0.45),
+    };
+    bytes[..8].copy_from_slice(&header.to_bytes());
+    for k in 1..33usize {
+        let v = (k as i32 * (32 - k as i32) * 3) as i16;
+        bytes[8 + 2 * k..10 + 2 * k].copy_from_slice(&v.to_le_bytes());
+    }
+    bytes
+}
 
 /// Runs centroid method `m` (an index into [`METHOD_NAMES`]) over the whole window
 /// (box = window side).
