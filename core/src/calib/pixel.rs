@@ -165,6 +165,17 @@ pub(crate) fn pixel_bits_d(d: i32, gain: GainEPerAdu, dark_16: i64, flat: FlatIn
     ((e + (1 << 23)) >> 24) as i32
 }
 
+/// A calibrated pixel's own flag: [`PixelFlags::SATURATED`] when the raw sample is at or
+/// above the table's saturation level `sat`, else none.
+#[inline(always)]
+pub(crate) fn saturation_flag(raw: u16, sat: u16) -> PixelFlags {
+    if raw >= sat {
+        PixelFlags::SATURATED
+    } else {
+        PixelFlags::empty()
+    }
+}
+
 /// The regular dark term in 2^-16 e-.
 #[inline(always)]
 pub(crate) fn dark_16ths(rel: DarkRel, dark_scale_bits: i32) -> i64 {
@@ -369,11 +380,7 @@ impl<'t> FrameCalibration<'t> {
                 .zip(consts)
             {
                 *e = Electrons::from_bits(pixel_bits(*r, *off, *gn, *d, *fl));
-                *f = if *r >= sat {
-                    PixelFlags::SATURATED
-                } else {
-                    PixelFlags::empty()
-                };
+                *f = saturation_flag(*r, sat);
                 flags |= *f;
             }
             if defects {
@@ -402,12 +409,10 @@ impl<'t> FrameCalibration<'t> {
         let offset = offset_16ths(levels.bias(out), t.column_bias(col));
         let dark = dark_16ths(t.dark_rel(x, y), self.dark_scale_bits);
         let e = pixel_bits(raw, offset, t.gain(out), dark, t.flat_inv(x, y));
-        let f = if raw >= t.saturation_adu() {
-            PixelFlags::SATURATED
-        } else {
-            PixelFlags::empty()
-        };
-        (Electrons::from_bits(e), f)
+        (
+            Electrons::from_bits(e),
+            saturation_flag(raw, t.saturation_adu()),
+        )
     }
 
     /// True when the table lists a hot or telegraph pixel on active row `y`.
@@ -505,11 +510,7 @@ impl<'t> FrameCalibration<'t> {
             for (col, (raw, (e, f))) in (col0..).zip(r.iter().zip(e.iter_mut().zip(f.iter_mut()))) {
                 let offset = bias16 + i32::from(t.column_bias(col).to_bits());
                 *e = Electrons::from_bits(pixel_bits(*raw, offset, gain, dark, flat));
-                *f = if *raw >= sat {
-                    PixelFlags::SATURATED
-                } else {
-                    PixelFlags::empty()
-                };
+                *f = saturation_flag(*raw, sat);
                 flags |= *f;
             }
             x = stop;

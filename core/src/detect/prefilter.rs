@@ -57,7 +57,7 @@
 use super::background::MAX_BLOCKS;
 use super::blobs::{above_thr, px_above_thr};
 use super::{DetectConfig, DetectError, Detection, LineDetector};
-use crate::calib::pixel::{dark_16ths, pixel_bits_d as pixel_bits};
+use crate::calib::pixel::{dark_16ths, pixel_bits_d as pixel_bits, saturation_flag};
 use crate::calib::{CalibError, FrameCalibration, FrameConditions, LineLevels, PixelFlags};
 use crate::table::MapView;
 use crate::units::{BiasAdu, DarkRel, Electrons, FlatInv, GainEPerAdu};
@@ -629,12 +629,7 @@ impl<const N: usize> LineScan<'_, '_, N> {
             .map_or(FlatInv::ONE, |b| FlatInv::from_bits(b as u16));
         let d = (i32::from(raw) << 4) - (bias16 + i32::from(cb.to_bits()));
         let e = pixel_bits(d, gain, dark_16ths(rel, k.ds), flat);
-        let f = if raw >= k.sat {
-            PixelFlags::SATURATED
-        } else {
-            PixelFlags::empty()
-        };
-        (Electrons::from_bits(e), f)
+        (Electrons::from_bits(e), saturation_flag(raw, k.sat))
     }
 
     /// The full chunks `data` of one output, from column `x0`, with their bounds and the
