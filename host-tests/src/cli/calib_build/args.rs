@@ -1,0 +1,104 @@
+//! The options of `startrack calib build` and their validation: the clap arguments, the
+//! comma-separated lists (`--gains`, `--psf-a-px`, `--pixcorr-boxes`, `--pixcorr-powers`) and
+//! the gains' range. A bad value is a [`CliError::Usage`] naming the option. Cost: nothing
+//! beyond parsing a few numbers.
+
+use crate::cli::CliError;
+use startrack_core::table::MAX_TILE_LOG2;
+use startrack_core::units::GainEPerAdu;
+use std::path::PathBuf;
+
+/// Options of `startrack calib build`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct CalibBuildArgs {
+    /// Output table file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Bias map, ADU, full readout (lines x line length).
+    #[arg(long)]
+    pub bias: Option<PathBuf>,
+    /// Relative dark map, unitless (covered columns' mean = 1), full readout.
+    #[arg(long)]
+    pub dark: Option<PathBuf>,
+    /// Flat field, unitless relative response, active area.
+    #[arg(long)]
+    pub flat: Option<PathBuf>,
+    /// Gains per output, e-/ADU, "G1,G2" (default: GAIN1/GAIN2 keywords of the maps).
+    #[arg(long)]
+    pub gains: Option<String>,
+    /// Hot pixels: CSV `col,row,dark_e`, full-readout coordinates.
+    #[arg(long)]
+    pub hot: Option<PathBuf>,
+    /// Exposure the hot pixels' `dark_e` was measured in, s.
+    #[arg(long, default_value_t = 1.0)]
+    pub hot_exposure_s: f64,
+    /// Temperature the hot pixels' `dark_e` was measured at, K.
+    #[arg(long, default_value_t = 293.0)]
+    pub hot_ref_k: f64,
+    /// A hot pixel's dark doubles every this many kelvin.
+    #[arg(long, default_value_t = 6.0)]
+    pub hot_doubling_k: f64,
+    /// Hot pixels with more dark than this (e-, in the reference exposure) are excluded.
+    #[arg(long, default_value_t = 10_000.0)]
+    pub hot_exclude_above_e: f64,
+    /// Map tiles of 2^N pixels: 0 is per pixel (full correction, 2 MB for the CCD47-20,
+    /// external flash); 3 (8x8) fits the firmware's 128 KB CALIB sector.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=i64::from(MAX_TILE_LOG2)))]
+    pub tile_log2: u8,
+    /// Raw samples at or above this are flagged saturated, ADU.
+    #[arg(long, default_value_t = 65535)]
+    pub saturation_adu: u16,
+    /// PSF 80 %-energy radii, px, "A[,A2..]": adds pixel-phase correction curves for them.
+    #[arg(long)]
+    pub psf_a_px: Option<String>,
+    /// CoG box sides the curves are built for, "5,7" (odd, 3..=29; window = box + 2).
+    #[arg(long, default_value = "5,7")]
+    pub pixcorr_boxes: String,
+    /// CoG powers the curves are built for, "1,2".
+    #[arg(long, default_value = "1,2")]
+    pub pixcorr_powers: String,
+}
+
+/// A comma-separated list of numbers of option `name`.
+pub(super) fn parse_list<T: std::str::FromStr>(name: &str, s: &str) -> Result<Vec<T>, CliError>
+where
+    T::Err: std::fmt::Display,
+{
+    s.split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<T>()
+                .map_err(|e| CliError::Usage(format!("{name} {s}: {e}")))
+        })
+        .collect()
+}
+
+/// The gains of `--gains`, one per output.
+pub(super) fn parse_gains(s: &str, outputs: usize) -> Result<Vec<f64>, CliError> {
+    let g: Vec<f64> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| CliError::Usage(format!("--gains {s}: {e}")))?;
+    if g.len() != outputs {
+        return Err(CliError::Usage(format!(
+            "--gains {s}: need {outputs} values, one per output"
+        )));
+    }
+    Ok(g)
+}
+
+/// The gains as the table stores them; each must be in (0, 16) e-/ADU.
+pub(super) fn encode_gains(g: &[f64]) -> Result<Vec<GainEPerAdu>, CliError> {
+    g.iter()
+        .map(|&v| {
+            if v.is_finite() && v > 0.0 && v < 16.0 {
+                Ok(GainEPerAdu::saturating_from_num(v).max(GainEPerAdu::DELTA))
+            } else {
+                Err(CliError::Usage(format!(
+                    "gain {v} e-/ADU: must be above 0 and below 16"
+                )))
+            }
+        })
+        .collect()
+}
