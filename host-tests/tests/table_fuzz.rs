@@ -2,7 +2,7 @@
 //! single-bit corruption of a written table is rejected, and whatever passes the structural
 //! checks is safe to read everywhere.
 
-#[path = "common/table_fixtures.rs"]
+#[path = "common/table_fixtures/mod.rs"]
 mod table_fixtures;
 
 use fixed::types::U8F8;
