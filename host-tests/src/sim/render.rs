@@ -1,9 +1,14 @@
-//! Raw samples of the simulated sensor, computed on demand.
+//! Raw samples of the simulated sensor, computed on demand: the basic sensor (stars, dark,
+//! flat, bias, gains, noise, ADC) and the per-pixel draws of the optional effects that
+//! [`super::effects`] describes (dark law, hot, telegraph and cosmic-ray charge, CTI).
+//! Cost: per raw sample, up to six ChaCha8 streams (column bias, relative dark, flat, photon,
+//! dark and read noise) and an erf difference per axis for each star within 8 sigma + 1 px.
 
-use super::effects::PsfShape;
+use super::effects::{COSMIC_CORE, PsfShape};
 use super::params::{SensorParams, Star};
 use super::psf::{pixel_fraction, sigma_of_a};
 use super::rng::{FIXED, Purpose, stream};
+use rand::RngExt;
 use rand_distr::{Distribution, Normal, Poisson};
 use startrack_core::geometry::Segment;
 use startrack_core::window::Rect;
@@ -215,5 +220,129 @@ impl Simulator {
                     .map(move |x| self.raw_sample(g.raw_col_of_x(usize::from(x)), usize::from(y)))
             })
             .collect()
+    }
+}
+
+/// True for raw elements with a pixel behind them (active or covered, any line).
+fn is_pixel(sim: &Simulator, col: usize) -> bool {
+    matches!(
+        sim.params.geometry.segment(col),
+        Some(Segment::Active | Segment::Covered)
+    )
+}
+
+// The optional effects' per-pixel draws.
+impl Simulator {
+    /// Factor of the regular dark at the sensor's temperature (1 without a [`DarkLaw`](super::effects::DarkLaw)).
+    pub fn dark_law_factor(&self) -> f64 {
+        let e = &self.params.effects;
+        e.dark_law.map_or(1.0, |l| {
+            if l.doubling_k > 0.0 {
+                2f64.powf((e.temperature_k - l.reference_k) / l.doubling_k)
+            } else {
+                1.0
+            }
+        })
+    }
+
+    /// The hot pixel at raw (`col`, `line`): its rate at the reference temperature, e-/s,
+    /// or `None` if the pixel is not hot (or hot pixels are off).
+    pub fn hot_rate_e_per_s(&self, col: usize, line: usize) -> Option<f64> {
+        let h = self.params.effects.hot?;
+        if !is_pixel(self, col) {
+            return None;
+        }
+        let mut r = stream(self.params.seed, FIXED, col, line, Purpose::Defect);
+        let u: f64 = r.random();
+        let v: f64 = r.random();
+        (u < h.fraction).then(|| {
+            let (lo, hi) = (h.rate_min_e_per_s.max(1e-9), h.rate_max_e_per_s.max(1e-9));
+            (lo.ln() + v * (hi.ln() - lo.ln())).exp()
+        })
+    }
+
+    /// Hot-pixel dark of raw (`col`, `line`) in this exposure at the sensor's temperature,
+    /// e- (0 for a normal pixel).
+    pub fn hot_dark_e(&self, col: usize, line: usize) -> f64 {
+        let Some(h) = self.params.effects.hot else {
+            return 0.0;
+        };
+        self.hot_rate_e_per_s(col, line).map_or(0.0, |rate| {
+            let law = if h.doubling_k > 0.0 {
+                2f64.powf((self.params.effects.temperature_k - h.reference_k) / h.doubling_k)
+            } else {
+                1.0
+            };
+            rate * h.exposure_s * law
+        })
+    }
+
+    /// The telegraph pixel at raw (`col`, `line`): its step between levels, e-, or `None`.
+    pub fn telegraph_step_e(&self, col: usize, line: usize) -> Option<f64> {
+        let t = self.params.effects.telegraph?;
+        if !is_pixel(self, col) {
+            return None;
+        }
+        let mut r = stream(self.params.seed, FIXED, col, line, Purpose::Defect);
+        // The first two draws belong to the hot-pixel test.
+        let _: (f64, f64) = (r.random(), r.random());
+        let u: f64 = r.random();
+        let amp: f64 = r.random();
+        (u < t.fraction).then_some(t.amplitude_e * (0.5 + amp))
+    }
+
+    /// Telegraph charge of raw (`col`, `line`) in this frame, e- (the step when high).
+    pub fn telegraph_e(&self, col: usize, line: usize) -> f64 {
+        let (Some(t), Some(step)) = (
+            self.params.effects.telegraph,
+            self.telegraph_step_e(col, line),
+        ) else {
+            return 0.0;
+        };
+        let mut r = stream(self.params.seed, self.frame, col, line, Purpose::Event);
+        // The first two draws belong to the cosmic-ray test.
+        let _: (f64, f64) = (r.random(), r.random());
+        let u: f64 = r.random();
+        if u < t.p_high { step } else { 0.0 }
+    }
+
+    /// The cosmic-ray deposit centred on raw (`col`, `line`) in this frame, e- (0: no hit).
+    pub fn cosmic_hit_e(&self, col: usize, line: usize) -> f64 {
+        let Some(c) = self.params.effects.cosmics else {
+            return 0.0;
+        };
+        if !is_pixel(self, col) || line >= usize::from(self.params.geometry.lines) {
+            return 0.0;
+        }
+        let mut r = stream(self.params.seed, self.frame, col, line, Purpose::Event);
+        let u: f64 = r.random();
+        let v: f64 = r.random();
+        if u < c.rate_per_px {
+            c.mean_e * (0.5 + v)
+        } else {
+            0.0
+        }
+    }
+
+    /// Cosmic-ray charge collected by raw (`col`, `line`) in this frame: its own hit's core
+    /// plus a quarter of the rest of each direct neighbour's hit, e-.
+    pub fn cosmic_e(&self, col: usize, line: usize) -> f64 {
+        if self.params.effects.cosmics.is_none() || !is_pixel(self, col) {
+            return 0.0;
+        }
+        let side = (1.0 - COSMIC_CORE) / 4.0;
+        let mut e = COSMIC_CORE * self.cosmic_hit_e(col, line);
+        let neighbours = [
+            (col.wrapping_sub(1), line),
+            (col + 1, line),
+            (col, line.wrapping_sub(1)),
+            (col, line + 1),
+        ];
+        for (c, l) in neighbours {
+            if c < self.params.geometry.line_len() && l != usize::MAX {
+                e += side * self.cosmic_hit_e(c, l);
+            }
+        }
+        e
     }
 }
