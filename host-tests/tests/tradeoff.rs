@@ -11,7 +11,7 @@ use startrack_host::figures::Written;
 use startrack_host::tradeoff::cost::{M7Table, m7_cost};
 use startrack_host::tradeoff::failures::{self, MapSpec, Perturb};
 use startrack_host::tradeoff::pareto::frontier;
-use startrack_host::tradeoff::{chart, write_failures};
+use startrack_host::tradeoff::{chart, write_chart, write_failures};
 
 #[test]
 fn pareto_keeps_exactly_the_undominated_points() {
@@ -180,7 +180,7 @@ fn small_run(dir: &std::path::Path) {
     let costs = chart::costs(&methods, &table(), 0);
     let rows = chart::rows(&methods, &costs, &noise, || {});
     let mut w = Written::default();
-    chart::write(dir, &rows, &methods, &noise, "test table", &mut w).unwrap();
+    write_chart(dir, &rows, &methods, &noise, "test table", &mut w).unwrap();
     let spec = MapSpec {
         grid_snr: vec![3.0, 30.0],
         grid_a_px: vec![0.5, 1.5],

@@ -1,5 +1,6 @@
-//! tradeoff.csv and tradeoff.png: every centroid method's cost per star against its accuracy
-//! at SNR 10, 30, 100 and a = 0.7, 1, 1.5, 2 px, with the Pareto frontier of each scene.
+//! tradeoff.csv: every centroid method's cost per star against its accuracy at SNR 10, 30,
+//! 100 and a = 0.7, 1, 1.5, 2 px, with the Pareto frontier of each scene ([`TradeRow`]s, which
+//! [`super::png::tradeoff`] draws as tradeoff.png).
 //!
 //! Accuracy is [`crate::accuracy::run_cell`] (the seeded Monte Carlo of `startrack accuracy`:
 //! RMS error against the truth and the Cramer-Rao bound over the same stars); cost is the M7
@@ -11,7 +12,7 @@
 use super::cost::{M7Table, host_ns_per_star, m7_cost};
 use super::pareto::frontier;
 use crate::accuracy::{Cell, Method, Noise, run_cell};
-use crate::figures::{FigureError, Written, csv::write_csv};
+use crate::figures::{FigureError, Written, csv};
 use std::path::Path;
 
 /// One method in one scene.
@@ -107,11 +108,10 @@ pub fn rows(
 /// tradeoff.csv's column names.
 pub const COLUMNS: &str = "method,window,a_px,snr,m7_instructions,m7_basis,host_ns,rms_px,crlb_px,rms_over_crlb,failed,pareto_m7,pareto_host";
 
-/// Writes tradeoff.csv and tradeoff.png.
-pub fn write(
+/// Writes tradeoff.csv.
+pub fn write_csv(
     out: &Path,
     rows: &[TradeRow],
-    methods: &[Method],
     noise: &Noise,
     m7_source: &str,
     written: &mut Written,
@@ -150,7 +150,5 @@ pub fn write(
         ),
         "pareto_*: 1 when no other method of the same (a_px, snr) is both cheaper (M7 / host) and has a smaller rms_px".into(),
     ];
-    write_csv(out, "tradeoff.csv", &header, COLUMNS, &lines, written)?;
-    let names: Vec<String> = methods.iter().map(Method::name).collect();
-    super::png::tradeoff(out, rows, &names, &WIDTHS_A_PX, &SNRS, written)
+    csv::write_csv(out, "tradeoff.csv", &header, COLUMNS, &lines, written)
 }

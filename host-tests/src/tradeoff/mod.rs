@@ -1,9 +1,10 @@
-//! Issue 4's speed against accuracy, and where each centroid method fails
+//! Speed against accuracy of every centroid method, and where each fails
 //! (`startrack tradeoff --out DIR [--quick] [--m7 FILE]`).
 //!
-//! - [`chart`]: tradeoff.csv and tradeoff.png, cost per star (Cortex-M7 instructions from a
-//!   `cargo m7-bench` CSV, host ns timed here: [`cost`]) against RMS error and RMS / CRLB
-//!   (from [`crate::accuracy::run_cell`]), the Pareto frontier ([`pareto`]) marked per scene.
+//! - [`chart`]: tradeoff.csv (and tradeoff.png, drawn by [`png`]), cost per star (Cortex-M7
+//!   instructions from a `cargo m7-bench` CSV, host ns timed here: [`cost`]) against RMS
+//!   error and RMS / CRLB (from [`crate::accuracy::run_cell`]), the Pareto frontier
+//!   ([`pareto`]) marked per scene.
 //! - [`failures`]: failures.csv, and one heatmap PNG per method ([`png`]): a grid over SNR x
 //!   PSF width and sweeps of DSNU, a hot pixel, a telegraph pixel, saturation, the distance
 //!   to an edge and a close pair's separation; a cell fails on bias, RMS over the bound or
@@ -81,11 +82,25 @@ pub fn run_all(out: &Path, opts: &Options) -> Result<Written, FigureError> {
     };
     let costs = chart::costs(&methods, &opts.m7, opts.host_passes);
     let rows = chart::rows(&methods, &costs, &noise, || bar.inc(1));
-    chart::write(out, &rows, &methods, &noise, &opts.m7_source, &mut w)?;
+    write_chart(out, &rows, &methods, &noise, &opts.m7_source, &mut w)?;
     let cells = failures::run(&methods, &spec, || bar.inc(1));
     bar.finish_and_clear();
     write_failures(out, &methods, &spec, &cells, &mut w)?;
     Ok(w)
+}
+
+/// Writes tradeoff.csv and tradeoff.png.
+pub fn write_chart(
+    out: &Path,
+    rows: &[chart::TradeRow],
+    methods: &[Method],
+    noise: &Noise,
+    m7_source: &str,
+    w: &mut Written,
+) -> Result<(), FigureError> {
+    chart::write_csv(out, rows, noise, m7_source, w)?;
+    let names: Vec<String> = methods.iter().map(Method::name).collect();
+    png::tradeoff(out, rows, &names, &chart::WIDTHS_A_PX, &chart::SNRS, w)
 }
 
 /// Writes failures.csv and the heatmaps.
