@@ -18,8 +18,8 @@ pub struct Args {
     /// Coarse: 300 stars per accuracy cell, a 5 x 5 failure grid, 150 stars per scene.
     #[arg(long)]
     pub quick: bool,
-    /// `cargo m7-bench` CSV (stage,unit,instructions_per_unit) [default: host-tests/m7-costs.csv,
-    /// regenerated with `cargo m7-bench > host-tests/m7-costs.csv`].
+    /// `cargo m7-bench` CSV (stage,unit,instructions_per_unit); default: host-tests/m7-costs.csv,
+    /// regenerated with `cargo m7-bench > host-tests/m7-costs.csv`.
     #[arg(long)]
     pub m7: Option<PathBuf>,
     /// Leave the host-ns column empty (then the outputs are fully deterministic).
