@@ -16,8 +16,11 @@
 //! (checked on a grid of 2001 phases, with a slope of at least [`MIN_SLOPE`]) each knot's
 //! `p(m_k)` is found by bisection to 1e-12 px and stored as `c = p - m` in I1F15.
 //!
-//! Cost: about 60 bisection steps of one window CoG per knot; a 33-knot curve is a few
-//! milliseconds on the host.
+//! Cost: in CoG evaluations of one window, 2001 for the monotonicity grid plus 60 bisection
+//! steps per knot with a given background; eight times as many with a perimeter background
+//! (one per cross-axis phase), plus 328 for its residual check, so a perimeter curve costs
+//! about eight given ones. `time startrack calib build ... --psf-a-px A` against the same
+//! command without `--psf-a-px` measures the curves of one width.
 
 use crate::sim::psf::{pixel_fraction, sigma_of_a};
 use fixed::types::{I1F15, U0F16, U8F8};
@@ -31,7 +34,8 @@ use startrack_core::centroid::pixcorr::{
 pub const MIN_SLOPE: f64 = 0.05;
 
 /// The largest RMS residual (over true phases in both axes) a perimeter-background curve may
-/// leave, px: two thirds of the 0.003 px, to leave room for the rest.
+/// leave, px: two thirds of the 0.003 px required of the corrected CoG's systematic error,
+/// to leave room for the rest.
 pub const CROSS_AXIS_LIMIT_PX: f64 = 0.002;
 
 /// Phases across the axis that a perimeter-background curve averages over: midpoints of 8

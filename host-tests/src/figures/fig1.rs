@@ -1,6 +1,7 @@
 //! Figure 1: RMS of the noise-free systematic shift of the power-1 CoG (eq. 2) against the
 //! image size `a` (0.25..8 px, log scale), for 3x3, 5x5 and 7x7 boxes. The paper finds a
-//! minimum (pixelisation below, truncation above); for the 5x5 box it lies near a ~ 1 px.
+//! minimum (pixelisation below, truncation above); for the 5x5 box it lies near a ~ 1 px
+//! (checked by `figures_pixelisation`: between 0.7 and 1.6 px).
 
 use super::{Effort, FigureError, FigureFiles, Written, log_space, plot, systematic};
 use std::path::Path;

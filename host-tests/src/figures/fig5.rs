@@ -29,7 +29,8 @@
 //!   lines (the firmware uses the whole frame for both). The perimeter's
 //!   24 pixels would add their own level error (`25/24` of the background variance in the
 //!   5x5 box's eq. 8 noise), which is what keeps `perimeter`'s measured SNR of an SNR-5 star
-//!   near 3.5 even without DSNU.
+//!   near 3.5 even without DSNU (the `mean SNR` that `cargo test -p startrack-host --test
+//!   figures_dark -- --nocapture` prints).
 //!
 //! Cost: ~1600 rendered samples per trial (49 window pixels, 48 reference elements on each of
 //! `DARK_LINES` lines);

@@ -32,8 +32,9 @@
 //!
 //! # Host time
 //! [`host_ns_per_star`] runs the method on a fixed set of noisy stars (seeded) in repeated
-//! passes and keeps the fastest pass's mean: wall-clock, so it varies run to run by a few
-//! per cent and is the one column of the outputs that is not deterministic.
+//! passes and keeps the fastest pass's mean: wall-clock, so it varies with the machine and
+//! its load (on a shared machine, compare the `host_ns` column of two `startrack tradeoff`
+//! runs) and is the one column of the outputs that is not deterministic.
 
 use crate::accuracy::{Method, PreparedMethod, flux_for_snr};
 use crate::sim::psf::{pixel_fraction, sigma_of_a};

@@ -40,8 +40,10 @@
 //! errors, [`crate::accuracy::rms_relative_se`]) and `detect_rate` a standard error of
 //! `sqrt(p(1-p)/N)`; the tests pin only cells whose margin to a limit exceeds 4 of these.
 //!
-//! Cost: per star one 9x9 render, two bounds and two runs of every method; the full map
-//! (about 160 scenes x 600 stars x 17 methods) takes well under a minute of CPU in release.
+//! Cost: per star one 9x9 render, two bounds and two runs of every method; the full map is
+//! every scene of [`MapSpec::new`] (its grid and sweeps) times its `trials` stars times every
+//! method of [`crate::accuracy::Method::all`], most of `startrack tradeoff`'s time (`time
+//! startrack tradeoff --out DIR` measures it).
 
 use crate::accuracy::{Method, PreparedMethod, crlb_x_px, flux_for_snr};
 use crate::sim::psf::{pixel_fraction, sigma_of_a};

@@ -11,8 +11,8 @@
 //!   detection.
 //!
 //! Everything but the host-ns column is seeded and deterministic: two runs write identical
-//! files apart from that column. The full run takes about 20 s of CPU in release;
-//! `--quick` (fewer stars, a coarser grid) about 4 s.
+//! files apart from that column. `--quick` runs fewer stars on a coarser grid, a fraction
+//! of the full run's time; `time startrack tradeoff --out DIR [--quick]` measures both.
 
 pub mod chart;
 pub mod cost;

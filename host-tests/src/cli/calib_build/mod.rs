@@ -49,8 +49,9 @@
 //! - here: [`build`] assembles the sections and encodes the table, [`run`] writes it and
 //!   prints the notes.
 //!
-//! Cost: dominated by reading the FITS maps (two full readouts and one active area) and, with
-//! `--psf-a-px`, building the curves; the encoding is one pass over the sections.
+//! Cost: without `--psf-a-px`, reading the FITS maps (two full readouts and one active area)
+//! and one pass over each; with it, building the curves ([`curves`]) takes most of the run.
+//! The encoding is one pass over the sections.
 
 pub mod args;
 pub mod curves;
