@@ -1,4 +1,4 @@
-//! Host benchmarks of the core's stages (issue 5), the same stages `cargo m7-bench` counts on
+//! Host benchmarks of the core's stages, the same stages `cargo m7-bench` counts on
 //! the Cortex-M7, on a simulated CCD47-20 frame (1072 x 1033 raw, 8x8-tiled table, 60
 //! stars):
 //!

@@ -1,4 +1,4 @@
-//! The accuracy table of issue 3, asserted: the best method's RMS error is within 1.1x the
+//! The accuracy table's requirements, asserted: the best method's RMS error is within 1.1x the
 //! Cramer-Rao bound at SNR 10, 30 and 100 for a = 0.7..2 px, and every method's error
 //! estimate is within 20 % of its measured scatter where first-order propagation holds (the
 //! exceptions are listed in [`estimate_should_hold`], each with its reason).

@@ -193,7 +193,7 @@ fn calib_build_adds_the_curves_and_reports_them() {
 /// sigmas. Bounds from counts: the mean of the per-axis differences `u^2 - c^2` (plain minus
 /// corrected squared error) must exceed 4 standard errors of that mean (same noise in both:
 /// the difference is the removed bias); the corrected chi^2 per degree of freedom must be
-/// below (1.2)^2 (the 20 % on sigma) plus 4 standard deviations of a chi^2/dof,
+/// below (1.2)^2 (the required 20 % on sigma) plus 4 standard deviations of a chi^2/dof,
 /// 4 sqrt(2 / dof).
 #[test]
 fn cog_with_the_tables_curve_beats_the_plain_cog_and_matches_its_sigma() {

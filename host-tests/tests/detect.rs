@@ -1,5 +1,5 @@
-//! Streaming detection: on a simulated CCD47-20 frame end to end, and the cases the issue
-//! names: hot and telegraph pixels never detect, the candidate list keeps the brightest when
+//! Streaming detection: on a simulated CCD47-20 frame end to end, and the cases it must
+//! handle: hot and telegraph pixels never detect, the candidate list keeps the brightest when
 //! full, random frames never panic.
 
 use proptest::prelude::*;

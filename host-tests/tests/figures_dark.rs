@@ -1,5 +1,5 @@
 //! Figures 5 and 6: the paper's dark non-uniformity experiment through the core, and our
-//! dark pre-calculation's improvement (issue 4's numbers).
+//! dark pre-calculation's improvement (the required numbers).
 //!
 //! Monte Carlo tolerances, with n = TRIALS trials per point:
 //! - a detection rate q has binomial standard error sqrt(q (1 - q) / n) (at most 0.016 for
@@ -7,7 +7,7 @@
 //! - an RMS over n roughly Gaussian errors has relative standard error 1/sqrt(2n) (2.2 % at
 //!   n = 1000); the two DSNU points of a ratio use the same star positions, phases and photon
 //!   draws, so their ratio scatters less than the sqrt(2) x 2.2 % = 3.2 % of independent
-//!   points. The issue's bound (<= 1.1) sits 3 of those above the expected ratio (~1.01:
+//!   points. The required bound (<= 1.1) sits 3 of those above the expected ratio (~1.01:
 //!   the measured map adds (250 + 25) / 32 e-^2 to 275 e-^2 per pixel), so a pass is not luck.
 
 use startrack_host::figures::fig5::{Fig5Params, Fig5Point, Method, run};

@@ -193,7 +193,7 @@ fn fig2_and_fig3_match_the_exact_reference_and_the_paper_shapes() {
 }
 
 #[test]
-fn csv_files_have_the_issue_columns_and_a_parameter_header() {
+fn csv_files_have_the_required_columns_and_a_parameter_header() {
     let dir = std::env::temp_dir().join(format!("startrack-figs-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let mut w = Written::default();

@@ -19,7 +19,7 @@ use startrack_core::window::Window;
 use startrack_host::pixcorr::{BuildError, CurveSpec, build_curve, measured_phase};
 
 const WIDTHS_A: [f64; 8] = [0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0];
-/// The bound on the corrected CoG's systematic error, px RMS.
+/// The required bound on the corrected CoG's systematic error, px RMS.
 const LIMIT_PX: f64 = 0.003;
 
 fn background(kind: PixCorrBackground) -> Background {
