@@ -28,7 +28,7 @@ fn frame(params: SensorParams, n_stars: usize, tile_log2: u8) -> Frame {
         .unwrap();
     let parsed = CalibTable::parse(&table).unwrap();
     let raw = startrack_host::demo::render_frame(&sim);
-    let levels = startrack_host::pipeline::measure_levels(&parsed, &raw).unwrap();
+    let levels = startrack_host::home::frame_levels(&parsed, &raw).unwrap();
     let lines = raw
         .chunks_exact(g.line_len())
         .map(<[u16]>::to_vec)
