@@ -176,11 +176,11 @@ fn calib_build_adds_the_curves_and_reports_them() {
     );
     let plain = std::fs::read(&s.without).unwrap();
     assert!(CalibTable::parse(&plain).unwrap().pixcorr().is_empty());
-    // The firmware's CoG (power 1, box 7, median perimeter; firmware/src/stars.rs) finds
+    // The tracker's CoG with the flight window (power 1, box 5, median perimeter) finds
     // its curve in a table built with the default boxes.
     let fw = t.pixcorr().find(
         startrack_core::centroid::cog::CogPower::One,
-        7,
+        startrack_core::tracker::TrackerConfig::FLIGHT.box_px(),
         startrack_core::centroid::pixcorr::PixCorrBackground::PerimeterMedian,
         1.2,
     );
@@ -201,7 +201,7 @@ fn cog_with_the_tables_curve_beats_the_plain_cog_and_matches_its_sigma() {
     let s = setup();
     let truth = truth(&s.files.truth);
     assert!(truth.iter().all(|t| t.2 == A_PX));
-    // Window 7 (box 5) is `process`'s default; window 9 (box 7) the firmware's CoG.
+    // Window 7 (box 5) is the flight window; window 9 (box 7) the other default curve box.
     for (method, window) in [(Method::Cog1, 7), (Method::Cog2, 7), (Method::Cog1, 9)] {
         // No width option: `process` reads PSFA from the frame.
         let corrected = process_window(&s.files.frame, &s.with_curves, method, None, window);

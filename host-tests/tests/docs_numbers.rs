@@ -3,14 +3,14 @@
 //!
 //! A table the docs mark with `<!-- checked: NAME -->` on the line before it is parsed and
 //! each of its cells compared with the CSV it comes from (`host-tests/m7-costs.csv`,
-//! `host-tests/figures/*.csv`) or with the code (`pipeline::FLAG_BITS`). A number written
+//! `host-tests/figures/*.csv`) or with the code (`StarFlags`). A number written
 //! with `d` decimals matches a value when it is that value rounded to `d` decimals, give or
 //! take the CSV's own rounding. A few numbers in running text are checked as the exact
 //! phrase the CSV gives. Also: every marker is one this file checks, every relative link
 //! and anchor of the pages resolves, the pages speak of the product only, and the README
 //! stays short.
 
-use startrack_host::pipeline::FLAG_BITS;
+use startrack_core::tracker::{StarFlags, Tracker, TrackerBuffers, TrackerConfig};
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
@@ -176,7 +176,7 @@ fn table(page: &str, name: &str) -> (Vec<String>, Vec<Vec<String>>) {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 10] = [
+const CHECKED: [&str; 12] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -186,7 +186,9 @@ const CHECKED: [&str; 10] = [
     "low-snr-detection",
     "fig-minima",
     "fig5-fig6",
-    "stars-csv-flags",
+    "star-flags",
+    "tracker-config",
+    "tracker-memory",
 ];
 
 #[test]
@@ -773,16 +775,75 @@ fn figure_5_and_6_table_is_their_csvs() {
 }
 
 #[test]
-fn stars_csv_flag_table_is_flag_bits() {
-    let (header, body) = table("docs/formats.md", "stars-csv-flags");
-    assert_eq!(header, ["bit", "value", "from", "meaning"]);
-    assert_eq!(body.len(), FLAG_BITS.len(), "one row per FLAG_BITS entry");
-    for (r, (bit, from, meaning)) in body.iter().zip(FLAG_BITS) {
-        assert_eq!(r[0], bit.to_string());
-        assert_eq!(r[1], (1u64 << bit).to_string(), "bit {bit}'s value");
-        assert_eq!(r[2], from, "bit {bit}'s source");
-        assert_eq!(r[3].replace('`', ""), meaning, "bit {bit}'s meaning");
+fn star_flag_table_is_star_flags() {
+    let (header, body) = table("docs/formats.md", "star-flags");
+    assert_eq!(header, ["bit", "value", "flag", "from", "meaning"]);
+    let flags: Vec<(&str, StarFlags)> = StarFlags::all().iter_names().collect();
+    assert_eq!(body.len(), flags.len(), "one row per StarFlags flag");
+    for (r, (name, f)) in body.iter().zip(flags) {
+        let bit = f.bits().trailing_zeros();
+        assert_eq!(r[0], bit.to_string(), "{name}'s bit");
+        assert_eq!(r[1], f.bits().to_string(), "{name}'s value");
+        assert_eq!(r[2].replace('`', ""), name, "bit {bit}'s name");
     }
+}
+
+#[test]
+fn tracker_config_table_is_the_flight_configuration() {
+    let (header, body) = table("docs/tracker.md", "tracker-config");
+    assert_eq!(header, ["field", "unit", "flight", "meaning"]);
+    let f = TrackerConfig::FLIGHT;
+    let expected: Vec<(&str, String)> = vec![
+        ("acquisition_method", format!("{:?}", f.acquisition_method)),
+        ("tracking_method", format!("{:?}", f.tracking_method)),
+        ("window_px", f.window_px.to_string()),
+        ("track_margin_px", f.track_margin_px.to_string()),
+        ("psf_a_px", f.psf_a_px.to_string()),
+        ("pixcorr_tolerance", f.pixcorr_tolerance.to_string()),
+        ("background_stride", f.background_stride.to_string()),
+        (
+            "background_warmup_rows",
+            f.background_warmup_rows.to_string(),
+        ),
+        ("max_stars", f.max_stars.to_string()),
+        ("max_tracked", f.max_tracked.to_string()),
+        ("min_track_stars", f.min_track_stars.to_string()),
+        ("reacquire_every", f.reacquire_every.to_string()),
+        ("exposure_ms", f.exposure_ms.to_string()),
+        ("line_summary_every", f.line_summary_every.to_string()),
+    ];
+    assert_eq!(body.len(), expected.len(), "one row per field");
+    for (r, (field, value)) in body.iter().zip(&expected) {
+        assert_eq!(r[0].replace('`', ""), *field);
+        assert_eq!(r[2].replace('`', ""), *value, "{field}");
+    }
+}
+
+#[test]
+fn tracker_memory_table_is_size_of() {
+    let (header, body) = table("docs/tracker.md", "tracker-memory");
+    assert_eq!(header, ["component", "bytes (64-bit host)", "where"]);
+    let sizes = [
+        ("TrackerBuffers", std::mem::size_of::<TrackerBuffers>()),
+        (
+            "Tracker<32>",
+            std::mem::size_of::<Tracker<'static, 'static, 32>>(),
+        ),
+    ];
+    assert_eq!(body.len(), sizes.len());
+    for (r, (name, size)) in body.iter().zip(sizes) {
+        assert_eq!(r[0].replace('`', ""), name);
+        assert_eq!(r[1], size.to_string(), "{name}");
+    }
+    let scan = std::mem::size_of::<startrack_core::detect::ScanDetector<'static, 32>>();
+    let det = std::mem::size_of::<startrack_core::detect::LineDetector<32>>();
+    assert!(
+        body[1][2].contains(&format!(
+            "the scan detector ({scan}, of which the line detector {det})"
+        )),
+        "{}",
+        body[1][2]
+    );
 }
 
 /// GitHub's anchor of a heading: lower case, punctuation but `-` and `_` dropped, spaces as
