@@ -565,8 +565,11 @@ fn tracker_memory() {
     let tracker = std::mem::size_of::<Tracker<'static, 'static, 32>>();
     let scan = std::mem::size_of::<startrack_core::detect::ScanDetector<'static, 32>>();
     let detector = std::mem::size_of::<LineDetector<32>>();
+    let ring = std::mem::size_of::<startrack_core::tracker::Ring>();
+    let capture = std::mem::size_of::<startrack_core::tracker::Capture>();
+    let plan = std::mem::size_of::<startrack_core::centroid::raw_cog::RawCogPlan>();
     eprintln!(
-        "TrackerBuffers {buffers} B, Tracker<32> {tracker} B, of which the scan detector {scan} B (its line detector {detector} B)"
+        "TrackerBuffers {buffers} B (ring {ring}, capture {capture}, plans 32 x {plan}), Tracker<32> {tracker} B, of which the scan detector {scan} B (its line detector {detector} B)"
     );
     assert!(buffers <= 70 * 1024, "{buffers}");
     assert!(tracker <= 40 * 1024, "{tracker}");
