@@ -26,5 +26,6 @@ pub mod centroid;
 pub mod detect;
 pub mod geometry;
 pub mod table;
+pub mod tracker;
 pub mod units;
 pub mod window;

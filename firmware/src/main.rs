@@ -1,20 +1,20 @@
 //! Star tracker firmware for the e2v CCD47-20 on an STM32H743ZI (NUCLEO-H743ZI).
 //!
 //! What runs: clocks at 480 MHz, the calibration table check ([`calib_store`]), the line
-//! readout by SPI DMA into ping-pong buffers ([`readout`], [`lines`]), the per-line
-//! calibration and summary ([`process`], [`telemetry`]), and the stars: detection, windows
-//! and centroids in acquisition and tracking modes ([`stars`]).
+//! readout by SPI DMA into ping-pong buffers ([`readout`], [`lines`]), and the core's
+//! tracker application bound to those and to the log ([`app`], [`telemetry`]): every
+//! processing step, from the bias of a line to a star's centroid and the mode changes, is
+//! the core's. This crate holds hardware and tasks only.
 //!
 //! Boundary, honestly: there is no CCD clock sequencer yet, so no CCD is driven; lines are
 //! SPI bursts paced by a timer (see [`readout`]). The defmt log is the only telemetry.
 #![no_std]
 #![no_main]
 
+mod app;
 mod calib_store;
 mod lines;
-mod process;
 mod readout;
-mod stars;
 mod telemetry;
 
 use defmt_rtt as _;
@@ -23,6 +23,13 @@ use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::spi::Spi;
 use embassy_stm32::{Config, bind_interrupts, dma, peripherals};
 use panic_probe as _;
+use startrack_core::tracker::TrackerBuffers;
+use static_cell::ConstStaticCell;
+
+/// The tracker's large buffers (line ring, tracking windows, fused CoG plans, ~68 KB): all
+/// zero, so in `.bss`; the tracker sets them up in place.
+static TRACKER_BUFFERS: ConstStaticCell<TrackerBuffers> =
+    ConstStaticCell::new(TrackerBuffers::new());
 
 bind_interrupts!(
     /// Interrupts the drivers need: DMA1 stream 0 carries SPI1 RX (the ADC samples).
@@ -106,14 +113,10 @@ async fn main(spawner: Spawner) {
     let cs = Output::new(p.PD14, Level::High, Speed::VeryHigh);
     let adc = readout::AdcLink::new(spi, cs);
 
-    let Some((ring, capture)) = stars::take_buffers() else {
-        defmt::error!("star buffers already taken");
+    let Some(buffers) = TRACKER_BUFFERS.try_take() else {
+        defmt::error!("tracker buffers already taken");
         return;
     };
-    spawn_or_log(
-        spawner,
-        "process",
-        process::process_task(table, ring, capture),
-    );
+    spawn_or_log(spawner, "tracker", app::tracker_task(table, buffers));
     spawn_or_log(spawner, "readout", readout::readout_task(adc));
 }

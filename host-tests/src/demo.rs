@@ -1,40 +1,46 @@
 //! The end-to-end demo on the simulated sensor: simulate a CCD47-20 frame of a star field,
-//! run it through the host pipeline ([`crate::pipeline`], the same path as
-//! `startrack process`: over-scan levels, covered-column dark scale, streaming calibration
-//! and detection, a centroid on a window at each candidate) and compare with the simulator's
-//! truth: calibrated electrons (chi^2 per pixel, with full calibration and with gains and
-//! over-scan only) and centroid positions (RMS error against the reported sigmas).
+//! run it through the core's tracker application as `startrack process` does (a standby
+//! frame for the dark scale, then an acquisition frame: over-scan levels, covered-column
+//! dark scale, the pre-filtered streaming detection, a centroid on a window at each star's
+//! peak) and compare with the simulator's truth: calibrated electrons (chi^2 per pixel,
+//! with full calibration and with gains and over-scan only) and centroid positions (RMS
+//! error against the reported sigmas).
 
-use crate::pipeline::{self, FrameLevels, Method, PipelineConfig, StarRow};
+use crate::cli::process::{HOST_CAPACITY, process_frame};
+use crate::home::frame_levels;
 use crate::sim::truth::TruthSections;
 use crate::sim::{SensorParams, Simulator, Star};
 use rand::{RngExt, SeedableRng};
-use startrack_core::calib::{FrameCalibration, PixelFlags};
-use startrack_core::detect::{Detection, DetectionFlags};
+use startrack_core::calib::{FrameCalibration, FrameConditions, PixelFlags};
 use startrack_core::table::CalibTable;
+use startrack_core::tracker::{StarFlags, StarRecord, TrackerConfig};
+use startrack_core::units::Electrons;
 use startrack_core::window::Rect;
 
-/// Window side, px.
-pub const WINDOW_PX: u16 = pipeline::DEFAULT_WINDOW_PX;
-/// Candidate list capacity on the host.
-pub const MAX_CANDIDATES: usize = pipeline::MAX_CANDIDATES;
-/// A detection within this distance of a simulated star is that star, px.
+/// A reported star within this distance of a simulated star is that star, px.
 pub const MATCH_PX: f64 = 2.0;
-/// The demo's centroid method: the near-optimal Gauss fit.
-pub const METHOD: Method = Method::GaussFit;
-/// The fit's PSF sigma, px: `sqrt(0.31) a` at the middle of the field's a = 0.8..2.0 px.
-pub const PSF_SIGMA_PX: f32 = 0.78;
+/// The PSF width the demo's tracker is configured with, px: `a` at the middle of the
+/// field's a = 0.8..2.0 px (sigma 0.78 px).
+pub const PSF_A_PX: f32 = 1.4;
+
+/// The demo's tracker configuration: the flight one, room for every star, the field's
+/// middle PSF width.
+pub fn tracker_config() -> TrackerConfig {
+    TrackerConfig {
+        max_stars: HOST_CAPACITY as u16,
+        psf_a_px: PSF_A_PX,
+        ..TrackerConfig::FLIGHT
+    }
+}
 
 /// What the demo measured for one star.
 #[derive(Clone, Debug)]
 pub struct StarReport {
     /// The star as simulated.
     pub star: Star,
-    /// What the detector found there.
-    pub detection: Detection,
-    /// The pipeline's output row for it (centroid, window, flags).
-    pub row: StarRow,
-    /// The window calibrated around it.
+    /// The tracker's record of it.
+    pub record: StarRecord,
+    /// The centroid window around it, calibrated here for the comparison with the truth.
     pub rect: Rect,
     /// True star electrons in the window (before the flat: what calibration must recover).
     pub true_flux_e: f64,
@@ -54,15 +60,15 @@ impl StarReport {
     /// Centroid minus true position (x, y), px.
     pub fn error_px(&self) -> (f64, f64) {
         (
-            f64::from(self.row.centroid.x_px) - self.star.x_px,
-            f64::from(self.row.centroid.y_px) - self.star.y_px,
+            f64::from(self.record.x_px) - self.star.x_px,
+            f64::from(self.record.y_px) - self.star.y_px,
         )
     }
 
-    /// True when the centroid carries no flag that voids its position or sigma (blended,
-    /// saturated, degenerate, clamped, not converged, excluded pixel, clipped).
+    /// True when the star carries no flag at all (no blend, saturation, clipping,
+    /// convergence or defect caveat on its position or sigma).
     pub fn clean(&self) -> bool {
-        self.row.flags == 0
+        self.record.flags.is_empty()
     }
 }
 
@@ -79,11 +85,11 @@ pub struct DemoReport {
     pub mean_bias_adu: [f64; 2],
     /// Pixels calibrated in total (in the star windows).
     pub pixels: usize,
-    /// Simulated stars the detector did not find.
+    /// Simulated stars the tracker did not report.
     pub missed: usize,
-    /// Simulated stars merged with a neighbour into one detection flagged blended.
+    /// Simulated stars merged with a neighbour into one star flagged blended.
     pub in_blends: usize,
-    /// Detections with no simulated star within [`MATCH_PX`].
+    /// Reported stars with no simulated star within [`MATCH_PX`].
     pub false_detections: usize,
     /// Candidates lost because the list was full.
     pub dropped: u32,
@@ -123,8 +129,10 @@ impl DemoReport {
     /// RMS over the same stars of the reported sigmas, px: what the error should be.
     pub fn reported_sigma_rms_px(&self) -> f64 {
         let (sum, n) = self.clean_stars().fold((0.0, 0usize), |(a, n), s| {
-            let c = &s.row.centroid;
-            let (sx, sy) = (f64::from(c.sigma_x_px), f64::from(c.sigma_y_px));
+            let (sx, sy) = (
+                f64::from(s.record.sigma_x_px),
+                f64::from(s.record.sigma_y_px),
+            );
             (a + sx * sx + sy * sy, n + 2)
         });
         if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
@@ -135,8 +143,10 @@ impl DemoReport {
     pub fn centroid_chi2(&self) -> (f64, usize) {
         self.clean_stars().fold((0.0, 0), |(a, n), s| {
             let (ex, ey) = s.error_px();
-            let c = &s.row.centroid;
-            let (sx, sy) = (f64::from(c.sigma_x_px), f64::from(c.sigma_y_px));
+            let (sx, sy) = (
+                f64::from(s.record.sigma_x_px),
+                f64::from(s.record.sigma_y_px),
+            );
             (a + (ex / sx).powi(2) + (ey / sy).powi(2), n + 2)
         })
     }
@@ -186,50 +196,47 @@ pub fn run(seed: u64, n_stars: usize) -> Result<DemoReport, String> {
     let bare = CalibTable::parse(&bare).map_err(|e| e.to_string())?;
     let raw = render_frame(&sim);
 
-    let config = PipelineConfig {
-        method: METHOD,
-        psf_sigma_px: PSF_SIGMA_PX,
-        window_px: WINDOW_PX,
-        ..PipelineConfig::default()
+    let config = tracker_config();
+    let result = process_frame(full, &raw, config, None).map_err(|e| e.to_string())?;
+    // The windows calibrated again, with every correction and with gains and over-scan
+    // only, to show what the maps are worth.
+    let levels_full = frame_levels(&full, &raw).map_err(|e| e.to_string())?;
+    let levels_bare = frame_levels(&bare, &raw).map_err(|e| e.to_string())?;
+    let conditions = |dark: Option<Electrons>, table: &CalibTable<'_>| FrameConditions {
+        dark_scale_e: dark.unwrap_or(Electrons::ZERO),
+        exposure_ms: config.exposure_ms,
+        temperature_k: table.hot_pixels().reference_temperature_k(),
     };
-    let result = pipeline::process(full, &raw, &config).map_err(|e| e.to_string())?;
-    // The same frame with gains and over-scan only, to show what the maps are worth.
-    let bare_levels: FrameLevels =
-        pipeline::measure_levels(&bare, &raw).map_err(|e| e.to_string())?;
-    let cal_full = FrameCalibration::new(full, result.conditions);
-    let cal_bare = FrameCalibration::new(bare, pipeline::conditions(&bare_levels, &config));
+    let cal_full = FrameCalibration::new(full, conditions(levels_full.dark_scale_e, &full));
+    let cal_bare = FrameCalibration::new(bare, conditions(levels_bare.dark_scale_e, &bare));
 
     let mut bias_sum = [0.0; 2];
-    for lv in &result.levels.lines {
+    for lv in &levels_full.lines {
         for (s, b) in bias_sum.iter_mut().zip(lv.bias_adu) {
             *s += b.to_num::<f64>();
         }
     }
-    let near = |d: &Detection, s: &Star| {
-        (f64::from(d.x_px) - s.x_px).hypot(f64::from(d.y_px) - s.y_px) < MATCH_PX
-    };
+    let dist =
+        |r: &StarRecord, s: &Star| (f64::from(r.x_px) - s.x_px).hypot(f64::from(r.y_px) - s.y_px);
     let false_detections = result
         .stars
         .iter()
-        .filter(|r| !stars.iter().any(|s| near(&r.detection, s)))
+        .filter(|r| !stars.iter().any(|s| dist(r, s) < MATCH_PX))
         .count();
 
     let mut reports = Vec::new();
     let mut pixels = 0;
     let (mut missed, mut in_blends) = (0, 0);
     for star in &stars {
-        let Some(row) = result
+        let Some(record) = result
             .stars
             .iter()
-            .find(|r| near(&r.detection, star))
+            .find(|r| dist(r, star) < MATCH_PX)
             .copied()
         else {
             // A star merged with a neighbour into one flagged blob is accounted for.
             let blend = result.stars.iter().any(|r| {
-                let d = &r.detection;
-                d.flags.contains(DetectionFlags::BLENDED)
-                    && (f64::from(d.x_px) - star.x_px).hypot(f64::from(d.y_px) - star.y_px)
-                        < 3.0 * MATCH_PX
+                r.flags.contains(StarFlags::DETECT_BLENDED) && dist(r, star) < 3.0 * MATCH_PX
             });
             if blend {
                 in_blends += 1;
@@ -238,15 +245,22 @@ pub fn run(seed: u64, n_stars: usize) -> Result<DemoReport, String> {
             }
             continue;
         };
-        let rect = row.rect;
-        let (e_full, _, flags) = pipeline::calibrate_window(&cal_full, &raw, &result.levels, rect)
+        let (rect, _) = Rect::centred_clipped(
+            record.x_px.round().clamp(0.0, f32::from(g.active_cols - 1)) as u16,
+            record.y_px.round().clamp(0.0, f32::from(g.active_rows - 1)) as u16,
+            config.window_px,
+            g.active_cols,
+            g.active_rows,
+        );
+        let (e_full, _, flags) = levels_full
+            .calibrate_window(&cal_full, &raw, rect)
             .map_err(|e| e.to_string())?;
-        let (e_bare, _, _) = pipeline::calibrate_window(&cal_bare, &raw, &bare_levels, rect)
+        let (e_bare, _, _) = levels_bare
+            .calibrate_window(&cal_bare, &raw, rect)
             .map_err(|e| e.to_string())?;
         let mut r = StarReport {
             star: *star,
-            detection: row.detection,
-            row,
+            record,
             rect,
             true_flux_e: 0.0,
             flux_e: 0.0,
@@ -272,14 +286,14 @@ pub fn run(seed: u64, n_stars: usize) -> Result<DemoReport, String> {
     }
     Ok(DemoReport {
         stars: reports,
-        dark_scale_e: result.levels.dark_scale_e.map_or(0.0, |v| v.to_num()),
+        dark_scale_e: result.summary.dark_scale_e.map_or(0.0, |v| v.to_num()),
         true_dark_scale_e: params.dark_mean_e * sim.covered_dark_mean(),
         mean_bias_adu: bias_sum.map(|s| s / f64::from(g.lines)),
         pixels,
         missed,
         in_blends,
         false_detections,
-        dropped: result.dropped,
+        dropped: result.summary.candidates_dropped,
     })
 }
 
@@ -311,12 +325,13 @@ pub fn print(report: &DemoReport) {
         report.true_dark_scale_e
     );
     println!(
-        "detection (streaming, calibrated lines): {} found, {} in flagged blends, {} missed, {} false, {} lost to a full list; windows {WINDOW_PX}x{WINDOW_PX} on the peaks",
+        "detection (the tracker's acquisition frame): {} found, {} in flagged blends, {} missed, {} false, {} lost to a full list; {w}x{w} windows on the peaks",
         report.stars.len(),
         report.in_blends,
         report.missed,
         report.false_detections,
-        report.dropped
+        report.dropped,
+        w = tracker_config().window_px
     );
     println!(
         "{:>8} {:>8} {:>5} {:>8} {:>8} {:>6} {:>10} {:>10} {:>8} {:>12} {:>8}",
@@ -339,9 +354,9 @@ pub fn print(report: &DemoReport) {
             s.star.x_px,
             s.star.y_px,
             s.star.a_px,
-            s.row.centroid.x_px,
-            s.row.centroid.y_px,
-            s.row.centroid.snr,
+            s.record.x_px,
+            s.record.y_px,
+            s.record.snr,
             s.true_flux_e,
             s.flux_e,
             s.chi2 / n,
@@ -355,8 +370,12 @@ pub fn print(report: &DemoReport) {
         report.chi2_per_pixel(true)
     );
     let (chi2, dof) = report.centroid_chi2();
+    let c = tracker_config();
+    let w = c.window_px;
     println!(
-        "centroids ({METHOD:?}, psf sigma {PSF_SIGMA_PX} px, {WINDOW_PX}x{WINDOW_PX}) on {} unflagged stars: RMS error {:.4} px per axis, reported sigma RMS {:.4} px, chi2/dof {:.2}",
+        "centroids ({}, a {} px, {w}x{w}) on {} unflagged stars: RMS error {:.4} px per axis, reported sigma RMS {:.4} px, chi2/dof {:.2}",
+        c.acquisition_method.name(),
+        c.psf_a_px,
         report.clean_stars().count(),
         report.centroid_rms_px(),
         report.reported_sigma_rms_px(),

@@ -8,10 +8,10 @@ mod common_cli;
 use common_cli::{build_args, startrack};
 use startrack_core::table::CalibTable;
 use startrack_host::cli::calib_build::{CalibBuildArgs, build};
-use startrack_host::cli::process::{ProcessArgs, measure};
+use startrack_host::cli::process::{Method, ProcessArgs, measure};
 use startrack_host::cli::simulate::{SimFiles, SimulateArgs};
 use startrack_host::fits::{MapF32, RawFrame, write_map, write_raw_frame};
-use startrack_host::pipeline::{CSV_HEADER, Method};
+use startrack_host::home::CSV_HEADER;
 use startrack_host::sim::Simulator;
 use startrack_host::sim::truth::TruthSections;
 use std::path::{Path, PathBuf};
@@ -38,12 +38,13 @@ fn process_args(frame: &Path, table: &Path) -> ProcessArgs {
     ProcessArgs {
         frame: frame.to_path_buf(),
         calib: table.to_path_buf(),
-        method: Method::GaussFit,
-        window: 7,
+        method: Some(Method::GaussFit),
+        window: Some(7),
         psf_sigma: Some(0.78),
         psf_a_px: None,
         exposure_s: None,
         temperature_k: None,
+        background_stride: None,
         out: None,
     }
 }
@@ -80,8 +81,8 @@ fn simulate_build_process_finds_the_stars_within_their_sigmas() {
 
     // Every simulated star (>= 5000 e-, SNR >= ~50) is found within 2 px, or sits in a
     // detection flagged blended (a close pair); every detection is a star.
-    let dist = |r: &startrack_host::pipeline::StarRow, t: (f64, f64)| {
-        (f64::from(r.centroid.x_px) - t.0).hypot(f64::from(r.centroid.y_px) - t.1)
+    let dist = |r: &startrack_core::tracker::StarRecord, t: (f64, f64)| {
+        (f64::from(r.x_px) - t.0).hypot(f64::from(r.y_px) - t.1)
     };
     let (mut found, mut blended, mut chi2, mut k) = (0, 0, 0.0, 0usize);
     for t in &truth {
@@ -90,15 +91,15 @@ fn simulate_build_process_finds_the_stars_within_their_sigmas() {
             .iter()
             .min_by(|a, b| dist(a, *t).total_cmp(&dist(b, *t)))
             .expect("some detection");
-        if dist(best, *t) < 2.0 && best.flags == 0 {
+        if dist(best, *t) < 2.0 && best.flags.is_empty() {
             found += 1;
-            let c = &best.centroid;
+            let c = best;
             chi2 += ((f64::from(c.x_px) - t.0) / f64::from(c.sigma_x_px)).powi(2)
                 + ((f64::from(c.y_px) - t.1) / f64::from(c.sigma_y_px)).powi(2);
             k += 2;
         } else {
             assert!(
-                dist(best, *t) < 6.0 && best.flags != 0,
+                dist(best, *t) < 6.0 && !best.flags.is_empty(),
                 "star at {t:?} not found (nearest {best:?})"
             );
             blended += 1;
@@ -430,7 +431,7 @@ fn every_method_measures_every_star() {
     let truth = truth(&files.truth);
     for method in [Method::Cog1, Method::Cog2, Method::GaussFit] {
         let result = measure(&ProcessArgs {
-            method,
+            method: Some(method),
             ..process_args(&files.frame, &table)
         })
         .unwrap();
@@ -440,9 +441,8 @@ fn every_method_measures_every_star() {
             let c = result
                 .stars
                 .iter()
-                .map(|r| r.centroid)
                 .min_by(|a, b| {
-                    let d = |c: &startrack_core::centroid::Centroid| {
+                    let d = |c: &startrack_core::tracker::StarRecord| {
                         (f64::from(c.x_px) - t.0).hypot(f64::from(c.y_px) - t.1)
                     };
                     d(a).total_cmp(&d(b))
@@ -538,9 +538,7 @@ fn measured_maps_carry_the_noise_of_n_frames_and_still_calibrate() {
             result
                 .stars
                 .iter()
-                .any(|r| (f64::from(r.centroid.x_px) - t.0)
-                    .hypot(f64::from(r.centroid.y_px) - t.1)
-                    < 2.0),
+                .any(|r| (f64::from(r.x_px) - t.0).hypot(f64::from(r.y_px) - t.1) < 2.0),
             "star at {t:?} not found with measured maps"
         );
     }

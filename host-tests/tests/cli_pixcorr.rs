@@ -7,10 +7,10 @@
 mod common_cli;
 
 use startrack_core::table::CalibTable;
+use startrack_core::tracker::{StarFlags, StarRecord};
 use startrack_host::cli::calib_build::{CalibBuildArgs, build};
-use startrack_host::cli::process::{ProcessArgs, measure};
+use startrack_host::cli::process::{Method, ProcessArgs, Processed, measure};
 use startrack_host::cli::simulate::{SimFiles, SimulateArgs};
-use startrack_host::pipeline::{FrameResult, Method, StarRow, UNCORRECTED_BIT};
 use std::path::{Path, PathBuf};
 
 const SEED: u64 = 11;
@@ -48,7 +48,7 @@ fn build_args(f: &SimFiles, out: PathBuf, psf_a_px: Option<String>) -> CalibBuil
     }
 }
 
-fn process(frame: &Path, table: &Path, method: Method, psf_a_px: Option<f32>) -> FrameResult {
+fn process(frame: &Path, table: &Path, method: Method, psf_a_px: Option<f32>) -> Processed {
     process_window(frame, table, method, psf_a_px, 7)
 }
 
@@ -58,16 +58,17 @@ fn process_window(
     method: Method,
     psf_a_px: Option<f32>,
     window: u16,
-) -> FrameResult {
+) -> Processed {
     measure(&ProcessArgs {
         frame: frame.to_path_buf(),
         calib: table.to_path_buf(),
-        method,
-        window,
+        method: Some(method),
+        window: Some(window),
         psf_sigma: None,
         psf_a_px,
         exposure_s: None,
         temperature_k: None,
+        background_stride: None,
         out: None,
     })
     .expect("process")
@@ -117,10 +118,10 @@ fn setup() -> Setup {
 }
 
 /// Per truth star, the errors (x, y) of the nearest row and its sigmas, for rows within
-/// 1 px whose flags (other than [`UNCORRECTED_BIT`]) are clear.
-fn errors(result: &FrameResult, truth: &[(f64, f64, f64)]) -> Vec<Option<[f64; 4]>> {
-    let d = |r: &StarRow, t: &(f64, f64, f64)| {
-        (f64::from(r.centroid.x_px) - t.0).hypot(f64::from(r.centroid.y_px) - t.1)
+/// 1 px whose flags (other than [`StarFlags::UNCORRECTED`]) are clear.
+fn errors(result: &Processed, truth: &[(f64, f64, f64)]) -> Vec<Option<[f64; 4]>> {
+    let d = |r: &StarRecord, t: &(f64, f64, f64)| {
+        (f64::from(r.x_px) - t.0).hypot(f64::from(r.y_px) - t.1)
     };
     truth
         .iter()
@@ -129,9 +130,9 @@ fn errors(result: &FrameResult, truth: &[(f64, f64, f64)]) -> Vec<Option<[f64; 4
                 .stars
                 .iter()
                 .min_by(|a, b| d(a, t).total_cmp(&d(b, t)))?;
-            let clean = r.flags & !(1 << UNCORRECTED_BIT) == 0;
+            let clean = (r.flags - StarFlags::UNCORRECTED).is_empty();
             (d(r, t) < 1.0 && clean).then(|| {
-                let c = &r.centroid;
+                let c = r;
                 [
                     f64::from(c.x_px) - t.0,
                     f64::from(c.y_px) - t.1,
@@ -175,11 +176,11 @@ fn calib_build_adds_the_curves_and_reports_them() {
     );
     let plain = std::fs::read(&s.without).unwrap();
     assert!(CalibTable::parse(&plain).unwrap().pixcorr().is_empty());
-    // The firmware's CoG (power 1, box 7, median perimeter; firmware/src/stars.rs) finds
+    // The tracker's CoG with the flight window (power 1, box 5, median perimeter) finds
     // its curve in a table built with the default boxes.
     let fw = t.pixcorr().find(
         startrack_core::centroid::cog::CogPower::One,
-        7,
+        startrack_core::tracker::TrackerConfig::FLIGHT.box_px(),
         startrack_core::centroid::pixcorr::PixCorrBackground::PerimeterMedian,
         1.2,
     );
@@ -200,25 +201,25 @@ fn cog_with_the_tables_curve_beats_the_plain_cog_and_matches_its_sigma() {
     let s = setup();
     let truth = truth(&s.files.truth);
     assert!(truth.iter().all(|t| t.2 == A_PX));
-    // Window 7 (box 5) is `process`'s default; window 9 (box 7) the firmware's CoG.
+    // Window 7 (box 5) is the flight window; window 9 (box 7) the other default curve box.
     for (method, window) in [(Method::Cog1, 7), (Method::Cog2, 7), (Method::Cog1, 9)] {
         // No width option: `process` reads PSFA from the frame.
         let corrected = process_window(&s.files.frame, &s.with_curves, method, None, window);
         let plain = process_window(&s.files.frame, &s.without, method, None, window);
-        let h = corrected.pixcorr.expect("a curve was applied");
+        let h = corrected.curve.expect("a curve was applied");
         assert_eq!(u16::from(h.box_side), window - 2);
-        assert!(plain.pixcorr.is_none());
+        assert!(plain.curve.is_none());
         assert!(
             corrected
                 .stars
                 .iter()
-                .all(|r| r.flags & (1 << UNCORRECTED_BIT) == 0)
+                .all(|r| !r.flags.contains(StarFlags::UNCORRECTED))
         );
         assert!(
             plain
                 .stars
                 .iter()
-                .all(|r| r.flags & (1 << UNCORRECTED_BIT) != 0),
+                .all(|r| r.flags.contains(StarFlags::UNCORRECTED)),
             "a plain CoG must be flagged uncorrected"
         );
         let (ec, ep) = (errors(&corrected, &truth), errors(&plain, &truth));
@@ -259,21 +260,21 @@ fn cog_with_the_tables_curve_beats_the_plain_cog_and_matches_its_sigma() {
 fn no_matching_curve_sets_the_uncorrected_flag() {
     let s = setup();
     let far = process(&s.files.frame, &s.with_curves, Method::Cog1, Some(0.9));
-    assert!(far.pixcorr.is_none());
+    assert!(far.curve.is_none());
     assert!(!far.stars.is_empty());
     assert!(
         far.stars
             .iter()
-            .all(|r| r.flags & (1 << UNCORRECTED_BIT) != 0)
+            .all(|r| r.flags.contains(StarFlags::UNCORRECTED))
     );
     let near = process(&s.files.frame, &s.with_curves, Method::Cog1, Some(0.63));
-    assert!(near.pixcorr.is_some());
+    assert!(near.curve.is_some());
     let fit = process(&s.files.frame, &s.with_curves, Method::GaussFit, None);
-    assert!(fit.pixcorr.is_none());
+    assert!(fit.curve.is_none());
     assert!(
         fit.stars
             .iter()
-            .all(|r| r.flags & (1 << UNCORRECTED_BIT) == 0)
+            .all(|r| !r.flags.contains(StarFlags::UNCORRECTED))
     );
 }
 
@@ -341,5 +342,5 @@ fn the_binary_reports_curves_built_and_used() {
         "0",
     ]);
     assert!(!ok && stderr.lines().count() == 1, "{stderr}");
-    assert!(stderr.contains("PSF sigma"), "{stderr}");
+    assert!(stderr.contains("PSF 80 % radius"), "{stderr}");
 }

@@ -261,7 +261,7 @@ fn simulated_frame_end_to_end() {
     let table = sim.truth_table(TruthSections::ALL).unwrap();
     let table = CalibTable::parse(&table).unwrap();
     let raw = startrack_host::demo::render_frame(&sim);
-    let levels = startrack_host::pipeline::measure_levels(&table, &raw).unwrap();
+    let levels = startrack_host::home::frame_levels(&table, &raw).unwrap();
     let lines: Vec<_> = raw.chunks_exact(g.line_len()).zip(&levels.lines).collect();
     let cal = FrameCalibration::new(
         table,

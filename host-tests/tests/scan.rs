@@ -28,7 +28,7 @@ fn frame(params: SensorParams, n_stars: usize, tile_log2: u8) -> Frame {
         .unwrap();
     let parsed = CalibTable::parse(&table).unwrap();
     let raw = startrack_host::demo::render_frame(&sim);
-    let levels = startrack_host::pipeline::measure_levels(&parsed, &raw).unwrap();
+    let levels = startrack_host::home::frame_levels(&parsed, &raw).unwrap();
     let lines = raw
         .chunks_exact(g.line_len())
         .map(<[u16]>::to_vec)
@@ -163,15 +163,16 @@ fn scan_equals_calibrated_path_on_simulated_frames() {
     }
 }
 
-/// The firmware's acquisition settings (firmware/src/stars.rs): background stride and
-/// warm-up rows.
+/// The longest background stride the tracker's acquisition has used (64; its flight
+/// configuration, `TrackerConfig::FLIGHT`, uses 16), and its warm-up rows: the most
+/// demanding case for the noise estimate.
 const FW_STRIDE: u16 = 64;
 const FW_WARMUP: u16 = 16;
 
 #[test]
 fn scan_noise_candidates_no_more_than_with_every_row_background() {
-    // Noise candidates (farther than 3 px from every true star) of the firmware's scan
-    // (stride 64, 16 warm-up rows) against a LineDetector updating its background on every
+    // Noise candidates (farther than 3 px from every true star) of the scan at stride 64
+    // with 16 warm-up rows against a LineDetector updating its background on every
     // row, on 8 simulated frames of 25 stars. Both counts are Poisson with (under the
     // hypothesis of equal rates) the same mean: their difference has a standard deviation
     // of sqrt(a + b); the scan may exceed the reference by 3 of those, plus 1 for tiny

@@ -91,6 +91,13 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
         }
     }
 
+    /// Forgets every line and sets where a raw line's active pixels start (buffers made
+    /// with a placeholder, e.g. all-zero statics, are set up in place).
+    pub fn reset_for(&mut self, first_active_col: usize) {
+        self.first_active_col = first_active_col;
+        self.clear();
+    }
+
     /// Forgets every line (at a frame start).
     pub fn clear(&mut self) {
         self.rows = [None; R];
@@ -274,6 +281,13 @@ impl<const N: usize> WindowCapture<N> {
             geometry,
             next_y: 0,
         }
+    }
+
+    /// Forgets every window and takes lines of `geometry` from now on (a list made with a
+    /// placeholder geometry, e.g. an all-zero static, is set up in place).
+    pub fn reset_for(&mut self, geometry: ReadoutGeometry) {
+        self.geometry = geometry;
+        self.reset();
     }
 
     /// Forgets every window and starts a new frame.

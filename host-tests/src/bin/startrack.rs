@@ -43,6 +43,9 @@ enum Command {
     /// Calibration tables from calibration maps.
     #[command(subcommand)]
     Calib(CalibCommand),
+    /// Run the tracker application live on the simulated sensor over a drifting scene
+    /// (software in the loop); telemetry and truth as CSV.
+    Sil(startrack_host::cli::sil::SilArgs),
     /// Write a simulated raw frame, its star truth and the true calibration maps to a folder.
     Simulate(startrack_host::cli::simulate::SimulateArgs),
     /// Every centroid method's RMS error over the Cramer-Rao bound, by Monte Carlo (markdown).
@@ -99,6 +102,10 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             }
             Err(e) => fail("accuracy", &e),
+        },
+        Command::Sil(args) => match startrack_host::cli::sil::run(&args) {
+            Ok(_) => ExitCode::SUCCESS,
+            Err(e) => fail("sil", &e),
         },
         Command::Figures(args) => startrack_host::cli::figures::run(&args),
         Command::Tradeoff(args) => startrack_host::cli::tradeoff::run(&args),

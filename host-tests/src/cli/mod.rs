@@ -6,11 +6,11 @@ pub mod accuracy;
 pub mod calib_build;
 pub mod figures;
 pub mod process;
+pub mod sil;
 pub mod simulate;
 pub mod tradeoff;
 
 use crate::fits::FitsError;
-use crate::pipeline::PipelineError;
 use startrack_core::table::{TableError, WriteError};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -36,8 +36,6 @@ pub enum CliError {
     },
     /// The table could not be encoded.
     TableWrite(WriteError),
-    /// The pipeline rejected the frame.
-    Pipeline(PipelineError),
     /// A line of a CSV input is malformed.
     Csv {
         /// The file.
@@ -64,7 +62,6 @@ impl fmt::Display for CliError {
                 )
             }
             Self::TableWrite(e) => write!(f, "cannot encode the table: {e}"),
-            Self::Pipeline(e) => write!(f, "{e}"),
             Self::Csv { path, line, msg } => write!(f, "{}:{line}: {msg}", path.display()),
             Self::Usage(m) => f.write_str(m),
         }
@@ -76,12 +73,6 @@ impl std::error::Error for CliError {}
 impl From<FitsError> for CliError {
     fn from(e: FitsError) -> Self {
         Self::Fits(e)
-    }
-}
-
-impl From<PipelineError> for CliError {
-    fn from(e: PipelineError) -> Self {
-        Self::Pipeline(e)
     }
 }
 

@@ -1,18 +1,57 @@
-//! `startrack process FRAME.fits --calib TABLE.bin`: the star list of one raw frame, through
-//! the host pipeline ([`crate::pipeline`]): the same core code as the firmware.
+//! `startrack process FRAME.fits --calib TABLE.bin`: the star list of one raw frame, from
+//! the core's tracker application ([`startrack_core::tracker`]) fed the frame's lines: the
+//! same code, configuration and output as the board's acquisition frame. The options change
+//! only the tracker's configuration.
+//!
+//! The tracker runs the frame twice, as the board does after start-up: a standby frame that
+//! measures the dark scale on the covered columns, then an acquisition frame calibrated with
+//! it ([`process_frame`]).
 //!
 //! The frame's shape must be the table's geometry (lines x line length, 1033 x 1072 for the
 //! CCD47-20). Exposure and temperature (for hot pixels' own dark law) come from the options,
-//! else from the frame's `EXPTIME` (s) and `CCDTEMP` (K) keywords, else 1 s and 293 K.
-//! The PSF width (Gauss-fit model, and which pixel-phase curve `cog1`/`cog2`
-//! use) comes from `--psf-a-px` (80 %-energy radius) or `--psf-sigma`, else the frame's
-//! `PSFA` keyword (px, written by `startrack simulate`), else sigma 0.8 px (a = 1.44 px).
+//! else from the frame's `EXPTIME` (s) and `CCDTEMP` (K) keywords, else 1 s and the table's
+//! hot-pixel reference temperature. The PSF width (the Gauss fit's, and which pixel-phase
+//! curve a CoG uses) comes from `--psf-a-px` (80 %-energy radius) or `--psf-sigma`, else
+//! the frame's `PSFA` keyword (px, written by `startrack simulate`), else the flight
+//! configuration's.
 
 use super::{CliError, read_file};
 use crate::fits::{read_keys, read_raw_frame};
-use crate::pipeline::{self, FrameResult, Method, PipelineConfig};
+use crate::home::{FrameClock, FrameLines, Recorder, block_on, write_csv};
+use startrack_core::centroid::cog::CogPower;
+use startrack_core::centroid::pixcorr::{CurveHeader, PixCorrBackground};
 use startrack_core::table::CalibTable;
+use startrack_core::tracker::{
+    CentroidMethod, FixedTable, FixedTemperature, FrameSummary, Mode, Ports, StarRecord, Tracker,
+    TrackerBuffers, TrackerConfig, select_curve,
+};
+use startrack_core::units::Kelvin;
 use std::path::PathBuf;
+
+/// Stars a frame the host's tracker keeps (the board: 32): room for any field, so that a
+/// miss is a detection miss, not a full list; losses are still counted.
+pub const HOST_CAPACITY: usize = 1024;
+
+/// The centroid methods `process` offers (the acquisition methods of the tracker).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// Centre of gravity, power 1 (paper eq. 2), pixel-phase corrected.
+    Cog1,
+    /// Centre of gravity, power 2, noise-unbiased (paper eq. 6), pixel-phase corrected.
+    Cog2,
+    /// Fit of the pixel-integrated Gaussian, background held at the border median.
+    GaussFit,
+}
+
+impl From<Method> for CentroidMethod {
+    fn from(m: Method) -> Self {
+        match m {
+            Method::Cog1 => Self::Cog1,
+            Method::Cog2 => Self::Cog2,
+            Method::GaussFit => Self::GaussFit,
+        }
+    }
+}
 
 /// Options of `startrack process`.
 #[derive(Clone, Debug, clap::Args)]
@@ -22,36 +61,165 @@ pub struct ProcessArgs {
     /// Calibration table (from `startrack calib build` or `startrack table`).
     #[arg(long)]
     pub calib: PathBuf,
-    /// Centroid method.
-    #[arg(long, value_enum, default_value = "gauss-fit")]
-    pub method: Method,
-    /// Window side, px (odd, 3 to 31); box methods use window - 2 inside it.
-    #[arg(long, default_value_t = pipeline::DEFAULT_WINDOW_PX)]
-    pub window: u16,
-    /// PSF Gaussian sigma, px (Gauss-fit model): sqrt(0.31) x the 80 % radius
-    /// (default: from --psf-a-px, else the frame's PSFA keyword, else 0.8).
+    /// Centroid method (default: the flight configuration's, gauss-fit).
+    #[arg(long, value_enum)]
+    pub method: Option<Method>,
+    /// Centroid window side, px (odd, 5 to 13); the box is window - 2, the border gives the
+    /// background (default: the flight configuration's, 7).
+    #[arg(long)]
+    pub window: Option<u16>,
+    /// PSF Gaussian sigma, px: sqrt(0.31) x the 80 % radius.
     #[arg(long, conflicts_with = "psf_a_px")]
     pub psf_sigma: Option<f32>,
-    /// PSF 80 %-energy radius, px: picks the table's pixel-phase curve for cog1/cog2 and
-    /// sets the sigma of gauss-fit (sigma = sqrt(0.31) a).
+    /// PSF 80 %-energy radius, px: the Gauss fit's width and which pixel-phase curve a CoG
+    /// uses.
     #[arg(long)]
     pub psf_a_px: Option<f32>,
     /// Exposure, s (default: the frame's EXPTIME keyword, else 1).
     #[arg(long)]
     pub exposure_s: Option<f64>,
-    /// Sensor temperature, K (default: the frame's CCDTEMP keyword, else 293).
+    /// Sensor temperature, K (default: the frame's CCDTEMP keyword, else the table's
+    /// hot-pixel reference temperature).
     #[arg(long)]
     pub temperature_k: Option<f64>,
+    /// Acquisition background stride, rows (default: the flight configuration's, 16; 1
+    /// updates the background on every row).
+    #[arg(long)]
+    pub background_stride: Option<u16>,
     /// Output CSV (default: standard output).
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
 
-/// PSF sigma when neither an option nor the frame gives one, px.
-pub const DEFAULT_PSF_SIGMA_PX: f32 = 0.8;
+/// What `process` measured.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Processed {
+    /// The acquisition frame's stars, as reported.
+    pub stars: Vec<StarRecord>,
+    /// Its summary.
+    pub summary: FrameSummary,
+    /// The configuration the tracker ran with.
+    pub config: TrackerConfig,
+    /// The pixel-phase curve a CoG method used (`None`: the Gauss fit, or no curve matched).
+    pub curve: Option<CurveHeader>,
+}
 
-/// Runs the pipeline on the frame and returns what it found (nothing written).
-pub fn measure(args: &ProcessArgs) -> Result<FrameResult, CliError> {
+/// The tracker's configuration and the sensor temperature for `args` and the frame's
+/// keywords `key`.
+pub fn config_of(
+    args: &ProcessArgs,
+    key: &dyn Fn(&str) -> Option<f64>,
+) -> Result<(TrackerConfig, Option<Kelvin>), CliError> {
+    let mut config = TrackerConfig {
+        max_stars: HOST_CAPACITY as u16,
+        ..TrackerConfig::FLIGHT
+    };
+    if let Some(m) = args.method {
+        config.acquisition_method = m.into();
+    }
+    if let Some(w) = args.window {
+        config.window_px = w;
+    }
+    if let Some(s) = args.background_stride {
+        config.background_stride = s;
+    }
+    let exposure_s = args.exposure_s.or(key("EXPTIME")).unwrap_or(1.0);
+    if !(0.0..=4.0e6).contains(&exposure_s) {
+        return Err(CliError::Usage(format!(
+            "exposure {exposure_s} s: must be 0 to 4e6 s"
+        )));
+    }
+    config.exposure_ms = (exposure_s * 1000.0).round() as u32;
+    let temperature = args.temperature_k.or(key("CCDTEMP"));
+    if let Some(t) = temperature
+        && !(1.0..=65535.0).contains(&t)
+    {
+        return Err(CliError::Usage(format!(
+            "temperature {t} K: must be 1 to 65535 K"
+        )));
+    }
+    config.psf_a_px = match (args.psf_sigma, args.psf_a_px) {
+        (Some(s), _) => s / 0.31f32.sqrt(),
+        (None, Some(a)) => a,
+        (None, None) => key("PSFA").map_or(config.psf_a_px, |a| a as f32),
+    };
+    config
+        .validate(HOST_CAPACITY)
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    Ok((config, temperature.map(Kelvin::saturating_from_num)))
+}
+
+/// Runs the tracker on one recorded frame `raw` (row-major, the table's geometry): a
+/// standby frame for the dark scale, then an acquisition frame. Returns the acquisition
+/// frame's stars and summary.
+pub fn process_frame(
+    table: CalibTable<'_>,
+    raw: &[u16],
+    config: TrackerConfig,
+    temperature_k: Option<Kelvin>,
+) -> Result<Processed, CliError> {
+    let geometry = *table.geometry();
+    let mut source = FrameLines::new(geometry, raw).ok_or_else(|| {
+        CliError::Usage(format!(
+            "frame has {} samples, the table's geometry needs {}",
+            raw.len(),
+            usize::from(geometry.lines) * geometry.line_len()
+        ))
+    })?;
+    let mut buffers = Box::new(TrackerBuffers::new());
+    let mut tracker = Box::new(
+        Tracker::<HOST_CAPACITY>::new(config, geometry, &mut buffers)
+            .map_err(|e| CliError::Usage(e.to_string()))?,
+    );
+    let mut recorder = Recorder::default();
+    let mut clock = FrameClock {
+        frame: 0,
+        period_us: 0,
+    };
+    let mut tables = FixedTable(Some(table));
+    let mut thermometer = FixedTemperature(temperature_k);
+    let mut ports = Ports {
+        clock: &mut clock,
+        thermometer: &mut thermometer,
+        tables: &mut tables,
+        telemetry: &mut recorder,
+    };
+    for mode in [Mode::Standby, Mode::Acquisition] {
+        tracker
+            .command_mode(mode)
+            .map_err(|e| CliError::Usage(e.to_string()))?;
+        let Ok(_) = block_on(tracker.run_frame(&mut source, &mut ports));
+    }
+    let frame = recorder
+        .frames
+        .pop()
+        .ok_or_else(|| CliError::Usage("the tracker reported no frame".into()))?;
+    let power = match config.acquisition_method {
+        CentroidMethod::Cog1 | CentroidMethod::FusedCog1 => Some(CogPower::One),
+        CentroidMethod::Cog2 => Some(CogPower::Two),
+        CentroidMethod::GaussFit => None,
+    };
+    let curve = power
+        .and_then(|p| {
+            select_curve(
+                &table,
+                &config,
+                p,
+                config.box_px(),
+                PixCorrBackground::PerimeterMedian,
+            )
+        })
+        .map(|c| c.header());
+    Ok(Processed {
+        stars: frame.stars,
+        summary: frame.summary,
+        config,
+        curve,
+    })
+}
+
+/// Runs the tracker on the frame and returns what it found (nothing written).
+pub fn measure(args: &ProcessArgs) -> Result<Processed, CliError> {
     let bytes = read_file(&args.calib)?;
     let table = CalibTable::parse(&bytes).map_err(|err| CliError::Table {
         path: args.calib.clone(),
@@ -60,39 +228,8 @@ pub fn measure(args: &ProcessArgs) -> Result<FrameResult, CliError> {
     let frame = read_raw_frame(&args.frame, table.geometry())?;
     let keys = read_keys(&args.frame, &["EXPTIME", "CCDTEMP", "PSFA"])?;
     let key = |k: &str| keys.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
-    let exposure_s = args.exposure_s.or(key("EXPTIME")).unwrap_or(1.0);
-    let temperature_k = args.temperature_k.or(key("CCDTEMP")).unwrap_or(293.0);
-    if !(0.0..=4.0e6).contains(&exposure_s) {
-        return Err(CliError::Usage(format!(
-            "exposure {exposure_s} s: must be 0 to 4e6 s"
-        )));
-    }
-    if !(1.0..=65535.0).contains(&temperature_k) {
-        return Err(CliError::Usage(format!(
-            "temperature {temperature_k} K: must be 1 to 65535 K"
-        )));
-    }
-    let psf_sigma_px = match (args.psf_sigma, args.psf_a_px) {
-        (Some(s), _) => s,
-        (None, Some(a)) => pipeline::sigma_of_a(a),
-        (None, None) => {
-            key("PSFA").map_or(DEFAULT_PSF_SIGMA_PX, |a| pipeline::sigma_of_a(a as f32))
-        }
-    };
-    if !(psf_sigma_px.is_finite() && (0.05..=50.0).contains(&psf_sigma_px)) {
-        return Err(CliError::Usage(format!(
-            "PSF sigma {psf_sigma_px} px: must be 0.05 to 50 px"
-        )));
-    }
-    let config = PipelineConfig {
-        method: args.method,
-        window_px: args.window,
-        psf_sigma_px,
-        exposure_ms: (exposure_s * 1000.0).round() as u32,
-        temperature_k,
-        ..PipelineConfig::default()
-    };
-    Ok(pipeline::process(table, &frame.data_adu, &config)?)
+    let (config, temperature_k) = config_of(args, &key)?;
+    process_frame(table, &frame.data_adu, config, temperature_k)
 }
 
 /// Runs `startrack process`: the CSV to `--out` or standard output, a one-line summary on
@@ -108,36 +245,39 @@ pub fn run(args: &ProcessArgs) -> Result<(), CliError> {
     match &args.out {
         Some(p) => {
             let mut f = std::io::BufWriter::new(std::fs::File::create(p).map_err(io(p.clone()))?);
-            pipeline::write_csv(&mut f, &result.stars).map_err(io(p.clone()))?;
+            write_csv(&mut f, &result.stars).map_err(io(p.clone()))?;
             std::io::Write::flush(&mut f).map_err(io(p.clone()))?;
         }
         None => {
             let mut out = std::io::stdout().lock();
-            pipeline::write_csv(&mut out, &result.stars).map_err(io("<stdout>".into()))?;
+            write_csv(&mut out, &result.stars).map_err(io("<stdout>".into()))?;
         }
     }
-    let pixcorr = match (
-        &result.pixcorr,
-        pipeline::corrected_cog(args.method, args.window),
-    ) {
+    let c = &result.config;
+    let method = c.acquisition_method;
+    let pixcorr = match (&result.curve, method) {
+        (_, CentroidMethod::GaussFit) => String::new(),
         (Some(h), _) => format!(
             ", pixel-phase curve a {:.3} px box {}",
             h.a_px.to_num::<f64>(),
             h.box_side
         ),
-        (None, Some((_, b))) => format!(
-            ", no pixel-phase curve for box {b} and this PSF width in the table: uncorrected (flag bit {})",
-            pipeline::UNCORRECTED_BIT
+        (None, _) => format!(
+            ", no pixel-phase curve for box {} and a {} px in the table: uncorrected (flag bit 17)",
+            c.box_px(),
+            c.psf_a_px
         ),
-        (None, None) => String::new(),
     };
+    let s = &result.summary;
     eprintln!(
-        "startrack process: {} stars ({:?}, window {}{pixcorr}), dark scale {:.2} e-, {} candidates lost to a full list{}",
-        result.stars.len(),
-        args.method,
-        args.window,
-        result.conditions.dark_scale_e.to_num::<f64>(),
-        result.dropped,
+        "startrack process: {} stars ({}, window {}, a {} px{pixcorr}), dark scale {:.2} e-, {} candidates lost to a full list, {} windows lost{}",
+        s.stars,
+        method.name(),
+        c.window_px,
+        c.psf_a_px,
+        s.dark_scale_e.map_or(0.0, |d| d.to_num::<f64>()),
+        s.candidates_dropped,
+        u32::from(s.ring_lost) + u32::from(s.windows_dropped) + u32::from(s.calib_failed),
         args.out
             .as_ref()
             .map_or(String::new(), |p| format!(", wrote {}", p.display()))

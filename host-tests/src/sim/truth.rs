@@ -116,6 +116,17 @@ impl Simulator {
         sections: TruthSections,
         tile_log2: u8,
     ) -> Result<Vec<u8>, WriteError> {
+        self.truth_table_with_curves(sections, tile_log2, &[])
+    }
+
+    /// [`Self::truth_table_tiled`] with a pixel-phase section holding `curves` (none: no
+    /// section).
+    pub fn truth_table_with_curves(
+        &self,
+        sections: TruthSections,
+        tile_log2: u8,
+        curves: &[crate::pixcorr::Curve],
+    ) -> Result<Vec<u8>, WriteError> {
         let g = self.params.geometry;
         let (gains, column_bias) = (self.true_gains(), self.true_column_bias());
         let norm = self.covered_dark_mean();
@@ -155,7 +166,11 @@ impl Simulator {
             hot: &hot,
             telegraph: &telegraph,
         };
-        encode(&spec)
+        if curves.is_empty() {
+            encode(&spec)
+        } else {
+            crate::pixcorr::write_table_with_curves(&spec, curves)
+        }
     }
 
     /// Reference temperature of the hot-pixel rates (293 K when hot pixels are off).

@@ -1,0 +1,254 @@
+//! Acquisition: every active raw line streams through the pre-filtered scan
+//! ([`ScanDetector`]) and into the line ring; when the scan closes a blob, the centroid
+//! window around its peak waits until its last row has streamed, is copied from the ring,
+//! calibrated and measured ([`super::measure`]). A window whose top rows already left the
+//! ring (a blob taller than the ring allows) is reported with
+//! [`StarFlags::RING_LOST`] and the detector's own position; one whose calibration fails
+//! with [`StarFlags::CALIB_FAILED`].
+//!
+//! The candidates are bit for bit those of a `LineDetector` with the same background
+//! stride fed every calibrated row (host test `scan`). Cost per line: the scan (~13 M7
+//! instructions a pixel, `cargo m7-bench` `scan_detect`), a 2 KB copy into the ring and a
+//! copy of the candidate list (`N` x 28 B); per star, a window copy and its measurement.
+
+use super::Ring;
+use super::config::{CentroidMethod, TrackerConfig};
+use super::list::{Carry, StarList};
+use super::measure::{Policy, Scratch, measure};
+use super::record::{FrameSummary, LineOutcome, StarFlags, StarRecord};
+use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
+use crate::detect::{Detection, ScanDetector};
+use crate::geometry::ReadoutGeometry;
+use crate::units::Electrons;
+use crate::window::Rect;
+
+/// What acquisition shares with the rest of the tracker for one call.
+pub(super) struct Shared<'a, const N: usize> {
+    pub(super) ring: &'a mut Ring,
+    pub(super) scratch: &'a mut Scratch,
+    pub(super) stars: &'a mut StarList<N>,
+    pub(super) summary: &'a mut FrameSummary,
+}
+
+/// A closed blob waiting for its window's last row.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    rect: Rect,
+    clipped: bool,
+    detection: Detection,
+}
+
+/// Acquisition's state within a frame.
+pub(super) struct Acquisition<'t, const N: usize> {
+    /// Built on the frame's first active line (it holds the frame's calibration).
+    scan: Option<ScanDetector<'t, N>>,
+    closed: heapless::Vec<Detection, N>,
+    pending: heapless::Vec<Pending, N>,
+}
+
+impl<'t, const N: usize> Acquisition<'t, N> {
+    pub(super) const fn new() -> Self {
+        Self {
+            scan: None,
+            closed: heapless::Vec::new(),
+            pending: heapless::Vec::new(),
+        }
+    }
+
+    /// Starts an acquisition frame.
+    pub(super) fn start(&mut self, ring: &mut Ring) {
+        ring.clear();
+        self.scan = None;
+        self.closed.clear();
+        self.pending.clear();
+    }
+
+    /// Active row `y`: into the ring and the scan; the windows it completes are measured.
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "one call per line from the frame loop"
+    )]
+    pub(super) fn line(
+        &mut self,
+        cal: &FrameCalibration<'t>,
+        policy: &Policy<'_>,
+        config: &TrackerConfig,
+        geometry: &ReadoutGeometry,
+        y: u16,
+        samples: &[u16],
+        levels: &LineLevels,
+        sh: Shared<'_, N>,
+    ) -> LineOutcome {
+        // The line has the geometry's length, at most the ring's: cannot fail.
+        let _ = sh.ring.push(y, samples, levels);
+        match self.scan.as_mut() {
+            Some(scan) => scan.set_conditions(*cal.conditions()),
+            None => {
+                self.scan = Some(
+                    ScanDetector::new(*cal, config.detect, config.background_stride)
+                        .with_background_warmup(config.background_warmup_rows),
+                );
+            }
+        }
+        let Some(scan) = self.scan.as_mut() else {
+            return LineOutcome::Refused;
+        };
+        if scan
+            .push_raw_line_closed(y, samples, levels, &mut self.closed)
+            .is_err()
+        {
+            sh.summary.lines_refused = sh.summary.lines_refused.saturating_add(1);
+            return LineOutcome::Refused;
+        }
+        let outcome = match scan.whole_line() {
+            Some((e, f)) => row_mean(e, f),
+            None => LineOutcome::Scanned,
+        };
+        self.queue_closed(config, geometry, sh.summary);
+        self.serve(cal, policy, config, Some(y), sh);
+        outcome
+    }
+
+    /// Ends the frame: completes the open blobs and measures every waiting window.
+    pub(super) fn finish(
+        &mut self,
+        cal: &FrameCalibration<'_>,
+        policy: &Policy<'_>,
+        config: &TrackerConfig,
+        geometry: &ReadoutGeometry,
+        sh: Shared<'_, N>,
+    ) {
+        if let Some(scan) = self.scan.as_mut() {
+            scan.finish_closed(&mut self.closed);
+            sh.summary.candidates_dropped = scan.detector().dropped();
+            self.queue_closed(config, geometry, sh.summary);
+        }
+        self.serve(cal, policy, config, None, sh);
+    }
+
+    /// Moves the candidates the last line closed into the pending list.
+    fn queue_closed(
+        &mut self,
+        config: &TrackerConfig,
+        geometry: &ReadoutGeometry,
+        summary: &mut FrameSummary,
+    ) {
+        for d in self.closed.iter() {
+            let (rect, clipped) = Rect::centred_clipped(
+                d.peak_x,
+                d.peak_y,
+                config.window_px,
+                geometry.active_cols,
+                geometry.active_rows,
+            );
+            let p = Pending {
+                rect,
+                clipped,
+                detection: *d,
+            };
+            if self.pending.push(p).is_err() {
+                summary.windows_dropped = summary.windows_dropped.saturating_add(1);
+            }
+        }
+    }
+
+    /// Measures the pending windows whose last row has streamed (all of them when `y` is
+    /// `None`, at the end of the frame).
+    fn serve(
+        &mut self,
+        cal: &FrameCalibration<'_>,
+        policy: &Policy<'_>,
+        config: &TrackerConfig,
+        y: Option<u16>,
+        mut sh: Shared<'_, N>,
+    ) {
+        let mut i = 0;
+        while let Some(p) = self.pending.get(i).copied() {
+            let last = p.rect.y0.saturating_add(p.rect.height).saturating_sub(1);
+            if y.is_some_and(|y| y < last) {
+                i += 1;
+                continue;
+            }
+            self.pending.swap_remove(i);
+            measure_pending(cal, policy, config, &p, &mut sh);
+        }
+    }
+}
+
+/// Measures one pending window, or reports the detector's position with the reason.
+fn measure_pending<const N: usize>(
+    cal: &FrameCalibration<'_>,
+    policy: &Policy<'_>,
+    config: &TrackerConfig,
+    p: &Pending,
+    sh: &mut Shared<'_, N>,
+) {
+    let rect = p.rect;
+    let detected = StarFlags::from_detection(p.detection.flags);
+    let want_background = config.tracking_method == CentroidMethod::FusedCog1;
+    let copied = match sh.scratch.inputs(rect) {
+        Some((raw, levels)) => sh.ring.copy_window(rect, raw, levels).is_ok(),
+        None => false,
+    };
+    let lost = if !copied {
+        sh.summary.ring_lost = sh.summary.ring_lost.saturating_add(1);
+        StarFlags::RING_LOST
+    } else if sh.scratch.calibrate(cal, rect).is_ok()
+        && let Some(input) = sh.scratch.window(rect, p.clipped)
+    {
+        let m = measure(policy, &input, detected, want_background);
+        sh.stars.push(
+            m.record,
+            Carry {
+                background: m.background,
+                ..Carry::default()
+            },
+        );
+        return;
+    } else {
+        sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+        StarFlags::CALIB_FAILED
+    };
+    let d = &p.detection;
+    let half = f32::from(config.window_px) / 2.0;
+    sh.stars.push(
+        StarRecord {
+            x_px: d.x_px,
+            y_px: d.y_px,
+            flux_e: d.flux_e,
+            snr: d.snr,
+            sigma_x_px: half,
+            sigma_y_px: half,
+            flags: detected | lost,
+        },
+        Carry::default(),
+    );
+}
+
+/// A whole calibrated row's mean over the pixels that are not excluded, its OR-ed flags
+/// and its saturated pixels.
+fn row_mean(e: &[Electrons], f: &[PixelFlags]) -> LineOutcome {
+    let (mut sum, mut used, mut saturated) = (0i64, 0i64, 0u16);
+    let mut flags = PixelFlags::empty();
+    for (v, fl) in e.iter().zip(f.iter()) {
+        flags |= *fl;
+        if !fl.is_excluded() {
+            sum += i64::from(v.to_bits());
+            used += 1;
+        }
+        if fl.contains(PixelFlags::SATURATED) {
+            saturated = saturated.saturating_add(1);
+        }
+    }
+    let mean_bits = if used == 0 {
+        0
+    } else {
+        // Round to nearest; the mean of i32 values fits an i32.
+        (2 * sum + used).div_euclid(2 * used) as i32
+    };
+    LineOutcome::Calibrated {
+        mean_e: Electrons::from_bits(mean_bits),
+        flags,
+        saturated,
+    }
+}

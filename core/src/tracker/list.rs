@@ -1,0 +1,79 @@
+//! A frame's star list: bounded, the brightest kept, each record with what the next
+//! tracking frame needs of the star ([`Carry`]).
+//!
+//! Cost: a push is O(1) while the list has room; once full, a scan for the faintest
+//! (at most `N` compares) per extra star.
+
+use super::measure::StarBackground;
+use super::record::StarRecord;
+
+/// What a star carries to the next tracking frame besides its position.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct Carry {
+    /// Its background as last measured on a full path (the fused CoG's given background).
+    pub(crate) background: Option<StarBackground>,
+    /// The fused CoG plan slot it was measured with.
+    pub(crate) plan_slot: Option<u8>,
+    /// Its motion between the last two frames, px per frame (tracked stars).
+    pub(crate) velocity_px: Option<(f32, f32)>,
+}
+
+/// Up to `N` stars, of which at most `limit` are kept.
+pub(crate) struct StarList<const N: usize> {
+    records: heapless::Vec<StarRecord, N>,
+    carries: heapless::Vec<Carry, N>,
+    limit: usize,
+    /// Stars not kept (list full and fainter than all, or pushed out by a brighter one).
+    pub(crate) dropped: u16,
+}
+
+impl<const N: usize> StarList<N> {
+    pub(crate) const fn new() -> Self {
+        Self {
+            records: heapless::Vec::new(),
+            carries: heapless::Vec::new(),
+            limit: N,
+            dropped: 0,
+        }
+    }
+
+    /// Empties the list for a frame that keeps at most `limit` stars.
+    pub(crate) fn clear(&mut self, limit: usize) {
+        self.records.clear();
+        self.carries.clear();
+        self.limit = limit.min(N);
+        self.dropped = 0;
+    }
+
+    pub(crate) fn records(&self) -> &[StarRecord] {
+        &self.records
+    }
+
+    pub(crate) fn iter(&self) -> impl Iterator<Item = (&StarRecord, &Carry)> {
+        self.records.iter().zip(self.carries.iter())
+    }
+
+    /// Adds a star; when the list is full the faintest is replaced by a brighter one.
+    pub(crate) fn push(&mut self, record: StarRecord, carry: Carry) {
+        if self.records.len() < self.limit {
+            // The limit is at most N: both pushes have room.
+            let _ = self.records.push(record);
+            let _ = self.carries.push(carry);
+            return;
+        }
+        self.dropped = self.dropped.saturating_add(1);
+        let faintest = self
+            .records
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.flux_e.total_cmp(&b.1.flux_e))
+            .map(|(i, s)| (i, s.flux_e));
+        if let Some((i, f)) = faintest
+            && record.flux_e > f
+            && let (Some(r), Some(c)) = (self.records.get_mut(i), self.carries.get_mut(i))
+        {
+            *r = record;
+            *c = carry;
+        }
+    }
+}

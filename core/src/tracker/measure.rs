@@ -1,0 +1,275 @@
+//! One star's measurement, the same in both modes: a window of raw samples and their row
+//! levels is calibrated, and the configured centroid method ([`Policy`]) measures it.
+//!
+//! - [`Policy`]: the method, box and PSF width of a mode, with the pixel-phase curve the
+//!   table holds for them, chosen once per frame by one rule ([`select_curve`]): the curve
+//!   of the CoG's power and box and of the method's background whose width is nearest the
+//!   configured `psf_a_px`, used only within `pixcorr_tolerance` of it; otherwise the CoG
+//!   is reported uncorrected and flagged.
+//! - [`Scratch`]: one window's buffers (raw, levels, electrons, flags, and the centroid
+//!   sub-window of a tracking window), ~2.8 KB.
+//!
+//! Cost per star: the window's calibration (~95 M7 instructions a pixel, `cargo m7-bench`
+//! stage `window_calibrate`), then the method (the Gauss fit 7x7 ~7,000, the CoG a few
+//! hundred plus ~140 for the curve).
+
+use super::config::{CentroidMethod, TrackerConfig};
+use super::record::{StarFlags, StarRecord};
+use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
+use crate::centroid::cog::{CogParams, CogPower, cog};
+use crate::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use crate::centroid::pixcorr::{PixCorr, PixCorrBackground};
+use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
+use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
+use crate::table::CalibTable;
+use crate::units::{BiasAdu, Electrons};
+use crate::window::{Rect, Window};
+
+/// Largest centroid window, px (the configuration's limit).
+pub(crate) const MAX_WINDOW_PX: usize = 13;
+
+/// A star's background as last measured (the border median of its centroid window): what
+/// the fused CoG takes as given in the next tracking frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct StarBackground {
+    /// Level, e- per pixel.
+    pub(crate) level_e: f32,
+    /// Per-pixel variance, e-^2.
+    pub(crate) variance_e2: f32,
+}
+
+/// The pixel-phase curve `config` uses for a CoG of `power` in a `box_px` box with
+/// `background`: of the table's curves for that power, box and background, the one whose
+/// width is nearest `config.psf_a_px`, if within `config.pixcorr_tolerance` of it.
+pub fn select_curve<'t>(
+    table: &CalibTable<'t>,
+    config: &TrackerConfig,
+    power: CogPower,
+    box_px: u8,
+    background: PixCorrBackground,
+) -> Option<PixCorr<'t>> {
+    let a = config.psf_a_px;
+    table
+        .pixcorr()
+        .find(power, box_px, background, a)
+        .filter(|c| {
+            let ca = c.header().a_px.to_num::<f32>();
+            (ca - a).abs() <= config.pixcorr_tolerance * a
+        })
+}
+
+/// How one mode measures a star, fixed for a frame.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Policy<'t> {
+    pub(crate) method: CentroidMethod,
+    pub(crate) box_px: u8,
+    pub(crate) sigma_px: f32,
+    /// The curve of the general path (perimeter-median CoG).
+    pub(crate) curve: Option<PixCorr<'t>>,
+    /// The curve of the fused CoG (given background).
+    pub(crate) fused_curve: Option<PixCorr<'t>>,
+}
+
+impl<'t> Policy<'t> {
+    /// The policy of `method` under `config` with `table`'s curves.
+    pub(crate) fn new(
+        method: CentroidMethod,
+        config: &TrackerConfig,
+        table: &CalibTable<'t>,
+    ) -> Self {
+        let box_px = config.box_px();
+        let power = match method {
+            CentroidMethod::Cog2 => Some(CogPower::Two),
+            CentroidMethod::Cog1 | CentroidMethod::FusedCog1 => Some(CogPower::One),
+            CentroidMethod::GaussFit => None,
+        };
+        let curve = power.and_then(|p| {
+            select_curve(table, config, p, box_px, PixCorrBackground::PerimeterMedian)
+        });
+        let fused_curve = (method == CentroidMethod::FusedCog1)
+            .then(|| {
+                select_curve(
+                    table,
+                    config,
+                    CogPower::One,
+                    box_px,
+                    PixCorrBackground::Given,
+                )
+            })
+            .flatten();
+        Self {
+            method,
+            box_px,
+            sigma_px: config.psf_sigma_px(),
+            curve,
+            fused_curve,
+        }
+    }
+
+    /// True for a CoG method (whose position needs the pixel-phase correction).
+    fn is_cog(&self) -> bool {
+        self.method != CentroidMethod::GaussFit
+    }
+
+    /// The centroid of `input` by the method (the fused CoG's general path is the CoG),
+    /// corrected with the curve; the flag says when a CoG had none.
+    pub(crate) fn centroid(&self, input: &CentroidInput<'_>) -> (Centroid, StarFlags) {
+        let c = match self.method {
+            CentroidMethod::GaussFit => gauss_fit(
+                input,
+                &GaussFitParams {
+                    start_box: self.box_px,
+                    fit_background: false,
+                    background: Background::PerimeterMedian,
+                    ..GaussFitParams::new(self.sigma_px)
+                },
+            ),
+            CentroidMethod::Cog2 => cog(input, &CogParams::new(CogPower::Two, self.box_px)),
+            CentroidMethod::Cog1 | CentroidMethod::FusedCog1 => {
+                cog(input, &CogParams::new(CogPower::One, self.box_px))
+            }
+        };
+        match (self.curve, self.is_cog()) {
+            (Some(k), true) => (k.apply(c), StarFlags::empty()),
+            (None, true) => (c, StarFlags::UNCORRECTED),
+            _ => (c, StarFlags::empty()),
+        }
+    }
+}
+
+/// One window's buffers.
+pub(crate) struct Scratch {
+    raw: [u16; CAPTURE_MAX_PX],
+    levels: [LineLevels; CAPTURE_MAX_SIDE as usize],
+    electrons: [Electrons; CAPTURE_MAX_PX],
+    flags: [PixelFlags; CAPTURE_MAX_PX],
+    sub_e: [Electrons; MAX_WINDOW_PX * MAX_WINDOW_PX],
+    sub_f: [PixelFlags; MAX_WINDOW_PX * MAX_WINDOW_PX],
+}
+
+/// Why a window gave no centroid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum MeasureError {
+    /// The window does not fit the buffers, or its calibration failed.
+    Calibration,
+}
+
+/// A calibrated window and the measurement made of it.
+pub(crate) struct Measured {
+    pub(crate) record: StarRecord,
+    pub(crate) background: Option<StarBackground>,
+}
+
+impl Scratch {
+    pub(crate) const fn new() -> Self {
+        Self {
+            raw: [0; CAPTURE_MAX_PX],
+            levels: [LineLevels {
+                bias_adu: [BiasAdu::ZERO; crate::geometry::MAX_OUTPUTS],
+            }; CAPTURE_MAX_SIDE as usize],
+            electrons: [Electrons::ZERO; CAPTURE_MAX_PX],
+            flags: [PixelFlags::empty(); CAPTURE_MAX_PX],
+            sub_e: [Electrons::ZERO; MAX_WINDOW_PX * MAX_WINDOW_PX],
+            sub_f: [PixelFlags::empty(); MAX_WINDOW_PX * MAX_WINDOW_PX],
+        }
+    }
+
+    /// The raw and level buffers for a window of `rect`, to be filled by the caller.
+    pub(crate) fn inputs(&mut self, rect: Rect) -> Option<(&mut [u16], &mut [LineLevels])> {
+        Some((
+            self.raw.get_mut(..rect.len())?,
+            self.levels.get_mut(..usize::from(rect.height))?,
+        ))
+    }
+
+    /// Calibrates the window held in the raw and level buffers.
+    pub(crate) fn calibrate(
+        &mut self,
+        cal: &FrameCalibration<'_>,
+        rect: Rect,
+    ) -> Result<(), MeasureError> {
+        let n = rect.len();
+        let (Some(raw), Some(levels), Some(e), Some(f)) = (
+            self.raw.get(..n),
+            self.levels.get(..usize::from(rect.height)),
+            self.electrons.get_mut(..n),
+            self.flags.get_mut(..n),
+        ) else {
+            return Err(MeasureError::Calibration);
+        };
+        cal.calibrate_window(rect, raw, levels, e, f)
+            .map(|_| ())
+            .map_err(|_| MeasureError::Calibration)
+    }
+
+    /// The calibrated window of `rect` as a centroid input.
+    pub(crate) fn window(&self, rect: Rect, clipped: bool) -> Option<CentroidInput<'_>> {
+        let n = rect.len();
+        Some(
+            CentroidInput::new(Window::new(rect, self.electrons.get(..n)?)?)
+                .with_pixel_flags(self.flags.get(..n)?)
+                .with_clipped(clipped),
+        )
+    }
+
+    /// Copies the part `sub` of the calibrated window `rect` into the sub-window buffers
+    /// and gives it as a centroid input.
+    pub(crate) fn sub_window(
+        &mut self,
+        rect: Rect,
+        sub: Rect,
+        clipped: bool,
+    ) -> Option<CentroidInput<'_>> {
+        let (w, sw) = (usize::from(rect.width), usize::from(sub.width));
+        let dx = usize::from(sub.x0.checked_sub(rect.x0)?);
+        let dy = usize::from(sub.y0.checked_sub(rect.y0)?);
+        if dx + sw > w || dy + usize::from(sub.height) > usize::from(rect.height) {
+            return None;
+        }
+        let n = sub.len();
+        let (dst_e, dst_f) = (self.sub_e.get_mut(..n)?, self.sub_f.get_mut(..n)?);
+        for (r, (de, df)) in dst_e
+            .chunks_exact_mut(sw.max(1))
+            .zip(dst_f.chunks_exact_mut(sw.max(1)))
+            .enumerate()
+        {
+            let start = (dy + r) * w + dx;
+            de.copy_from_slice(self.electrons.get(start..start + sw)?);
+            df.copy_from_slice(self.flags.get(start..start + sw)?);
+        }
+        Some(
+            CentroidInput::new(Window::new(sub, self.sub_e.get(..n)?)?)
+                .with_pixel_flags(self.sub_f.get(..n)?)
+                .with_clipped(clipped),
+        )
+    }
+}
+
+/// Measures a calibrated centroid window: the policy's centroid with `flags` added, and
+/// (when `want_background`) the border median it used, for the fused CoG of the next frame.
+pub(crate) fn measure(
+    policy: &Policy<'_>,
+    input: &CentroidInput<'_>,
+    flags: StarFlags,
+    want_background: bool,
+) -> Measured {
+    let (c, uncorrected) = policy.centroid(input);
+    let pixel_flags = input
+        .pixel_flags
+        .iter()
+        .fold(PixelFlags::empty(), |m, f| m | *f);
+    let background = want_background
+        .then(|| estimate_background(input, Background::PerimeterMedian))
+        .flatten()
+        .map(|b| StarBackground {
+            level_e: b.level_e(),
+            variance_e2: b.variance_e2,
+        });
+    Measured {
+        record: StarRecord::from_centroid(
+            &c,
+            flags | uncorrected | StarFlags::from_pixels(pixel_flags),
+        ),
+        background,
+    }
+}

@@ -1,0 +1,654 @@
+//! The star tracker application: the frame loop, its modes and the rules that change them,
+//! in one piece of `no_std` code that the board, the host tools and the software-in-the-loop
+//! run alike. A home binds its hardware (or files, or the simulator) to the [`ports`] and
+//! calls [`Tracker::run_frame`] once a frame; everything from a raw line to a reported star
+//! happens here.
+//!
+//! # A frame
+//! ```text
+//! begin_frame   the table in force, the sensor temperature, the mode (rules below),
+//!               what to read (ReadoutRequest: full frame, or the tracking windows)
+//! push_line     per raw line in readout order: bias of each output from its over-scan,
+//!               covered pixels into the frame's dark scale, then by mode:
+//!   acquisition   the raw line into the 16-line ring and the pre-filtered scan
+//!                 (detect::prefilter), which calibrates only 16-pixel chunks that may
+//!                 pass the threshold and every background row whole; each closed blob's
+//!                 centroid window is cut from the ring once its last row is in,
+//!                 calibrated and measured (acquire.rs)
+//!   tracking      the rows of the windows placed on the last frame's stars are copied;
+//!                 a window whose last row is in is calibrated, tested for its star
+//!                 (detect::track) and the centroid window around the star's peak
+//!                 measured (track.rs)
+//!   standby       nothing more
+//! end_frame     open windows served, the star list (the brightest `max_stars`) and the
+//!               frame summary reported, the next mode decided
+//! ```
+//! A line is calibrated with the previous frame's complete dark scale (the dark signal
+//! follows the temperature, slow against a frame); the very first frame uses its own
+//! running estimate, which already holds the line's covered pixels.
+//!
+//! Every star is measured the same way in both modes ([`measure`]): the configured method
+//! on a `window_px` window around its brightest pixel, the border median as background,
+//! the table's pixel-phase curve chosen by one rule for a CoG ([`select_curve`]).
+//!
+//! # Mode rules
+//! All here, in [`Tracker::begin_frame`] and `decide_next`:
+//! - a command ([`Tracker::command_mode`]) takes effect at the next frame: standby stays
+//!   until another command; tracking needs stars from the last frame, else acquisition;
+//! - no calibration table: standby ([`ModeReason::NoTable`]) until one is in force;
+//! - acquisition -> tracking when it gave at least `min_track_stars` usable centroids;
+//! - tracking -> acquisition when fewer than `min_track_stars` were found, or after
+//!   `reacquire_every` tracking frames in a row (stars entering the field).
+//!
+//! Every change is an [`Event::ModeChange`] with its reason.
+//!
+//! # Memory
+//! [`TrackerBuffers`] (the line ring 34 KB, the tracking windows 19 KB, the fused CoG's
+//! plans 15 KB) lives where the home puts it (`.bss` on the board); the [`Tracker`] itself
+//! holds the scan detector (~13 KB of line buffers plus `N` candidates of 28 B), the
+//! pending windows, the star list (`N` x ~60 B), one window's scratch (~2.8 KB) and the
+//! last frame's stars. `size_of` of both is printed and bounded by the host test
+//! `tracker_memory`.
+//!
+//! # Cost
+//! Per acquisition line, the scan's ~13 M7 instructions a pixel (`cargo m7-bench`,
+//! `scan_detect`), a 2 KB copy into the ring, and the bias levels; per tracking line, a
+//! row test per window and the copy of the rows in windows; per star, the window's
+//! calibration and the method ([`measure`]).
+
+mod acquire;
+pub mod config;
+mod list;
+mod measure;
+pub mod ports;
+pub mod record;
+mod track;
+
+pub use config::{CentroidMethod, ConfigError, TrackerConfig};
+pub use measure::select_curve;
+pub use ports::{
+    Clock, FixedTable, FixedTemperature, LineSource, Ports, ReadoutRequest, SourceLine, TableStore,
+    TelemetrySink, Thermometer,
+};
+pub use record::{
+    Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, StarFlags, StarRecord,
+    TemperatureSource,
+};
+
+use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels};
+use crate::centroid::raw_cog::RawCogPlan;
+use crate::detect::{LineRing, WindowCapture};
+use crate::geometry::ReadoutGeometry;
+use crate::table::CalibTable;
+use crate::units::{BiasAdu, Electrons, Kelvin};
+use acquire::Acquisition;
+use list::StarList;
+use measure::{Policy, Scratch};
+use track::Tracking;
+
+/// Raw lines the acquisition ring keeps: a centroid window completes a few rows after its
+/// blob closes, so 16 leaves room for blobs up to ~8 rows below their peak.
+pub const RING_LINES: usize = 16;
+/// Longest raw line the ring holds (the CCD47-20's 1072 elements).
+pub const RING_LINE_LEN: usize = ReadoutGeometry::CCD47_20_DUAL.line_len();
+/// Most stars tracked at once (tracking windows, fused CoG plans).
+pub const TRACK_WINDOWS: usize = 32;
+
+/// The line ring of acquisition.
+pub type Ring = LineRing<RING_LINES, RING_LINE_LEN>;
+/// The window list of tracking.
+pub type Capture = WindowCapture<TRACK_WINDOWS>;
+
+/// The tracker's large buffers, apart so that a home can place them (the board: a static
+/// in `.bss`, all zero until [`Tracker::new`] sets them up in place).
+pub struct TrackerBuffers {
+    ring: Ring,
+    capture: Capture,
+    plans: [RawCogPlan; TRACK_WINDOWS],
+}
+
+impl TrackerBuffers {
+    /// Empty buffers (every byte zero, so a static of them costs no flash).
+    pub const fn new() -> Self {
+        Self {
+            ring: LineRing::new(0),
+            capture: WindowCapture::new(ReadoutGeometry {
+                overscan_px: 0,
+                covered_px: 0,
+                active_cols: 0,
+                active_rows: 0,
+                lines: 0,
+                outputs: 0,
+            }),
+            plans: [RawCogPlan::EMPTY; TRACK_WINDOWS],
+        }
+    }
+}
+
+impl Default for TrackerBuffers {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// What a home tells the tracker at a frame's start (from its ports).
+#[derive(Clone, Copy, Debug)]
+pub struct FrameInputs<'t> {
+    /// The calibration table in force.
+    pub table: Option<CalibTable<'t>>,
+    /// The sensor temperature, K, if measured.
+    pub temperature_k: Option<Kelvin>,
+    /// The home clock now, us.
+    pub start_us: u64,
+}
+
+/// Why a mode command was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum CommandError {
+    /// Tracking was asked for with no star from the last frame to track.
+    NothingToTrack,
+}
+
+impl core::fmt::Display for CommandError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::NothingToTrack => "tracking needs stars from the last frame",
+        })
+    }
+}
+
+impl core::error::Error for CommandError {}
+
+/// The tracker application, for up to `N` stars a frame (the board: 32; the host's
+/// `process`: 1024, room for any field).
+pub struct Tracker<'t, 'b, const N: usize> {
+    config: TrackerConfig,
+    staged_config: Option<TrackerConfig>,
+    geometry: ReadoutGeometry,
+    buffers: &'b mut TrackerBuffers,
+    table: Option<CalibTable<'t>>,
+    /// Length of the last frame's table (0: none); `None` before the first frame.
+    table_len: Option<u32>,
+    frame: u32,
+    started: bool,
+    open: bool,
+    mode: Mode,
+    next: (Mode, ModeReason),
+    commanded: Option<Mode>,
+    /// A commanded standby, held until the next command.
+    standby_held: bool,
+    tracking_run: u32,
+    estimator: DarkScaleEstimator,
+    prev_dark_scale: Option<Electrons>,
+    last_line: Option<u16>,
+    conditions: Option<FrameConditions>,
+    temperature_k: Kelvin,
+    summary: FrameSummary,
+    policy: Option<Policy<'t>>,
+    acq: Acquisition<'t, N>,
+    trk: Tracking,
+    stars: StarList<N>,
+    scratch: Scratch,
+}
+
+impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
+    /// A tracker for lines of `geometry`, configured with `config`, using `buffers`. It
+    /// starts in standby and moves to acquisition at its first frame.
+    pub fn new(
+        config: TrackerConfig,
+        geometry: ReadoutGeometry,
+        buffers: &'b mut TrackerBuffers,
+    ) -> Result<Self, ConfigError> {
+        config.validate(N)?;
+        if geometry.validate().is_err() || geometry.line_len() > RING_LINE_LEN {
+            return Err(ConfigError::Geometry);
+        }
+        buffers.ring.reset_for(geometry.first_active_col());
+        buffers.capture.reset_for(geometry);
+        Ok(Self {
+            config,
+            staged_config: None,
+            geometry,
+            buffers,
+            table: None,
+            table_len: None,
+            frame: 0,
+            started: false,
+            open: false,
+            mode: Mode::Standby,
+            next: (Mode::Acquisition, ModeReason::Start),
+            commanded: None,
+            standby_held: false,
+            tracking_run: 0,
+            estimator: DarkScaleEstimator::new(),
+            prev_dark_scale: None,
+            last_line: None,
+            conditions: None,
+            temperature_k: Kelvin::ZERO,
+            summary: empty_summary(0, Mode::Standby, 0),
+            policy: None,
+            acq: Acquisition::new(),
+            trk: Tracking::new(),
+            stars: StarList::new(),
+            scratch: Scratch::new(),
+        })
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &TrackerConfig {
+        &self.config
+    }
+
+    /// The readout geometry.
+    pub fn geometry(&self) -> &ReadoutGeometry {
+        &self.geometry
+    }
+
+    /// The current (or last) frame's mode.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Checks `config` and stages it for the next frame.
+    pub fn set_config(&mut self, config: TrackerConfig) -> Result<(), ConfigError> {
+        config.validate(N)?;
+        self.staged_config = Some(config);
+        Ok(())
+    }
+
+    /// Asks for `mode` from the next frame on (see the module's mode rules).
+    pub fn command_mode(&mut self, mode: Mode) -> Result<(), CommandError> {
+        if mode == Mode::Tracking && self.trk.priors_len() == 0 {
+            return Err(CommandError::NothingToTrack);
+        }
+        self.commanded = Some(mode);
+        Ok(())
+    }
+
+    /// What the current frame reads.
+    pub fn readout_request(&self) -> ReadoutRequest<'_> {
+        match self.mode {
+            Mode::Tracking => ReadoutRequest::Windows(self.trk.rects()),
+            Mode::Standby | Mode::Acquisition => ReadoutRequest::FullFrame,
+        }
+    }
+
+    /// One frame through the ports: begins it, has `source` read what it asks for, takes
+    /// every line, ends it. Returns the frame's summary (also sent to the telemetry port),
+    /// or the source's error (the frame is ended with what it got, its summary sent).
+    pub async fn run_frame<S: LineSource>(
+        &mut self,
+        source: &mut S,
+        ports: &mut Ports<'_, 't>,
+    ) -> Result<FrameSummary, S::Error> {
+        let inputs = FrameInputs {
+            table: ports.tables.active_table(),
+            temperature_k: ports.thermometer.sensor_temperature_k(),
+            start_us: ports.clock.now_us(),
+        };
+        let frame = self.begin_frame(inputs, ports.telemetry);
+        let read = source.start_frame(frame, &self.readout_request()).await;
+        if let Err(e) = read {
+            self.end_frame(ports.telemetry);
+            return Err(e);
+        }
+        loop {
+            match source.next_line().await {
+                Ok(Some(l)) => {
+                    self.push_line(l.line, l.samples, ports.telemetry);
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    self.end_frame(ports.telemetry);
+                    return Err(e);
+                }
+            }
+        }
+        Ok(self.end_frame(ports.telemetry))
+    }
+
+    /// Starts the next frame (ending an open one first) and returns its number: applies a
+    /// staged configuration, takes the table in force, decides the mode and places the
+    /// tracking windows. [`Self::readout_request`] then says what to read.
+    pub fn begin_frame(
+        &mut self,
+        inputs: FrameInputs<'t>,
+        telemetry: &mut dyn TelemetrySink,
+    ) -> u32 {
+        if self.open {
+            self.end_frame(telemetry);
+        }
+        let frame = if self.started {
+            self.frame.wrapping_add(1)
+        } else {
+            0
+        };
+        self.started = true;
+        self.frame = frame;
+        self.open = true;
+        if let Some(c) = self.staged_config.take() {
+            self.config = c;
+            telemetry.event(&Event::ConfigApplied { frame });
+        }
+
+        let table = inputs.table.filter(|t| *t.geometry() == self.geometry);
+        let len = table.map_or(0, |t| u32::try_from(t.len_bytes()).unwrap_or(u32::MAX));
+        if self.table_len != Some(len) {
+            telemetry.event(&Event::TableChanged {
+                frame,
+                len_bytes: len,
+            });
+            self.table_len = Some(len);
+        }
+        self.table = table;
+
+        let (mut to, mut reason) = self.next;
+        if let Some(m) = self.commanded.take() {
+            (to, reason) = (m, ModeReason::Command);
+            self.standby_held = m == Mode::Standby;
+        }
+        if to == Mode::Tracking && self.trk.priors_len() == 0 {
+            (to, reason) = (Mode::Acquisition, ModeReason::TooFewStars);
+        }
+        if to != Mode::Standby && table.is_none() {
+            (to, reason) = (Mode::Standby, ModeReason::NoTable);
+        }
+        if to != self.mode {
+            telemetry.event(&Event::ModeChange {
+                frame,
+                from: self.mode,
+                to,
+                reason,
+            });
+        }
+        self.mode = to;
+
+        let (temperature_k, source) = match (inputs.temperature_k, table) {
+            (Some(t), _) => (t, TemperatureSource::Sensor),
+            (None, Some(t)) => (
+                t.hot_pixels().reference_temperature_k(),
+                TemperatureSource::TableReference,
+            ),
+            (None, None) => (Kelvin::ZERO, TemperatureSource::None),
+        };
+        self.temperature_k = temperature_k;
+        self.summary = FrameSummary {
+            calibrated: table.is_some(),
+            temperature_k,
+            temperature_source: source,
+            ..empty_summary(frame, to, inputs.start_us)
+        };
+        self.estimator = DarkScaleEstimator::new();
+        self.last_line = None;
+        self.conditions = None;
+        self.stars.clear(usize::from(self.config.max_stars));
+        self.policy = table.map(|t| {
+            let method = match to {
+                Mode::Tracking => self.config.tracking_method,
+                _ => self.config.acquisition_method,
+            };
+            Policy::new(method, &self.config, &t)
+        });
+        match to {
+            Mode::Acquisition => self.acq.start(&mut self.buffers.ring),
+            Mode::Tracking => {
+                let placed = self.trk.start(
+                    &self.config,
+                    &self.geometry,
+                    &mut self.buffers.capture,
+                    &mut self.summary,
+                );
+                self.summary.track_windows = placed;
+            }
+            Mode::Standby => {}
+        }
+        frame
+    }
+
+    /// Takes raw line `line` of the current frame (`samples`: the whole raw line) and
+    /// returns what was made of it. Lines must come in increasing order; a refused line is
+    /// counted in the frame summary.
+    pub fn push_line(
+        &mut self,
+        line: u16,
+        samples: &[u16],
+        telemetry: &mut dyn TelemetrySink,
+    ) -> LineOutcome {
+        let mut bias_adu = [BiasAdu::ZERO; crate::geometry::MAX_OUTPUTS];
+        let (outcome, dark_scale_e) = match self.take_line(line, samples, &mut bias_adu) {
+            Some(done) => done,
+            None => {
+                self.summary.lines_refused = self.summary.lines_refused.saturating_add(1);
+                (LineOutcome::Refused, Electrons::ZERO)
+            }
+        };
+        if line.is_multiple_of(self.config.line_summary_every) {
+            telemetry.line(&LineSummary {
+                frame: self.frame,
+                line,
+                bias_adu,
+                dark_scale_e,
+                outcome,
+            });
+        }
+        outcome
+    }
+
+    /// [`Self::push_line`]'s work; `None` when the line is refused.
+    fn take_line(
+        &mut self,
+        line: u16,
+        samples: &[u16],
+        bias_adu: &mut [BiasAdu; crate::geometry::MAX_OUTPUTS],
+    ) -> Option<(LineOutcome, Electrons)> {
+        if !self.open
+            || samples.len() != self.geometry.line_len()
+            || self.last_line.is_some_and(|l| line <= l)
+            || line >= self.geometry.lines
+        {
+            return None;
+        }
+        let levels = LineLevels::measure(&self.geometry, samples).ok()?;
+        *bias_adu = levels.bias_adu;
+        self.last_line = Some(line);
+        self.summary.lines = self.summary.lines.saturating_add(1);
+        let active = line < self.geometry.active_rows;
+        let Some(table) = self.table else {
+            let outcome = if active {
+                uncalibrated(&self.geometry, samples, &levels)
+            } else {
+                LineOutcome::Levels
+            };
+            return Some((outcome, Electrons::ZERO));
+        };
+        self.estimator.add_line(&table, samples, &levels).ok()?;
+        // The CCD47-20 always has covered columns, so the running estimate exists.
+        let dark_scale_e = self
+            .prev_dark_scale
+            .or_else(|| self.estimator.estimate())
+            .unwrap_or(Electrons::ZERO);
+        if !active {
+            return Some((LineOutcome::Levels, dark_scale_e));
+        }
+        let conditions = FrameConditions {
+            dark_scale_e,
+            exposure_ms: self.config.exposure_ms,
+            temperature_k: self.temperature_k,
+        };
+        self.conditions = Some(conditions);
+        let cal = FrameCalibration::new(table, conditions);
+        let outcome = match (self.mode, self.policy) {
+            (Mode::Acquisition, Some(policy)) => self.acq.line(
+                &cal,
+                &policy,
+                &self.config,
+                &self.geometry,
+                line,
+                samples,
+                &levels,
+                acquire::Shared {
+                    ring: &mut self.buffers.ring,
+                    scratch: &mut self.scratch,
+                    stars: &mut self.stars,
+                    summary: &mut self.summary,
+                },
+            ),
+            (Mode::Tracking, Some(policy)) => self.trk.line(
+                &cal,
+                &policy,
+                &self.config,
+                line,
+                samples,
+                &levels,
+                track::Shared {
+                    capture: &mut self.buffers.capture,
+                    plans: &mut self.buffers.plans,
+                    scratch: &mut self.scratch,
+                    stars: &mut self.stars,
+                    summary: &mut self.summary,
+                },
+            ),
+            _ => LineOutcome::Levels,
+        };
+        Some((outcome, dark_scale_e))
+    }
+
+    /// Ends the current frame: serves what is still open, reports the stars and the
+    /// summary, decides the next mode. Returns the summary (a no-op returning the last
+    /// one when no frame is open).
+    pub fn end_frame(&mut self, telemetry: &mut dyn TelemetrySink) -> FrameSummary {
+        if !self.open {
+            return self.summary;
+        }
+        self.open = false;
+        if let (Some(table), Some(conditions), Some(policy)) =
+            (self.table, self.conditions, self.policy)
+        {
+            let cal = FrameCalibration::new(table, conditions);
+            match self.mode {
+                Mode::Acquisition => self.acq.finish(
+                    &cal,
+                    &policy,
+                    &self.config,
+                    &self.geometry,
+                    acquire::Shared {
+                        ring: &mut self.buffers.ring,
+                        scratch: &mut self.scratch,
+                        stars: &mut self.stars,
+                        summary: &mut self.summary,
+                    },
+                ),
+                Mode::Tracking => self.trk.finish(
+                    &cal,
+                    &policy,
+                    &self.config,
+                    track::Shared {
+                        capture: &mut self.buffers.capture,
+                        plans: &mut self.buffers.plans,
+                        scratch: &mut self.scratch,
+                        stars: &mut self.stars,
+                        summary: &mut self.summary,
+                    },
+                ),
+                Mode::Standby => {}
+            }
+        }
+        let estimate = self.table.and(self.estimator.estimate());
+        self.summary.dark_scale_e = estimate;
+        if estimate.is_some() {
+            self.prev_dark_scale = estimate;
+        }
+        let mut centroids = 0u16;
+        for s in self.stars.records() {
+            telemetry.star(self.frame, s);
+            if s.is_centroid() {
+                centroids = centroids.saturating_add(1);
+            }
+        }
+        self.summary.stars = u16::try_from(self.stars.records().len()).unwrap_or(u16::MAX);
+        self.summary.centroids = centroids;
+        self.summary.stars_dropped = self.stars.dropped;
+        self.trk
+            .keep_priors(&self.stars, usize::from(self.config.max_tracked));
+        self.next = self.decide_next(centroids);
+        self.tracking_run = match self.mode {
+            Mode::Tracking => self.tracking_run.saturating_add(1),
+            _ => 0,
+        };
+        self.summary.next_mode = self.next.0;
+        telemetry.frame(&self.summary);
+        self.summary
+    }
+
+    /// The next frame's mode and why, from this frame's mode and usable centroids (before a
+    /// command or a missing table overrule it at the next frame's start).
+    fn decide_next(&self, centroids: u16) -> (Mode, ModeReason) {
+        let enough = centroids >= self.config.min_track_stars;
+        match self.mode {
+            Mode::Standby if self.standby_held => (Mode::Standby, ModeReason::Command),
+            Mode::Standby => (Mode::Acquisition, ModeReason::TableAvailable),
+            Mode::Acquisition if enough => (Mode::Tracking, ModeReason::Acquired),
+            Mode::Acquisition => (Mode::Acquisition, ModeReason::TooFewStars),
+            Mode::Tracking if !enough => (Mode::Acquisition, ModeReason::TooFewStars),
+            Mode::Tracking
+                if self.tracking_run.saturating_add(1) >= self.config.reacquire_every =>
+            {
+                (Mode::Acquisition, ModeReason::Reacquire)
+            }
+            Mode::Tracking => (Mode::Tracking, ModeReason::Acquired),
+        }
+    }
+}
+
+fn empty_summary(frame: u32, mode: Mode, start_us: u64) -> FrameSummary {
+    FrameSummary {
+        frame,
+        mode,
+        next_mode: mode,
+        start_us,
+        calibrated: false,
+        temperature_k: Kelvin::ZERO,
+        temperature_source: TemperatureSource::None,
+        dark_scale_e: None,
+        lines: 0,
+        lines_refused: 0,
+        stars: 0,
+        centroids: 0,
+        candidates_dropped: 0,
+        windows_dropped: 0,
+        ring_lost: 0,
+        calib_failed: 0,
+        track_windows: 0,
+        track_refused: 0,
+        track_lost: 0,
+        stars_dropped: 0,
+    }
+}
+
+/// An active line without a table: the mean of its active samples above their output's
+/// bias, ADU.
+fn uncalibrated(geometry: &ReadoutGeometry, samples: &[u16], levels: &LineLevels) -> LineOutcome {
+    let first = geometry.first_active_col();
+    let (mut sum, mut n) = (0i64, 0i64);
+    for (col, raw) in samples
+        .iter()
+        .enumerate()
+        .skip(first)
+        .take(usize::from(geometry.active_cols))
+    {
+        let bias = levels.bias(geometry.output_of_col(col));
+        // Both in 1/16 ADU: a sample is at most 2^20, the bias at most 2^20 as well.
+        sum += (i64::from(*raw) << 4) - i64::from(bias.to_bits());
+        n += 1;
+    }
+    let mean = if n == 0 {
+        0.0
+    } else {
+        sum as f32 / (16.0 * n as f32)
+    };
+    LineOutcome::Uncalibrated {
+        mean_above_bias_adu: mean,
+    }
+}

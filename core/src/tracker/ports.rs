@@ -1,0 +1,152 @@
+//! The ports: what a home (the board, the host tools, the software-in-the-loop) supplies to
+//! the tracker application, as small traits, and what the application asks of the sensor
+//! ([`ReadoutRequest`]).
+//!
+//! | port | the board | the host (`process`, `sil`) |
+//! |---|---|---|
+//! | [`LineSource`] | ADC lines by DMA (later: the CCD sequencer's windowed readout) | a FITS frame, or the simulated CCD47-20 rendering only what the request reads |
+//! | [`Clock`] | the MCU timer | frame number x frame period |
+//! | [`Thermometer`] | the CCD board's sensor | a fixed value or the FITS keyword |
+//! | [`TableStore`] | the flash slot in force | a table file |
+//! | [`TelemetrySink`] | the log (later: the link, rate-limited) | CSV rows |
+//!
+//! The line source is async so that the same frame loop ([`super::Tracker::run_frame`])
+//! awaits DMA on the board and runs to completion at once on the host. Everything else is
+//! called between lines or frames and must not block: a telemetry sink that cannot send a
+//! record counts it as lost rather than wait.
+
+use super::record::{Event, FrameSummary, LineSummary, StarRecord};
+use crate::geometry::ReadoutGeometry;
+use crate::table::CalibTable;
+use crate::units::Kelvin;
+use crate::window::Rect;
+
+/// What the tracker wants read in a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReadoutRequest<'a> {
+    /// Every line, every element (standby and acquisition).
+    FullFrame,
+    /// Only the lines that cross these windows (active-area coordinates, increasing
+    /// `y0`), and of those only the windows' pixels plus the line's over-scan and covered
+    /// columns (the bias and the dark scale). Other lines may be skipped; other samples
+    /// of a line are not looked at.
+    Windows(&'a [Rect]),
+}
+
+impl ReadoutRequest<'_> {
+    /// Whether raw line `line` of `geometry` is needed.
+    pub fn reads_line(&self, geometry: &ReadoutGeometry, line: u16) -> bool {
+        match self {
+            Self::FullFrame => true,
+            Self::Windows(rects) => {
+                line < geometry.active_rows && rects.iter().any(|r| r.contains(r.x0, line))
+            }
+        }
+    }
+
+    /// Whether active pixel (`x`, `y`) is needed (over-scan and covered columns always
+    /// are, on every line read).
+    pub fn reads_pixel(&self, x: u16, y: u16) -> bool {
+        match self {
+            Self::FullFrame => true,
+            Self::Windows(rects) => rects.iter().any(|r| r.contains(x, y)),
+        }
+    }
+}
+
+/// One raw line as a source delivers it.
+#[derive(Clone, Copy, Debug)]
+pub struct SourceLine<'a> {
+    /// Raw line index within the frame, 0-based, increasing within a frame.
+    pub line: u16,
+    /// The whole raw line (`geometry.line_len()` samples, ADU); samples the request does not
+    /// read may hold anything.
+    pub samples: &'a [u16],
+}
+
+/// Raw lines in readout order.
+#[allow(
+    async_fn_in_trait,
+    reason = "the tracker and its sources run on one executor; no Send bound is wanted"
+)]
+pub trait LineSource {
+    /// Why a frame could not be read (the frame then ends early; lines already given stay).
+    type Error;
+
+    /// Starts reading frame `frame` as `request` says (on the board: the sequencer's
+    /// program; in the SIL: what is rendered).
+    async fn start_frame(
+        &mut self,
+        frame: u32,
+        request: &ReadoutRequest<'_>,
+    ) -> Result<(), Self::Error>;
+
+    /// The frame's next line, or `None` when the frame is over. The line stays valid until
+    /// the next call.
+    async fn next_line(&mut self) -> Result<Option<SourceLine<'_>>, Self::Error>;
+}
+
+/// The home's clock.
+pub trait Clock {
+    /// Microseconds since an epoch the home defines (monotonic).
+    fn now_us(&mut self) -> u64;
+}
+
+/// The sensor's temperature.
+pub trait Thermometer {
+    /// The CCD's temperature now, K; `None` when no reading is available (the table's
+    /// hot-pixel reference temperature is then used, and the frame summary says so).
+    fn sensor_temperature_k(&mut self) -> Option<Kelvin>;
+}
+
+/// The calibration table in force.
+pub trait TableStore<'t> {
+    /// The checked table to calibrate the next frame with, or `None` (no star processing).
+    /// Called at each frame start, so a new table takes effect at a frame boundary.
+    fn active_table(&mut self) -> Option<CalibTable<'t>>;
+}
+
+/// Where the application's records go. Must not block.
+pub trait TelemetrySink {
+    /// One line's record (every `line_summary_every`th line).
+    fn line(&mut self, _summary: &LineSummary) {}
+    /// One star of frame `frame` (called for each reported star, before the frame's summary).
+    fn star(&mut self, frame: u32, star: &StarRecord);
+    /// The frame's summary, after its stars.
+    fn frame(&mut self, summary: &FrameSummary);
+    /// An event (mode and table changes).
+    fn event(&mut self, event: &Event);
+}
+
+/// The ports other than the line source, for [`super::Tracker::run_frame`].
+pub struct Ports<'p, 't> {
+    /// Time.
+    pub clock: &'p mut dyn Clock,
+    /// Sensor temperature.
+    pub thermometer: &'p mut dyn Thermometer,
+    /// The calibration table.
+    pub tables: &'p mut dyn TableStore<'t>,
+    /// Telemetry.
+    pub telemetry: &'p mut dyn TelemetrySink,
+}
+
+/// A table store that always gives the same table (the host tools, and the board until
+/// tables can be updated in flight).
+#[derive(Clone, Copy, Debug)]
+pub struct FixedTable<'t>(pub Option<CalibTable<'t>>);
+
+impl<'t> TableStore<'t> for FixedTable<'t> {
+    fn active_table(&mut self) -> Option<CalibTable<'t>> {
+        self.0
+    }
+}
+
+/// A thermometer that always reads the same (`None`: no sensor).
+#[derive(Clone, Copy, Debug)]
+pub struct FixedTemperature(pub Option<Kelvin>);
+
+impl Thermometer for FixedTemperature {
+    fn sensor_temperature_k(&mut self) -> Option<Kelvin> {
+        self.0
+    }
+}

@@ -1,0 +1,361 @@
+//! What the tracker reports: one [`StarRecord`] per star per frame with one flag layout
+//! ([`StarFlags`]), one [`FrameSummary`] per frame with every loss counted, a
+//! [`LineSummary`] for every `line_summary_every`th line, and [`Event`]s (mode changes,
+//! table changes). These are the telemetry records of every home: the firmware's log (and
+//! later its link), `stars.csv` of `startrack process`, and the software-in-the-loop's CSV.
+//!
+//! Cost: a record is 28 bytes, a summary under 100; nothing here allocates.
+
+use crate::calib::PixelFlags;
+use crate::centroid::{Centroid, CentroidFlags};
+use crate::detect::{DetectionFlags, TrackFlags};
+use crate::units::{BiasAdu, Electrons, Kelvin};
+
+/// The tracker's mode for one frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Mode {
+    /// Lines are levelled and the dark scale measured; no stars are looked for.
+    Standby,
+    /// Whole-frame detection, a centroid per detected star.
+    Acquisition,
+    /// Only windows around the last frame's stars are read and measured.
+    Tracking,
+}
+
+impl Mode {
+    /// The mode's name as telemetry and the CSV files write it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Standby => "standby",
+            Self::Acquisition => "acquisition",
+            Self::Tracking => "tracking",
+        }
+    }
+}
+
+bitflags::bitflags! {
+    /// Everything known about a reported star, one bit a fact. The bit numbers are stable:
+    /// telemetry, `stars.csv` and the SIL's CSV carry them as a `u32`.
+    ///
+    /// Bits 0-5 come from the detector that found the star (the line detector in
+    /// acquisition, the window test in tracking), 8-15 from the centroid method, 16 from
+    /// calibration, 17-21 from the tracker itself.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub struct StarFlags: u32 {
+        /// Detection: a saturated pixel in the blob (acquisition) or the window's interior
+        /// (tracking).
+        const DETECT_SATURATED = 1 << 0;
+        /// Detection: the blob touches the active area's edge, or the tracking window was
+        /// clipped there or its peak sits next to its border.
+        const DETECT_EDGE = 1 << 1;
+        /// Detection: probably a close pair.
+        const DETECT_BLENDED = 1 << 2;
+        /// Detection: SNR between the detection minimum and the low-SNR level.
+        const DETECT_LOW_SNR = 1 << 3;
+        /// Detection: blob truncated (a run or blob table was full).
+        const DETECT_TRUNCATED = 1 << 4;
+        /// Tracking detection: the window held an excluded pixel.
+        const DETECT_EXCLUDED = 1 << 5;
+        /// Centroid: a saturated pixel in the window.
+        const SATURATED = 1 << 8;
+        /// Centroid: the window or the method's box was clipped at an edge.
+        const EDGE_CLIPPED = 1 << 9;
+        /// Centroid: the window holds an excluded (hot or telegraph) pixel.
+        const EXCLUDED_PIXEL = 1 << 10;
+        /// Centroid: SNR below 3.
+        const LOW_SNR = 1 << 11;
+        /// Centroid: degenerate, no position (the window's centre is reported).
+        const DEGENERATE = 1 << 12;
+        /// Centroid: an iterative method did not converge.
+        const NOT_CONVERGED = 1 << 13;
+        /// Centroid: the position fell outside the window and was clamped.
+        const CLAMPED = 1 << 15;
+        /// Calibration: the window holds a hot pixel corrected by its own dark law.
+        const HOT_CORRECTED = 1 << 16;
+        /// A CoG without a pixel-phase curve for its power, box and the PSF width: the
+        /// position carries the CoG's pixelisation bias.
+        const UNCORRECTED = 1 << 17;
+        /// Found in tracking mode.
+        const TRACKED = 1 << 18;
+        /// Measured by the fused raw-window CoG (tracking), background carried from the
+        /// star's last full measurement.
+        const FUSED = 1 << 19;
+        /// The window's top rows had left the line ring: position and flux are the
+        /// detector's, not a centroid.
+        const RING_LOST = 1 << 20;
+        /// The window could not be calibrated: position and flux are the detector's.
+        const CALIB_FAILED = 1 << 21;
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for StarFlags {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(f, "StarFlags({=u32:#x})", self.bits())
+    }
+}
+
+const DETECTION_BITS: [(DetectionFlags, StarFlags); 5] = [
+    (DetectionFlags::SATURATED, StarFlags::DETECT_SATURATED),
+    (DetectionFlags::EDGE, StarFlags::DETECT_EDGE),
+    (DetectionFlags::BLENDED, StarFlags::DETECT_BLENDED),
+    (DetectionFlags::LOW_SNR, StarFlags::DETECT_LOW_SNR),
+    (DetectionFlags::TRUNCATED, StarFlags::DETECT_TRUNCATED),
+];
+
+const TRACK_BITS: [(TrackFlags, StarFlags); 5] = [
+    (TrackFlags::SATURATED, StarFlags::DETECT_SATURATED),
+    (TrackFlags::EDGE, StarFlags::DETECT_EDGE),
+    (TrackFlags::BLENDED, StarFlags::DETECT_BLENDED),
+    (TrackFlags::LOW_SNR, StarFlags::DETECT_LOW_SNR),
+    (TrackFlags::EXCLUDED_PIXEL, StarFlags::DETECT_EXCLUDED),
+];
+
+const CENTROID_BITS: [(CentroidFlags, StarFlags); 7] = [
+    (CentroidFlags::SATURATED, StarFlags::SATURATED),
+    (CentroidFlags::EDGE_CLIPPED, StarFlags::EDGE_CLIPPED),
+    (CentroidFlags::EXCLUDED_PIXEL, StarFlags::EXCLUDED_PIXEL),
+    (CentroidFlags::LOW_SNR, StarFlags::LOW_SNR),
+    (CentroidFlags::DEGENERATE, StarFlags::DEGENERATE),
+    (CentroidFlags::NOT_CONVERGED, StarFlags::NOT_CONVERGED),
+    (CentroidFlags::CLAMPED, StarFlags::CLAMPED),
+];
+
+impl StarFlags {
+    /// The bits of a line detector's flags.
+    pub fn from_detection(d: DetectionFlags) -> Self {
+        map(&DETECTION_BITS, |f| d.contains(f))
+    }
+
+    /// The bits of a tracking window test's flags (its "no background" and "bad input" mean
+    /// nothing was detected: such a window reports no star).
+    pub fn from_track(t: TrackFlags) -> Self {
+        map(&TRACK_BITS, |f| t.contains(f))
+    }
+
+    /// The bits of a centroid's flags.
+    pub fn from_centroid(c: CentroidFlags) -> Self {
+        map(&CENTROID_BITS, |f| c.contains(f))
+    }
+
+    /// The bits of a window's OR-ed calibration flags (saturation and exclusion reach the
+    /// centroid's own flags; a corrected hot pixel is reported here).
+    pub fn from_pixels(p: PixelFlags) -> Self {
+        if p.contains(PixelFlags::HOT_CORRECTED) {
+            Self::HOT_CORRECTED
+        } else {
+            Self::empty()
+        }
+    }
+}
+
+fn map<F: Copy>(table: &[(F, StarFlags)], has: impl Fn(F) -> bool) -> StarFlags {
+    table
+        .iter()
+        .filter(|(f, _)| has(*f))
+        .fold(StarFlags::empty(), |m, (_, s)| m | *s)
+}
+
+/// One star as reported, active-area pixels (0-based, pixel centres at integers).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StarRecord {
+    /// Column, px.
+    pub x_px: f32,
+    /// Row, px.
+    pub y_px: f32,
+    /// Background-subtracted signal, e- (the CoG box's; the Gauss fit's whole PSF).
+    pub flux_e: f32,
+    /// SNR of `flux_e` (eq. 8 with the measured noise; the fit's `N / sigma_N`).
+    pub snr: f32,
+    /// Estimated 1-sigma error of `x_px`, px.
+    pub sigma_x_px: f32,
+    /// Estimated 1-sigma error of `y_px`, px.
+    pub sigma_y_px: f32,
+    /// What is known about the star.
+    pub flags: StarFlags,
+}
+
+impl StarRecord {
+    /// A centroid as a record, with `flags` added to the centroid's own.
+    pub fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {
+        Self {
+            x_px: c.x_px,
+            y_px: c.y_px,
+            flux_e: c.flux_e,
+            snr: c.snr,
+            sigma_x_px: c.sigma_x_px,
+            sigma_y_px: c.sigma_y_px,
+            flags: flags | StarFlags::from_centroid(c.flags),
+        }
+    }
+
+    /// True when the position is a centroid that may be used (for attitude, and to place
+    /// the next frame's tracking window): neither the detector's stand-in
+    /// ([`StarFlags::RING_LOST`], [`StarFlags::CALIB_FAILED`]) nor degenerate.
+    pub fn is_centroid(&self) -> bool {
+        !self
+            .flags
+            .intersects(StarFlags::RING_LOST | StarFlags::CALIB_FAILED | StarFlags::DEGENERATE)
+    }
+}
+
+/// Where a frame's sensor temperature came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TemperatureSource {
+    /// The home's thermometer.
+    Sensor,
+    /// No reading: the table's hot-pixel reference temperature was used (only hot pixels
+    /// with their own dark law depend on it).
+    TableReference,
+    /// No reading and no table.
+    None,
+}
+
+/// What a frame produced besides its stars: its conditions and every loss, counted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrameSummary {
+    /// The tracker's frame number (0 at start-up, one more each frame).
+    pub frame: u32,
+    /// The frame's mode.
+    pub mode: Mode,
+    /// The mode the rules give the next frame (a command, or a missing table at its start,
+    /// may overrule it: see the tracker's mode rules).
+    pub next_mode: Mode,
+    /// The home clock at the frame's start, us.
+    pub start_us: u64,
+    /// A calibration table was in force (without one no star is looked for).
+    pub calibrated: bool,
+    /// The sensor temperature used for hot pixels, K.
+    pub temperature_k: Kelvin,
+    /// Where `temperature_k` came from.
+    pub temperature_source: TemperatureSource,
+    /// This frame's dark scale from its covered pixels, e- (`None`: no table or no covered
+    /// pixel read). The next frame's lines are calibrated with it.
+    pub dark_scale_e: Option<Electrons>,
+    /// Lines taken.
+    pub lines: u16,
+    /// Lines refused: wrong length, out of order, or their over-scan unusable.
+    pub lines_refused: u16,
+    /// Stars reported (at most the configured `max_stars`).
+    pub stars: u16,
+    /// Reported stars whose position is a usable centroid ([`StarRecord::is_centroid`]).
+    pub centroids: u16,
+    /// Acquisition: candidates the detector's full list lost.
+    pub candidates_dropped: u32,
+    /// Acquisition: windows that could not wait for their rows (pending list full).
+    pub windows_dropped: u16,
+    /// Acquisition: windows whose rows had left the line ring.
+    pub ring_lost: u16,
+    /// Windows that could not be calibrated.
+    pub calib_failed: u16,
+    /// Tracking: windows placed.
+    pub track_windows: u16,
+    /// Tracking: windows that could not be placed (outside the area, too many).
+    pub track_refused: u16,
+    /// Tracking: windows without a star (or with missing rows).
+    pub track_lost: u16,
+    /// Stars not reported because the star list was full (the brightest are kept).
+    pub stars_dropped: u16,
+}
+
+/// What was made of one line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LineOutcome {
+    /// An active row calibrated whole (an acquisition background row).
+    Calibrated {
+        /// Mean of the row's active pixels that are not excluded, e-.
+        mean_e: Electrons,
+        /// Flags of the row's pixels, OR-ed.
+        flags: PixelFlags,
+        /// Pixels at or above the table's saturation level.
+        saturated: u16,
+    },
+    /// An active acquisition row streamed raw through the pre-filtered scan (only chunks
+    /// that may hold a star were calibrated: there is no row mean).
+    Scanned,
+    /// A tracking row: only the pixels of the windows it crosses were kept.
+    Tracked {
+        /// Windows whose last row this was (measured now).
+        windows_done: u8,
+    },
+    /// No table: only the bias was taken off.
+    Uncalibrated {
+        /// Mean of the active samples above their output's bias, ADU.
+        mean_above_bias_adu: f32,
+    },
+    /// A line with no active row (store-section rows read after the image), or an active
+    /// row in standby.
+    Levels,
+    /// The line was refused (see [`FrameSummary::lines_refused`]).
+    Refused,
+}
+
+/// The record of one line, reported every `line_summary_every`th line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LineSummary {
+    /// The tracker's frame number.
+    pub frame: u32,
+    /// Raw line index within the frame.
+    pub line: u16,
+    /// Bias level of each output from the line's over-scan, ADU (zero when refused).
+    pub bias_adu: [BiasAdu; crate::geometry::MAX_OUTPUTS],
+    /// The dark scale the line was calibrated with, e- (zero without a table).
+    pub dark_scale_e: Electrons,
+    /// What was made of the line.
+    pub outcome: LineOutcome,
+}
+
+/// Why the mode changed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ModeReason {
+    /// The tracker's first frame.
+    Start,
+    /// A command asked for it.
+    Command,
+    /// Acquisition found enough stars to track.
+    Acquired,
+    /// Too few stars were left in tracking (or found in acquisition after tracking).
+    TooFewStars,
+    /// The periodic acquisition frame that picks up stars entering the field.
+    Reacquire,
+    /// No calibration table: stars cannot be measured.
+    NoTable,
+    /// A calibration table is in force again after a standby for want of one.
+    TableAvailable,
+}
+
+/// Something that happened between frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Event {
+    /// The mode changes from the frame `frame` on.
+    ModeChange {
+        /// First frame in the new mode.
+        frame: u32,
+        /// The mode before.
+        from: Mode,
+        /// The mode from `frame` on.
+        to: Mode,
+        /// Why.
+        reason: ModeReason,
+    },
+    /// The calibration table in force changed at frame `frame` (`len_bytes` 0: none).
+    TableChanged {
+        /// First frame with the new table.
+        frame: u32,
+        /// The new table's length, bytes; 0 when there is none.
+        len_bytes: u32,
+    },
+    /// A configuration was accepted; it applies from frame `frame` on.
+    ConfigApplied {
+        /// First frame with the new configuration.
+        frame: u32,
+    },
+}

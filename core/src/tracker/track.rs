@@ -1,0 +1,369 @@
+//! Tracking: the frame reads only windows placed on the last frame's stars, at their
+//! positions moved on by their last motion; each window is `window_px + 2 track_margin_px`
+//! square, so a star that moved up to the margin still has its whole centroid window read.
+//! When a window's last row is in, it is calibrated, the window test
+//! ([`track_detect`]: border background, eq. 8 SNR, spike and blend tests) decides whether
+//! the star is there, and the centroid window around its peak is measured
+//! ([`super::measure`]). With [`CentroidMethod::FusedCog1`] the raw window first goes
+//! through the fused CoG with the star's carried background (a plan per star, rebuilt only
+//! when the star moves to another pixel or the table or dark scale changes); a result it
+//! flags goes through the full path.
+//!
+//! Cost per line: a row test per window and the copy of the rows inside windows; per
+//! star, the window's calibration (121 pixels for 11x11), the window test (~2-4 k
+//! operations) and the method; the fused CoG instead ~2,600 M7 instructions a 7x7 box
+//! (`cargo m7-bench`, `centroid_cog1c_raw_planned_7x7`).
+
+use super::config::{CentroidMethod, TrackerConfig};
+use super::list::{Carry, StarList};
+use super::measure::{Policy, Scratch, StarBackground, measure};
+use super::record::{FrameSummary, LineOutcome, StarFlags, StarRecord};
+use super::{Capture, TRACK_WINDOWS};
+use crate::calib::{FrameCalibration, LineLevels};
+use crate::centroid::CentroidFlags;
+use crate::centroid::raw_cog::{PlanError, RawCogParams, RawCogPlan, RawWindow};
+use crate::detect::track_detect;
+use crate::geometry::ReadoutGeometry;
+use crate::window::Rect;
+
+/// What tracking shares with the rest of the tracker for one call.
+pub(super) struct Shared<'a, const N: usize> {
+    pub(super) capture: &'a mut Capture,
+    pub(super) plans: &'a mut [RawCogPlan; TRACK_WINDOWS],
+    pub(super) scratch: &'a mut Scratch,
+    pub(super) stars: &'a mut StarList<N>,
+    pub(super) summary: &'a mut FrameSummary,
+}
+
+/// A star of the last frame to look for.
+#[derive(Clone, Copy, Debug)]
+struct Prior {
+    x_px: f32,
+    y_px: f32,
+    carry: Carry,
+}
+
+/// A placed window: its star and the fused CoG's anchor pixel and plan slot.
+#[derive(Clone, Copy, Debug)]
+struct Placed {
+    prior: Prior,
+    anchor: (u16, u16),
+    slot: u8,
+}
+
+/// Tracking's state: the last frame's stars and this frame's windows (capture order).
+pub(super) struct Tracking {
+    priors: heapless::Vec<Prior, TRACK_WINDOWS>,
+    placed: heapless::Vec<Placed, TRACK_WINDOWS>,
+    rects: heapless::Vec<Rect, TRACK_WINDOWS>,
+}
+
+/// Flags of a fused result that send the window through the full path.
+const FULL_PATH: CentroidFlags = CentroidFlags::LOW_SNR
+    .union(CentroidFlags::SATURATED)
+    .union(CentroidFlags::EXCLUDED_PIXEL)
+    .union(CentroidFlags::EDGE_CLIPPED)
+    .union(CentroidFlags::DEGENERATE)
+    .union(CentroidFlags::NOT_CONVERGED)
+    .union(CentroidFlags::CLAMPED);
+
+/// Nearest pixel of a position, inside `0..size`.
+fn pixel_of(v: f32, size: u16) -> u16 {
+    let v = if v.is_finite() { v + 0.5 } else { 0.0 };
+    (v.max(0.0) as u32).min(u32::from(size.saturating_sub(1))) as u16
+}
+
+impl Tracking {
+    pub(super) const fn new() -> Self {
+        Self {
+            priors: heapless::Vec::new(),
+            placed: heapless::Vec::new(),
+            rects: heapless::Vec::new(),
+        }
+    }
+
+    /// Stars the next tracking frame would look for.
+    pub(super) fn priors_len(&self) -> usize {
+        self.priors.len()
+    }
+
+    /// This frame's windows.
+    pub(super) fn rects(&self) -> &[Rect] {
+        &self.rects
+    }
+
+    /// Keeps the usable centroids of `stars`, the brightest `max` of them, for the next
+    /// tracking frame.
+    pub(super) fn keep_priors<const N: usize>(&mut self, stars: &StarList<N>, max: usize) {
+        let mut order: heapless::Vec<(f32, usize), N> = heapless::Vec::new();
+        for (i, (s, _)) in stars.iter().enumerate() {
+            if s.is_centroid() {
+                // At most N stars in the list: cannot fail.
+                let _ = order.push((s.flux_e, i));
+            }
+        }
+        order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        self.priors.clear();
+        for (_, i) in order.iter().take(max.min(TRACK_WINDOWS)) {
+            if let Some((s, c)) = stars.iter().nth(*i) {
+                // At most TRACK_WINDOWS taken: cannot fail.
+                let _ = self.priors.push(Prior {
+                    x_px: s.x_px,
+                    y_px: s.y_px,
+                    carry: *c,
+                });
+            }
+        }
+    }
+
+    /// Places this frame's windows; returns how many.
+    pub(super) fn start(
+        &mut self,
+        config: &TrackerConfig,
+        geometry: &ReadoutGeometry,
+        capture: &mut Capture,
+        summary: &mut FrameSummary,
+    ) -> u16 {
+        capture.reset();
+        self.placed.clear();
+        self.rects.clear();
+        // Plan slots: a star keeps its last one (each slot served one window last frame,
+        // so at most one star holds it); the others take a free one.
+        let mut used = 0u64;
+        for p in self.priors.iter() {
+            if let Some(k) = p
+                .carry
+                .plan_slot
+                .filter(|k| usize::from(*k) < TRACK_WINDOWS)
+            {
+                used |= 1 << k;
+            }
+        }
+        let mut free = !used;
+        let side = config.track_window_px();
+        for p in self.priors.iter() {
+            let (vx, vy) = p.carry.velocity_px.unwrap_or((0.0, 0.0));
+            let anchor = (
+                pixel_of(p.x_px + vx, geometry.active_cols),
+                pixel_of(p.y_px + vy, geometry.active_rows),
+            );
+            let (rect, clipped) = Rect::centred_clipped(
+                anchor.0,
+                anchor.1,
+                side,
+                geometry.active_cols,
+                geometry.active_rows,
+            );
+            if capture.add(rect, clipped).is_err() {
+                summary.track_refused = summary.track_refused.saturating_add(1);
+                continue;
+            }
+            let slot = match p.carry.plan_slot {
+                Some(k) if usize::from(k) < TRACK_WINDOWS => k,
+                // At most TRACK_WINDOWS windows: a free slot is left.
+                _ => {
+                    let k = free.trailing_zeros().min(TRACK_WINDOWS as u32 - 1) as u8;
+                    free &= !(1 << k);
+                    k
+                }
+            };
+            // Capture indices follow the adds; same capacity: cannot fail.
+            let _ = self.placed.push(Placed {
+                prior: *p,
+                anchor,
+                slot,
+            });
+            let _ = self.rects.push(rect);
+        }
+        u16::try_from(self.placed.len()).unwrap_or(u16::MAX)
+    }
+
+    /// Active row `y`: copies the windows' pixels and measures the windows it completes.
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "one call per line from the frame loop"
+    )]
+    pub(super) fn line<const N: usize>(
+        &mut self,
+        cal: &FrameCalibration<'_>,
+        policy: &Policy<'_>,
+        config: &TrackerConfig,
+        y: u16,
+        samples: &[u16],
+        levels: &LineLevels,
+        mut sh: Shared<'_, N>,
+    ) -> LineOutcome {
+        match sh.capture.push_line(y, samples, levels) {
+            Ok(done) => {
+                let mut n = 0u8;
+                for i in done {
+                    self.measure(cal, policy, config, i, &mut sh);
+                    n = n.saturating_add(1);
+                }
+                LineOutcome::Tracked { windows_done: n }
+            }
+            Err(_) => {
+                sh.summary.lines_refused = sh.summary.lines_refused.saturating_add(1);
+                LineOutcome::Refused
+            }
+        }
+    }
+
+    /// Ends the frame: the windows still open are measured with what they have.
+    pub(super) fn finish<const N: usize>(
+        &mut self,
+        cal: &FrameCalibration<'_>,
+        policy: &Policy<'_>,
+        config: &TrackerConfig,
+        mut sh: Shared<'_, N>,
+    ) {
+        for i in sh.capture.finish() {
+            self.measure(cal, policy, config, i, &mut sh);
+        }
+    }
+
+    /// Measures window `i`: the fused CoG when configured and it gives a clean result,
+    /// else the full path.
+    fn measure<const N: usize>(
+        &self,
+        cal: &FrameCalibration<'_>,
+        policy: &Policy<'_>,
+        config: &TrackerConfig,
+        i: usize,
+        sh: &mut Shared<'_, N>,
+    ) {
+        let Some(placed) = self.placed.get(i) else {
+            return;
+        };
+        let velocity = |r: &StarRecord| {
+            let v = (r.x_px - placed.prior.x_px, r.y_px - placed.prior.y_px);
+            // A jump beyond the window is no motion of this star: forget it.
+            let limit = f32::from(config.track_window_px());
+            (v.0.abs() < limit && v.1.abs() < limit).then_some(v)
+        };
+        if policy.method == CentroidMethod::FusedCog1
+            && let Some((record, background)) = fused(cal, policy, placed, i, sh)
+        {
+            let v = velocity(&record);
+            sh.stars.push(
+                record,
+                Carry {
+                    background: Some(background),
+                    plan_slot: Some(placed.slot),
+                    velocity_px: v,
+                },
+            );
+            return;
+        }
+        let Some(w) = sh.capture.window(i) else {
+            return;
+        };
+        let (rect, clipped) = (w.rect, w.clipped);
+        let copied = !w.missing_rows
+            && match sh.scratch.inputs(rect) {
+                Some((raw, levels)) => {
+                    raw.copy_from_slice(w.raw);
+                    levels.copy_from_slice(w.levels);
+                    true
+                }
+                None => false,
+            };
+        if !copied {
+            sh.summary.track_lost = sh.summary.track_lost.saturating_add(1);
+            return;
+        }
+        if sh.scratch.calibrate(cal, rect).is_err() {
+            sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+            return;
+        }
+        let verdict = match sh.scratch.window(rect, clipped) {
+            Some(input) => track_detect(&input.window, input.pixel_flags, clipped, &config.track),
+            None => {
+                sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+                return;
+            }
+        };
+        if !verdict.detected {
+            sh.summary.track_lost = sh.summary.track_lost.saturating_add(1);
+            return;
+        }
+        // The centroid window around the peak, inside the tracking window.
+        let (rel, _) = Rect::centred_clipped(
+            verdict.peak_x.saturating_sub(rect.x0),
+            verdict.peak_y.saturating_sub(rect.y0),
+            config.window_px,
+            rect.width,
+            rect.height,
+        );
+        let sub = Rect {
+            x0: rect.x0 + rel.x0,
+            y0: rect.y0 + rel.y0,
+            ..rel
+        };
+        let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;
+        let want_background = config.tracking_method == CentroidMethod::FusedCog1;
+        let flags = StarFlags::TRACKED | StarFlags::from_track(verdict.flags);
+        let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) else {
+            sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+            return;
+        };
+        let m = measure(policy, &input, flags, want_background);
+        let v = velocity(&m.record);
+        sh.stars.push(
+            m.record,
+            Carry {
+                background: m.background,
+                plan_slot: None,
+                velocity_px: v,
+            },
+        );
+    }
+}
+
+/// The fused raw-window CoG of window `i` with the star's carried background; `None` when
+/// it does not apply (no given-background curve, no background yet, rows missing, the
+/// window clipped) or flags its result, so that the full path measures the window. The
+/// star's plan is applied, and rebuilt first when it is stale.
+fn fused<const N: usize>(
+    cal: &FrameCalibration<'_>,
+    policy: &Policy<'_>,
+    placed: &Placed,
+    i: usize,
+    sh: &mut Shared<'_, N>,
+) -> Option<(StarRecord, StarBackground)> {
+    let w = sh.capture.window(i)?;
+    let bg = placed.prior.carry.background?;
+    if w.missing_rows || w.clipped {
+        return None;
+    }
+    let curve = policy.fused_curve?;
+    let win = RawWindow {
+        rect: w.rect,
+        raw: w.raw,
+        levels: w.levels,
+    };
+    let params = RawCogParams {
+        box_side: policy.box_px,
+        level_e: bg.level_e,
+        variance_e2: bg.variance_e2,
+        curve: Some(curve),
+    };
+    let plan = sh.plans.get_mut(usize::from(placed.slot))?;
+    let res = match plan.apply(cal, &win, &params) {
+        Ok(r) => r,
+        Err(PlanError::Stale) => {
+            plan.rebuild(cal, w.rect, placed.anchor, policy.box_px)
+                .ok()?;
+            plan.apply(cal, &win, &params).ok()?
+        }
+        Err(PlanError::BadInput) => return None,
+    };
+    let c = res.centroid;
+    if res.general_path || c.flags.intersects(FULL_PATH) {
+        return None;
+    }
+    Some((
+        StarRecord::from_centroid(&c, StarFlags::TRACKED | StarFlags::FUSED),
+        bg,
+    ))
+}

@@ -1,0 +1,174 @@
+//! `startrack sil`: the tracker application live on the simulated CCD47-20 ([`crate::sil`]),
+//! frame after frame over a drifting scene. Writes the telemetry (one row per star per
+//! frame) and the truth (one row per true star per frame) as CSV, the mode changes and a
+//! closing summary on standard error.
+//!
+//! - `--telemetry FILE`: `frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags`
+//!   (`flags`: the `StarFlags` bits, docs/formats.md);
+//! - `--truth FILE`: `frame,x_px,y_px,signal_e,a_px`.
+
+use super::CliError;
+use crate::home::csv_row;
+use crate::sil::{self, SilConfig, SilReport};
+use startrack_core::tracker::{Event, Mode, TrackerConfig};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Options of `startrack sil`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct SilArgs {
+    /// Frames to run.
+    #[arg(long, default_value_t = 20)]
+    pub frames: u32,
+    /// Seed of the scene and the sensor.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Stars in the scene.
+    #[arg(long, default_value_t = 20)]
+    pub stars: usize,
+    /// Motion of the scene per frame, px: X,Y (a slow attitude rate).
+    #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.3, -0.2])]
+    pub drift_px: Vec<f64>,
+    /// PSF 80 %-energy radius of the scene and the tracker, px.
+    #[arg(long)]
+    pub psf_a_px: Option<f32>,
+    /// Telemetry CSV (one row per reported star per frame).
+    #[arg(long)]
+    pub telemetry: Option<PathBuf>,
+    /// Truth CSV (one row per true star per frame).
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+}
+
+/// The SIL configuration of `args`.
+pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
+    let [dx, dy] = args.drift_px[..] else {
+        return Err(CliError::Usage("--drift-px takes X,Y".into()));
+    };
+    if !(dx.is_finite() && dy.is_finite() && dx.abs() <= 5.0 && dy.abs() <= 5.0) {
+        return Err(CliError::Usage(
+            "--drift-px: each component within -5 to 5 px a frame".into(),
+        ));
+    }
+    let mut tracker = TrackerConfig::FLIGHT;
+    if let Some(a) = args.psf_a_px {
+        tracker.psf_a_px = a;
+    }
+    tracker
+        .validate(sil::SIL_CAPACITY)
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    Ok(SilConfig {
+        frames: args.frames,
+        seed: args.seed,
+        stars: args.stars,
+        drift_px: (dx, dy),
+        tracker,
+        ..SilConfig::default()
+    })
+}
+
+fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>, CliError> {
+    std::fs::File::create(path)
+        .map(std::io::BufWriter::new)
+        .map_err(|e| io_error(path, &e))
+}
+
+fn io_error(path: &Path, e: &std::io::Error) -> CliError {
+    CliError::Io {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    }
+}
+
+/// Writes the telemetry CSV of `report`.
+pub fn write_telemetry(out: &mut dyn Write, report: &SilReport) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags"
+    )?;
+    for f in &report.frames {
+        for m in &f.stars {
+            writeln!(
+                out,
+                "{},{},{}",
+                f.summary.frame,
+                f.summary.mode.name(),
+                csv_row(&m.star)
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// Writes the truth CSV of `report`.
+pub fn write_truth(out: &mut dyn Write, report: &SilReport) -> std::io::Result<()> {
+    writeln!(out, "frame,x_px,y_px,signal_e,a_px")?;
+    for f in &report.frames {
+        for t in &f.truth {
+            writeln!(
+                out,
+                "{},{:.4},{:.4},{:.1},{:.3}",
+                f.summary.frame, t.x_px, t.y_px, t.signal_e, t.a_px
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// Runs `startrack sil`.
+pub fn run(args: &SilArgs) -> Result<SilReport, CliError> {
+    let config = config_of(args)?;
+    let report = sil::run(&config).map_err(CliError::Usage)?;
+    if let Some(p) = &args.telemetry {
+        let mut f = create(p)?;
+        write_telemetry(&mut f, &report)
+            .and_then(|()| f.flush())
+            .map_err(|e| io_error(p, &e))?;
+    }
+    if let Some(p) = &args.truth {
+        let mut f = create(p)?;
+        write_truth(&mut f, &report)
+            .and_then(|()| f.flush())
+            .map_err(|e| io_error(p, &e))?;
+    }
+    for e in &report.events {
+        if let Event::ModeChange {
+            frame,
+            from,
+            to,
+            reason,
+        } = e
+        {
+            eprintln!(
+                "frame {frame}: {} -> {} ({reason:?})",
+                from.name(),
+                to.name()
+            );
+        }
+    }
+    let count = |m: Mode| report.frames.iter().filter(|f| f.summary.mode == m).count();
+    let missed: usize = report.frames.iter().map(|f| f.missed.len()).sum();
+    let in_field: usize = report
+        .frames
+        .iter()
+        .map(|f| {
+            f.truth
+                .iter()
+                .filter(|t| sil::in_field(t, &Default::default()))
+                .count()
+        })
+        .sum();
+    eprintln!(
+        "startrack sil: {} frames ({} acquisition, {} tracking), {} of {} in-field star-frames measured, RMS error {:.4} px per axis, chi2/dof {:.2} (acquisition {:.2}, tracking {:.2})",
+        report.frames.len(),
+        count(Mode::Acquisition),
+        count(Mode::Tracking),
+        in_field - missed,
+        in_field,
+        report.rms_error_px(),
+        report.chi2_per_dof(None),
+        report.chi2_per_dof(Some(Mode::Acquisition)),
+        report.chi2_per_dof(Some(Mode::Tracking)),
+    );
+    Ok(report)
+}

@@ -1,0 +1,335 @@
+//! The host's home for the core's tracker application ([`startrack_core::tracker`]): line
+//! sources (a recorded frame, the simulated CCD47-20), a telemetry recorder, a clock, and
+//! a runner that drives [`Tracker::run_frame`] to completion. `startrack process`, `startrack
+//! sil`, the demo and the tests all run the tracker through these, exactly as the board does
+//! through its own ports.
+//!
+//! Cost: the sources copy one raw line (2 KB) per line read; the simulated source renders
+//! only the samples the tracker's request reads (over-scan and covered columns of each line
+//! read, and the windows' pixels), so a tracking frame costs its windows, not a frame.
+
+use crate::sim::Simulator;
+use startrack_core::calib::{
+    CalibError, DarkScaleEstimator, FrameCalibration, LineLevels, PixelFlags,
+};
+use startrack_core::geometry::{ReadoutGeometry, Segment};
+use startrack_core::table::CalibTable;
+use startrack_core::tracker::{
+    Clock, Event, FrameSummary, LineSource, LineSummary, ReadoutRequest, SourceLine, StarRecord,
+    TelemetrySink,
+};
+use startrack_core::units::Electrons;
+use startrack_core::window::Rect;
+use std::convert::Infallible;
+
+/// Runs a tracker future to completion: the host's sources never wait.
+pub fn block_on<F: std::future::Future>(f: F) -> F::Output {
+    pollster::block_on(f)
+}
+
+/// A recorded frame (row-major, `lines x line_len` raw samples) as a line source: every
+/// frame it is asked for is this frame again. Lines the request does not read are skipped.
+pub struct FrameLines<'a> {
+    geometry: ReadoutGeometry,
+    raw: &'a [u16],
+    request_lines: Vec<bool>,
+    next: usize,
+}
+
+impl<'a> FrameLines<'a> {
+    /// The frame `raw` of `geometry`; `None` when its size does not match.
+    pub fn new(geometry: ReadoutGeometry, raw: &'a [u16]) -> Option<Self> {
+        (raw.len() == usize::from(geometry.lines) * geometry.line_len()).then(|| Self {
+            geometry,
+            raw,
+            request_lines: Vec::new(),
+            next: usize::from(geometry.lines),
+        })
+    }
+}
+
+impl LineSource for FrameLines<'_> {
+    type Error = Infallible;
+
+    async fn start_frame(
+        &mut self,
+        _frame: u32,
+        request: &ReadoutRequest<'_>,
+    ) -> Result<(), Infallible> {
+        self.request_lines = (0..self.geometry.lines)
+            .map(|l| request.reads_line(&self.geometry, l))
+            .collect();
+        self.next = 0;
+        Ok(())
+    }
+
+    async fn next_line(&mut self) -> Result<Option<SourceLine<'_>>, Infallible> {
+        while self.next < self.request_lines.len() && !self.request_lines[self.next] {
+            self.next += 1;
+        }
+        let line = self.next;
+        let len = self.geometry.line_len();
+        let Some(samples) = self.raw.get(line * len..(line + 1) * len) else {
+            return Ok(None);
+        };
+        self.next += 1;
+        Ok(Some(SourceLine {
+            line: line as u16,
+            samples,
+        }))
+    }
+}
+
+/// The simulated sensor as a line source: frame `k` of the tracker is rendered by
+/// `scene(k)` (the stars where they are at that frame, the frame's own noise), and only the
+/// samples the request reads are rendered; the others are 0.
+pub struct SimLines<F: FnMut(u32) -> Simulator> {
+    scene: F,
+    sim: Option<Simulator>,
+    lines: Vec<(u16, Vec<(usize, usize)>)>,
+    next: usize,
+    buf: Vec<u16>,
+    /// Samples rendered so far (what a readout would have digitised).
+    pub samples_rendered: u64,
+}
+
+impl<F: FnMut(u32) -> Simulator> SimLines<F> {
+    /// A source whose frame `k` is `scene(k)`.
+    pub fn new(scene: F) -> Self {
+        Self {
+            scene,
+            sim: None,
+            lines: Vec::new(),
+            next: 0,
+            buf: Vec::new(),
+            samples_rendered: 0,
+        }
+    }
+}
+
+/// The raw column spans `[start, end)` of line `line` that `request` reads: the whole line,
+/// or the over-scan and covered columns plus the windows' pixels. Empty when the line is
+/// not read.
+pub fn read_spans(
+    geometry: &ReadoutGeometry,
+    request: &ReadoutRequest<'_>,
+    line: u16,
+) -> Vec<(usize, usize)> {
+    if !request.reads_line(geometry, line) {
+        return Vec::new();
+    }
+    let len = geometry.line_len();
+    let ReadoutRequest::Windows(rects) = request else {
+        return vec![(0, len)];
+    };
+    let first = geometry.first_active_col();
+    let mut spans: Vec<(usize, usize)> = (0..len)
+        .filter(|&c| !matches!(geometry.segment(c), Some(Segment::Active)))
+        .map(|c| (c, c + 1))
+        .collect();
+    for r in rects.iter().filter(|r| r.contains(r.x0, line)) {
+        let s = first + usize::from(r.x0);
+        spans.push((s, s + usize::from(r.width)));
+    }
+    spans.sort_unstable();
+    let mut merged: Vec<(usize, usize)> = Vec::new();
+    for (s, e) in spans {
+        match merged.last_mut() {
+            Some(last) if s <= last.1 => last.1 = last.1.max(e),
+            _ => merged.push((s, e)),
+        }
+    }
+    merged
+}
+
+impl<F: FnMut(u32) -> Simulator> LineSource for SimLines<F> {
+    type Error = Infallible;
+
+    async fn start_frame(
+        &mut self,
+        frame: u32,
+        request: &ReadoutRequest<'_>,
+    ) -> Result<(), Infallible> {
+        let sim = (self.scene)(frame);
+        let g = sim.params.geometry;
+        self.lines = (0..g.lines)
+            .map(|l| (l, read_spans(&g, request, l)))
+            .filter(|(_, spans)| !spans.is_empty())
+            .collect();
+        self.buf = vec![0; g.line_len()];
+        self.sim = Some(sim);
+        self.next = 0;
+        Ok(())
+    }
+
+    async fn next_line(&mut self) -> Result<Option<SourceLine<'_>>, Infallible> {
+        let (Some(sim), Some((line, spans))) = (&self.sim, self.lines.get(self.next)) else {
+            return Ok(None);
+        };
+        self.next += 1;
+        self.buf.fill(0);
+        for &(s, e) in spans {
+            for (c, v) in self.buf[s..e].iter_mut().enumerate() {
+                *v = sim.raw_sample(s + c, usize::from(*line));
+            }
+            self.samples_rendered += (e - s) as u64;
+        }
+        Ok(Some(SourceLine {
+            line: *line,
+            samples: &self.buf,
+        }))
+    }
+}
+
+/// A clock that reads frame number x frame period (the host has no readout timing).
+#[derive(Clone, Copy, Debug)]
+pub struct FrameClock {
+    /// The current frame.
+    pub frame: u32,
+    /// Frame period, us.
+    pub period_us: u64,
+}
+
+impl Clock for FrameClock {
+    fn now_us(&mut self) -> u64 {
+        u64::from(self.frame) * self.period_us
+    }
+}
+
+/// A frame as the telemetry port reported it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameRecord {
+    /// Its stars, in reported order.
+    pub stars: Vec<StarRecord>,
+    /// Its summary.
+    pub summary: FrameSummary,
+}
+
+/// A telemetry sink that keeps everything.
+#[derive(Clone, Debug, Default)]
+pub struct Recorder {
+    /// Frames, in order.
+    pub frames: Vec<FrameRecord>,
+    /// Events, in order.
+    pub events: Vec<Event>,
+    /// Line summaries, in order.
+    pub lines: Vec<LineSummary>,
+    pending: Vec<StarRecord>,
+}
+
+impl TelemetrySink for Recorder {
+    fn line(&mut self, summary: &LineSummary) {
+        self.lines.push(*summary);
+    }
+
+    fn star(&mut self, _frame: u32, star: &StarRecord) {
+        self.pending.push(*star);
+    }
+
+    fn frame(&mut self, summary: &FrameSummary) {
+        self.frames.push(FrameRecord {
+            stars: std::mem::take(&mut self.pending),
+            summary: *summary,
+        });
+    }
+
+    fn event(&mut self, event: &Event) {
+        self.events.push(*event);
+    }
+}
+
+/// The `stars.csv` header: one star a line, active-area pixels (0-based, pixel centres at
+/// integers), `flags` the [`startrack_core::tracker::StarFlags`] bits.
+pub const CSV_HEADER: &str = "x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags";
+
+/// One star as a `stars.csv` line (no newline).
+pub fn csv_row(s: &StarRecord) -> String {
+    format!(
+        "{:.4},{:.4},{:.1},{:.2},{:.4},{:.4},{}",
+        s.x_px,
+        s.y_px,
+        s.flux_e,
+        s.snr,
+        s.sigma_x_px,
+        s.sigma_y_px,
+        s.flags.bits()
+    )
+}
+
+/// Writes `stars` as `stars.csv` (header, then one star per line).
+pub fn write_csv(out: &mut dyn std::io::Write, stars: &[StarRecord]) -> std::io::Result<()> {
+    writeln!(out, "{CSV_HEADER}")?;
+    for s in stars {
+        writeln!(out, "{}", csv_row(s))?;
+    }
+    Ok(())
+}
+
+/// Every line's bias levels and the dark scale of a recorded frame, for host analyses that
+/// calibrate a frame's pixels outside the tracker (the demo's comparison with the truth,
+/// the detection tests).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameLevels {
+    /// The frame's geometry.
+    pub geometry: ReadoutGeometry,
+    /// Bias levels of every raw line.
+    pub lines: Vec<LineLevels>,
+    /// The covered columns' dark scale over the whole frame, or `None` without covered
+    /// columns.
+    pub dark_scale_e: Option<Electrons>,
+}
+
+/// Measures every line's bias and the frame's dark scale with `table`. `raw` holds the
+/// frame row-major (`lines x line_len` samples of the table's geometry).
+pub fn frame_levels(table: &CalibTable<'_>, raw: &[u16]) -> Result<FrameLevels, String> {
+    let g = *table.geometry();
+    let expected = usize::from(g.lines) * g.line_len();
+    if raw.len() != expected {
+        return Err(format!(
+            "frame has {} samples, the table's geometry needs {expected}",
+            raw.len()
+        ));
+    }
+    let mut est = DarkScaleEstimator::new();
+    let mut lines = Vec::with_capacity(usize::from(g.lines));
+    for line in raw.chunks_exact(g.line_len()) {
+        let lv = LineLevels::measure(&g, line).map_err(|e| e.to_string())?;
+        est.add_line(table, line, &lv).map_err(|e| e.to_string())?;
+        lines.push(lv);
+    }
+    Ok(FrameLevels {
+        geometry: g,
+        lines,
+        dark_scale_e: est.estimate(),
+    })
+}
+
+impl FrameLevels {
+    /// Calibrates window `rect` of the frame `raw` with `cal`: electrons, per-pixel flags,
+    /// OR-ed flags.
+    pub fn calibrate_window(
+        &self,
+        cal: &FrameCalibration<'_>,
+        raw: &[u16],
+        rect: Rect,
+    ) -> Result<(Vec<Electrons>, Vec<PixelFlags>, PixelFlags), CalibError> {
+        let g = self.geometry;
+        let len = g.line_len();
+        let (x0, y0) = (usize::from(rect.x0), usize::from(rect.y0));
+        let w = usize::from(rect.width);
+        let mut win = Vec::with_capacity(rect.len());
+        for y in y0..y0 + usize::from(rect.height) {
+            let start = g.raw_line_of_y(y) * len + g.raw_col_of_x(x0);
+            win.extend_from_slice(raw.get(start..start + w).ok_or(CalibError::BufferLength)?);
+        }
+        let lv_start = g.raw_line_of_y(y0);
+        let lv = self
+            .lines
+            .get(lv_start..lv_start + usize::from(rect.height))
+            .ok_or(CalibError::BufferLength)?;
+        let mut e = vec![Electrons::ZERO; rect.len()];
+        let mut f = vec![PixelFlags::empty(); rect.len()];
+        let flags = cal.calibrate_window(rect, &win, lv, &mut e, &mut f)?;
+        Ok((e, f, flags))
+    }
+}

@@ -1,0 +1,576 @@
+//! The core's tracker application, driven directly and through its three host homes:
+//!
+//! - `startrack sil`'s loop on the default scene: acquisition hands over to tracking,
+//!   tracking follows the drift, every star in the field is measured in every frame, the
+//!   positions agree with the truth within the reported sigmas, the mode changes are logged;
+//! - `startrack process` on a simulated frame equals, bit for bit, the application fed the
+//!   same frame by the SIL's line port;
+//! - the acquisition frame's stars equal a whole-frame reference built from the core's
+//!   stages (every row calibrated into the line detector, each window cut from the whole
+//!   frame): the line ring and the pre-filtered scan lose nothing;
+//! - the mode rules, refused lines and configurations, and the memory bound.
+
+use startrack_core::calib::{FrameCalibration, FrameConditions, PixelFlags};
+use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use startrack_core::centroid::{Background, CentroidInput};
+use startrack_core::detect::LineDetector;
+use startrack_core::table::CalibTable;
+use startrack_core::tracker::{
+    CentroidMethod, CommandError, ConfigError, Event, FixedTable, FixedTemperature, FrameInputs,
+    LineOutcome, Mode, ModeReason, Ports, ReadoutRequest, StarFlags, StarRecord, Tracker,
+    TrackerBuffers, TrackerConfig,
+};
+use startrack_core::units::Electrons;
+use startrack_core::window::{Rect, Window};
+use startrack_host::cli::process::{HOST_CAPACITY, process_frame};
+use startrack_host::demo::{render_frame, star_field};
+use startrack_host::home::{FrameClock, Recorder, SimLines, block_on, frame_levels};
+use startrack_host::sil::{self, SilConfig};
+use startrack_host::sim::truth::TruthSections;
+use startrack_host::sim::{SensorParams, Simulator};
+
+/// The default SIL run: what `startrack sil --frames 20` does.
+#[test]
+fn sil_tracks_every_star_in_the_field_within_its_sigmas() {
+    let config = SilConfig::default();
+    let report = sil::run(&config).unwrap();
+    let modes: Vec<Mode> = report.frames.iter().map(|f| f.summary.mode).collect();
+    // Acquisition, 16 tracking frames, the periodic acquisition, tracking again.
+    let mut expected = vec![Mode::Acquisition];
+    expected.extend([Mode::Tracking; 16]);
+    expected.push(Mode::Acquisition);
+    expected.extend([Mode::Tracking; 2]);
+    assert_eq!(modes, expected);
+    let changes: Vec<(u32, Mode, ModeReason)> = report
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            Event::ModeChange {
+                frame, to, reason, ..
+            } => Some((*frame, *to, *reason)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        changes,
+        [
+            (0, Mode::Acquisition, ModeReason::Start),
+            (1, Mode::Tracking, ModeReason::Acquired),
+            (17, Mode::Acquisition, ModeReason::Reacquire),
+            (18, Mode::Tracking, ModeReason::Acquired),
+        ]
+    );
+    let full = usize::from(SensorParams::default().geometry.lines)
+        * SensorParams::default().geometry.line_len();
+    for f in &report.frames {
+        let s = &f.summary;
+        assert!(
+            f.missed.is_empty(),
+            "frame {} ({:?}): stars in the field not measured: {:?}",
+            s.frame,
+            s.mode,
+            f.missed
+        );
+        assert_eq!(f.truth.len(), config.stars);
+        assert_eq!(
+            (
+                s.lines_refused,
+                s.ring_lost,
+                s.calib_failed,
+                s.windows_dropped
+            ),
+            (0, 0, 0, 0),
+            "frame {}",
+            s.frame
+        );
+        if s.mode == Mode::Tracking {
+            // Every star tracked: a window each, found in it. A window beyond the true
+            // stars was placed on a noise detection of the frame before (the detector
+            // passes ~0.3 noise peaks a frame) and must be lost.
+            let (windows, lost) = (usize::from(s.track_windows), usize::from(s.track_lost));
+            assert_eq!(s.track_refused, 0, "frame {}", s.frame);
+            assert!(
+                windows >= config.stars,
+                "frame {}: {windows} windows",
+                s.frame
+            );
+            assert_eq!(windows - lost, config.stars, "frame {}", s.frame);
+            assert!(
+                f.stars
+                    .iter()
+                    .all(|m| m.star.flags.contains(StarFlags::TRACKED))
+            );
+            assert!(
+                f.stars.iter().all(|m| m.truth.is_some()),
+                "frame {}",
+                s.frame
+            );
+            // Only the windows' rows are read: their over-scan and covered columns and
+            // the windows' pixels, under 3 % of a full frame.
+            assert!(
+                (f.samples_read as usize) < full * 3 / 100,
+                "frame {}: {} samples read",
+                s.frame,
+                f.samples_read
+            );
+        } else {
+            assert_eq!(f.samples_read as usize, full);
+        }
+    }
+    // Positions against the truth: chi^2 per degree of freedom of the errors over the
+    // reported sigmas. 20 frames x 20 stars x 2 axes = 800 terms: a chi^2/dof has a
+    // standard deviation of sqrt(2/800) = 0.05, so [0.8, 1.25] is a band of 4-5 of those
+    // around 1 (the held border-median background's own error is not in the fit's sigma:
+    // a small excess is expected, a factor is not).
+    let (chi2, n) = report.chi2(None);
+    let per_dof = chi2 / n as f64;
+    eprintln!(
+        "sil, default scene: {} terms, chi2/dof {per_dof:.3} (acquisition {:.3}, tracking {:.3}), RMS error {:.4} px per axis",
+        n,
+        report.chi2_per_dof(Some(Mode::Acquisition)),
+        report.chi2_per_dof(Some(Mode::Tracking)),
+        report.rms_error_px()
+    );
+    assert!(n >= 2 * 20 * config.stars, "{n} terms");
+    assert!((0.8..1.25).contains(&per_dof), "chi2/dof {per_dof}");
+}
+
+/// Tracking with the fused raw-window CoG (the cheapest tracking path) follows the same
+/// scene: every star in every frame, most measured by the fused path, positions within
+/// their sigmas.
+#[test]
+fn sil_fused_cog_tracking_follows_the_drift() {
+    let config = SilConfig {
+        frames: 8,
+        pixcorr_curves: true,
+        tracker: TrackerConfig {
+            tracking_method: CentroidMethod::FusedCog1,
+            ..TrackerConfig::FLIGHT
+        },
+        ..SilConfig::default()
+    };
+    let report = sil::run(&config).unwrap();
+    let mut fused = 0;
+    let mut tracked = 0;
+    for f in &report.frames {
+        assert!(
+            f.missed.is_empty(),
+            "frame {}: {:?}",
+            f.summary.frame,
+            f.missed
+        );
+        for m in &f.stars {
+            if m.star.flags.contains(StarFlags::TRACKED) {
+                tracked += 1;
+                fused += usize::from(m.star.flags.contains(StarFlags::FUSED));
+            }
+        }
+    }
+    // From the second tracking frame on every star has a carried background; the first
+    // tracking frame's stars were acquired with it too.
+    assert_eq!(tracked, 7 * config.stars);
+    assert!(fused * 10 >= tracked * 9, "{fused} of {tracked} fused");
+    let per_dof = report.chi2_per_dof(Some(Mode::Tracking));
+    eprintln!(
+        "sil, fused CoG tracking: {fused} of {tracked} fused, chi2/dof {per_dof:.3}, RMS {:.4} px",
+        report.rms_error_px()
+    );
+    // 7 frames x 20 stars x 2 axes = 280 terms: sqrt(2/280) = 0.085; the fused CoG's sigma
+    // is within 1.00-1.15 of its scatter (host test raw_cog).
+    assert!((0.7..1.45).contains(&per_dof), "chi2/dof {per_dof}");
+}
+
+/// The sensor, a seeded field and its true table, for the frame-level tests.
+fn field(seed: u64, stars: usize) -> (Simulator, Vec<u8>) {
+    let params = SensorParams {
+        seed,
+        ..SensorParams::default()
+    };
+    let sim = Simulator::new(params.clone(), star_field(seed, stars, &params));
+    let table = sim.truth_table(TruthSections::ALL).unwrap();
+    (sim, table)
+}
+
+fn host_config() -> TrackerConfig {
+    TrackerConfig {
+        max_stars: HOST_CAPACITY as u16,
+        psf_a_px: 1.4,
+        ..TrackerConfig::FLIGHT
+    }
+}
+
+fn same_bits(a: &[StarRecord], b: &[StarRecord]) -> bool {
+    let key = |s: &StarRecord| {
+        [
+            s.x_px.to_bits(),
+            s.y_px.to_bits(),
+            s.flux_e.to_bits(),
+            s.snr.to_bits(),
+            s.sigma_x_px.to_bits(),
+            s.sigma_y_px.to_bits(),
+            s.flags.bits(),
+        ]
+    };
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| key(x) == key(y))
+}
+
+/// `process` (a recorded frame's lines) and the SIL's line port (the simulator rendering
+/// what the request reads) feed the same application the same lines: same stars, same bits.
+#[test]
+fn process_equals_the_sil_line_port_bit_for_bit() {
+    let (sim, table_bytes) = field(21, 40);
+    let table = CalibTable::parse(&table_bytes).unwrap();
+    let raw = render_frame(&sim);
+    let config = host_config();
+    let processed = process_frame(table, &raw, config, None).unwrap();
+    assert!(processed.stars.len() >= 38, "{}", processed.stars.len());
+
+    let mut buffers = Box::new(TrackerBuffers::new());
+    let mut tracker =
+        Box::new(Tracker::<HOST_CAPACITY>::new(config, sim.params.geometry, &mut buffers).unwrap());
+    // The SIL's sensor, held on frame 0 for both passes (process reads one frame twice).
+    let mut source = SimLines::new(|_| sim.clone());
+    let mut recorder = Recorder::default();
+    let mut clock = FrameClock {
+        frame: 0,
+        period_us: 0,
+    };
+    let (mut tables, mut thermometer) = (FixedTable(Some(table)), FixedTemperature(None));
+    let mut ports = Ports {
+        clock: &mut clock,
+        thermometer: &mut thermometer,
+        tables: &mut tables,
+        telemetry: &mut recorder,
+    };
+    for mode in [Mode::Standby, Mode::Acquisition] {
+        tracker.command_mode(mode).unwrap();
+        let Ok(_) = block_on(tracker.run_frame(&mut source, &mut ports));
+    }
+    let sil_frame = recorder.frames.last().unwrap();
+    assert!(same_bits(&processed.stars, &sil_frame.stars));
+    assert_eq!(processed.summary, sil_frame.summary);
+}
+
+/// The application's acquisition frame against a whole-frame reference made of the core's
+/// stages: every row calibrated into a `LineDetector` (the same background stride and
+/// warm-up), each candidate's window cut from the whole frame, calibrated and fitted. The
+/// streaming path (pre-filtered scan, 16-line ring) must give the same stars, bit for bit.
+#[test]
+fn acquisition_equals_the_whole_frame_reference() {
+    let (sim, table_bytes) = field(11, 60);
+    let table = CalibTable::parse(&table_bytes).unwrap();
+    let raw = render_frame(&sim);
+    let config = host_config();
+    let processed = process_frame(table, &raw, config, None).unwrap();
+
+    let g = sim.params.geometry;
+    let levels = frame_levels(&table, &raw).unwrap();
+    let cal = FrameCalibration::new(
+        table,
+        FrameConditions {
+            dark_scale_e: levels.dark_scale_e.unwrap(),
+            exposure_ms: config.exposure_ms,
+            temperature_k: table.hot_pixels().reference_temperature_k(),
+        },
+    );
+    let mut det = LineDetector::<HOST_CAPACITY>::new(config.detect, g.active_cols, g.active_rows)
+        .with_background_stride(config.background_stride)
+        .with_background_warmup(config.background_warmup_rows);
+    let mut e = vec![Electrons::ZERO; usize::from(g.active_cols)];
+    let mut f = vec![PixelFlags::empty(); e.len()];
+    for y in 0..g.active_rows {
+        let line = usize::from(y);
+        let raw_line = &raw[line * g.line_len()..(line + 1) * g.line_len()];
+        cal.calibrate_span(y, 0, raw_line, &levels.lines[line], &mut e, &mut f)
+            .unwrap();
+        det.push_line(y, &e, &f).unwrap();
+    }
+    det.finish();
+    let mut reference: Vec<StarRecord> = det
+        .candidates()
+        .iter()
+        .map(|d| {
+            let (rect, clipped) = Rect::centred_clipped(
+                d.peak_x,
+                d.peak_y,
+                config.window_px,
+                g.active_cols,
+                g.active_rows,
+            );
+            let (we, wf, pf) = levels.calibrate_window(&cal, &raw, rect).unwrap();
+            let input = CentroidInput::new(Window::new(rect, &we).unwrap())
+                .with_pixel_flags(&wf)
+                .with_clipped(clipped);
+            let c = gauss_fit(
+                &input,
+                &GaussFitParams {
+                    start_box: config.box_px(),
+                    fit_background: false,
+                    background: Background::PerimeterMedian,
+                    ..GaussFitParams::new(config.psf_sigma_px())
+                },
+            );
+            StarRecord::from_centroid(
+                &c,
+                StarFlags::from_detection(d.flags) | StarFlags::from_pixels(pf),
+            )
+        })
+        .collect();
+    let mut streamed = processed.stars.clone();
+    let order =
+        |a: &StarRecord, b: &StarRecord| a.y_px.total_cmp(&b.y_px).then(a.x_px.total_cmp(&b.x_px));
+    reference.sort_by(order);
+    streamed.sort_by(order);
+    eprintln!(
+        "acquisition: {} stars streamed, {} in the whole-frame reference",
+        streamed.len(),
+        reference.len()
+    );
+    assert!(reference.len() >= 55, "{}", reference.len());
+    assert!(same_bits(&streamed, &reference));
+}
+
+/// A tracker on the default sensor with its true table, and a recorder.
+fn small_tracker(buffers: &mut TrackerBuffers) -> Tracker<'static, '_, 32> {
+    Tracker::<32>::new(
+        TrackerConfig::FLIGHT,
+        SensorParams::default().geometry,
+        buffers,
+    )
+    .unwrap()
+}
+
+fn inputs(table: Option<CalibTable<'_>>) -> FrameInputs<'_> {
+    FrameInputs {
+        table,
+        temperature_k: None,
+        start_us: 0,
+    }
+}
+
+/// The mode rules that the SIL does not reach: no table, commands, refused lines.
+#[test]
+fn mode_rules_commands_and_refused_lines() {
+    let (sim, table_bytes) = field(3, 0);
+    let table = CalibTable::parse(&table_bytes).unwrap();
+    let g = sim.params.geometry;
+    let mut buffers = Box::new(TrackerBuffers::new());
+    let mut t = Tracker::<32>::new(TrackerConfig::FLIGHT, g, &mut buffers).unwrap();
+    let mut rec = Recorder::default();
+    // No stars yet: tracking cannot be commanded.
+    assert_eq!(
+        t.command_mode(Mode::Tracking),
+        Err(CommandError::NothingToTrack)
+    );
+    // No table: standby, whatever was asked.
+    t.begin_frame(inputs(None), &mut rec);
+    assert_eq!(t.mode(), Mode::Standby);
+    assert_eq!(t.readout_request(), ReadoutRequest::FullFrame);
+    let mut line = vec![0u16; g.line_len()];
+    sim.render_line(0, &mut line);
+    assert!(matches!(
+        t.push_line(0, &line, &mut rec),
+        LineOutcome::Uncalibrated { .. }
+    ));
+    // Out of order, repeated, too short, past the frame: refused and counted.
+    assert_eq!(t.push_line(0, &line, &mut rec), LineOutcome::Refused);
+    sim.render_line(5, &mut line);
+    assert!(matches!(
+        t.push_line(5, &line, &mut rec),
+        LineOutcome::Uncalibrated { .. }
+    ));
+    assert_eq!(t.push_line(3, &line, &mut rec), LineOutcome::Refused);
+    assert_eq!(t.push_line(6, &line[1..], &mut rec), LineOutcome::Refused);
+    assert_eq!(t.push_line(g.lines, &line, &mut rec), LineOutcome::Refused);
+    let s = t.end_frame(&mut rec);
+    assert_eq!((s.lines, s.lines_refused, s.calibrated), (2, 4, false));
+    // The rules want acquisition; the next frame's start decides on the table then.
+    assert_eq!(s.next_mode, Mode::Acquisition);
+    // A line after the frame ended is refused too.
+    assert_eq!(t.push_line(7, &line, &mut rec), LineOutcome::Refused);
+    // The table arrives: acquisition at the next frame.
+    t.begin_frame(inputs(Some(table)), &mut rec);
+    assert_eq!(t.mode(), Mode::Acquisition);
+    t.end_frame(&mut rec);
+    // A commanded standby holds until the next command.
+    t.command_mode(Mode::Standby).unwrap();
+    for _ in 0..3 {
+        t.begin_frame(inputs(Some(table)), &mut rec);
+        assert_eq!(t.mode(), Mode::Standby);
+        t.end_frame(&mut rec);
+    }
+    t.command_mode(Mode::Acquisition).unwrap();
+    t.begin_frame(inputs(Some(table)), &mut rec);
+    assert_eq!(t.mode(), Mode::Acquisition);
+    // An acquisition frame with no star stays in acquisition.
+    let s = t.end_frame(&mut rec);
+    assert_eq!((s.stars, s.next_mode), (0, Mode::Acquisition));
+    let changes: Vec<(u32, Mode, Mode, ModeReason)> = rec
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            Event::ModeChange {
+                frame,
+                from,
+                to,
+                reason,
+            } => Some((*frame, *from, *to, *reason)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        changes,
+        [
+            (
+                1,
+                Mode::Standby,
+                Mode::Acquisition,
+                ModeReason::TableAvailable
+            ),
+            (2, Mode::Acquisition, Mode::Standby, ModeReason::Command),
+            (5, Mode::Standby, Mode::Acquisition, ModeReason::Command),
+        ]
+    );
+    let tables: Vec<u32> = rec
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            Event::TableChanged { frame, .. } => Some(*frame),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(tables, [0, 1]);
+    assert_eq!(rec.frames.len(), 6);
+    // A configuration is checked, then applied at the next frame.
+    assert_eq!(
+        t.set_config(TrackerConfig {
+            window_px: 8,
+            ..TrackerConfig::FLIGHT
+        }),
+        Err(ConfigError::Window(8))
+    );
+    t.set_config(TrackerConfig {
+        window_px: 9,
+        ..TrackerConfig::FLIGHT
+    })
+    .unwrap();
+    assert_eq!(t.config().window_px, 7);
+    t.begin_frame(inputs(Some(table)), &mut rec);
+    assert_eq!(t.config().window_px, 9);
+    assert!(rec.events.contains(&Event::ConfigApplied { frame: 6 }));
+}
+
+/// Every configuration field the checks guard, one bad value each.
+#[test]
+fn bad_configurations_are_refused_with_their_reason() {
+    let f = TrackerConfig::FLIGHT;
+    let cases = [
+        (TrackerConfig { window_px: 3, ..f }, ConfigError::Window(3)),
+        (
+            TrackerConfig { window_px: 15, ..f },
+            ConfigError::Window(15),
+        ),
+        (
+            TrackerConfig {
+                acquisition_method: CentroidMethod::FusedCog1,
+                ..f
+            },
+            ConfigError::FusedInAcquisition,
+        ),
+        (
+            TrackerConfig {
+                window_px: 13,
+                tracking_method: CentroidMethod::FusedCog1,
+                track_margin_px: 1,
+                ..f
+            },
+            ConfigError::Window(13),
+        ),
+        (
+            TrackerConfig {
+                track_margin_px: 5,
+                ..f
+            },
+            ConfigError::TrackMargin(5),
+        ),
+        (
+            TrackerConfig {
+                psf_a_px: f32::NAN,
+                ..f
+            },
+            ConfigError::PsfWidth,
+        ),
+        (
+            TrackerConfig {
+                background_stride: 0,
+                ..f
+            },
+            ConfigError::BackgroundStride,
+        ),
+        (
+            TrackerConfig { max_stars: 33, ..f },
+            ConfigError::MaxStars {
+                max_stars: 33,
+                capacity: 32,
+            },
+        ),
+        (
+            TrackerConfig {
+                max_tracked: 0,
+                ..f
+            },
+            ConfigError::MaxTracked(0),
+        ),
+        (
+            TrackerConfig {
+                min_track_stars: 40,
+                ..f
+            },
+            ConfigError::MinTrackStars(40),
+        ),
+        (
+            TrackerConfig {
+                reacquire_every: 0,
+                ..f
+            },
+            ConfigError::Period,
+        ),
+    ];
+    for (c, e) in cases {
+        assert_eq!(c.validate(32), Err(e), "{c:?}");
+        assert!(!e.to_string().is_empty());
+    }
+    let mut thresholds = f;
+    thresholds.detect.peak_sigmas = -1.0;
+    assert_eq!(thresholds.validate(32), Err(ConfigError::Thresholds));
+    assert_eq!(f.validate(32), Ok(()));
+    let mut buffers = Box::new(TrackerBuffers::new());
+    let long_lines = startrack_core::geometry::ReadoutGeometry {
+        active_cols: 2048,
+        ..SensorParams::default().geometry
+    };
+    assert!(matches!(
+        Tracker::<32>::new(f, long_lines, &mut buffers),
+        Err(ConfigError::Geometry)
+    ));
+    let _ = small_tracker(&mut buffers);
+}
+
+/// The application's memory: the buffers a home places and the tracker itself, for the
+/// board's capacity (32 stars). Printed with `--nocapture`; the bounds keep them from
+/// growing unnoticed (the board's RAM is 512 KB of AXI SRAM).
+#[test]
+fn tracker_memory() {
+    let buffers = std::mem::size_of::<TrackerBuffers>();
+    let tracker = std::mem::size_of::<Tracker<'static, 'static, 32>>();
+    let scan = std::mem::size_of::<startrack_core::detect::ScanDetector<'static, 32>>();
+    let detector = std::mem::size_of::<LineDetector<32>>();
+    let ring = std::mem::size_of::<startrack_core::tracker::Ring>();
+    let capture = std::mem::size_of::<startrack_core::tracker::Capture>();
+    let plan = std::mem::size_of::<startrack_core::centroid::raw_cog::RawCogPlan>();
+    eprintln!(
+        "TrackerBuffers {buffers} B (ring {ring}, capture {capture}, plans 32 x {plan}), Tracker<32> {tracker} B, of which the scan detector {scan} B (its line detector {detector} B)"
+    );
+    assert!(buffers <= 70 * 1024, "{buffers}");
+    assert!(tracker <= 40 * 1024, "{tracker}");
+}
