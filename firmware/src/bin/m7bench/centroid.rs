@@ -1,6 +1,6 @@
 //! Stages of the centroid methods on a calibrated window, per star: the general path's
 //! corrected CoG (`centroid_cog1c_7x7`: power 1, 7x7 box, perimeter median, then the
-//! pixel-phase curve, as the firmware's acquisition runs it) and each of [`METHOD_NAMES`] on
+//! pixel-phase curve; the fused CoG replaces it in tracking) and each of [`METHOD_NAMES`] on
 //! the 7x7 window and on its central 5x5, the box filling the window
 //! (`centroid_<method>_<n>x<n>`). The windows come from [`crate::window`]'s
 //! `calibrate_window`. Cost: eleven centroids a window.
@@ -69,7 +69,7 @@ impl CentroidTimes {
             CentroidInput::new(w5).with_pixel_flags(&wf5),
             CentroidInput::new(w7).with_pixel_flags(wf),
         ];
-        // The firmware's corrected CoG: power 1, 7x7 box, perimeter median, then the curve.
+        // The general path's corrected CoG: power 1, 7x7 box, perimeter median, then the curve.
         let input7 = black_box(&inputs[1]);
         self.cog1c += bench.measure(|| {
             let c = curve.apply(cog(input7, &CogParams::new(CogPower::One, 7)));

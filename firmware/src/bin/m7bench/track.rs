@@ -1,16 +1,17 @@
-//! Stage `tracking_frame`, per frame: the per-frame cost of the firmware's tracking
-//! (`firmware/src/stars.rs`) for [`TRACK_STARS`] 7x7 raw windows, each calibrated and
-//! centroided by applying its window's `RawCogPlan` (the fused raw-window CoG power 1 in the
-//! 7x7 box, `centroid::raw_cog`: the calibration folded into the sums; each star's background
-//! given, carried from its last measurement; pixel-phase curve applied).
+//! Stage `tracking_frame`, per frame: the per-frame centroid cost of the tracker's tracking
+//! mode with the fused CoG (`core/src/tracker/track.rs`, `CentroidMethod::FusedCog1`) for
+//! [`TRACK_STARS`] 7x7 raw windows, each calibrated and centroided by applying its window's
+//! `RawCogPlan` (the fused raw-window CoG power 1 in the 7x7 box, `centroid::raw_cog`: the
+//! calibration folded into the sums; each star's background given, carried from its last
+//! measurement; pixel-phase curve applied).
 //!
-//! The plans are built beforehand, untimed: the firmware rebuilds a window's plan only when
+//! The plans are built beforehand, untimed: the tracker rebuilds a window's plan only when
 //! its star moves to another anchor pixel (stage `raw_cog_plan_7x7` in [`crate::window`]
 //! gives that cost per move; `centroid_cog1c_raw_7x7` the one-shot plan + apply). Not
-//! included: the window capture of the raw lines and the full-path fallback on flags. The
-//! general path (calibrate_window + cog with a perimeter median + curve) is measured by
-//! `window_calibrate` and `centroid_cog1c_7x7`. Cost: [`TRACK_STARS`] plan applications,
-//! timed once (the inputs take 7 raw lines a star).
+//! included: the window capture of the raw lines, the window test and the full-path
+//! fallback on flags. The general path (calibrate_window + cog with a perimeter median +
+//! curve) is measured by `window_calibrate` and `centroid_cog1c_7x7`. Cost: [`TRACK_STARS`]
+//! plan applications, timed once (the inputs take 7 raw lines a star).
 
 use crate::harness::{Bench, Out};
 use crate::inputs::{G, Lcg, RAW_COLS, placeholder_levels, raw_line_noisy};

@@ -2,10 +2,10 @@
 //! windows at different positions: `window_calibrate` (the window's 49 raw samples to
 //! electrons, `FrameCalibration::calibrate_window`), the fused raw-window corrected CoG
 //! one-shot (`centroid_cog1c_raw_7x7`, `_5x5`: `centroid::raw_cog`, calibration included)
-//! and split as the firmware's tracking runs it (`raw_cog_plan_7x7`, the plan of a box,
-//! rebuilt when the star moves to another anchor pixel; `centroid_cog1c_raw_planned_7x7`,
-//! its application to a frame's raw window), then the centroid methods of [`crate::centroid`]
-//! on the calibrated window. The run fails if the fused path flags a clean star or the plan
+//! and split as tracking runs it (`raw_cog_plan_7x7`, the plan of a box, rebuilt when the
+//! star moves to another anchor pixel; `centroid_cog1c_raw_planned_7x7`, its application to
+//! a frame's raw window), then the centroid methods of [`crate::centroid`] on the calibrated
+//! window. The run fails if the fused path flags a clean star or the plan
 //! disagrees with the one-shot. Cost: [`WINDOW_REPS`] windows, 7 raw lines each.
 
 use crate::centroid::CentroidTimes;
@@ -117,7 +117,7 @@ pub fn run(
     t_centroid.print_corrected(out, bench, reps);
     bench.row(out, "centroid_cog1c_raw_7x7", "star", t_cog1c_raw, reps);
     bench.row(out, "centroid_cog1c_raw_5x5", "star", t_cog1c_raw5, reps);
-    // The fused path split as the firmware's tracking runs it: the plan of a box (built when
+    // The fused path split as tracking runs it: the plan of a box (built when
     // the star moves to another anchor pixel) and its application to a frame's raw window.
     bench.row(out, "raw_cog_plan_7x7", "box", t_raw_plan, reps);
     bench.row(
