@@ -1,8 +1,8 @@
 //! The host's home for the core's tracker application ([`startrack_core::tracker`]): line
 //! sources (a recorded frame, the simulated CCD47-20), a telemetry recorder, a clock, and
-//! a runner that drives [`Tracker::run_frame`] to completion. `startrack process`, `startrack
-//! sil`, the demo and the tests all run the tracker through these, exactly as the board does
-//! through its own ports.
+//! a runner that drives [`Tracker::run_frame`](startrack_core::tracker::Tracker::run_frame)
+//! to completion. `startrack process`, `startrack sil`, the demo and the tests all run the
+//! tracker through these, exactly as the board does through its own ports.
 //!
 //! Cost: the sources copy one raw line (2 KB) per line read; the simulated source renders
 //! only the samples the tracker's request reads (over-scan and covered columns of each line

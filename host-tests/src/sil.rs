@@ -10,7 +10,8 @@
 //! the host test `sil` pins it.
 //!
 //! Cost: a full frame (acquisition) renders 1.1 M samples, a tracking frame about 40 lines'
-//! over-scan and covered columns plus its windows per star; ~1 s and ~0.02 s in release.
+//! over-scan and covered columns plus its windows per star; ~1 s and ~0.02 s in release
+//! (`time startrack sil --frames N` for a few N measures both).
 
 use crate::home::{FrameClock, Recorder, SimLines, block_on};
 use crate::pixcorr::{CurveSpec, build_curves};
