@@ -17,6 +17,11 @@ pub const PIXCORR_KNOTS: u8 = 33;
 /// Most curves the pixel-phase section holds.
 pub const MAX_CURVES: usize = 16;
 
+/// The largest correction of a curve, px, for its note.
+fn largest_correction_px(c: &Curve) -> f64 {
+    c.knots_px.iter().fold(0.0f64, |m, k| m.max(k.abs()))
+}
+
 /// The pixel-phase curves of `args` (empty without `--psf-a-px`) and one note per curve
 /// built or refused.
 pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String>), CliError> {
@@ -74,7 +79,7 @@ pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String
                     Ok(c) => {
                         notes.push(format!(
                             "pixel-phase curve: a {a_px} px, box {box_side}, power {p}, median perimeter background (largest correction {:.4} px)",
-                            c.knots_px.iter().fold(0.0f64, |m, k| m.max(k.abs()))
+                            largest_correction_px(&c)
                         ));
                         curves.push(c);
                     }
@@ -108,7 +113,7 @@ pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String
                 Ok(c) => {
                     notes.push(format!(
                         "tracking curve (given background): a {a_px} px, box {box_side}, power 1 (largest correction {:.4} px)",
-                        c.knots_px.iter().fold(0.0f64, |m, k| m.max(k.abs()))
+                        largest_correction_px(&c)
                     ));
                     curves.push(c);
                 }
