@@ -574,3 +574,113 @@ fn tracker_memory() {
     assert!(buffers <= 70 * 1024, "{buffers}");
     assert!(tracker <= 40 * 1024, "{tracker}");
 }
+
+/// One step of the random operation sequences below.
+#[derive(Clone, Debug)]
+enum Op {
+    /// Begin a frame, with the table or without.
+    Begin(bool),
+    /// A line: its index, its length less the geometry's (0: right length), a sample
+    /// pattern seed and a base level.
+    Line(u16, u8, u64, u16),
+    /// End the frame.
+    End,
+    /// A mode command.
+    Command(u8),
+    /// A configuration with this window and stride.
+    Config(u16, u16),
+}
+
+fn op() -> impl proptest::strategy::Strategy<Value = Op> {
+    use proptest::prelude::*;
+    prop_oneof![
+        1 => any::<bool>().prop_map(Op::Begin),
+        8 => (0u16..1100, prop_oneof![4 => Just(0u8), 1 => any::<u8>()], any::<u64>(), any::<u16>())
+            .prop_map(|(l, d, seed, base)| Op::Line(l, d, seed, base)),
+        1 => Just(Op::End),
+        1 => (0u8..3).prop_map(Op::Command),
+        1 => (0u16..20, 0u16..80).prop_map(|(w, s)| Op::Config(w, s)),
+    ]
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(32))]
+    /// Any sequence of frames, lines (any index, length, samples: saturated, flat, noise),
+    /// commands and configurations: no panic, every line either taken or refused and
+    /// counted, summaries that add up, and records that are finite.
+    #[test]
+    fn any_input_gives_records_or_counted_refusals(ops in proptest::collection::vec(op(), 1..60)) {
+        let (_, table_bytes) = field(4, 0);
+        let table = CalibTable::parse(&table_bytes).unwrap();
+        let g = SensorParams::default().geometry;
+        let mut buffers = Box::new(TrackerBuffers::new());
+        let mut t = Tracker::<32>::new(TrackerConfig::FLIGHT, g, &mut buffers).unwrap();
+        let mut rec = Recorder::default();
+        let mut line = vec![0u16; g.line_len()];
+        let (mut pushed, mut open) = (0u32, false);
+        let mut frames = 0usize;
+        for op in ops {
+            match op {
+                Op::Begin(with_table) => {
+                    if open {
+                        frames += 1;
+                    }
+                    t.begin_frame(inputs(with_table.then_some(table)), &mut rec);
+                    open = true;
+                    pushed = 0;
+                }
+                Op::Line(l, short, seed, base) => {
+                    let mut x = seed | 1;
+                    for v in line.iter_mut() {
+                        x ^= x << 13;
+                        x ^= x >> 7;
+                        x ^= x << 17;
+                        *v = match seed % 4 {
+                            0 => u16::MAX,
+                            1 => base,
+                            _ => base.saturating_add((x % 512) as u16),
+                        };
+                    }
+                    let len = g.line_len().saturating_sub(usize::from(short));
+                    let outcome = t.push_line(l, &line[..len], &mut rec);
+                    if open {
+                        pushed += 1;
+                    } else {
+                        proptest::prop_assert_eq!(outcome, LineOutcome::Refused);
+                    }
+                }
+                Op::End => {
+                    let s = t.end_frame(&mut rec);
+                    if open {
+                        frames += 1;
+                        proptest::prop_assert!(u32::from(s.lines) <= pushed);
+                        proptest::prop_assert!(u32::from(s.lines) + u32::from(s.lines_refused) >= pushed);
+                    }
+                    open = false;
+                }
+                Op::Command(m) => {
+                    let mode = [Mode::Standby, Mode::Acquisition, Mode::Tracking][usize::from(m)];
+                    let _ = t.command_mode(mode);
+                }
+                Op::Config(w, s) => {
+                    let c = TrackerConfig {
+                        window_px: w,
+                        background_stride: s,
+                        ..TrackerConfig::FLIGHT
+                    };
+                    proptest::prop_assert_eq!(t.set_config(c).is_ok(), c.validate(32).is_ok());
+                }
+            }
+        }
+        proptest::prop_assert_eq!(rec.frames.len(), frames);
+        for f in &rec.frames {
+            proptest::prop_assert!(f.stars.len() <= 32);
+            proptest::prop_assert_eq!(usize::from(f.summary.stars), f.stars.len());
+            for s in &f.stars {
+                for v in [s.x_px, s.y_px, s.flux_e, s.snr, s.sigma_x_px, s.sigma_y_px] {
+                    proptest::prop_assert!(v.is_finite(), "{:?}", s);
+                }
+            }
+        }
+    }
+}
