@@ -7,8 +7,9 @@ mod common_cli;
 
 use common_cli::{build_args, startrack};
 use startrack_core::table::CalibTable;
+use startrack_core::tracker::CentroidMethod;
 use startrack_host::cli::calib_build::{CalibBuildArgs, build};
-use startrack_host::cli::process::{Method, ProcessArgs, measure};
+use startrack_host::cli::process::{ProcessArgs, measure};
 use startrack_host::cli::simulate::{SimFiles, SimulateArgs};
 use startrack_host::fits::{MapF32, RawFrame, write_map, write_raw_frame};
 use startrack_host::home::CSV_HEADER;
@@ -38,7 +39,7 @@ fn process_args(frame: &Path, table: &Path) -> ProcessArgs {
     ProcessArgs {
         frame: frame.to_path_buf(),
         calib: table.to_path_buf(),
-        method: Some(Method::GaussFit),
+        method: Some(CentroidMethod::GaussFit),
         window: Some(7),
         psf_sigma: Some(0.78),
         psf_a_px: None,
@@ -429,7 +430,11 @@ fn calib_build_and_simulate_binaries_reject_bad_input_in_one_line() {
 fn every_method_measures_every_star() {
     let (_dir, files, table) = setup(STARS);
     let truth = truth(&files.truth);
-    for method in [Method::Cog1, Method::Cog2, Method::GaussFit] {
+    for method in [
+        CentroidMethod::Cog1,
+        CentroidMethod::Cog2,
+        CentroidMethod::GaussFit,
+    ] {
         let result = measure(&ProcessArgs {
             method: Some(method),
             ..process_args(&files.frame, &table)

@@ -7,9 +7,10 @@
 mod common_cli;
 
 use startrack_core::table::CalibTable;
+use startrack_core::tracker::CentroidMethod;
 use startrack_core::tracker::{StarFlags, StarRecord};
 use startrack_host::cli::calib_build::{CalibBuildArgs, build};
-use startrack_host::cli::process::{Method, ProcessArgs, Processed, measure};
+use startrack_host::cli::process::{ProcessArgs, Processed, measure};
 use startrack_host::cli::simulate::{SimFiles, SimulateArgs};
 use std::path::{Path, PathBuf};
 
@@ -48,14 +49,14 @@ fn build_args(f: &SimFiles, out: PathBuf, psf_a_px: Option<String>) -> CalibBuil
     }
 }
 
-fn process(frame: &Path, table: &Path, method: Method, psf_a_px: Option<f32>) -> Processed {
+fn process(frame: &Path, table: &Path, method: CentroidMethod, psf_a_px: Option<f32>) -> Processed {
     process_window(frame, table, method, psf_a_px, 7)
 }
 
 fn process_window(
     frame: &Path,
     table: &Path,
-    method: Method,
+    method: CentroidMethod,
     psf_a_px: Option<f32>,
     window: u16,
 ) -> Processed {
@@ -202,7 +203,11 @@ fn cog_with_the_tables_curve_beats_the_plain_cog_and_matches_its_sigma() {
     let truth = truth(&s.files.truth);
     assert!(truth.iter().all(|t| t.2 == A_PX));
     // Window 7 (box 5) is the flight window; window 9 (box 7) the other default curve box.
-    for (method, window) in [(Method::Cog1, 7), (Method::Cog2, 7), (Method::Cog1, 9)] {
+    for (method, window) in [
+        (CentroidMethod::Cog1, 7),
+        (CentroidMethod::Cog2, 7),
+        (CentroidMethod::Cog1, 9),
+    ] {
         // No width option: `process` reads PSFA from the frame.
         let corrected = process_window(&s.files.frame, &s.with_curves, method, None, window);
         let plain = process_window(&s.files.frame, &s.without, method, None, window);
@@ -259,7 +264,12 @@ fn cog_with_the_tables_curve_beats_the_plain_cog_and_matches_its_sigma() {
 #[test]
 fn no_matching_curve_sets_the_uncorrected_flag() {
     let s = setup();
-    let far = process(&s.files.frame, &s.with_curves, Method::Cog1, Some(0.9));
+    let far = process(
+        &s.files.frame,
+        &s.with_curves,
+        CentroidMethod::Cog1,
+        Some(0.9),
+    );
     assert!(far.curve.is_none());
     assert!(!far.stars.is_empty());
     assert!(
@@ -267,9 +277,19 @@ fn no_matching_curve_sets_the_uncorrected_flag() {
             .iter()
             .all(|r| r.flags.contains(StarFlags::UNCORRECTED))
     );
-    let near = process(&s.files.frame, &s.with_curves, Method::Cog1, Some(0.63));
+    let near = process(
+        &s.files.frame,
+        &s.with_curves,
+        CentroidMethod::Cog1,
+        Some(0.63),
+    );
     assert!(near.curve.is_some());
-    let fit = process(&s.files.frame, &s.with_curves, Method::GaussFit, None);
+    let fit = process(
+        &s.files.frame,
+        &s.with_curves,
+        CentroidMethod::GaussFit,
+        None,
+    );
     assert!(fit.curve.is_none());
     assert!(
         fit.stars

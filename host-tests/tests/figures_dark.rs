@@ -10,7 +10,7 @@
 //!   points. The required bound (<= 1.1) sits 3 of those above the expected ratio (~1.01:
 //!   the measured map adds (250 + 25) / 32 e-^2 to 275 e-^2 per pixel), so a pass is not luck.
 
-use startrack_host::figures::fig5::{Fig5Params, Fig5Point, Method, run};
+use startrack_host::figures::fig5::{DarkMethod, Fig5Params, Fig5Point, run};
 
 const TRIALS: usize = 1000;
 
@@ -26,7 +26,7 @@ fn experiment() -> Vec<Fig5Point> {
     run(&p, false).points
 }
 
-fn get(points: &[Fig5Point], snr0: f64, dsnu: f64, power: u8, method: Method) -> Fig5Point {
+fn get(points: &[Fig5Point], snr0: f64, dsnu: f64, power: u8, method: DarkMethod) -> Fig5Point {
     *points
         .iter()
         .find(|q| q.snr0 == snr0 && q.dsnu == dsnu && q.power == power && q.method == method)
@@ -58,8 +58,8 @@ fn precalc_removes_the_dsnu_penalty_and_perimeter_shows_the_paper_effect() {
     for snr0 in [5.0, 10.0] {
         for power in [1u8, 2] {
             // Precalc: the error at DSNU 0.25 is at most 1.1x the error without DSNU.
-            let e0 = get(&pts, snr0, 0.0, power, Method::Precalc).rms_px;
-            let e25 = get(&pts, snr0, 0.25, power, Method::Precalc).rms_px;
+            let e0 = get(&pts, snr0, 0.0, power, DarkMethod::Precalc).rms_px;
+            let e25 = get(&pts, snr0, 0.25, power, DarkMethod::Precalc).rms_px;
             assert!(
                 e25 <= 1.1 * e0,
                 "precalc SNR {snr0} pow {power}: {e25} vs {e0} (MC rel. se {rel_se:.3})"
@@ -68,7 +68,7 @@ fn precalc_removes_the_dsnu_penalty_and_perimeter_shows_the_paper_effect() {
         // Perimeter (the paper): the detection rate falls with DSNU.
         let d: Vec<f64> = [0.0, 0.125, 0.25]
             .iter()
-            .map(|&s| get(&pts, snr0, s, 1, Method::Perimeter).detect_rate)
+            .map(|&s| get(&pts, snr0, s, 1, DarkMethod::Perimeter).detect_rate)
             .collect();
         for w in d.windows(2) {
             let se = (binomial_se(w[0]).powi(2) + binomial_se(w[1]).powi(2)).sqrt();
@@ -77,14 +77,14 @@ fn precalc_removes_the_dsnu_penalty_and_perimeter_shows_the_paper_effect() {
     }
     // Precalc: an SNR-5 star is still detected at least 95 % of the time at every DSNU.
     for dsnu in [0.0, 0.125, 0.25] {
-        let q = get(&pts, 5.0, dsnu, 1, Method::Precalc).detect_rate;
+        let q = get(&pts, 5.0, dsnu, 1, DarkMethod::Precalc).detect_rate;
         assert!(q >= 0.95, "precalc SNR 5 DSNU {dsnu}: detected {q}");
     }
     // Perimeter at high SNR: the error grows with DSNU (the paper: 0.1 -> 0.3 px at SNR 10),
     // by far more than the Monte Carlo scatter (relative se 1/sqrt(2 n_detected)).
     for power in [1u8, 2] {
-        let a = get(&pts, 10.0, 0.0, power, Method::Perimeter);
-        let b = get(&pts, 10.0, 0.25, power, Method::Perimeter);
+        let a = get(&pts, 10.0, 0.0, power, DarkMethod::Perimeter);
+        let b = get(&pts, 10.0, 0.25, power, DarkMethod::Perimeter);
         let se_b = 1.0 / (2.0 * b.detect_rate * TRIALS as f64).sqrt();
         assert!(
             b.rms_px * (1.0 - 3.0 * se_b) > 2.0 * a.rms_px * (1.0 + 3.0 * rel_se),

@@ -32,15 +32,11 @@
 //! the table's pixel-phase curve chosen by one rule for a CoG ([`select_curve`]).
 //!
 //! # Mode rules
-//! All here, in [`Tracker::begin_frame`] and `decide_next`:
-//! - a command ([`Tracker::command_mode`]) takes effect at the next frame: standby stays
-//!   until another command; tracking needs stars from the last frame, else acquisition;
-//! - no calibration table: standby ([`ModeReason::NoTable`]) until one is in force;
-//! - acquisition -> tracking when it gave at least `min_track_stars` usable centroids;
-//! - tracking -> acquisition when fewer than `min_track_stars` were found, or after
-//!   `reacquire_every` tracking frames in a row (stars entering the field).
-//!
-//! Every change is an [`Event::ModeChange`] with its reason.
+//! All in `modes.rs`, asked by [`Tracker::begin_frame`] and [`Tracker::end_frame`]: a
+//! command takes effect at the next frame; no table means standby; acquisition hands over
+//! to tracking with at least `min_track_stars` usable centroids, tracking goes back with
+//! fewer or every `reacquire_every` frames. Every change is an [`Event::ModeChange`] with
+//! its [`ModeReason`].
 //!
 //! # Memory
 //! [`TrackerBuffers`] (the line ring 34 KB, the tracking windows 19 KB, the fused CoG's
@@ -60,12 +56,14 @@ mod acquire;
 pub mod config;
 mod list;
 mod measure;
+mod modes;
 pub mod ports;
 pub mod record;
 mod track;
 
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
 pub use measure::select_curve;
+pub use modes::CommandError;
 pub use ports::{
     Clock, FixedTable, FixedTemperature, LineSource, Ports, ReadoutRequest, SourceLine, TableStore,
     TelemetrySink, Thermometer,
@@ -84,6 +82,7 @@ use crate::units::{BiasAdu, Electrons, Kelvin};
 use acquire::Acquisition;
 use list::StarList;
 use measure::{Policy, Scratch};
+use modes::Modes;
 use track::Tracking;
 
 /// Raw lines the acquisition ring keeps: a centroid window completes a few rows after its
@@ -142,25 +141,6 @@ pub struct FrameInputs<'t> {
     pub start_us: u64,
 }
 
-/// Why a mode command was refused.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub enum CommandError {
-    /// Tracking was asked for with no star from the last frame to track.
-    NothingToTrack,
-}
-
-impl core::fmt::Display for CommandError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(match self {
-            Self::NothingToTrack => "tracking needs stars from the last frame",
-        })
-    }
-}
-
-impl core::error::Error for CommandError {}
-
 /// The tracker application, for up to `N` stars a frame (the board: 32; the host's
 /// `process`: 1024, room for any field).
 pub struct Tracker<'t, 'b, const N: usize> {
@@ -174,12 +154,7 @@ pub struct Tracker<'t, 'b, const N: usize> {
     frame: u32,
     started: bool,
     open: bool,
-    mode: Mode,
-    next: (Mode, ModeReason),
-    commanded: Option<Mode>,
-    /// A commanded standby, held until the next command.
-    standby_held: bool,
-    tracking_run: u32,
+    modes: Modes,
     estimator: DarkScaleEstimator,
     prev_dark_scale: Option<Electrons>,
     last_line: Option<u16>,
@@ -217,11 +192,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             frame: 0,
             started: false,
             open: false,
-            mode: Mode::Standby,
-            next: (Mode::Acquisition, ModeReason::Start),
-            commanded: None,
-            standby_held: false,
-            tracking_run: 0,
+            modes: Modes::new(),
             estimator: DarkScaleEstimator::new(),
             prev_dark_scale: None,
             last_line: None,
@@ -248,7 +219,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
 
     /// The current (or last) frame's mode.
     pub fn mode(&self) -> Mode {
-        self.mode
+        self.modes.mode()
     }
 
     /// Checks `config` and stages it for the next frame.
@@ -260,16 +231,12 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
 
     /// Asks for `mode` from the next frame on (see the module's mode rules).
     pub fn command_mode(&mut self, mode: Mode) -> Result<(), CommandError> {
-        if mode == Mode::Tracking && self.trk.priors_len() == 0 {
-            return Err(CommandError::NothingToTrack);
-        }
-        self.commanded = Some(mode);
-        Ok(())
+        self.modes.command(mode, self.trk.priors_len() > 0)
     }
 
     /// What the current frame reads.
     pub fn readout_request(&self) -> ReadoutRequest<'_> {
-        match self.mode {
+        match self.modes.mode() {
             Mode::Tracking => ReadoutRequest::Windows(self.trk.rects()),
             Mode::Standby | Mode::Acquisition => ReadoutRequest::FullFrame,
         }
@@ -344,26 +311,15 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         }
         self.table = table;
 
-        let (mut to, mut reason) = self.next;
-        if let Some(m) = self.commanded.take() {
-            (to, reason) = (m, ModeReason::Command);
-            self.standby_held = m == Mode::Standby;
-        }
-        if to == Mode::Tracking && self.trk.priors_len() == 0 {
-            (to, reason) = (Mode::Acquisition, ModeReason::TooFewStars);
-        }
-        if to != Mode::Standby && table.is_none() {
-            (to, reason) = (Mode::Standby, ModeReason::NoTable);
-        }
-        if to != self.mode {
+        let (to, change) = self.modes.begin(self.trk.priors_len() > 0, table.is_some());
+        if let Some((from, reason)) = change {
             telemetry.event(&Event::ModeChange {
                 frame,
-                from: self.mode,
+                from,
                 to,
                 reason,
             });
         }
-        self.mode = to;
 
         let (temperature_k, source) = match (inputs.temperature_k, table) {
             (Some(t), _) => (t, TemperatureSource::Sensor),
@@ -479,7 +435,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         };
         self.conditions = Some(conditions);
         let cal = FrameCalibration::new(table, conditions);
-        let outcome = match (self.mode, self.policy) {
+        let outcome = match (self.modes.mode(), self.policy) {
             (Mode::Acquisition, Some(policy)) => self.acq.line(
                 &cal,
                 &policy,
@@ -527,7 +483,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             (self.table, self.conditions, self.policy)
         {
             let cal = FrameCalibration::new(table, conditions);
-            match self.mode {
+            match self.modes.mode() {
                 Mode::Acquisition => self.acq.finish(
                     &cal,
                     &policy,
@@ -572,33 +528,9 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.summary.stars_dropped = self.stars.dropped;
         self.trk
             .keep_priors(&self.stars, usize::from(self.config.max_tracked));
-        self.next = self.decide_next(centroids);
-        self.tracking_run = match self.mode {
-            Mode::Tracking => self.tracking_run.saturating_add(1),
-            _ => 0,
-        };
-        self.summary.next_mode = self.next.0;
+        self.summary.next_mode = self.modes.end(centroids, &self.config);
         telemetry.frame(&self.summary);
         self.summary
-    }
-
-    /// The next frame's mode and why, from this frame's mode and usable centroids (before a
-    /// command or a missing table overrule it at the next frame's start).
-    fn decide_next(&self, centroids: u16) -> (Mode, ModeReason) {
-        let enough = centroids >= self.config.min_track_stars;
-        match self.mode {
-            Mode::Standby if self.standby_held => (Mode::Standby, ModeReason::Command),
-            Mode::Standby => (Mode::Acquisition, ModeReason::TableAvailable),
-            Mode::Acquisition if enough => (Mode::Tracking, ModeReason::Acquired),
-            Mode::Acquisition => (Mode::Acquisition, ModeReason::TooFewStars),
-            Mode::Tracking if !enough => (Mode::Acquisition, ModeReason::TooFewStars),
-            Mode::Tracking
-                if self.tracking_run.saturating_add(1) >= self.config.reacquire_every =>
-            {
-                (Mode::Acquisition, ModeReason::Reacquire)
-            }
-            Mode::Tracking => (Mode::Tracking, ModeReason::Acquired),
-        }
     }
 }
 

@@ -296,8 +296,8 @@ impl Tracking {
             rect.height,
         );
         let sub = Rect {
-            x0: rect.x0 + rel.x0,
-            y0: rect.y0 + rel.y0,
+            x0: rect.x0.saturating_add(rel.x0),
+            y0: rect.y0.saturating_add(rel.y0),
             ..rel
         };
         let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;

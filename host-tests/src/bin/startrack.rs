@@ -51,9 +51,9 @@ enum Command {
     /// Every centroid method's RMS error over the Cramer-Rao bound, by Monte Carlo (markdown).
     Accuracy(startrack_host::cli::accuracy::AccuracyArgs),
     /// The founding paper's Figures 1-6 (CSV with parameters, PNG) from the core's code.
-    Figures(startrack_host::cli::figures::Args),
+    Figures(startrack_host::cli::figures::FiguresArgs),
     /// Cost per star against accuracy (Pareto frontier) and failure maps of every centroid method.
-    Tradeoff(startrack_host::cli::tradeoff::Args),
+    Tradeoff(startrack_host::cli::tradeoff::TradeoffArgs),
 }
 
 #[derive(Subcommand)]

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 /// Arguments of `startrack figures`.
 #[derive(clap::Args, Debug, Clone)]
-pub struct Args {
+pub struct FiguresArgs {
     /// Directory for fig1..fig6 .csv and .png (created if missing).
     #[arg(long)]
     pub out: std::path::PathBuf,
@@ -17,7 +17,7 @@ pub struct Args {
 }
 
 /// Runs the subcommand.
-pub fn run(args: &Args) -> ExitCode {
+pub fn run(args: &FiguresArgs) -> ExitCode {
     let effort = if args.quick {
         Effort::Quick
     } else {

@@ -18,6 +18,7 @@
 use super::{CliError, read_file};
 use crate::fits::{read_keys, read_raw_frame};
 use crate::home::{FrameClock, FrameLines, Recorder, block_on, write_csv};
+use clap::builder::TypedValueParser as _;
 use startrack_core::centroid::cog::CogPower;
 use startrack_core::centroid::pixcorr::{CurveHeader, PixCorrBackground};
 use startrack_core::table::CalibTable;
@@ -32,25 +33,21 @@ use std::path::PathBuf;
 /// miss is a detection miss, not a full list; losses are still counted.
 pub const HOST_CAPACITY: usize = 1024;
 
-/// The centroid methods `process` offers (the acquisition methods of the tracker).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Method {
-    /// Centre of gravity, power 1 (paper eq. 2), pixel-phase corrected.
-    Cog1,
-    /// Centre of gravity, power 2, noise-unbiased (paper eq. 6), pixel-phase corrected.
-    Cog2,
-    /// Fit of the pixel-integrated Gaussian, background held at the border median.
-    GaussFit,
-}
+/// The acquisition methods `process` offers, by their names.
+const METHODS: [CentroidMethod; 3] = [
+    CentroidMethod::Cog1,
+    CentroidMethod::Cog2,
+    CentroidMethod::GaussFit,
+];
 
-impl From<Method> for CentroidMethod {
-    fn from(m: Method) -> Self {
-        match m {
-            Method::Cog1 => Self::Cog1,
-            Method::Cog2 => Self::Cog2,
-            Method::GaussFit => Self::GaussFit,
-        }
-    }
+/// The `--method` parser: one of [`METHODS`] by name (clap lists them on a bad value).
+fn method_parser() -> impl clap::builder::TypedValueParser<Value = CentroidMethod> {
+    clap::builder::PossibleValuesParser::new(METHODS.map(CentroidMethod::name)).map(|s| {
+        METHODS
+            .into_iter()
+            .find(|m| m.name() == s)
+            .unwrap_or(CentroidMethod::GaussFit)
+    })
 }
 
 /// Options of `startrack process`.
@@ -61,9 +58,10 @@ pub struct ProcessArgs {
     /// Calibration table (from `startrack calib build` or `startrack table`).
     #[arg(long)]
     pub calib: PathBuf,
-    /// Centroid method (default: the flight configuration's, gauss-fit).
-    #[arg(long, value_enum)]
-    pub method: Option<Method>,
+    /// Centroid method: gauss-fit (the flight configuration's), cog1 or cog2 (centre of
+    /// gravity, power 1 or 2, pixel-phase corrected).
+    #[arg(long, value_parser = method_parser())]
+    pub method: Option<CentroidMethod>,
     /// Centroid window side, px (odd, 5 to 13); the box is window - 2, the border gives the
     /// background (default: the flight configuration's, 7).
     #[arg(long)]
@@ -115,7 +113,7 @@ pub fn config_of(
         ..TrackerConfig::FLIGHT
     };
     if let Some(m) = args.method {
-        config.acquisition_method = m.into();
+        config.acquisition_method = m;
     }
     if let Some(w) = args.window {
         config.window_px = w;

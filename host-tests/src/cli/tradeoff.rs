@@ -11,7 +11,7 @@ pub const DEFAULT_M7: &str = "host-tests/m7-costs.csv";
 
 /// Arguments of `startrack tradeoff`.
 #[derive(clap::Args, Debug, Clone)]
-pub struct Args {
+pub struct TradeoffArgs {
     /// Directory for tradeoff.csv/.png, failures.csv and failures-METHOD.png (created).
     #[arg(long)]
     pub out: PathBuf,
@@ -46,7 +46,7 @@ fn load_m7(arg: Option<&PathBuf>) -> Result<(M7Table, String), String> {
 }
 
 /// Runs the subcommand.
-pub fn run(args: &Args) -> ExitCode {
+pub fn run(args: &TradeoffArgs) -> ExitCode {
     let (m7, m7_source) = match load_m7(args.m7.as_ref()) {
         Ok(v) => v,
         Err(e) => {

@@ -114,14 +114,14 @@ impl Fig5Params {
 
 /// How the dark is handled.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Method {
+pub enum DarkMethod {
     /// The paper's: background from the window's perimeter only.
     Perimeter,
     /// Dark pre-calculated from the covered pixels and a measured relative dark map.
     Precalc,
 }
 
-impl Method {
+impl DarkMethod {
     /// The CSV name.
     pub fn name(self) -> &'static str {
         match self {
@@ -141,7 +141,7 @@ pub struct Fig5Point {
     /// CoG power.
     pub power: u8,
     /// Dark handling.
-    pub method: Method,
+    pub method: DarkMethod,
     /// RMS error over detected trials, px (0 when none was detected).
     pub rms_px: f64,
     /// Fraction of trials detected.
@@ -252,7 +252,7 @@ pub fn run(p: &Fig5Params, progress: bool) -> Fig5Result {
                     frame,
                     ..Simulator::new(params.clone(), vec![star])
                 };
-                let methods = [(Method::Perimeter, &bare), (Method::Precalc, &pre)];
+                let methods = [(DarkMethod::Perimeter, &bare), (DarkMethod::Precalc, &pre)];
                 for (mi, (method, table)) in methods.into_iter().enumerate() {
                     let Some(table) = table else { continue };
                     for (pi, power) in [CogPower::One, CogPower::Two].into_iter().enumerate() {
@@ -271,7 +271,10 @@ pub fn run(p: &Fig5Params, progress: bool) -> Fig5Result {
                     }
                 }
             }
-            for (mi, method) in [Method::Perimeter, Method::Precalc].into_iter().enumerate() {
+            for (mi, method) in [DarkMethod::Perimeter, DarkMethod::Precalc]
+                .into_iter()
+                .enumerate()
+            {
                 for (pi, power) in [1u8, 2].into_iter().enumerate() {
                     let a = acc
                         .get(mi)
@@ -308,7 +311,7 @@ pub fn run(p: &Fig5Params, progress: bool) -> Fig5Result {
 fn trial(
     sim: &Simulator,
     star: &Star,
-    (method, table, dark_frames): (Method, &CalibTable<'_>, u32),
+    (method, table, dark_frames): (DarkMethod, &CalibTable<'_>, u32),
     power: CogPower,
 ) -> Option<(f64, f64, f64)> {
     let g = sim.params.geometry;
@@ -348,8 +351,8 @@ fn trial(
     cal.calibrate_window(rect, &raw, &levels, &mut e, &mut f)
         .ok()?;
     let background = match method {
-        Method::Perimeter => Background::PerimeterMean,
-        Method::Precalc => {
+        DarkMethod::Perimeter => Background::PerimeterMean,
+        DarkMethod::Precalc => {
             // Dark shot noise at this frame's dark level, read noise, and the measured map's
             // own noise (per pixel, relative sqrt((dark + read^2) / N) / dark).
             let d = dark_scale_e.to_num::<f64>().max(0.0);
@@ -455,7 +458,7 @@ pub fn write(out: &Path, res: &Fig5Result, written: &mut Written) -> Result<(), 
 /// `powers` has more than one.
 pub fn dsnu_series(res: &Fig5Result, powers: &[u8], y: fn(&Fig5Point) -> f64) -> Vec<plot::Series> {
     let mut series = Vec::new();
-    for method in [Method::Perimeter, Method::Precalc] {
+    for method in [DarkMethod::Perimeter, DarkMethod::Precalc] {
         for (si, &snr0) in res.params.snr0.iter().enumerate() {
             for (pi, &power) in powers.iter().enumerate() {
                 let label = if powers.len() > 1 {
@@ -472,7 +475,7 @@ pub fn dsnu_series(res: &Fig5Result, powers: &[u8], y: fn(&Fig5Point) -> f64) ->
                         .map(|q| (q.dsnu, y(q)))
                         .collect(),
                     color: powers.len() * si + pi,
-                    dashed: method == Method::Precalc,
+                    dashed: method == DarkMethod::Precalc,
                 });
             }
         }
