@@ -9,8 +9,9 @@
 //! - [`inputs`]: the calibration table, raw lines with stars and noise, pixel-phase curves;
 //! - the stage families, in the order they print: [`line_path`] (levels, dark scale, line
 //!   calibration), [`scan`] (the streaming scan), [`track`] (a tracking frame), [`window`]
-//!   (a star window's calibration and the fused raw-window CoG) and [`centroid`] (the
-//!   centroid methods on calibrated windows).
+//!   (a star window's calibration and the fused raw-window CoG), [`centroid`] (the
+//!   centroid methods on calibrated windows) and [`tracker`] (the tracker application's
+//!   acquisition and tracking frames, every line).
 //!
 //! Cost: QEMU runs the whole bench in well under a second of host time; `cargo m7-bench`'s
 //! time is the release build (fat LTO). Uses neither embassy nor defmt; linked with its own
@@ -25,6 +26,7 @@ mod inputs;
 mod line_path;
 mod scan;
 mod track;
+mod tracker;
 mod window;
 
 use core::arch::asm;
@@ -163,5 +165,7 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         &raw_params5,
         &curve,
         &mut rng,
-    )
+    )?;
+    // Last, so that its draws do not change the other stages' inputs.
+    tracker::run(out, &bench, &table, &mut rng)
 }
