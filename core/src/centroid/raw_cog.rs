@@ -5,7 +5,7 @@
 //! without calibrating any pixel.
 //!
 //! # Formula
-//! The calibration ([`crate::calib::pixel`]) is affine in the raw sample inside a *cell*
+//! The calibration ([`crate::calib::formula`]) is affine in the raw sample inside a *cell*
 //! (pixels sharing output amplifier, dark tile and flat tile):
 //! ```text
 //! e = (d gamma / 16 - D) phi,   d = 16 raw - 16 bias(row, output) - 16 column_bias(col)
@@ -118,7 +118,7 @@ use super::{
     Background, Centroid, CentroidFlags, CentroidInput, Measured, finish_in, level_to_bits, math,
     sanitize_var,
 };
-use crate::calib::pixel::{QUANTISATION_E as CALIB_QUANTISATION_E, offset_16ths};
+use crate::calib::formula::{QUANTISATION_E as CALIB_QUANTISATION_E, offset_16ths};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::geometry::Output;
 use crate::units::{ColumnBiasAdu, Electrons};

@@ -3,7 +3,7 @@
 //!
 //! # Method
 //! Calibration is monotone: with the gain and the inverse flat positive, a pixel's electrons
-//! never decrease when its raw sample grows (`calib::pixel`'s formula, floor shifts and the
+//! never decrease when its raw sample grows (`calib::formula`'s formula, floor shifts and the
 //! final clamp are all monotone). So for each chunk of [`CHUNK_PX`] columns there is a raw
 //! level `R` at or below which no regular pixel of the chunk can exceed the join threshold
 //! `T = background + k sigma` (the chunk lies in one background block). It comes from the
@@ -57,7 +57,8 @@
 use super::background::MAX_BLOCKS;
 use super::blobs::{above_thr, px_above_thr};
 use super::{DetectConfig, DetectError, Detection, LineDetector};
-use crate::calib::pixel::{dark_16ths, pixel_bits_d as pixel_bits, saturation_flag};
+use crate::calib::formula::{dark_16ths, pixel_bits_d as pixel_bits};
+use crate::calib::pixel::saturation_flag;
 use crate::calib::{CalibError, FrameCalibration, FrameConditions, LineLevels, PixelFlags};
 use crate::table::MapView;
 use crate::units::{BiasAdu, DarkRel, Electrons, FlatInv, GainEPerAdu};
