@@ -27,6 +27,13 @@ pub struct BlockLevel {
     pub sigma_bits: i32,
 }
 
+/// The join threshold of a block, I26F6 bits: `background + k sigma` (the one formula both
+/// the calibrated scan and the raw pre-filter of [`super::prefilter`] use).
+#[inline(always)]
+pub(crate) fn threshold_bits(l: BlockLevel, k: f32) -> i64 {
+    i64::from(l.bg_bits) + (k * l.sigma_bits as f32) as i64
+}
+
 /// The running per-block estimate.
 #[derive(Clone, Debug)]
 pub struct Background {
@@ -61,12 +68,12 @@ impl Background {
     }
 
     /// Each block's join threshold for `k` sigmas
-    /// ([`super::blobs::threshold_bits`]), computed once per line rather than per pixel (the
+    /// ([`threshold_bits`]), computed once per line rather than per pixel (the
     /// f32-to-i64 conversion is a library call on the M7).
     pub(crate) fn thresholds(&self, k: f32) -> [i64; MAX_BLOCKS] {
         let mut t = [0i64; MAX_BLOCKS];
         for (t, l) in t.iter_mut().zip(self.blocks.iter()).take(self.n_blocks) {
-            *t = super::blobs::threshold_bits(*l, k);
+            *t = threshold_bits(*l, k);
         }
         t
     }

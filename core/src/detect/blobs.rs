@@ -73,15 +73,8 @@ pub struct Detection {
     pub flags: DetectionFlags,
 }
 
-/// The join threshold of a block, I26F6 bits: `background + k sigma` (the one formula both
-/// the calibrated scan and the raw pre-filter of [`super::prefilter`] use).
-#[inline(always)]
-pub(crate) fn threshold_bits(l: super::background::BlockLevel, k: f32) -> i64 {
-    i64::from(l.bg_bits) + (k * l.sigma_bits as f32) as i64
-}
-
 /// True when pixel `x` belongs to a blob: above its block's threshold `thr`
-/// ([`threshold_bits`]), or saturated, and not a listed hot or telegraph pixel.
+/// ([`super::background::threshold_bits`]), or saturated, and not a listed hot or telegraph pixel.
 #[inline(always)]
 pub(crate) fn above_thr(thr: i64, pixels_e: &[Electrons], flags: &[PixelFlags], x: usize) -> bool {
     let (Some(&e), Some(&f)) = (pixels_e.get(x), flags.get(x)) else {
