@@ -69,16 +69,9 @@
 use super::{
     Background, Centroid, CentroidFlags, CentroidInput, Measured, PixelBox, Prepared, math,
 };
-
-/// Weights of the centre of gravity.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum CogPower {
-    /// Weights `F` (eq. 2): the most accurate at high SNR.
-    One,
-    /// Weights `F^2 - var` (eq. 6, noise-unbiased): fewer outliers at low SNR.
-    Two,
-}
+/// Weights of the centre of gravity (defined with the pixel-phase curve format, which records
+/// the power a curve was made for).
+pub use crate::table::pixcorr::CogPower;
 
 /// Where the box is centred.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -113,7 +113,6 @@
 //!   the box centre: the level is taken as exact).
 
 use super::cog::{Anchor, CogParams, CogPower, cog};
-use super::pixcorr::PixCorr;
 use super::{
     Background, Centroid, CentroidFlags, CentroidInput, Measured, finish_in, level_to_bits, math,
     sanitize_var,
@@ -121,6 +120,7 @@ use super::{
 use crate::calib::formula::{QUANTISATION_E as CALIB_QUANTISATION_E, offset_16ths};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::geometry::Output;
+use crate::table::pixcorr::PixCorr;
 use crate::units::{ColumnBiasAdu, Electrons};
 use crate::window::{Rect, Window};
 
