@@ -287,11 +287,6 @@ impl EdgeGrid {
 /// An edge's `(z, erfc(|z|), exp(-z^2))`.
 type Edge = (f32, f32, f32);
 
-/// The standard normal density `exp(-z^2/2) / sqrt(2 pi)`.
-pub fn norm_pdf(z: f32) -> f32 {
-    0.398_942_3 * exp(-0.5 * z * z)
-}
-
 /// The fraction of a unit 1-D Gaussian (sigma `s`, centre `c`) falling in the pixel centred at
 /// `i`: `Phi((i + 1/2 - c) / s) - Phi((i - 1/2 - c) / s)` (paper eq. 3 for eq. 5), computed
 /// from the tail on the same side so that no two numbers near 1 are subtracted.

@@ -51,9 +51,18 @@
 
 pub mod cog;
 pub mod gauss_fit;
-pub mod math;
+pub(crate) mod math;
 pub mod pixcorr;
 pub mod raw_cog;
+
+/// The f32 functions of the centroid methods (`centroid::math`: square root, exponential,
+/// `erfc`, the Gaussian's pixel fractions), reachable from outside the crate only for the
+/// host accuracy tests (`host-tests/tests/centroid_math.rs`, which compare them with f64):
+/// not part of the API.
+#[doc(hidden)]
+pub mod test_only_math {
+    pub use super::math::{EdgeGrid, erfc, erfc_abs_and_gauss, exp, pixel_fraction, sqrt};
+}
 
 use crate::calib::PixelFlags;
 use crate::window::Window;
@@ -186,8 +195,9 @@ pub enum Background {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct BackgroundEstimate {
-    /// Level, e- per pixel, in `Electrons` bits (1/64 e-).
-    pub level_bits: i64,
+    /// Level, e- per pixel, in `Electrons` bits (1/64 e-; [`Self::level_e`] outside the
+    /// crate).
+    pub(crate) level_bits: i64,
     /// Per-pixel variance of the background, e-^2.
     pub variance_e2: f32,
     /// Variance of the level estimate itself (shared by every pixel), e-^2.

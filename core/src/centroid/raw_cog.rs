@@ -42,7 +42,8 @@
 //!
 //! # Difference to the per-pixel calibrated sums
 //! The general path rounds every pixel to 1/64 e- (after truncating the signal term to
-//! 2^-16 e-): each calibrated pixel is within [`QUANTISATION_E`] of the formula's exact
+//! 2^-16 e-): each calibrated pixel is within
+//! [`QUANTISATION_E`](crate::calib::formula::QUANTISATION_E) of the formula's exact
 //! value, so its `sum w F` is within `sum |w| QUANTISATION_E` of the exact sum. The fused
 //! sums are exact integers (`Z_w`, `W_w`, see below) until the per-cell f32 step: converting
 //! `Z_w`, `W_w` and the constants (gain bits, dark bits) to f32 and the products and sums
@@ -117,7 +118,7 @@ use super::{
     Background, Centroid, CentroidFlags, CentroidInput, Measured, finish_in, level_to_bits, math,
     sanitize_var,
 };
-use crate::calib::formula::{QUANTISATION_E as CALIB_QUANTISATION_E, offset_16ths};
+use crate::calib::formula::offset_16ths;
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::geometry::Output;
 use crate::table::pixcorr::PixCorr;
@@ -129,10 +130,6 @@ use crate::window::{Rect, Window};
 pub const MAX_BOX_SIDE: u8 = 9;
 const MB: usize = MAX_BOX_SIDE as usize;
 const MB2: usize = MB * MB;
-
-/// Largest difference of a calibrated pixel to the formula's exact value (the general path's
-/// rounding; the fused path does not round per pixel), e-.
-pub const QUANTISATION_E: f64 = CALIB_QUANTISATION_E;
 
 /// A window of raw samples with the levels of its rows.
 #[derive(Clone, Copy, Debug)]

@@ -16,7 +16,7 @@
 //! Blob positions are means of the blob's pixels weighted by their positive signal: a seed for the centroid
 //! methods, not a measurement.
 
-use super::background::Background;
+use super::background::BlockBackground;
 use super::{DetectConfig, DetectError};
 use crate::calib::PixelFlags;
 use crate::units::Electrons;
@@ -176,7 +176,7 @@ pub struct LineDetector<const N: usize> {
     config: DetectConfig,
     width: u16,
     rows: u16,
-    background: Background,
+    background: BlockBackground,
     /// The previous and the current line's runs; `cur_ix` tells which is current, so that
     /// ending a line flips a flag instead of swapping two 1.5 KB vectors.
     runs: [heapless::Vec<Run, MAX_RUNS>; 2],
@@ -201,7 +201,7 @@ impl<const N: usize> LineDetector<N> {
             config,
             width,
             rows,
-            background: Background::new(usize::from(width)),
+            background: BlockBackground::new(usize::from(width)),
             runs: [heapless::Vec::new(), heapless::Vec::new()],
             cur_ix: false,
             blobs: [Blob::default(); MAX_OPEN],
@@ -241,7 +241,7 @@ impl<const N: usize> LineDetector<N> {
     }
 
     /// The running background and noise estimate.
-    pub fn background(&self) -> &Background {
+    pub fn background(&self) -> &BlockBackground {
         &self.background
     }
 
@@ -287,7 +287,7 @@ impl<const N: usize> LineDetector<N> {
         let thr = self.background.thresholds(self.config.pixel_sigmas);
         let last_block = self.background.block_of(usize::MAX);
         let up = |x: usize| {
-            // The block of x, as `Background::block_of`.
+            // The block of x, as `BlockBackground::block_of`.
             let b = (x / super::background::BLOCK_PX).min(last_block);
             let t = thr.get(b).copied().unwrap_or(i64::MAX);
             above_thr(t, pixels_e, flags, x)
@@ -458,9 +458,9 @@ impl<const N: usize> LineDetector<N> {
                 continue;
             };
             let l = bg.at(usize::from(x));
-            let w_bits = e.to_bits().saturating_sub(l.bg_bits);
+            let w_bits = e.to_bits().saturating_sub(l.background_e.to_bits());
             let w = w_bits as f32 / 64.0;
-            let sigma = l.sigma_bits as f32 / 64.0;
+            let sigma = l.sigma_e.to_bits() as f32 / 64.0;
             b.pixels += 1;
             b.sum_w_e += w;
             let (dx, dy) = (
