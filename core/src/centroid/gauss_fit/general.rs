@@ -13,7 +13,10 @@
 
 use super::{GaussFitParams, Grid, profile, step_usable};
 use crate::centroid::cog::{CogPower, cog_in_box, usable_sigma_px};
-use crate::centroid::{Centroid, CentroidFlags, MAX_SIDE, Measured, PixelBox, Prepared, math, pos};
+use crate::centroid::math::{self, pos};
+use crate::centroid::pixel_box::PixelBox;
+use crate::centroid::prepared::{Measured, Prepared};
+use crate::centroid::{Centroid, CentroidFlags, MAX_SIDE};
 
 type Mat4 = [[f32; 4]; 4];
 

@@ -12,7 +12,9 @@
 
 use super::{GaussFitParams, Grid, general, profile, step_usable};
 use crate::centroid::cog::{CogPower, cog_in_box, usable_sigma_px};
-use crate::centroid::{Centroid, CentroidFlags, Measured, Prepared, math};
+use crate::centroid::math;
+use crate::centroid::prepared::{Measured, Prepared};
+use crate::centroid::{Centroid, CentroidFlags};
 
 /// Largest window side of this path (its profile buffers are zeroed per fit, so they
 /// are sized for star windows, not for [`crate::centroid::MAX_SIDE`]); larger windows take the

@@ -83,7 +83,9 @@
 mod general;
 mod held;
 
-use super::{Background, Centroid, CentroidFlags, CentroidInput, Prepared, math};
+use super::math;
+use super::prepared::Prepared;
+use super::{Background, Centroid, CentroidFlags, CentroidInput};
 
 /// Parameters of [`gauss_fit`].
 #[derive(Clone, Copy, Debug, PartialEq)]

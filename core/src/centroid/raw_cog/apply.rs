@@ -14,11 +14,10 @@ use super::plan::{BoxAt, MB2, PlanError, RawCogPlan, key_of};
 use super::sums::{Meas, fused_cog};
 use super::{RawCog, RawCogParams, RawWindow};
 use crate::calib::{FrameCalibration, PixelFlags};
+use crate::centroid::background::{level_to_bits, sanitize_var};
 use crate::centroid::cog::{Anchor, CogParams, CogPower, cog};
-use crate::centroid::{
-    Background, Centroid, CentroidFlags, CentroidInput, Measured, finish_in, level_to_bits,
-    sanitize_var,
-};
+use crate::centroid::prepared::{Measured, finish_in};
+use crate::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use crate::units::Electrons;
 use crate::window::{Rect, Window};
 

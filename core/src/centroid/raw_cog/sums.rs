@@ -18,7 +18,8 @@ use super::RawWindow;
 use super::plan::{CellConst, ColGroup, MB, RawCogPlan, cell_const};
 use crate::calib::FrameCalibration;
 use crate::calib::formula::offset_16ths;
-use crate::centroid::{CentroidFlags, math, pos};
+use crate::centroid::CentroidFlags;
+use crate::centroid::math::{self, pos};
 use crate::geometry::Output;
 use crate::units::ColumnBiasAdu;
 
