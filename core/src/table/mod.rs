@@ -28,10 +28,10 @@
 //! # Sections
 //! | kind | name | contents | format |
 //! |---|---|---|---|
-//! | 1 | gains | one per output | u32, [`GainEPerAdu`] U4F28 e-/ADU, not 0 |
-//! | 2 | column bias | one per raw column (`line_len`) | i16, [`ColumnBiasAdu`] I12F4 ADU |
-//! | 3 | relative dark | [map header](MapHeader) + u8 per tile | [`DarkRel`] U2F6, covered mean = 1 |
-//! | 4 | inverse flat | map header + u16 per tile | [`FlatInv`] U2F14, not 0 |
+//! | 1 | gains | one per output | u32, [`GainEPerAdu`](crate::units::GainEPerAdu) U4F28 e-/ADU, not 0 |
+//! | 2 | column bias | one per raw column (`line_len`) | i16, [`ColumnBiasAdu`](crate::units::ColumnBiasAdu) I12F4 ADU |
+//! | 3 | relative dark | [map header](MapHeader) + u8 per tile | [`DarkRel`](crate::units::DarkRel) U2F6, covered mean = 1 |
+//! | 4 | inverse flat | map header + u16 per tile | [`FlatInv`](crate::units::FlatInv) U2F14, not 0 |
 //! | 5 | hot pixels | u32 reference temperature U16F16 K, u32 count, entries | see [`HotPixel`] |
 //! | 6 | telegraph pixels | u32 count, entries x u16, y u16 | active coordinates |
 //! | 7 | pixel-phase correction | u16 count (1..=16), u16 reserved 0, curves back to back | see [`pixcorr`] |

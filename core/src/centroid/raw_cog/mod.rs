@@ -1,7 +1,7 @@
 //! The tracking path's corrected centre of gravity straight from a window's RAW samples:
 //! calibration and CoG power 1 fused, with a given background and an optional pixel-phase
 //! curve ([`super::pixcorr`]). It gives what `calibrate_window` + [`super::cog::cog`]
-//! (power 1, [`Background::Given`], box anchored on a given pixel) + [`PixCorr::apply`] give,
+//! (power 1, [`Background::Given`](super::Background::Given), box anchored on a given pixel) + [`PixCorr::apply`] give,
 //! without calibrating any pixel.
 //!
 //! # Formula
@@ -95,19 +95,19 @@
 //! The pixel-phase curve holds only while the CoG lies within half a pixel of the anchor
 //! (its domain is the anchor pixel's phase). When it lands further, the box is moved once to
 //! the CoG's pixel (if it still fits the window unclipped) and the CoG measured again;
-//! [`CentroidFlags::NOT_CONVERGED`] when it still lands more than half a pixel off, or when
+//! [`CentroidFlags::NOT_CONVERGED`](super::CentroidFlags::NOT_CONVERGED) when it still lands more than half a pixel off, or when
 //! the move would leave the window.
 //!
 //! # Where it fails (and what it does then)
 //! - A listed hot or telegraph pixel inside the box: the fused sums cannot apply its own
 //!   dark law or skip it, so the box goes through the general path (`calibrate_window` of
 //!   the box, `cog` with the given background, the curve): exact, slower.
-//! - A saturated sample (raw >= the table's saturation): [`CentroidFlags::SATURATED`], as
+//! - A saturated sample (raw >= the table's saturation): [`CentroidFlags::SATURATED`](super::CentroidFlags::SATURATED), as
 //!   the general path (the value is a lower bound there too).
-//! - A box clipped by the window: [`CentroidFlags::EDGE_CLIPPED`], computed on the clipped
+//! - A box clipped by the window: [`CentroidFlags::EDGE_CLIPPED`](super::CentroidFlags::EDGE_CLIPPED), computed on the clipped
 //!   box like the general path (truncation bias; the curve was made for the full box).
 //! - Flux not positive, bad buffers, an anchor outside the window, a window outside the
-//!   active area, a side above [`MAX_BOX_SIDE`]: [`CentroidFlags::DEGENERATE`] with the
+//!   active area, a side above [`MAX_BOX_SIDE`]: [`CentroidFlags::DEGENERATE`](super::CentroidFlags::DEGENERATE) with the
 //!   anchor pixel as position. Never a panic, never a NaN.
 //! - Everything [`super::cog`] and [`super::pixcorr`] list: pixelisation without a curve, a
 //!   PSF wider than the curve's, a background level that is wrong (it pulls the CoG towards
