@@ -23,7 +23,7 @@
 //!
 //! # Held background
 //! With `fit_background` off, no excluded pixel and sides up to 16 px (`startrack accuracy`'s
-//! configuration, and the near-CRLB method of issue 5) the same estimator runs on three
+//! configuration, the near-CRLB one) the same estimator runs on three
 //! parameters `(x, y, N)` (the 4x4 system's `B` row is then a decoupled unit pivot with a
 //! zero step, so nothing changes but the work):
 //! - `J = (N fy dx, N fx dy, fx fy)` separates: per pixel only the weight (one divide), the
