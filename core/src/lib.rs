@@ -7,8 +7,8 @@
 //! Data flow (each stage a module):
 //! raw readout line/window ([`geometry`]) -> per-line bias and per-frame dark scale
 //! ([`calib::levels`]) -> per-pixel electrons, applied only to the pixels read
-//! ([`calib::pixel`]) with the maps of a calibration table ([`table`]) and the defect lists
-//! ([`calib::defects`]).
+//! ([`calib::pixel`]) with the maps and defect lists of a calibration table ([`table`]) ->
+//! detections ([`detect`]) -> centroids ([`centroid`]).
 //!
 //! Every fixed-point quantity has its format and range stated in [`units`].
 #![no_std]

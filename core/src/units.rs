@@ -3,7 +3,7 @@
 //! `IaFb` / `UaFb` are the `fixed` crate's types: a integer bits (sign included for `I`),
 //! b fraction bits, resolution 2^-b. Ranges below are the ones this crate guarantees, which
 //! may be narrower than the type's; the bounds are what the overflow proofs in
-//! [`crate::calib::pixel`] rely on.
+//! [`crate::calib::formula`] rely on.
 //!
 //! | quantity | type | unit | range | resolution |
 //! |---|---|---|---|---|

@@ -22,11 +22,11 @@ use startrack_core::calib::{
 };
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
-use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::centroid::raw_cog::{RawCogParams, RawCogPlan, RawWindow, raw_cog};
 use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::detect::{DetectConfig, LineDetector, ScanDetector};
 use startrack_core::table::CalibTable;
+use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::units::{Electrons, Kelvin};
 use startrack_core::window::{Rect, Window};
 use startrack_host::pixcorr::{CurveSpec, build_curve};

@@ -25,7 +25,7 @@
 use crate::sim::psf::{pixel_fraction, sigma_of_a};
 use fixed::types::{I1F15, U0F16, U8F8};
 use startrack_core::centroid::cog::CogPower;
-use startrack_core::centroid::pixcorr::{
+use startrack_core::table::pixcorr::{
     CurveHeader, MAX_KNOTS, MIN_KNOTS, PixCorr, PixCorrBackground,
 };
 
@@ -264,7 +264,7 @@ pub fn build_curve(spec: &CurveSpec) -> Result<Curve, BuildError> {
 
 impl Curve {
     /// The curve as the core reads it.
-    pub fn parsed(&self) -> Result<PixCorr<'_>, startrack_core::centroid::pixcorr::PixCorrError> {
+    pub fn parsed(&self) -> Result<PixCorr<'_>, startrack_core::table::pixcorr::PixCorrError> {
         PixCorr::parse(&self.bytes).map(|(c, _)| c)
     }
 }

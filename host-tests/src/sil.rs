@@ -19,8 +19,8 @@ use crate::sim::truth::TruthSections;
 use crate::sim::{SensorParams, Simulator, Star};
 use rand::{RngExt, SeedableRng};
 use startrack_core::centroid::cog::CogPower;
-use startrack_core::centroid::pixcorr::PixCorrBackground;
 use startrack_core::table::CalibTable;
+use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_core::tracker::{
     Event, FixedTable, FixedTemperature, FrameSummary, Mode, Ports, StarRecord, Tracker,
     TrackerBuffers, TrackerConfig,

@@ -4,8 +4,8 @@
 
 use fixed::types::U8F8;
 use proptest::prelude::*;
+use startrack_core::calib::formula::QUANTISATION_E;
 use startrack_core::calib::hot::{HOT_DARK_REL_TOL, hot_dark_e};
-use startrack_core::calib::pixel::QUANTISATION_E;
 use startrack_core::calib::{
     DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
 };

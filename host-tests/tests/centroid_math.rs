@@ -6,7 +6,7 @@
 #[path = "common/psf.rs"]
 mod psf;
 
-use startrack_core::centroid::math;
+use startrack_core::centroid::test_only_math as math;
 
 /// Log-spaced and linear samples of [lo, hi].
 fn samples(lo: f64, hi: f64, n: usize) -> impl Iterator<Item = f64> {

@@ -182,7 +182,7 @@ fn calib_build_adds_the_curves_and_reports_them() {
     let fw = t.pixcorr().find(
         startrack_core::centroid::cog::CogPower::One,
         startrack_core::tracker::TrackerConfig::FLIGHT.box_px(),
-        startrack_core::centroid::pixcorr::PixCorrBackground::PerimeterMedian,
+        startrack_core::table::pixcorr::PixCorrBackground::PerimeterMedian,
         1.2,
     );
     assert!(fw.is_some());

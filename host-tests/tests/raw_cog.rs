@@ -12,10 +12,11 @@ mod psf;
 use fixed::types::U8F8;
 use proptest::prelude::*;
 use psf::{Rng, Star, Win, add_noise, render, sigma_of_a};
+use startrack_core::calib::formula::QUANTISATION_E;
 use startrack_core::calib::{FrameCalibration, FrameConditions, LineLevels, PixelFlags};
 use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
 use startrack_core::centroid::raw_cog::{
-    MAX_BOX_SIDE, PlanError, QUANTISATION_E, RawCog, RawCogParams, RawCogPlan, RawWindow, raw_cog,
+    MAX_BOX_SIDE, PlanError, RawCog, RawCogParams, RawCogPlan, RawWindow, raw_cog,
 };
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use startrack_core::geometry::ReadoutGeometry;

@@ -8,8 +8,8 @@ mod table_fixtures;
 use fixed::types::U8F8;
 use proptest::prelude::*;
 use startrack_core::centroid::cog::CogPower;
-use startrack_core::centroid::pixcorr::PixCorrBackground;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_core::table::{
     CalibTable, DIR_ENTRY_LEN, HEADER_LEN, HotPixel, HotPolicy, SectionKind, TableError,
 };

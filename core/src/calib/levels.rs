@@ -15,6 +15,7 @@
 //! unbiased for the skewed Poisson distribution of dark charge: the rejection band is far
 //! out in the tails. Cost: one sort of 32 values per line.
 
+use super::formula::{offset_16ths, signal_bits};
 use crate::geometry::{MAX_OUTPUTS, Output, ReadoutGeometry};
 use crate::table::CalibTable;
 use crate::units::{BiasAdu, DARK_SCALE_LIMIT_E, Electrons};
@@ -160,9 +161,8 @@ impl DarkScaleEstimator {
                     break;
                 };
                 let out = g.output_of_col(col);
-                let offset =
-                    crate::calib::pixel::offset_16ths(levels.bias(out), table.column_bias(col));
-                *v = crate::calib::pixel::signal_bits(*raw, offset, table.gain(out));
+                let offset = offset_16ths(levels.bias(out), table.column_bias(col));
+                *v = signal_bits(*raw, offset, table.gain(out));
                 n += 1;
             }
         }

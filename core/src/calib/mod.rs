@@ -1,11 +1,14 @@
 //! Raw ADC words to electrons, the way the founding paper prescribes.
 //!
+//! - [`formula`]: the calibration formula on fixed-point bits and why it cannot overflow,
+//!   shared by everything that calibrates.
 //! - [`levels`]: per-line bias from the over-scan (per output) and the frame's dark scale from
 //!   the covered columns.
 //! - [`hot`]: the dark signal of a hot pixel from its own rate and temperature law.
 //! - [`pixel`]: the per-pixel formula, applied only to the pixels the pipeline reads
 //!   (a line span or a star window), with the flags it raises.
 
+pub mod formula;
 pub mod hot;
 pub mod levels;
 pub mod pixel;

@@ -66,19 +66,13 @@
 //! - Excluded pixels in the box bias the centroid away from them (flagged).
 //! - Power 2 at low SNR: `W` can be 0 or negative (DEGENERATE), and the ratio is noisy.
 
-use super::{
-    Background, Centroid, CentroidFlags, CentroidInput, Measured, PixelBox, Prepared, math,
-};
-
-/// Weights of the centre of gravity.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum CogPower {
-    /// Weights `F` (eq. 2): the most accurate at high SNR.
-    One,
-    /// Weights `F^2 - var` (eq. 6, noise-unbiased): fewer outliers at low SNR.
-    Two,
-}
+use super::math::{self, pos};
+use super::pixel_box::PixelBox;
+use super::prepared::{Measured, Prepared};
+use super::{Background, Centroid, CentroidFlags, CentroidInput};
+/// Weights of the centre of gravity (defined with the pixel-phase curve format, which records
+/// the power a curve was made for).
+pub use crate::table::pixcorr::CogPower;
 
 /// Where the box is centred.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -213,7 +207,7 @@ fn cog_in_box_f32(
             CogPower::One => (f, v, 1.0),
             CogPower::Two => {
                 let w = f * f - (f + var_bg + var_level);
-                (w, (4.0 * super::pos(w) + 2.0 * v) * v, 2.0 * f - 1.0)
+                (w, (4.0 * pos(w) + 2.0 * v) * v, 2.0 * f - 1.0)
             }
         };
         let dx = f32::from(col) - f32::from(anchor.0);

@@ -20,6 +20,13 @@
 //! reaches a centroid. Cost on the Cortex-M7 (QEMU instructions): `sqrt` ~25 with one
 //! `vdiv` (~14 cycles on the M7), `exp` ~35 with none.
 
+/// `max(v, 0)` (0 for NaN, as `f32::max`) by a compare: without `-C target-cpu=cortex-m7`
+/// (the Cortex-M4 FPU, no `vmaxnm`) `f32::max` is a call to `fmaxf`.
+#[inline(always)]
+pub(crate) fn pos(v: f32) -> f32 {
+    if v > 0.0 { v } else { 0.0 }
+}
+
 /// Square root; 0 for negative, zero or NaN input, `f32::MAX.sqrt()` for +inf.
 ///
 /// `r0` from the bit pattern (`0x5f37_59df - bits / 2`, within 3.5 % of `1/sqrt(x)`), two
@@ -286,11 +293,6 @@ impl EdgeGrid {
 
 /// An edge's `(z, erfc(|z|), exp(-z^2))`.
 type Edge = (f32, f32, f32);
-
-/// The standard normal density `exp(-z^2/2) / sqrt(2 pi)`.
-pub fn norm_pdf(z: f32) -> f32 {
-    0.398_942_3 * exp(-0.5 * z * z)
-}
 
 /// The fraction of a unit 1-D Gaussian (sigma `s`, centre `c`) falling in the pixel centred at
 /// `i`: `Phi((i + 1/2 - c) / s) - Phi((i - 1/2 - c) / s)` (paper eq. 3 for eq. 5), computed

@@ -18,24 +18,31 @@ pub const MAX_BLOCKS: usize = 64;
 /// Exponential smoothing length, lines.
 pub const SMOOTH_LINES: i64 = 8;
 
-/// Background and noise of one block, in I26F6 bits (1/64 e-).
+/// Background and noise of one block.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct BlockLevel {
-    /// Background, bits.
-    pub bg_bits: i32,
-    /// Noise sigma, bits (at least 1/64 e-).
-    pub sigma_bits: i32,
+    /// Background, e- per pixel.
+    pub background_e: Electrons,
+    /// Noise sigma, e- (at least 1/64 e-).
+    pub sigma_e: Electrons,
 }
 
-/// The running per-block estimate.
+/// The join threshold of a block, I26F6 bits: `background + k sigma` (the one formula both
+/// the calibrated scan and the raw pre-filter of [`super::prefilter`] use).
+#[inline(always)]
+pub(crate) fn threshold_bits(l: BlockLevel, k: f32) -> i64 {
+    i64::from(l.background_e.to_bits()) + (k * l.sigma_e.to_bits() as f32) as i64
+}
+
+/// The running per-block background and noise estimate of the lines seen so far.
 #[derive(Clone, Debug)]
-pub struct Background {
+pub struct BlockBackground {
     blocks: [BlockLevel; MAX_BLOCKS],
     n_blocks: usize,
     primed: bool,
 }
 
-impl Background {
+impl BlockBackground {
     /// An estimator for lines of `width` pixels (at most `MAX_BLOCKS * BLOCK_PX`; wider lines
     /// share the last block's estimate).
     pub fn new(width: usize) -> Self {
@@ -61,12 +68,12 @@ impl Background {
     }
 
     /// Each block's join threshold for `k` sigmas
-    /// ([`super::blobs::threshold_bits`]), computed once per line rather than per pixel (the
+    /// ([`threshold_bits`]), computed once per line rather than per pixel (the
     /// f32-to-i64 conversion is a library call on the M7).
     pub(crate) fn thresholds(&self, k: f32) -> [i64; MAX_BLOCKS] {
         let mut t = [0i64; MAX_BLOCKS];
         for (t, l) in t.iter_mut().zip(self.blocks.iter()).take(self.n_blocks) {
-            *t = super::blobs::threshold_bits(*l, k);
+            *t = threshold_bits(*l, k);
         }
         t
     }
@@ -114,14 +121,16 @@ impl Background {
             let sigma = (median - low).max(1);
             if first {
                 *level = BlockLevel {
-                    bg_bits: median as i32,
-                    sigma_bits: sigma as i32,
+                    background_e: Electrons::from_bits(median as i32),
+                    sigma_e: Electrons::from_bits(sigma as i32),
                 };
             } else {
-                let bg = i64::from(level.bg_bits);
-                let sg = i64::from(level.sigma_bits);
-                level.bg_bits = (bg + (median - bg) / SMOOTH_LINES) as i32;
-                level.sigma_bits = (sg + (sigma - sg) / SMOOTH_LINES).max(1) as i32;
+                let bg = i64::from(level.background_e.to_bits());
+                let sg = i64::from(level.sigma_e.to_bits());
+                level.background_e =
+                    Electrons::from_bits((bg + (median - bg) / SMOOTH_LINES) as i32);
+                level.sigma_e =
+                    Electrons::from_bits((sg + (sigma - sg) / SMOOTH_LINES).max(1) as i32);
             }
         }
         self.primed = true;

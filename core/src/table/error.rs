@@ -117,7 +117,7 @@ pub enum TableError {
         /// The curve's index.
         index: u32,
         /// What is wrong with it.
-        error: crate::centroid::pixcorr::PixCorrError,
+        error: super::pixcorr::PixCorrError,
     },
 }
 

@@ -28,13 +28,13 @@
 //! # Sections
 //! | kind | name | contents | format |
 //! |---|---|---|---|
-//! | 1 | gains | one per output | u32, [`GainEPerAdu`] U4F28 e-/ADU, not 0 |
-//! | 2 | column bias | one per raw column (`line_len`) | i16, [`ColumnBiasAdu`] I12F4 ADU |
-//! | 3 | relative dark | [map header](MapHeader) + u8 per tile | [`DarkRel`] U2F6, covered mean = 1 |
-//! | 4 | inverse flat | map header + u16 per tile | [`FlatInv`] U2F14, not 0 |
+//! | 1 | gains | one per output | u32, [`GainEPerAdu`](crate::units::GainEPerAdu) U4F28 e-/ADU, not 0 |
+//! | 2 | column bias | one per raw column (`line_len`) | i16, [`ColumnBiasAdu`](crate::units::ColumnBiasAdu) I12F4 ADU |
+//! | 3 | relative dark | [map header](MapHeader) + u8 per tile | [`DarkRel`](crate::units::DarkRel) U2F6, covered mean = 1 |
+//! | 4 | inverse flat | map header + u16 per tile | [`FlatInv`](crate::units::FlatInv) U2F14, not 0 |
 //! | 5 | hot pixels | u32 reference temperature U16F16 K, u32 count, entries | see [`HotPixel`] |
 //! | 6 | telegraph pixels | u32 count, entries x u16, y u16 | active coordinates |
-//! | 7 | pixel-phase correction | u16 count (1..=16), u16 reserved 0, curves back to back | see [`crate::centroid::pixcorr`] |
+//! | 7 | pixel-phase correction | u16 count (1..=16), u16 reserved 0, curves back to back | see [`pixcorr`] |
 //!
 //! Gains are required; every other section is optional and its absence means "no
 //! correction": column bias 0, relative dark 1 (the covered columns' dark subtracted
@@ -45,7 +45,7 @@
 //! knots (i16, I1F15 px); each curve is checked like any entry, and a bad one is reported as
 //! [`TableError::PixCorrCurve`] with its index. The host builds them
 //! (`startrack_host::pixcorr`); the firmware picks one with [`CalibTable::pixcorr`] and
-//! [`crate::centroid::pixcorr::PixCorrSet::find`].
+//! [`pixcorr::PixCorrSet::find`].
 //!
 //! A map covers the active area in square tiles of `2^tile_log2` pixels (0 = one value per
 //! pixel, the full map; larger tiles are the reduced form that fits internal flash: the
@@ -60,6 +60,7 @@
 
 mod error;
 mod parse;
+pub mod pixcorr;
 mod write;
 
 pub use error::{SectionKind, TableError, WriteError};

@@ -1,12 +1,12 @@
 //! Reading and checking a calibration table in place.
 
 use super::error::{SectionKind, TableError};
+use super::pixcorr::PixCorrSet;
 use super::{
     CRC, DIR_ENTRY_LEN, HEADER_LEN, HOT_ENTRY_LEN, HotPixel, HotPolicy, MAGIC, MAP_HEADER_LEN,
     MAX_PIXCORR_CURVES, MAX_TILE_LOG2, MapHeader, PIXCORR_HEADER_LEN, RefTemperature,
     TELEGRAPH_ENTRY_LEN, VERSION,
 };
-use crate::centroid::pixcorr::PixCorrSet;
 use crate::geometry::{MAX_OUTPUTS, Output, ReadoutGeometry};
 use crate::units::{ColumnBiasAdu, DarkRel, ERatePerS, FlatInv, GainEPerAdu};
 use fixed::types::U8F8;

@@ -2,11 +2,11 @@
 //! an in-flight recalibration produce exactly the bytes [`CalibTable::parse`] reads.
 
 use super::error::{SectionKind, WriteError};
+use super::pixcorr::PixCorr;
 use super::{
     CRC, DIR_ENTRY_LEN, HEADER_LEN, HOT_ENTRY_LEN, HotPixel, HotPolicy, MAGIC, MAP_HEADER_LEN,
     MapHeader, PIXCORR_HEADER_LEN, RefTemperature, TELEGRAPH_ENTRY_LEN, VERSION,
 };
-use crate::centroid::pixcorr::PixCorr;
 use crate::geometry::ReadoutGeometry;
 use crate::table::CalibTable;
 use crate::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu};

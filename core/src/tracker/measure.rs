@@ -18,10 +18,10 @@ use super::record::{StarFlags, StarRecord};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::centroid::cog::{CogParams, CogPower, cog};
 use crate::centroid::gauss_fit::{GaussFitParams, gauss_fit};
-use crate::centroid::pixcorr::{PixCorr, PixCorrBackground};
 use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
 use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
 use crate::table::CalibTable;
+use crate::table::pixcorr::{PixCorr, PixCorrBackground};
 use crate::units::{BiasAdu, Electrons};
 use crate::window::{Rect, Window};
 

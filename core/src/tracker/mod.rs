@@ -27,7 +27,7 @@
 //! follows the temperature, slow against a frame); the very first frame uses its own
 //! running estimate, which already holds the line's covered pixels.
 //!
-//! Every star is measured the same way in both modes ([`measure`]): the configured method
+//! Every star is measured the same way in both modes (`measure`): the configured method
 //! on a `window_px` window around its brightest pixel, the border median as background,
 //! the table's pixel-phase curve chosen by one rule for a CoG ([`select_curve`]).
 //!
@@ -50,7 +50,7 @@
 //! Per acquisition line, the scan's ~13 M7 instructions a pixel (`cargo m7-bench`,
 //! `scan_detect`), a 2 KB copy into the ring, and the bias levels; per tracking line, a
 //! row test per window and the copy of the rows in windows; per star, the window's
-//! calibration and the method ([`measure`]).
+//! calibration and the method (`measure`).
 
 mod acquire;
 pub mod config;

@@ -20,8 +20,8 @@ use crate::fits::{read_keys, read_raw_frame};
 use crate::home::{FrameClock, FrameLines, Recorder, block_on, write_csv};
 use clap::builder::TypedValueParser as _;
 use startrack_core::centroid::cog::CogPower;
-use startrack_core::centroid::pixcorr::{CurveHeader, PixCorrBackground};
 use startrack_core::table::CalibTable;
+use startrack_core::table::pixcorr::{CurveHeader, PixCorrBackground};
 use startrack_core::tracker::{
     CentroidMethod, FixedTable, FixedTemperature, FrameSummary, Mode, Ports, StarRecord, Tracker,
     TrackerBuffers, TrackerConfig, select_curve,

@@ -3,8 +3,8 @@
 
 use crate::table_fixtures::*;
 use fixed::types::U8F8;
-use startrack_core::centroid::pixcorr::PixCorrError;
 use startrack_core::geometry::{GeometryError, ReadoutGeometry};
+use startrack_core::table::pixcorr::PixCorrError;
 use startrack_core::table::{
     CalibTable, DIR_ENTRY_LEN, HEADER_LEN, MapSpec, SectionKind, TableError, TableSpec, WriteError,
     write_table,

@@ -5,7 +5,7 @@
 use super::round_trip::round_trip;
 use super::{parse_unit, with_section};
 use crate::table_fixtures::*;
-use startrack_core::centroid::pixcorr::{PixCorr, PixCorrError};
+use startrack_core::table::pixcorr::{PixCorr, PixCorrError};
 use startrack_core::table::{CalibTable, SectionKind, TableError, WriteError, write_table};
 
 #[test]
@@ -107,7 +107,7 @@ fn pixcorr_write_checks_the_curve_count() {
 #[test]
 fn pixcorr_curve_from_the_host_builder_round_trips_and_corrects() {
     use startrack_core::centroid::cog::CogPower;
-    use startrack_core::centroid::pixcorr::PixCorrBackground;
+    use startrack_core::table::pixcorr::PixCorrBackground;
     use startrack_host::pixcorr::{CurveSpec, build_curve, measured_phase};
     let spec = CurveSpec {
         a_px: 1.5,

@@ -12,8 +12,8 @@ use core::hint::black_box;
 use startrack_core::calib::PixelFlags;
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
-use startrack_core::centroid::pixcorr::PixCorr;
 use startrack_core::centroid::{Background, CentroidInput};
+use startrack_core::table::pixcorr::PixCorr;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 

@@ -36,9 +36,9 @@ use fixed::types::U16F16;
 use harness::{Bench, Out, exit, systick_handler};
 use inputs::{Lcg, s_curve_bytes, write_bench_table};
 use startrack_core::calib::{FrameCalibration, FrameConditions};
-use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::centroid::raw_cog::RawCogParams;
 use startrack_core::table::CalibTable;
+use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::units::Electrons;
 
 // ---------------------------------------------------------------------------------------------

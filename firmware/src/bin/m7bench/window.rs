@@ -13,8 +13,8 @@ use crate::harness::{Bench, Out};
 use crate::inputs::{G, Lcg, RAW_COLS, placeholder_levels, raw_line};
 use core::hint::black_box;
 use startrack_core::calib::{FrameCalibration, LineLevels, PixelFlags};
-use startrack_core::centroid::pixcorr::PixCorr;
 use startrack_core::centroid::raw_cog::{RawCogParams, RawCogPlan, RawWindow, raw_cog};
+use startrack_core::table::pixcorr::PixCorr;
 use startrack_core::units::Electrons;
 use startrack_core::window::Rect;
 

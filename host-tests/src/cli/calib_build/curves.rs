@@ -9,7 +9,7 @@ use super::args::{CalibBuildArgs, parse_list};
 use crate::cli::CliError;
 use crate::pixcorr::{Curve, CurveSpec, build_curve};
 use startrack_core::centroid::cog::CogPower;
-use startrack_core::centroid::pixcorr::PixCorrBackground;
+use startrack_core::table::pixcorr::PixCorrBackground;
 
 /// Knots per pixel-phase curve (74 bytes each).
 pub const PIXCORR_KNOTS: u8 = 33;

@@ -4,8 +4,8 @@
 //! Cost: one value per tile, column or list entry.
 
 use startrack_core::centroid::cog::CogPower;
-use startrack_core::centroid::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::table::{
     HotPixel, HotPolicy, MapSpec, TableSpec, write_table, write_table_with_pixcorr,
 };

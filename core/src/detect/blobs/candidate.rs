@@ -1,0 +1,123 @@
+//! From a closed blob to a star candidate: the counting rules of the configuration (pixels,
+//! peak sigmas, saturation), the measured SNR (eq. 8), the shape test for blends, the flags,
+//! and the bounded list that keeps the `N` brightest; plus the reporting of the candidates a
+//! line completed, for the firmware's acquisition centroiding.
+//!
+//! # Cost
+//! Per closed blob one square root for the SNR and one for the covariance's eigenvalues; on
+//! a full list a scan for the faintest candidate (`N` compares). The `_closed` variants copy
+//! the candidate list once per line.
+
+use super::{Blob, Detection, DetectionFlags, LineDetector};
+use crate::calib::PixelFlags;
+use crate::detect::DetectError;
+use crate::units::Electrons;
+
+impl<const N: usize> LineDetector<N> {
+    /// Completes blob `b`: a candidate when it counts (its size and peak, or saturated) and
+    /// its SNR passes, kept in the list by the overflow policy of [`super`].
+    pub(super) fn complete(&mut self, b: &Blob) {
+        let saturated = b.flags.contains(DetectionFlags::SATURATED);
+        if !saturated
+            && (b.pixels < self.config.min_pixels || b.peak_sigmas <= self.config.peak_sigmas)
+        {
+            return;
+        }
+        let s = b.sum_w_e;
+        let snr = s / libm::sqrtf(s.max(0.0) + b.var_e2).max(f32::MIN_POSITIVE);
+        if snr.is_nan() || snr <= self.config.min_snr {
+            return;
+        }
+        let mut flags = b.flags;
+        let (x, y) = match b.moments.shape() {
+            Some(((mx, my), (l1, l2))) => {
+                // A single star is round to within noise; a pair is elongated along the line
+                // joining it (its variance grows by f (1 - f) d^2 for fluxes f, 1 - f and
+                // separation d).
+                if l1 > 2.0 * l2 && l1 - l2 > 1.0 {
+                    flags |= DetectionFlags::BLENDED;
+                }
+                (f32::from(b.ref_x) + mx, f32::from(b.ref_y) + my)
+            }
+            None => (f32::from(b.peak_x), f32::from(b.peak_y)),
+        };
+        if snr < self.config.low_snr {
+            flags |= DetectionFlags::LOW_SNR;
+        }
+        if b.x_min == 0
+            || b.x_max.saturating_add(1) >= self.width
+            || b.y_min == 0
+            || b.last_y.saturating_add(1) >= self.rows
+        {
+            flags |= DetectionFlags::EDGE;
+        }
+        let d = Detection {
+            x_px: x.clamp(f32::from(b.x_min), f32::from(b.x_max)),
+            y_px: y.clamp(f32::from(b.y_min), f32::from(b.last_y)),
+            peak_x: b.peak_x,
+            peak_y: b.peak_y,
+            flux_e: s,
+            pixels: b.pixels,
+            snr,
+            flags,
+        };
+        if let Err(d) = self.candidates.push(d) {
+            self.dropped += 1;
+            let faintest = self
+                .candidates
+                .iter()
+                .enumerate()
+                .min_by(|a, b| a.1.flux_e.total_cmp(&b.1.flux_e))
+                .map(|(i, c)| (i, c.flux_e));
+            if let Some((i, f)) = faintest
+                && d.flux_e > f
+                && let Some(slot) = self.candidates.get_mut(i)
+            {
+                *slot = d;
+            }
+        }
+    }
+}
+
+/// Reporting the candidates a line completed (acquisition centroiding in the firmware): kept
+/// apart from the detector's internals, it compares the candidate list before and after.
+impl<const N: usize> LineDetector<N> {
+    /// [`Self::push_line`], then writes into `closed` the candidates that this line
+    /// completed and the list kept (a new candidate, or one that replaced a fainter one);
+    /// a candidate the full list refused is not reported (it is counted in
+    /// [`Self::dropped`]). Cost: a copy of the candidate list per line.
+    pub fn push_line_closed(
+        &mut self,
+        y: u16,
+        pixels_e: &[Electrons],
+        flags: &[PixelFlags],
+        closed: &mut heapless::Vec<Detection, N>,
+    ) -> Result<(), DetectError> {
+        let before = self.candidates.clone();
+        closed.clear();
+        self.push_line(y, pixels_e, flags)?;
+        self.changed_since(&before, closed);
+        Ok(())
+    }
+
+    /// [`Self::finish`], reporting the candidates it completed like [`Self::push_line_closed`].
+    pub fn finish_closed(&mut self, closed: &mut heapless::Vec<Detection, N>) {
+        let before = self.candidates.clone();
+        closed.clear();
+        self.finish();
+        self.changed_since(&before, closed);
+    }
+
+    fn changed_since(
+        &self,
+        before: &heapless::Vec<Detection, N>,
+        closed: &mut heapless::Vec<Detection, N>,
+    ) {
+        for (i, c) in self.candidates.iter().enumerate() {
+            if before.get(i) != Some(c) {
+                // `closed` has the list's capacity, so this cannot fail.
+                let _ = closed.push(*c);
+            }
+        }
+    }
+}
