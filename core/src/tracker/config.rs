@@ -101,9 +101,10 @@ pub struct TrackerConfig {
 
 impl TrackerConfig {
     /// The flight configuration. The Gauss fit in both modes: the measured frontier
-    /// (docs/speed.md) puts it within 1.04 x the Cramer-Rao bound, and 30 fitted 7x7 stars
-    /// cost ~0.4 M M7 instructions, under a millisecond at 480 MHz against a frame time of
-    /// 50 ms or more; the CoG methods stay for budgets that need them.
+    /// (docs/speed.md) puts it within 1.04 x the Cramer-Rao bound, at ~7,000 M7 instructions
+    /// a 7x7 star against ~2,600 for the fused CoG, a small part of a 30-star tracking frame
+    /// (`cargo m7-bench`, `tracker_tracking_frame`: 9.1 M, two thirds of it the bias and dark
+    /// scale of every line); the CoG methods stay for budgets that need them.
     pub const FLIGHT: Self = Self {
         acquisition_method: CentroidMethod::GaussFit,
         tracking_method: CentroidMethod::GaussFit,

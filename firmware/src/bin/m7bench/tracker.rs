@@ -49,7 +49,6 @@ pub fn run(
 ) -> Result<(), &'static str> {
     let stars: [(usize, usize); STARS] = core::array::from_fn(|i| (40 + 31 * i, 50 + 29 * i));
     let config = TrackerConfig {
-
         // The synthetic stars' width, a = sigma / sqrt(0.31).
         psf_a_px: PSF_SIGMA_PX / 0.556_776_4,
         ..TrackerConfig::FLIGHT
