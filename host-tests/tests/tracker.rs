@@ -12,6 +12,10 @@
 //! The mode rules, refused lines and configurations, random operation sequences and the
 //! memory bound are in `tracker_rules.rs`.
 
+#[path = "common/field.rs"]
+mod common_field;
+
+use common_field::field;
 use startrack_core::calib::{FrameCalibration, FrameConditions, PixelFlags};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::{Background, CentroidInput};
@@ -24,11 +28,10 @@ use startrack_core::tracker::{
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 use startrack_host::cli::process::{HOST_CAPACITY, process_frame};
-use startrack_host::demo::{render_frame, star_field};
+use startrack_host::demo::render_frame;
 use startrack_host::home::{FrameClock, Recorder, SimLines, block_on, frame_levels};
 use startrack_host::sil::{self, SilConfig};
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator};
+use startrack_host::sim::SensorParams;
 
 /// The default SIL run: what `startrack sil --frames 20` does.
 #[test]
@@ -179,17 +182,6 @@ fn sil_fused_cog_tracking_follows_the_drift() {
     // 7 frames x 20 stars x 2 axes = 280 terms: sqrt(2/280) = 0.085; the fused CoG's sigma
     // is within 1.00-1.15 of its scatter (host test raw_cog).
     assert!((0.7..1.45).contains(&per_dof), "chi2/dof {per_dof}");
-}
-
-/// The sensor, a seeded field and its true table, for the frame-level tests.
-fn field(seed: u64, stars: usize) -> (Simulator, Vec<u8>) {
-    let params = SensorParams {
-        seed,
-        ..SensorParams::default()
-    };
-    let sim = Simulator::new(params.clone(), star_field(seed, stars, &params));
-    let table = sim.truth_table(TruthSections::ALL).unwrap();
-    (sim, table)
 }
 
 fn host_config() -> TrackerConfig {

@@ -2,27 +2,18 @@
 //! (no table, commands, a held standby), refused lines, every configuration check, random
 //! operation sequences (no panic, every loss counted), and the memory bound.
 
+#[path = "common/field.rs"]
+mod common_field;
+
+use common_field::field;
 use startrack_core::detect::LineDetector;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
     CentroidMethod, CommandError, ConfigError, Event, FrameInputs, LineOutcome, Mode, ModeReason,
     ReadoutRequest, Tracker, TrackerBuffers, TrackerConfig,
 };
-use startrack_host::demo::star_field;
 use startrack_host::home::Recorder;
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator};
-
-/// The sensor, a seeded field and its true table.
-fn field(seed: u64, stars: usize) -> (Simulator, Vec<u8>) {
-    let params = SensorParams {
-        seed,
-        ..SensorParams::default()
-    };
-    let sim = Simulator::new(params.clone(), star_field(seed, stars, &params));
-    let table = sim.truth_table(TruthSections::ALL).unwrap();
-    (sim, table)
-}
+use startrack_host::sim::SensorParams;
 
 /// A tracker on the default sensor with its true table, and a recorder.
 fn small_tracker(buffers: &mut TrackerBuffers) -> Tracker<'static, '_, 32> {

@@ -53,15 +53,21 @@ pub struct DetectConfig {
     pub low_snr: f32,
 }
 
+impl DetectConfig {
+    /// The defaults: join at 2.5 sigma, a peak above 5 sigma, at least 2 pixels, SNR above 3,
+    /// low-SNR flag below 5.
+    pub const DEFAULT: Self = Self {
+        pixel_sigmas: 2.5,
+        peak_sigmas: 5.0,
+        min_pixels: 2,
+        min_snr: 3.0,
+        low_snr: 5.0,
+    };
+}
+
 impl Default for DetectConfig {
     fn default() -> Self {
-        Self {
-            pixel_sigmas: 2.5,
-            peak_sigmas: 5.0,
-            min_pixels: 2,
-            min_snr: 3.0,
-            low_snr: 5.0,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -11,24 +11,16 @@
 //! instructions a pixel, `cargo m7-bench` `scan_detect`), a 2 KB copy into the ring and a
 //! copy of the candidate list (`N` x 28 B); per star, a window copy and its measurement.
 
-use super::Ring;
 use super::config::{CentroidMethod, TrackerConfig};
-use super::list::{Carry, StarList};
-use super::measure::{Policy, Scratch, measure};
+use super::list::Carry;
+use super::measure::{Policy, measure};
 use super::record::{FrameSummary, LineOutcome, StarFlags, StarRecord};
+use super::{Ring, Shared};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::detect::{Detection, ScanDetector};
 use crate::geometry::ReadoutGeometry;
 use crate::units::Electrons;
 use crate::window::Rect;
-
-/// What acquisition shares with the rest of the tracker for one call.
-pub(super) struct Shared<'a, const N: usize> {
-    pub(super) ring: &'a mut Ring,
-    pub(super) scratch: &'a mut Scratch,
-    pub(super) stars: &'a mut StarList<N>,
-    pub(super) summary: &'a mut FrameSummary,
-}
 
 /// A closed blob waiting for its window's last row.
 #[derive(Clone, Copy, Debug)]

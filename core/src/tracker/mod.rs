@@ -162,12 +162,41 @@ pub struct Tracker<'t, 'b, const N: usize> {
     last_line: Option<u16>,
     conditions: Option<FrameConditions>,
     temperature_k: Kelvin,
-    summary: FrameSummary,
     policy: Option<Policy<'t>>,
     acq: Acquisition<'t, N>,
     trk: Tracking,
-    stars: StarList<N>,
+    work: FrameWork<N>,
+}
+
+/// What a frame's measurements write into: one window's scratch, the star list, the
+/// frame's summary with its counters.
+struct FrameWork<const N: usize> {
     scratch: Scratch,
+    stars: StarList<N>,
+    summary: FrameSummary,
+}
+
+/// What a mode's work reaches for one call: the large buffers and the frame's work.
+pub(crate) struct Shared<'a, const N: usize> {
+    pub(crate) ring: &'a mut Ring,
+    pub(crate) capture: &'a mut Capture,
+    pub(crate) plans: &'a mut [RawCogPlan; TRACK_WINDOWS],
+    pub(crate) scratch: &'a mut Scratch,
+    pub(crate) stars: &'a mut StarList<N>,
+    pub(crate) summary: &'a mut FrameSummary,
+}
+
+impl<'a, const N: usize> Shared<'a, N> {
+    fn new(buffers: &'a mut TrackerBuffers, work: &'a mut FrameWork<N>) -> Self {
+        Self {
+            ring: &mut buffers.ring,
+            capture: &mut buffers.capture,
+            plans: &mut buffers.plans,
+            scratch: &mut work.scratch,
+            stars: &mut work.stars,
+            summary: &mut work.summary,
+        }
+    }
 }
 
 impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
@@ -200,12 +229,14 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             last_line: None,
             conditions: None,
             temperature_k: Kelvin::ZERO,
-            summary: empty_summary(0, Mode::Standby, 0),
             policy: None,
             acq: Acquisition::new(),
             trk: Tracking::new(),
-            stars: StarList::new(),
-            scratch: Scratch::new(),
+            work: FrameWork {
+                scratch: Scratch::new(),
+                stars: StarList::new(),
+                summary: empty_summary(0, Mode::Standby, 0),
+            },
         })
     }
 
@@ -332,7 +363,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             (None, None) => (Kelvin::ZERO, TemperatureSource::None),
         };
         self.temperature_k = temperature_k;
-        self.summary = FrameSummary {
+        self.work.summary = FrameSummary {
             calibrated: table.is_some(),
             temperature_k,
             temperature_source: source,
@@ -341,7 +372,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.estimator = DarkScaleEstimator::new();
         self.last_line = None;
         self.conditions = None;
-        self.stars.clear(usize::from(self.config.max_stars));
+        self.work.stars.clear(usize::from(self.config.max_stars));
         self.policy = table.map(|t| {
             let method = match to {
                 Mode::Tracking => self.config.tracking_method,
@@ -356,9 +387,9 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
                     &self.config,
                     &self.geometry,
                     &mut self.buffers.capture,
-                    &mut self.summary,
+                    &mut self.work.summary,
                 );
-                self.summary.track_windows = placed;
+                self.work.summary.track_windows = placed;
             }
             Mode::Standby => {}
         }
@@ -378,7 +409,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         let (outcome, dark_scale_e) = match self.take_line(line, samples, &mut bias_adu) {
             Some(done) => done,
             None => {
-                self.summary.lines_refused = self.summary.lines_refused.saturating_add(1);
+                self.work.summary.lines_refused = self.work.summary.lines_refused.saturating_add(1);
                 (LineOutcome::Refused, Electrons::ZERO)
             }
         };
@@ -411,7 +442,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         let levels = LineLevels::measure(&self.geometry, samples).ok()?;
         *bias_adu = levels.bias_adu;
         self.last_line = Some(line);
-        self.summary.lines = self.summary.lines.saturating_add(1);
+        self.work.summary.lines = self.work.summary.lines.saturating_add(1);
         let active = line < self.geometry.active_rows;
         let Some(table) = self.table else {
             let outcome = if active {
@@ -446,12 +477,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
                 line,
                 samples,
                 &levels,
-                acquire::Shared {
-                    ring: &mut self.buffers.ring,
-                    scratch: &mut self.scratch,
-                    stars: &mut self.stars,
-                    summary: &mut self.summary,
-                },
+                Shared::new(self.buffers, &mut self.work),
             ),
             (Mode::Tracking, Some(policy)) => self.trk.line(
                 &cal,
@@ -460,13 +486,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
                 line,
                 samples,
                 &levels,
-                track::Shared {
-                    capture: &mut self.buffers.capture,
-                    plans: &mut self.buffers.plans,
-                    scratch: &mut self.scratch,
-                    stars: &mut self.stars,
-                    summary: &mut self.summary,
-                },
+                Shared::new(self.buffers, &mut self.work),
             ),
             _ => LineOutcome::Levels,
         };
@@ -478,7 +498,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
     /// one when no frame is open).
     pub fn end_frame(&mut self, telemetry: &mut dyn TelemetrySink) -> FrameSummary {
         if !self.open {
-            return self.summary;
+            return self.work.summary;
         }
         self.open = false;
         if let (Some(table), Some(conditions), Some(policy)) =
@@ -491,48 +511,38 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
                     &policy,
                     &self.config,
                     &self.geometry,
-                    acquire::Shared {
-                        ring: &mut self.buffers.ring,
-                        scratch: &mut self.scratch,
-                        stars: &mut self.stars,
-                        summary: &mut self.summary,
-                    },
+                    Shared::new(self.buffers, &mut self.work),
                 ),
                 Mode::Tracking => self.trk.finish(
                     &cal,
                     &policy,
                     &self.config,
-                    track::Shared {
-                        capture: &mut self.buffers.capture,
-                        plans: &mut self.buffers.plans,
-                        scratch: &mut self.scratch,
-                        stars: &mut self.stars,
-                        summary: &mut self.summary,
-                    },
+                    Shared::new(self.buffers, &mut self.work),
                 ),
                 Mode::Standby => {}
             }
         }
         let estimate = self.table.and(self.estimator.estimate());
-        self.summary.dark_scale_e = estimate;
+        self.work.summary.dark_scale_e = estimate;
         if estimate.is_some() {
             self.prev_dark_scale = estimate;
         }
         let mut centroids = 0u16;
-        for s in self.stars.records() {
+        for s in self.work.stars.records() {
             telemetry.star(self.frame, s);
             if s.is_centroid() {
                 centroids = centroids.saturating_add(1);
             }
         }
-        self.summary.stars = u16::try_from(self.stars.records().len()).unwrap_or(u16::MAX);
-        self.summary.centroids = centroids;
-        self.summary.stars_dropped = self.stars.dropped;
+        self.work.summary.stars =
+            u16::try_from(self.work.stars.records().len()).unwrap_or(u16::MAX);
+        self.work.summary.centroids = centroids;
+        self.work.summary.stars_dropped = self.work.stars.dropped;
         self.trk
-            .keep_priors(&self.stars, usize::from(self.config.max_tracked));
-        self.summary.next_mode = self.modes.end(centroids, &self.config);
-        telemetry.frame(&self.summary);
-        self.summary
+            .keep_priors(&self.work.stars, usize::from(self.config.max_tracked));
+        self.work.summary.next_mode = self.modes.end(centroids, &self.config);
+        telemetry.frame(&self.work.summary);
+        self.work.summary
     }
 }
 

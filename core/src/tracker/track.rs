@@ -14,26 +14,18 @@
 //! operations) and the method; the fused CoG instead ~2,600 M7 instructions a 7x7 box
 //! (`cargo m7-bench`, `centroid_cog1c_raw_planned_7x7`).
 
+use super::Shared;
 use super::config::{CentroidMethod, TrackerConfig};
 use super::list::{Carry, StarList};
-use super::measure::{Policy, Scratch, StarBackground, measure};
+use super::measure::{Policy, StarBackground, measure};
 use super::record::{FrameSummary, LineOutcome, StarFlags, StarRecord};
 use super::{Capture, TRACK_WINDOWS};
 use crate::calib::{FrameCalibration, LineLevels};
 use crate::centroid::CentroidFlags;
-use crate::centroid::raw_cog::{PlanError, RawCogParams, RawCogPlan, RawWindow};
+use crate::centroid::raw_cog::{PlanError, RawCogParams, RawWindow};
 use crate::detect::track_detect;
 use crate::geometry::ReadoutGeometry;
 use crate::window::Rect;
-
-/// What tracking shares with the rest of the tracker for one call.
-pub(super) struct Shared<'a, const N: usize> {
-    pub(super) capture: &'a mut Capture,
-    pub(super) plans: &'a mut [RawCogPlan; TRACK_WINDOWS],
-    pub(super) scratch: &'a mut Scratch,
-    pub(super) stars: &'a mut StarList<N>,
-    pub(super) summary: &'a mut FrameSummary,
-}
 
 /// A star of the last frame to look for.
 #[derive(Clone, Copy, Debug)]
