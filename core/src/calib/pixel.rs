@@ -14,7 +14,7 @@
 //! A window up to [`WINDOW_SETUP_COLS`] wide looks its per-column constants up once per
 //! window and the dark and flat terms once per tile row. Defect lists are
 //! searched once per row (binary search), not per pixel. Measured by `cargo m7-bench`
-//! (`line_calibrate`, `window_calibrate`; README, "Cortex-M7 cost").
+//! (`line_calibrate`, `window_calibrate`; docs/speed.md).
 
 use super::formula::{dark_16ths, offset_16ths, pixel_bits};
 use super::hot::{HOT_DARK_LIMIT_E, hot_dark_e};

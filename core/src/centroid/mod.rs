@@ -1,18 +1,16 @@
 //! Star centroids from a window of calibrated pixels: the methods, their shared output type,
 //! the background and noise model, and the flag policy.
 //!
-//! | method | module | cost | systematic error, noise-free (RMS over phases) | random error |
+//! | method | module | M7 cost, 7x7 (`cargo m7-bench`) | systematic error, noise-free (RMS over phases) | random error |
 //! |---|---|---|---|---|
-//! | centre of gravity, power 1 (eq. 2) and 2 (eq. 6) | [`cog`] | ~10 flops/pixel | 5x5: 0.049 px at a = 0.5, < 0.001 at a = 1, 0.047 at a = 2 (power 1) | 0.86..1.1 of the CRLB-limited scatter |
-//! | pixel-integrated Gaussian fit | [`gauss_fit`] | ~200 flops/pixel for 4 steps | < 1e-5 px (model exact) | efficiency 0.97..1.00 |
+//! | centre of gravity, power 1 (eq. 2) and 2 (eq. 6) | [`cog`] | ~6,500 and ~11,700 (`centroid_cog1_7x7`, `centroid_cog2_7x7`; ~3,900 with a given background) | 5x5: 0.049 px at a = 0.5, < 0.001 at a = 1, 0.047 at a = 2 (power 1); removed by the table's pixel-phase curve ([`pixcorr`]) | 0.86..1.1 of the CRLB-limited scatter |
+//! | the same, power 1 fused with calibration on the raw window | [`raw_cog`] | ~2,600 a frame with its plan (`centroid_cog1c_raw_planned_7x7`) | as the corrected CoG | as the CoG |
+//! | pixel-integrated Gaussian fit | [`gauss_fit`] | ~7,000 held background (`centroid_gauss_fit_given_bg_7x7`), ~22,000 fitted | < 1e-5 px (model exact) | efficiency 0.97..1.00 |
 //!
-//! (a = the paper's 80 %-energy radius, s = sqrt(0.31) a; numbers from the host tests
-//! `centroid_cog`, `centroid_cog_noise`, `centroid_gauss_fit` run with
-//! `--nocapture`; costs are operation counts, not M7 measurements.) None of them yet applies the paper's pixelisation correction table.
-//!
-//! (The 3-point peak fits, parabolic and log-parabolic, and the Gaussian-windowed IWC
-//! centroid were removed: on the Cortex-M7 they sat on the speed/accuracy frontier in no
-//! scene; see the README's method list.)
+//! (a = the paper's 80 %-energy radius, s = sqrt(0.31) a; the errors from the host tests
+//! `centroid_cog`, `centroid_cog_noise`, `centroid_gauss_fit` run with `--nocapture`; the
+//! exact counts are in docs/speed.md, checked against the bench's CSV.) A method stays only
+//! where it sits on the speed/accuracy frontier for some scene (docs/speed.md).
 //!
 //! # Arithmetic: f32, with an exact integer background subtraction
 //! Every method works in `f32`, the Cortex-M7's hardware float type for the

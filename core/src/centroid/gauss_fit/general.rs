@@ -8,7 +8,7 @@
 //! # Cost
 //! Per step `w + h + 2` edge `erfc`s and densities, then the ten upper-triangle sums and four
 //! right-hand sides per pixel, a 4x4 Cholesky (four square roots) and two triangular solves;
-//! with the perimeter-median background, 16,799 (5x5) and 22,039 (7x7) instructions per star
+//! with the perimeter-median background, ~16,800 (5x5) and ~22,000 (7x7) instructions per star
 //! on the M7 (`centroid_gauss_fit_*` of `cargo m7-bench`, 2 steps).
 
 use super::{GaussFitParams, Grid, profile, step_usable};

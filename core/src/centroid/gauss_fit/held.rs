@@ -5,7 +5,7 @@
 //! of [`super`].
 //!
 //! # Cost
-//! 4,765 (5x5) and 7,057 (7x7) instructions per star on the M7
+//! ~4,800 (5x5) and ~7,000 (7x7) instructions per star on the M7
 //! (`centroid_gauss_fit_given_bg_*` of `cargo m7-bench`, 2 steps): per step ~18 instructions
 //! a pixel for the normal equations and ~40 an edge for the profiles (see [`super`] for the
 //! whole breakdown).

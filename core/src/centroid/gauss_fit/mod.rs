@@ -54,14 +54,15 @@
 //! by neighbouring pixels), then the normal equations' sums per pixel; from the CoG start
 //! a bright star converges in 2 steps (the covariance comes from the last one), a faint one
 //! in 3-4. Measured on the Cortex-M7 (`cargo m7-bench`, QEMU instructions per star, the
-//! bench's bright star, 2 steps):
+//! bench's bright star, 2 steps; the exact counts are in docs/speed.md, checked against the
+//! bench's CSV):
 //!
 //! | configuration | 5x5 | 7x7 |
 //! |---|---|---|
-//! | background held and given (`centroid_gauss_fit_given_bg_*`: `startrack accuracy`'s) | 4,765 | 7,057 |
-//! | perimeter median, `B` fitted (`centroid_gauss_fit_*`: [`GaussFitParams::new`]) | 16,799 | 22,039 |
+//! | background held and given (`centroid_gauss_fit_given_bg_*`: `startrack accuracy`'s) | ~4,800 | ~7,000 |
+//! | perimeter median, `B` fitted (`centroid_gauss_fit_*`: [`GaussFitParams::new`]) | ~16,800 | ~22,000 |
 //!
-//! Of the held 7x7's ~7,060 (QEMU `-d exec` trace, see the README): ~1,430 a step for the
+//! Of the held 7x7's ~7,000 (QEMU `-d exec` trace, docs/speed.md): ~1,430 a step for the
 //! normal equations (~18 instructions a pixel: load, convert, weight divide, residual, five
 //! multiply-adds; ~65 a row, with the 4-way unrolled loop's remainder), ~500 a step per axis
 //! for the edge profile (~40 an edge: the A&S divide and polynomial, the recurrence, the

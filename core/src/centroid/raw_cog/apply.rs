@@ -5,9 +5,9 @@
 //!
 //! # Cost
 //! `cargo m7-bench`, 7x7 box crossing 2x2 tiles, curve applied: an application
-//! (`centroid_cog1c_raw_planned_7x7`) 2,568 instructions, of which the fused sums ~1,970, the
+//! (`centroid_cog1c_raw_planned_7x7`) ~2,600 instructions, of which the fused sums ~2,000, the
 //! curve ~280 and the rest (plan check, re-anchoring test, clamps) ~250; the one-shot
-//! `raw_cog` (`centroid_cog1c_raw_7x7`) 4,028. A re-anchoring move builds the moved box's
+//! `raw_cog` (`centroid_cog1c_raw_7x7`) ~4,000. A re-anchoring move builds the moved box's
 //! plan on the spot (one-shot cost); the general path calibrates the box and runs `cog`.
 
 use super::plan::{BoxAt, MB2, PlanError, RawCogPlan, key_of};

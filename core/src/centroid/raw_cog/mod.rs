@@ -80,16 +80,16 @@
 //! ~30 integer operations and ten f32 multiply-adds, per star one divide, three square
 //! roots (`math::sqrt`) and the curve (two Catmull-Rom evaluations). `cargo m7-bench`
 //! (7x7 box crossing 2x2 tiles, curve applied): `centroid_cog1c_raw_planned_7x7` (apply)
-//! 2,568 instructions, `raw_cog_plan_7x7` (plan build, in place) 1,308,
-//! `centroid_cog1c_raw_7x7` (one-shot [`raw_cog`] = build + apply) 4,028, against 4,655 +
-//! 6,805 for `window_calibrate` + `centroid_cog1c_7x7` (general path with a perimeter
-//! median); `tracking_frame`, 30 applications: 77,651. What bounds the application (QEMU
-//! `-d exec` trace, per call): the fused sums and CoG ~1,970 (of which the row loop ~850:
+//! ~2,600 instructions, `raw_cog_plan_7x7` (plan build, in place) ~1,300,
+//! `centroid_cog1c_raw_7x7` (one-shot [`raw_cog`] = build + apply) ~4,000, against ~4,700 +
+//! ~6,800 for `window_calibrate` + `centroid_cog1c_7x7` (general path with a perimeter
+//! median); `tracking_frame`, 30 applications: ~78,000 (exact counts: docs/speed.md). What bounds the application (QEMU
+//! `-d exec` trace, per call): the fused sums and CoG ~2,000 (of which the row loop ~850:
 //! two runs of 3-4 samples a row with their set-up and spilled accumulators; the bias sums
 //! and tile-row bookkeeping ~300; the four cells ~370), the curve ~280, the rest (plan
 //! check, re-anchoring test, clamps) ~250. An unrolled 7-wide row loop (per-column prefix
 //! sums over the rows: 21 accumulators, spilled) and a column-major loop (strided
-//! `step_by`) were both slower (2,667 and 3,659) and were not kept.
+//! `step_by`) were both slower (~2,700 and ~3,700) and were not kept.
 
 //! # Re-anchoring
 //! The pixel-phase curve holds only while the CoG lies within half a pixel of the anchor

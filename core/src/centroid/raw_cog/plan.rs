@@ -10,7 +10,7 @@
 //! application to another window, anchor, side, table or dark scale is refused as stale.
 //!
 //! # Cost
-//! Built in place by [`RawCogPlan::rebuild`]: 1,308 instructions on the M7 for a 7x7 box
+//! Built in place by [`RawCogPlan::rebuild`]: ~1,300 instructions on the M7 for a 7x7 box
 //! (`raw_cog_plan_7x7` of `cargo m7-bench`), the table look-ups and the defect-list search.
 //! Size 472 bytes on a 64-bit host (the host test `plan_is_small` keeps it at most 480).
 
@@ -145,9 +145,9 @@ pub(super) struct PlanKey {
 /// frame's dark scale, the window's position and the box (side, anchor): the box, its
 /// column groups with their column-bias sums, its tile rows with their row weights, the
 /// cells' constants `A`, `K`, whether it holds a listed defect, the saturation level. Built
-/// once per box position ([`RawCogPlan::rebuild`] in place, 1,308 instructions on the M7
+/// once per box position ([`RawCogPlan::rebuild`] in place, ~1,300 instructions on the M7
 /// for a 7x7 box: the table look-ups and the defect-list search), then applied to each
-/// frame's raw samples and line levels ([`RawCogPlan::apply`], 2,568). Size: 472 bytes on
+/// frame's raw samples and line levels ([`RawCogPlan::apply`], ~2,600). Size: 472 bytes on
 /// a 64-bit host, a little less on the M7 (`size_of`; the host test `plan_is_small` keeps it
 /// at most 480).
 ///

@@ -11,8 +11,8 @@
 //! Per sample one load and three adds; per row and run the five cell sums (~120
 //! instructions a row of a 7x7 box with the bookkeeping and register spills); per tile row
 //! the line levels' bias sums; per cell ~30 integer operations and ten f32 multiply-adds;
-//! per star one divide and three square roots. Of `centroid_cog1c_raw_planned_7x7`'s 2,568
-//! instructions (`cargo m7-bench`) the fused sums and CoG take ~1,970.
+//! per star one divide and three square roots. Of `centroid_cog1c_raw_planned_7x7`'s ~2,600
+//! instructions (`cargo m7-bench`) the fused sums and CoG take ~2,000.
 
 use super::RawWindow;
 use super::plan::{CellConst, ColGroup, MB, RawCogPlan, cell_const};
