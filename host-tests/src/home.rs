@@ -15,12 +15,55 @@ use startrack_core::calib::{
 use startrack_core::geometry::{ReadoutGeometry, Segment};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Clock, Event, FrameSummary, LineSource, LineSummary, ReadoutRequest, SourceLine, StarRecord,
-    TelemetrySink,
+    Clock, Event, FixedTable, FixedTemperature, FrameSummary, LineSource, LineSummary, Mode, Ports,
+    ReadoutRequest, SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_core::units::Electrons;
+use startrack_core::units::Kelvin;
 use startrack_core::window::Rect;
 use std::convert::Infallible;
+
+/// Stars a frame the host's tracker keeps (the board: 32): room for any field, so that a
+/// miss is a detection miss, not a full list; losses are still counted.
+pub const HOST_CAPACITY: usize = 1024;
+
+/// A fresh host tracker run on one frame as the board runs after start-up: a standby frame
+/// (the dark scale from the covered columns), then an acquisition frame calibrated with
+/// it, both read from `source` (which gives the same frame twice). Returns the acquisition
+/// frame as the telemetry port reported it.
+pub fn acquire_once<S: LineSource<Error = Infallible>>(
+    config: TrackerConfig,
+    table: CalibTable<'_>,
+    temperature_k: Option<Kelvin>,
+    source: &mut S,
+) -> Result<FrameRecord, String> {
+    let mut buffers = Box::new(TrackerBuffers::new());
+    let mut tracker = Box::new(
+        Tracker::<HOST_CAPACITY>::new(config, *table.geometry(), &mut buffers)
+            .map_err(|e| e.to_string())?,
+    );
+    let mut recorder = Recorder::default();
+    let mut clock = FrameClock {
+        frame: 0,
+        period_us: 0,
+    };
+    let mut tables = FixedTable(Some(table));
+    let mut thermometer = FixedTemperature(temperature_k);
+    let mut ports = Ports {
+        clock: &mut clock,
+        thermometer: &mut thermometer,
+        tables: &mut tables,
+        telemetry: &mut recorder,
+    };
+    for mode in [Mode::Standby, Mode::Acquisition] {
+        tracker.command_mode(mode).map_err(|e| e.to_string())?;
+        let Ok(_) = block_on(tracker.run_frame(source, &mut ports));
+    }
+    recorder
+        .frames
+        .pop()
+        .ok_or_else(|| "the tracker reported no frame".to_string())
+}
 
 /// Runs a tracker future to completion: the host's sources never wait.
 pub fn block_on<F: std::future::Future>(f: F) -> F::Output {

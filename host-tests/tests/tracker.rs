@@ -22,14 +22,13 @@ use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::detect::LineDetector;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    CentroidMethod, Event, FixedTable, FixedTemperature, Mode, ModeReason, Ports, StarFlags,
-    StarRecord, Tracker, TrackerBuffers, TrackerConfig,
+    CentroidMethod, Event, Mode, ModeReason, StarFlags, StarRecord, TrackerConfig,
 };
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 use startrack_host::cli::process::{HOST_CAPACITY, process_frame};
 use startrack_host::demo::render_frame;
-use startrack_host::home::{FrameClock, Recorder, SimLines, block_on, frame_levels};
+use startrack_host::home::{SimLines, acquire_once, frame_levels};
 use startrack_host::sil::{self, SilConfig};
 use startrack_host::sim::SensorParams;
 
@@ -218,28 +217,9 @@ fn process_equals_the_sil_line_port_bit_for_bit() {
     let processed = process_frame(table, &raw, config, None).unwrap();
     assert!(processed.stars.len() >= 38, "{}", processed.stars.len());
 
-    let mut buffers = Box::new(TrackerBuffers::new());
-    let mut tracker =
-        Box::new(Tracker::<HOST_CAPACITY>::new(config, sim.params.geometry, &mut buffers).unwrap());
     // The SIL's sensor, held on frame 0 for both passes (process reads one frame twice).
     let mut source = SimLines::new(|_| sim.clone());
-    let mut recorder = Recorder::default();
-    let mut clock = FrameClock {
-        frame: 0,
-        period_us: 0,
-    };
-    let (mut tables, mut thermometer) = (FixedTable(Some(table)), FixedTemperature(None));
-    let mut ports = Ports {
-        clock: &mut clock,
-        thermometer: &mut thermometer,
-        tables: &mut tables,
-        telemetry: &mut recorder,
-    };
-    for mode in [Mode::Standby, Mode::Acquisition] {
-        tracker.command_mode(mode).unwrap();
-        let Ok(_) = block_on(tracker.run_frame(&mut source, &mut ports));
-    }
-    let sil_frame = recorder.frames.last().unwrap();
+    let sil_frame = acquire_once(config, table, None, &mut source).unwrap();
     assert!(same_bits(&processed.stars, &sil_frame.stars));
     assert_eq!(processed.summary, sil_frame.summary);
 }

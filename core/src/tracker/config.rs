@@ -3,6 +3,7 @@
 //! host option that fails them gets a [`ConfigError`], never a half-applied setting).
 
 use crate::centroid::MAX_SIDE;
+use crate::centroid::cog::CogPower;
 use crate::centroid::raw_cog::MAX_BOX_SIDE;
 use crate::detect::capture::CAPTURE_MAX_SIDE;
 use crate::detect::{DetectConfig, TrackConfig};
@@ -42,6 +43,16 @@ impl CentroidMethod {
             Self::Cog1 => "cog1",
             Self::Cog2 => "cog2",
             Self::FusedCog1 => "fused-cog1",
+        }
+    }
+
+    /// The power of a CoG method (whose position the pixel-phase curve corrects); `None` for
+    /// the Gauss fit.
+    pub const fn cog_power(self) -> Option<CogPower> {
+        match self {
+            Self::Cog1 | Self::FusedCog1 => Some(CogPower::One),
+            Self::Cog2 => Some(CogPower::Two),
+            Self::GaussFit => None,
         }
     }
 }

@@ -78,12 +78,7 @@ impl<'t> Policy<'t> {
         table: &CalibTable<'t>,
     ) -> Self {
         let box_px = config.box_px();
-        let power = match method {
-            CentroidMethod::Cog2 => Some(CogPower::Two),
-            CentroidMethod::Cog1 | CentroidMethod::FusedCog1 => Some(CogPower::One),
-            CentroidMethod::GaussFit => None,
-        };
-        let curve = power.and_then(|p| {
+        let curve = method.cog_power().and_then(|p| {
             select_curve(table, config, p, box_px, PixCorrBackground::PerimeterMedian)
         });
         let fused_curve = (method == CentroidMethod::FusedCog1)

@@ -17,21 +17,17 @@
 
 use super::{CliError, read_file};
 use crate::fits::{read_keys, read_raw_frame};
-use crate::home::{FrameClock, FrameLines, Recorder, block_on, write_csv};
+use crate::home::{FrameLines, acquire_once, write_csv};
 use clap::builder::TypedValueParser as _;
-use startrack_core::centroid::cog::CogPower;
 use startrack_core::table::CalibTable;
 use startrack_core::table::pixcorr::{CurveHeader, PixCorrBackground};
 use startrack_core::tracker::{
-    CentroidMethod, FixedTable, FixedTemperature, FrameSummary, Mode, Ports, StarRecord, Tracker,
-    TrackerBuffers, TrackerConfig, select_curve,
+    CentroidMethod, FrameSummary, StarRecord, TrackerConfig, select_curve,
 };
 use startrack_core::units::Kelvin;
 use std::path::PathBuf;
 
-/// Stars a frame the host's tracker keeps (the board: 32): room for any field, so that a
-/// miss is a detection miss, not a full list; losses are still counted.
-pub const HOST_CAPACITY: usize = 1024;
+pub use crate::home::HOST_CAPACITY;
 
 /// The acquisition methods `process` offers, by their names.
 const METHODS: [CentroidMethod; 3] = [
@@ -164,40 +160,10 @@ pub fn process_frame(
             usize::from(geometry.lines) * geometry.line_len()
         ))
     })?;
-    let mut buffers = Box::new(TrackerBuffers::new());
-    let mut tracker = Box::new(
-        Tracker::<HOST_CAPACITY>::new(config, geometry, &mut buffers)
-            .map_err(|e| CliError::Usage(e.to_string()))?,
-    );
-    let mut recorder = Recorder::default();
-    let mut clock = FrameClock {
-        frame: 0,
-        period_us: 0,
-    };
-    let mut tables = FixedTable(Some(table));
-    let mut thermometer = FixedTemperature(temperature_k);
-    let mut ports = Ports {
-        clock: &mut clock,
-        thermometer: &mut thermometer,
-        tables: &mut tables,
-        telemetry: &mut recorder,
-    };
-    for mode in [Mode::Standby, Mode::Acquisition] {
-        tracker
-            .command_mode(mode)
-            .map_err(|e| CliError::Usage(e.to_string()))?;
-        let Ok(_) = block_on(tracker.run_frame(&mut source, &mut ports));
-    }
-    let frame = recorder
-        .frames
-        .pop()
-        .ok_or_else(|| CliError::Usage("the tracker reported no frame".into()))?;
-    let power = match config.acquisition_method {
-        CentroidMethod::Cog1 | CentroidMethod::FusedCog1 => Some(CogPower::One),
-        CentroidMethod::Cog2 => Some(CogPower::Two),
-        CentroidMethod::GaussFit => None,
-    };
-    let curve = power
+    let frame = acquire_once(config, table, temperature_k, &mut source).map_err(CliError::Usage)?;
+    let curve = config
+        .acquisition_method
+        .cog_power()
         .and_then(|p| {
             select_curve(
                 &table,
