@@ -156,6 +156,13 @@ impl<F: NorFlash> FlashStore<F> {
         &self.flash
     }
 
+    /// The device, for a home that erases [`Self::pending_erase`]'s range with its own
+    /// (async) driver before [`Self::confirm_erased`]. Anything else written through it is
+    /// outside the store's promises (mount still refuses what does not check out).
+    pub fn flash_mut(&mut self) -> &mut F {
+        &mut self.flash
+    }
+
     /// Gives the device back.
     pub fn into_flash(self) -> F {
         self.flash
