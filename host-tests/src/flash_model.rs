@@ -19,6 +19,7 @@ use embedded_storage::nor_flash::{
 };
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use startrack_core::store::{EraseProgress, FlashStore, H743_BANK2, StoreError, TableKind};
 use std::path::{Path, PathBuf};
 
 /// Program unit, bytes (a 256-bit flash word).
@@ -403,4 +404,27 @@ impl FileFlash {
         std::fs::write(&tmp, self.flash.to_file_bytes())?;
         std::fs::rename(&tmp, &self.path)
     }
+}
+
+/// The bytes of a freshly erased bank 2 holding `table` as the only table of `kind`, in slot
+/// 0 with sequence number 1, from the slot's start to the end of the table's last unit: the
+/// image a board's bank 2 gets at bring-up (`probe-rs download --base-address` the slot's
+/// bus address, e.g. 0x0810_0000 for the calibration table). Made by the store itself, over
+/// the flash model, so it is exactly what an upload writes.
+pub fn slot_image(kind: TableKind, table: &[u8]) -> Result<Vec<u8>, StoreError> {
+    let crc = store_crc32(table);
+    let mut store =
+        FlashStore::mount(MockFlash::new(BANK_B, 0), H743_BANK2).map_err(|e| e.error)?;
+    store.begin(kind, u32::try_from(table.len()).unwrap_or(u32::MAX), crc)?;
+    while store.erase_step()? != EraseProgress::Done {}
+    store.chunk(0, table)?;
+    let info = store.commit()?;
+    let slot = H743_BANK2.slots_of(kind)[usize::from(info.slot)];
+    let end = info.data_offset_b as usize + table.len().div_ceil(UNIT_B) * UNIT_B;
+    Ok(store.flash().bytes()[slot.offset_b as usize..end].to_vec())
+}
+
+/// CRC-32/ISO-HDLC, the store's CRC.
+fn store_crc32(b: &[u8]) -> u32 {
+    crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(b)
 }

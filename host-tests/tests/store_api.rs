@@ -255,3 +255,57 @@ fn the_flash_file_round_trips_and_refuses_a_foreign_file() {
     let err = FileFlash::open(&path).expect_err("garbage accepted");
     assert_eq!(err.kind(), std::io::ErrorKind::InvalidData);
 }
+
+#[test]
+fn the_storage_page_shows_the_bank2_layout() {
+    use startrack_core::store::{H743_BANK2_ADDRESS, H743_SECTOR_B};
+    let page = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/storage.md"))
+        .expect("docs/storage.md");
+    let rows: Vec<Vec<String>> = page
+        .lines()
+        .skip_while(|l| !l.starts_with("| kind | slot | bank-2 offset"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| {
+            l.trim_matches('|')
+                .split('|')
+                .map(|c| c.trim().to_string())
+                .collect()
+        })
+        .collect();
+    assert_eq!(rows.len(), 4, "docs/storage.md: one row per slot");
+    let mut i = 0;
+    for kind in TableKind::ALL {
+        for (s, slot) in H743_BANK2.slots_of(kind).iter().enumerate() {
+            let first = slot.offset_b / H743_SECTOR_B;
+            let last = (slot.offset_b + slot.len_b) / H743_SECTOR_B - 1;
+            let want = [
+                format!("{kind:?}").to_lowercase(),
+                s.to_string(),
+                format!("0x{:05X}", slot.offset_b),
+                format!("0x{:08X}", H743_BANK2_ADDRESS + slot.offset_b),
+                slot.len_b.to_string(),
+                format!("{first}-{last}"),
+            ];
+            assert_eq!(rows[i], want, "docs/storage.md flash map, row {i}");
+            i += 1;
+        }
+    }
+}
+
+#[test]
+fn a_slot_image_flashed_into_an_erased_bank_is_the_table_in_force() {
+    let t = table(5000);
+    let image = startrack_host::flash_model::slot_image(CAL, &t).expect("image");
+    assert_eq!(
+        image.len(),
+        32 + 5024,
+        "header unit, then the table to its last unit"
+    );
+    let mut flash = MockFlash::new(BANK_B, 9);
+    flash.corrupt(0, &image);
+    let store = FlashStore::mount(flash, H743_BANK2).ok().expect("mount");
+    let active = store.active(CAL).expect("the image's table is in force");
+    assert_eq!(active.header.sequence, 1);
+    assert_eq!(active.bytes(store.flash().bytes()), Some(&t[..]));
+}
