@@ -67,6 +67,11 @@ fn cut_everywhere(before: &[&[u8]], new: &[u8], next: &[u8], chunk_b: usize) -> 
     let base = flash_with(before);
     let old: Option<Vec<u8>> = before.last().map(|t| t.to_vec());
     assert_eq!(active_table(&mount(base.clone())), old);
+    // The slot in force (header and table units), which no step may touch.
+    let kept = mount(base.clone()).active(KIND).map(|a| {
+        let start = (a.data_offset_b - 32) as usize;
+        start..a.data_offset_b as usize + (a.header.len_b as usize).div_ceil(32) * 32
+    });
 
     // Dry run: the steps of this upload.
     let mut dry = mount(base.clone());
@@ -93,6 +98,17 @@ fn cut_everywhere(before: &[&[u8]], new: &[u8], next: &[u8], chunk_b: usize) -> 
             );
             let mut flash = store.into_flash();
             assert!(flash.is_off());
+            if let Some(r) = kept.clone() {
+                assert_eq!(
+                    flash.bytes()[r.clone()],
+                    base.bytes()[r.clone()],
+                    "step {k} {mode:?}: the slot in force was written"
+                );
+                assert!(
+                    r.step_by(32)
+                        .all(|o| flash.unit_state(o) == base.unit_state(o))
+                );
+            }
             flash.power_on();
             let store = mount(flash);
             let got = active_table(&store);

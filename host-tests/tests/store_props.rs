@@ -9,7 +9,7 @@ use proptest::prelude::*;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use startrack_core::store::{
-    EraseProgress, FlashStore, H743_BANK2, SlotState, StoreError, TableKind,
+    EraseProgress, FlashStore, H743_BANK2, SlotHeader, SlotState, StoreError, TableKind,
 };
 use startrack_host::flash_model::{BANK_B, CutMode, MockFlash};
 
@@ -202,6 +202,15 @@ proptest! {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_random_header_unit_is_refused_with_a_reason(
+        bytes in prop::array::uniform32(any::<u8>()),
+        cap in 0..300_000u32,
+    ) {
+        // Random bytes never pass magic, version and CRC together (2^-72); never a panic.
+        prop_assert!(SlotHeader::decode(&bytes, TableKind::Calibration, cap).is_err());
     }
 
     #[test]
