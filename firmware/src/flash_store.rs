@@ -254,6 +254,28 @@ fn load(store: &mut Store) -> Result<CalibTable<'static>, LoadError> {
     }
 }
 
+/// The calibration table's own checks for [`FlashStore::commit_checked`]: the core parses
+/// the uploaded table where it lies in bank 2 and its geometry must be this firmware's.
+#[allow(
+    dead_code,
+    reason = "called by the link's upload handling once it is bound"
+)]
+pub fn calibration_ok(_bank: &mut Bank2, offset_b: u32, len_b: u32) -> bool {
+    if offset_b
+        .checked_add(len_b)
+        .is_none_or(|end| end > H743_BANK_B)
+    {
+        return false;
+    }
+    let start = core::ptr::with_exposed_provenance::<u8>((H743_BANK2_ADDRESS + offset_b) as usize);
+    // SAFETY: the range lies inside bank 2 (checked above), memory-mapped and readable. The
+    // store calls this after programming every unit of the range and reading it all back
+    // (its CRC), so no unit in it is torn (no ECC fault), and nothing writes or erases that
+    // slot while the slice lives: `_bank`'s exclusive borrow (the only writer) spans it.
+    let bytes = unsafe { core::slice::from_raw_parts(start, len_b as usize) };
+    CalibTable::parse(bytes).is_ok_and(|t| *t.geometry() == GEOMETRY)
+}
+
 /// The erase step of an upload, for the task that owns the store: erases the next sector of
 /// the target slot with the async driver (1-2 s in which this task waits and the others,
 /// the frame loop among them, run), then has the store check it blank.

@@ -309,3 +309,29 @@ fn a_slot_image_flashed_into_an_erased_bank_is_the_table_in_force() {
     assert_eq!(active.header.sequence, 1);
     assert_eq!(active.bytes(store.flash().bytes()), Some(&t[..]));
 }
+
+#[test]
+fn a_table_its_own_checks_refuse_is_not_committed() {
+    use startrack_core::table::CalibTable;
+    let mut store = fresh();
+    let good = table(300);
+    store.begin(CAL, 300, crc32(&good)).expect("begin");
+    erase_all(&mut store);
+    store.chunk(0, &good).expect("chunk");
+    let info = store.commit().expect("commit");
+    // Bytes with the right CRC that are not a calibration table: refused by its parser.
+    let not_a_table = table(400);
+    store.begin(CAL, 400, crc32(&not_a_table)).expect("begin");
+    erase_all(&mut store);
+    store.chunk(0, &not_a_table).expect("chunk");
+    let parses = |f: &mut MockFlash, at: u32, len: u32| {
+        CalibTable::parse(&f.bytes()[at as usize..(at + len) as usize]).is_ok()
+    };
+    assert_eq!(store.commit_checked(parses), Err(StoreError::Invalid));
+    assert_eq!(store.upload_status(), None);
+    assert_eq!(store.active(CAL), Some(info));
+    let store = FlashStore::mount(store.into_flash(), H743_BANK2)
+        .ok()
+        .expect("mount");
+    assert_eq!(store.active(CAL), Some(info));
+}

@@ -37,7 +37,12 @@ fn upload(
     for (i, c) in table.chunks(chunk_b).enumerate() {
         store.chunk((i * chunk_b) as u32, c)?;
     }
-    store.commit().map(|_| ())
+    // Committed only if the core parses it where it lies (the calibration table's own checks).
+    store
+        .commit_checked(|f, at, len| {
+            CalibTable::parse(&f.bytes()[at as usize..(at + len) as usize]).is_ok()
+        })
+        .map(|_| ())
 }
 
 /// The bytes of the table in force, checked: CRC (by the store), parsed by the core.

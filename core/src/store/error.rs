@@ -88,6 +88,8 @@ pub enum StoreError {
         /// The CRC of the bytes read back.
         computed: u32,
     },
+    /// The table has the announced CRC but its own checks refused it (nothing committed).
+    Invalid,
     /// A freshly erased sector does not read blank, or a header read back differs.
     VerifyFailed {
         /// Device offset of the unit that differs, bytes.
@@ -133,6 +135,7 @@ impl core::fmt::Display for StoreError {
                     "CRC {computed:#010x} read back, {expected:#010x} announced"
                 )
             }
+            Self::Invalid => write!(f, "the table's own checks refused it"),
             Self::VerifyFailed { offset_b } => write!(f, "flash verify failed at {offset_b:#x}"),
             Self::SequenceExhausted => write!(f, "no sequence number left"),
             Self::NoTable => write!(f, "no valid table"),

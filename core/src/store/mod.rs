@@ -29,6 +29,8 @@
 //! 4. [`FlashStore::commit`]: the last unit (padded with 0xFF) is programmed, the table
 //!    read back and its CRC compared with the announced one, then the header (sequence
 //!    number = the highest seen + 1, length, CRC, its own CRC) written last, and read back.
+//!    [`FlashStore::commit_checked`] also runs the table's own checks (a calibration table's
+//!    parse and geometry) before the header.
 //!
 //! At mount a slot is valid when its header unit reads, decodes (magic, version, kind,
 //! length, header CRC) and the table's bytes have the header's CRC; the valid slot with the

@@ -372,6 +372,18 @@ impl<F: NorFlash> FlashStore<F> {
     /// `Incomplete` keep the upload (its missing steps may follow); any other error drops
     /// it, and the table in force stays.
     pub fn commit(&mut self) -> Result<CommitInfo, StoreError> {
+        self.commit_checked(|_, _, _| true)
+    }
+
+    /// [`Self::commit`] with the table's own checks: once the bytes read back have the
+    /// announced CRC and before the header is written, `check(device, data_offset_b, len_b)`
+    /// looks at the table where it lies (e.g. parses a calibration table through a
+    /// memory-mapped view, all its units programmed and read back); `false` commits nothing
+    /// ([`StoreError::Invalid`]) and drops the upload.
+    pub fn commit_checked(
+        &mut self,
+        check: impl FnOnce(&mut F, u32, u32) -> bool,
+    ) -> Result<CommitInfo, StoreError> {
         let u = *self.upload.as_ref().ok_or(StoreError::NoUpload)?;
         // Refusals that touch no flash keep the upload: the missing steps may still come.
         if u.erased_sectors < self.sectors_in(&u) {
@@ -383,7 +395,7 @@ impl<F: NorFlash> FlashStore<F> {
                 total_b: u.total_b,
             });
         }
-        let result = self.finish(&u);
+        let result = self.finish(&u, check);
         self.upload = None;
         match result {
             Ok(info) => {
@@ -411,7 +423,11 @@ impl<F: NorFlash> FlashStore<F> {
 
     // --- internals ---------------------------------------------------------------------
 
-    fn finish(&mut self, u: &Upload) -> Result<CommitInfo, StoreError> {
+    fn finish(
+        &mut self,
+        u: &Upload,
+        check: impl FnOnce(&mut F, u32, u32) -> bool,
+    ) -> Result<CommitInfo, StoreError> {
         let tail = u.received_b as usize % HEADER_LEN;
         if tail != 0 {
             let start = u.received_b.saturating_sub(tail as u32);
@@ -429,6 +445,9 @@ impl<F: NorFlash> FlashStore<F> {
                 expected: u.crc32,
                 computed,
             });
+        }
+        if !check(&mut self.flash, slot.data_offset_b(), u.total_b) {
+            return Err(StoreError::Invalid);
         }
         let header = SlotHeader {
             kind: u.kind,
