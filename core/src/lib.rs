@@ -25,6 +25,8 @@ pub mod calib;
 pub mod centroid;
 pub mod detect;
 pub mod geometry;
+pub mod safe;
+pub mod store;
 pub mod table;
 pub mod tracker;
 pub mod units;

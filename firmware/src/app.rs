@@ -7,23 +7,32 @@
 //! |---|---|
 //! | lines | [`ChannelLines`]: the readout task's DMA'd line buffers ([`crate::lines`]) |
 //! | clock | embassy-time's `Instant` |
-//! | temperature | none yet: the table's hot-pixel reference temperature is used (the frame summary says so) |
-//! | table | the flash table checked at start-up ([`crate::calib_store`]), or none |
+//! | temperature | [`BoardThermometer`]: the CCD board's sensor (not wired yet), else the MCU's ([`crate::mcu_temp`]) |
+//! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none |
 //! | telemetry | the defmt log ([`crate::telemetry`]) |
+//!
+//! After every frame the task marks the watchdog's progress ([`crate::watchdog`]) and adds
+//! the frame to housekeeping ([`crate::safe_state::HEALTH`]).
 //!
 //! The readout free-runs without a sequencer, so the tracker's [`ReadoutRequest`] is not
 //! sent anywhere yet: every line is read whole, which serves any request. The exposure is
 //! taken as one frame period of the timer-paced readout.
 
 use crate::lines::{FILLED, FREE, GEOMETRY, LineBuf, RawLine};
+use crate::mcu_temp::{McuThermometer, NoBoardSensor};
 use crate::readout::LINE_PERIOD;
 use crate::telemetry::DefmtTelemetry;
+use crate::{safe_state, watchdog};
 use core::convert::Infallible;
+use startrack_core::safe::{FallbackThermometer, SetupFaults};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Clock, FixedTable, FixedTemperature, LineSource, Ports, ReadoutRequest, SourceLine, Tracker,
-    TrackerBuffers, TrackerConfig,
+    Clock, FixedTable, LineSource, Ports, ReadoutRequest, SourceLine, Tracker, TrackerBuffers,
+    TrackerConfig,
 };
+
+/// The board's sensor temperature: the CCD board's sensor, else the MCU's.
+pub type BoardThermometer = FallbackThermometer<NoBoardSensor, McuThermometer>;
 
 /// Stars a frame the board keeps (candidates, windows, reported stars).
 pub const MAX_STARS: usize = 32;
@@ -121,12 +130,14 @@ impl Clock for BoardClock {
 
 /// The tracker task: the flight configuration with this board's exposure, frame after
 /// frame. A configuration the core refuses (which the constants here cannot produce) is
-/// logged and the task ends. (Ending rather than idling keeps the refused tracker out of
-/// the task's state: an await in that branch would hold it there beside the running one.)
+/// logged, the safe standby is entered ([`safe_state::enter_standby`]) and the task ends.
+/// (Ending rather than idling keeps the refused tracker out of the task's state: an await in
+/// that branch would hold it there beside the running one.)
 #[embassy_executor::task]
 pub async fn tracker_task(
     table: Option<CalibTable<'static>>,
     buffers: &'static mut TrackerBuffers,
+    mut thermometer: BoardThermometer,
 ) {
     let config = TrackerConfig {
         exposure_ms: EXPOSURE_MS,
@@ -137,12 +148,12 @@ pub async fn tracker_task(
         Ok(t) => t,
         Err(e) => {
             defmt::error!("tracker: configuration refused: {}", e);
+            safe_state::enter_standby(SetupFaults::TRACKER_CONFIG);
             return;
         }
     };
     let mut source = ChannelLines::new();
     let mut clock = BoardClock;
-    let mut thermometer = FixedTemperature(None);
     let mut tables = FixedTable(table);
     let mut telemetry = DefmtTelemetry;
     loop {
@@ -152,6 +163,12 @@ pub async fn tracker_task(
             tables: &mut tables,
             telemetry: &mut telemetry,
         };
-        let Ok(_) = tracker.run_frame(&mut source, &mut ports).await;
+        let Ok(summary) = tracker.run_frame(&mut source, &mut ports).await;
+        watchdog::progress();
+        let (k, source_used) = (thermometer.last_k(), thermometer.source());
+        safe_state::update_health(|h| {
+            h.on_frame(&summary);
+            h.on_temperature(k, source_used);
+        });
     }
 }

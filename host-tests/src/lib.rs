@@ -6,6 +6,7 @@ pub mod cli;
 pub mod demo;
 pub mod figures;
 pub mod fits;
+pub mod flash_model;
 pub mod home;
 pub mod pixcorr;
 pub mod sil;

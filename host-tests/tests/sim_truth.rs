@@ -1,5 +1,5 @@
 //! The simulator's truth tables: per pixel they reproduce the sensor's maps, tiled they are
-//! tile means and fit the firmware's 128 KB CALIB flash sector.
+//! tile means and fit the firmware's 192 KB table limit.
 
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::CalibTable;

@@ -26,7 +26,7 @@ enum Command {
         stars: usize,
     },
     /// Write the simulated sensor's true calibration as a table file (for bring-up on a board:
-    /// flash it into the CALIB sector, see the README).
+    /// with --slot-image, the bank-2 slot to flash, see the README).
     Table {
         /// Output file.
         #[arg(long)]
@@ -34,9 +34,13 @@ enum Command {
         /// Seed of the simulated sensor.
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Map tiles of 2^N pixels; 3 (8x8) fits the 128 KB CALIB sector.
+        /// Map tiles of 2^N pixels; 3 (8x8) fits the firmware's 192 KB table.
         #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(0..=10))]
         tile_log2: u8,
+        /// Write the calibration slot's image instead (slot header, then the table; flash it
+        /// at 0x08100000, the start of bank 2).
+        #[arg(long)]
+        slot_image: bool,
     },
     /// Find and centroid the stars of a raw frame (FITS) with a calibration table; CSV out.
     Process(startrack_host::cli::process::ProcessArgs),
@@ -123,6 +127,7 @@ fn main() -> ExitCode {
             out,
             seed,
             tile_log2,
+            slot_image,
         } => {
             let params = startrack_host::sim::SensorParams {
                 seed,
@@ -133,6 +138,17 @@ fn main() -> ExitCode {
             let written = sim
                 .truth_table_tiled(sections, tile_log2)
                 .map_err(|e| e.to_string())
+                .and_then(|t| {
+                    if slot_image {
+                        startrack_host::flash_model::slot_image(
+                            startrack_core::store::TableKind::Calibration,
+                            &t,
+                        )
+                        .map_err(|e| e.to_string())
+                    } else {
+                        Ok(t)
+                    }
+                })
                 .and_then(|t| {
                     std::fs::write(&out, &t)
                         .map(|()| t.len())

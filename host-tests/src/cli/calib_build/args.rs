@@ -42,7 +42,7 @@ pub struct CalibBuildArgs {
     #[arg(long, default_value_t = 10_000.0)]
     pub hot_exclude_above_e: f64,
     /// Map tiles of 2^N pixels: 0 is per pixel (full correction, megabytes for the CCD47-20:
-    /// external flash); 3 (8x8) fits the firmware's 128 KB CALIB sector.
+    /// external flash); 3 (8x8) fits the firmware's 192 KB table limit.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=i64::from(MAX_TILE_LOG2)))]
     pub tile_log2: u8,
     /// Raw samples at or above this are flagged saturated, ADU.

@@ -1,0 +1,103 @@
+//! The sensor temperature with a fallback: the CCD board's sensor first, the MCU's internal
+//! sensor when the first gives no plausible reading, and nothing when neither does (the
+//! tracker then uses the table's hot-pixel reference temperature and its frame summary says
+//! so).
+//!
+//! The MCU sensor measures the die, not the CCD: it is a coarse stand-in (the board's
+//! thermal design sets how far apart they are), used so that the hot-pixel law follows the
+//! temperature trend rather than staying at the table's reference. Housekeeping reports
+//! which source was used ([`FallbackThermometer::source`]). Cost: one or two sensor reads
+//! per frame and a range check.
+
+use crate::tracker::Thermometer;
+use crate::units::Kelvin;
+
+/// Readings outside this range are faults (a disconnected sensor reads 0 or full scale):
+/// 150 K ..= 400 K, wider than any CCD47-20 operating point.
+pub const PLAUSIBLE_K: (Kelvin, Kelvin) =
+    (Kelvin::const_from_int(150), Kelvin::const_from_int(400));
+
+/// Where the last reading came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ThermoSource {
+    /// The CCD board's sensor.
+    External,
+    /// The MCU's internal sensor (the external one failed).
+    Mcu,
+    /// Neither gave a plausible reading.
+    None,
+}
+
+/// Two thermometers in order of preference, itself a [`Thermometer`].
+#[derive(Clone, Copy, Debug)]
+pub struct FallbackThermometer<E, M> {
+    /// The CCD board's sensor.
+    pub external: E,
+    /// The MCU's sensor.
+    pub mcu: M,
+    source: ThermoSource,
+    last_k: Option<Kelvin>,
+    external_failures: u32,
+    mcu_failures: u32,
+}
+
+impl<E: Thermometer, M: Thermometer> FallbackThermometer<E, M> {
+    /// The chain, nothing read yet.
+    pub const fn new(external: E, mcu: M) -> Self {
+        Self {
+            external,
+            mcu,
+            source: ThermoSource::None,
+            last_k: None,
+            external_failures: 0,
+            mcu_failures: 0,
+        }
+    }
+
+    /// Where the last reading came from.
+    pub fn source(&self) -> ThermoSource {
+        self.source
+    }
+
+    /// The last reading, K.
+    pub fn last_k(&self) -> Option<Kelvin> {
+        self.last_k
+    }
+
+    /// Readings the external sensor failed to give (absent or implausible).
+    pub fn external_failures(&self) -> u32 {
+        self.external_failures
+    }
+
+    /// Readings the MCU sensor failed to give, when it was asked.
+    pub fn mcu_failures(&self) -> u32 {
+        self.mcu_failures
+    }
+}
+
+/// A reading inside [`PLAUSIBLE_K`].
+fn plausible(t: Option<Kelvin>) -> Option<Kelvin> {
+    t.filter(|k| (PLAUSIBLE_K.0..=PLAUSIBLE_K.1).contains(k))
+}
+
+impl<E: Thermometer, M: Thermometer> Thermometer for FallbackThermometer<E, M> {
+    fn sensor_temperature_k(&mut self) -> Option<Kelvin> {
+        let (reading, source) = match plausible(self.external.sensor_temperature_k()) {
+            Some(k) => (Some(k), ThermoSource::External),
+            None => {
+                self.external_failures = self.external_failures.saturating_add(1);
+                match plausible(self.mcu.sensor_temperature_k()) {
+                    Some(k) => (Some(k), ThermoSource::Mcu),
+                    None => {
+                        self.mcu_failures = self.mcu_failures.saturating_add(1);
+                        (None, ThermoSource::None)
+                    }
+                }
+            }
+        };
+        self.source = source;
+        self.last_k = reading;
+        reading
+    }
+}
