@@ -169,6 +169,20 @@ impl<'w, 's> Program<'w, 's> {
         self.exposure_us
     }
 
+    /// The same program over a copy of its words (in DMA-reachable RAM, or an edited copy to
+    /// check); `None` when the lengths differ.
+    pub fn relocated<'x>(&self, words: &'x [u32]) -> Option<Program<'x, 's>> {
+        (words.len() == self.words.len()).then_some(Program {
+            words,
+            spans: self.spans,
+            steps: self.steps,
+            tick_ps: self.tick_ps,
+            outputs: self.outputs,
+            binning: self.binning,
+            exposure_us: self.exposure_us,
+        })
+    }
+
     /// Every word of the frame in play order (what the DMA writes), without allocating.
     pub fn ticks(&self) -> impl Iterator<Item = u32> + '_ {
         self.steps.iter().flat_map(move |s| {
@@ -179,14 +193,27 @@ impl<'w, 's> Program<'w, 's> {
     }
 }
 
-/// The rest state: image and store at P12 (phase 3 low: the barrier between sections),
-/// register at P31, reset gate high, everything else low.
-pub const REST: LineSet = LineSet::EMPTY
-    .phases(Line::IMAGE, Phases::P12)
-    .phases(Line::STORE, Phases::P12)
-    .phases(Line::REG_LEFT, Phases::P31)
-    .phases(Line::REG_RIGHT, Phases::P31)
-    .with(Line::Rg);
+/// The rest state with two outputs: image and store at P12 (phase 3 low: the barrier
+/// between sections), register at P31, reset gate high, everything else low.
+pub const REST: LineSet = rest(2);
+
+/// The rest state for `outputs`. With one output the right half rests at P12 and shifts
+/// backward ([`Phases::BACKWARD_FROM_P12`]) so that its packets cross the split into the
+/// left half on the same tick as the left half moves towards its output (the phase relation
+/// at the split: check against datasheet).
+pub const fn rest(outputs: u8) -> LineSet {
+    let right = if outputs == 1 {
+        Phases::P12
+    } else {
+        Phases::P31
+    };
+    LineSet::EMPTY
+        .phases(Line::IMAGE, Phases::P12)
+        .phases(Line::STORE, Phases::P12)
+        .phases(Line::REG_LEFT, Phases::P31)
+        .phases(Line::REG_RIGHT, right)
+        .with(Line::Rg)
+}
 
 struct Writer<'b, T> {
     buf: &'b mut [T],
@@ -211,7 +238,7 @@ fn register_shift(base: LineSet, outputs: u8) -> [LineSet; 3] {
     let right = if outputs == 2 {
         Phases::FORWARD_FROM_P31
     } else {
-        Phases::BACKWARD_FROM_P31
+        Phases::BACKWARD_FROM_P12
     };
     let mut states = [base; 3];
     for (i, s) in states.iter_mut().enumerate() {
@@ -233,6 +260,7 @@ fn segment_words(
     binning: u16,
     w: &mut Writer<'_, u32>,
 ) {
+    let rest = rest(outputs);
     let mut emit = |state: LineSet, n: u32| {
         let word = pins.bsrr(state);
         for _ in 0..n {
@@ -242,7 +270,7 @@ fn segment_words(
     match id {
         SegmentId::FrameTransfer => {
             for p in Phases::FORWARD_FROM_P12 {
-                let s = REST
+                let s = rest
                     .phases(Line::IMAGE, p)
                     .phases(Line::STORE, p)
                     .with(Line::Dg);
@@ -256,11 +284,11 @@ fn segment_words(
                 (false, t.line_state)
             };
             for p in Phases::FORWARD_FROM_P12 {
-                emit(REST.phases(Line::STORE, p).set(Line::Dg, dg), n);
+                emit(rest.phases(Line::STORE, p).set(Line::Dg, dg), n);
             }
         }
         SegmentId::ReadPixel => {
-            let shifting = REST.with(Line::Sw);
+            let shifting = rest.with(Line::Sw);
             for _ in 0..binning {
                 for s in register_shift(shifting, outputs) {
                     emit(s, t.serial_state);
@@ -274,12 +302,12 @@ fn segment_words(
             emit(signal.with(Line::Convst), 1);
         }
         SegmentId::SkipPixel => {
-            for s in register_shift(REST, outputs) {
+            for s in register_shift(rest, outputs) {
                 emit(s, t.serial_state);
             }
         }
-        SegmentId::RegisterDump => emit(REST.with(Line::Dg), t.dump_register),
-        SegmentId::Idle => emit(REST, 1),
+        SegmentId::RegisterDump => emit(rest.with(Line::Dg), t.dump_register),
+        SegmentId::Idle => emit(rest, 1),
     }
 }
 

@@ -127,6 +127,9 @@ impl Phases {
     pub const FORWARD_FROM_P31: [Self; 3] = [Self::P12, Self::P23, Self::P31];
     /// One element backward (away from the output) from and back to P31.
     pub const BACKWARD_FROM_P31: [Self; 3] = [Self::P23, Self::P12, Self::P31];
+    /// One element backward from and back to P12 (the packet crosses into the next element
+    /// at the first state, in step with [`Self::FORWARD_FROM_P31`]).
+    pub const BACKWARD_FROM_P12: [Self; 3] = [Self::P31, Self::P23, Self::P12];
 }
 
 /// The level of every line at one tick: bit `l` is [`Line`] `l`.

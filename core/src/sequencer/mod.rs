@@ -32,7 +32,7 @@ pub mod plan;
 pub mod timing;
 
 pub use check::{SequenceError, check_program};
-pub use compile::{CompileError, Program, REST, SEGMENTS, SegmentId, Step, compile};
+pub use compile::{CompileError, Program, REST, SEGMENTS, SegmentId, Step, compile, rest};
 pub use cost::Cost;
 pub use lines::{Line, LineSet, Phases, PinMap, PinMapError};
 pub use plan::{Binning, MAX_WINDOWS, PlanError, ReadoutPlan};
