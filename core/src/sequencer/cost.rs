@@ -1,5 +1,6 @@
 //! What a compiled frame costs, read off its program ([`Cost::of`]): ticks by segment, rows
-//! clocked, pixels digitised, the frame time and the best update rate. Nothing here is
+//! clocked, pixels digitised, the frame time (the store's readout) and the update rate
+//! (frame transfer + readout or exposure). Nothing here is
 //! estimated from the plan: each number is a sum over the steps the DMA will play, so it
 //! stays true when the compiler changes. Cost: O(steps).
 
@@ -63,28 +64,29 @@ impl Cost {
             / 1000
     }
 
-    /// Frame transfer plus readout (without exposure padding), ns: the time from the end of
-    /// an exposure to the last sample of the frame.
+    /// The frame time: the store's readout from the first line transfer to the last sample,
+    /// ns. The frame transfer before it and the exposure padding after it are not in it;
+    /// the next exposure runs all through it.
     pub fn frame_time_ns(&self) -> u64 {
-        let idle = SegmentId::Idle as usize;
-        let ticks: u64 = self
-            .ticks_by_segment
+        let ticks: u64 = SegmentId::ALL
             .iter()
-            .enumerate()
-            .filter(|&(i, _)| i != idle)
-            .map(|(_, t)| *t)
+            .filter(|id| !matches!(id, SegmentId::FrameTransfer | SegmentId::Idle))
+            .map(|&id| self.ticks_by_segment.get(id as usize).copied().unwrap_or(0))
             .sum();
         ticks * u64::from(self.tick_ps) / 1000
     }
 
-    /// The whole program (one frame cycle, exposure padding included), ns.
+    /// One frame cycle when the program repeats back to back, ns: the frame transfer, then
+    /// the readout or the exposure, whichever is longer.
     pub fn cycle_ns(&self) -> u64 {
-        self.frame_time_ns() + self.segment_ns(SegmentId::Idle)
+        self.segment_ns(SegmentId::FrameTransfer)
+            + self.frame_time_ns()
+            + self.segment_ns(SegmentId::Idle)
     }
 
-    /// Frames per second when the program repeats back to back, mHz (the exposure overlaps
-    /// the store's readout, so with an exposure no longer than the readout this is the best
-    /// rate).
+    /// Frames per second when the program repeats back to back, mHz: `1 / cycle`. The
+    /// exposure overlaps the store's readout, so with an exposure no longer than the readout
+    /// this is the best rate.
     pub fn update_rate_mhz(&self) -> u64 {
         1_000_000_000_000u64
             .checked_div(self.cycle_ns())

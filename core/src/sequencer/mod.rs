@@ -24,6 +24,12 @@
 //! (`startrack_host::ccd_model`) to prove that they deliver the line layout of
 //! [`crate::geometry`] and exactly the windows' pixels.
 
+/// RAM the firmware sets aside for one compiled frame (word table + program), bytes: 64 KB
+/// of the 512 KB AXI SRAM, which the DMA reaches (DTCM it does not). The host test
+/// `sequencer_targets` compiles the largest plans `readout-plan` offers and checks that
+/// they fit.
+pub const TABLE_RAM_BYTES: usize = 64 * 1024;
+
 pub mod check;
 pub mod compile;
 pub mod cost;
