@@ -4,7 +4,8 @@
 
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::sequencer::{
-    Binning, Cost, Limits, PinMap, ReadoutPlan, SegmentId, Step, TABLE_RAM_BYTES, Timing, compile,
+    Binning, Cost, Cursor, Limits, PinMap, ReadoutPlan, SegmentId, Step, TABLE_RAM_BYTES, Timing,
+    compile,
 };
 use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
@@ -150,4 +151,39 @@ fn command_prints_one_row() {
     assert_eq!(lines[0], HEADER);
     assert!(lines[1].starts_with("windows,2000000,2,10,"));
     assert!(run(&args(Mode::Full, 5_000_000, 0, 2)).is_err());
+}
+
+proptest::proptest! {
+    /// The firmware's feeder: the program written out in chunks of any size is exactly the
+    /// program's words in play order, and a finished cursor writes nothing more.
+    #[test]
+    fn cursor_chunks_are_the_program(chunk in 1usize..5000, windows in 1u16..40) {
+        let c = cost(&args(Mode::Windows, 1_000_000, windows, 2));
+        let rects = c.rects;
+        let plan = ReadoutPlan::new(
+            ReadoutGeometry::CCD47_20_DUAL,
+            ReadoutRequest::Windows(&rects),
+            Binning::X1,
+            0,
+        )
+        .unwrap_or_else(|e| unreachable!("{e}"));
+        let t = Timing::at_pixel_rate(1_000_000)
+            .validate(&Limits::CCD47_20)
+            .unwrap_or_else(|e| unreachable!("{e}"));
+        let (mut w, mut s) = (vec![0; 4096], vec![Step::EMPTY; 8192]);
+        let p = compile(&plan, &t, &PinMap::IN_ORDER, &mut w, &mut s)
+            .unwrap_or_else(|e| unreachable!("{e}"));
+        let mut cursor = Cursor::START;
+        let mut out = Vec::new();
+        let mut buf = vec![0u32; chunk];
+        loop {
+            let n = cursor.fill(&p, &mut buf);
+            out.extend_from_slice(&buf[..n]);
+            if n < chunk {
+                break;
+            }
+        }
+        proptest::prop_assert_eq!(cursor.fill(&p, &mut buf), 0);
+        proptest::prop_assert!(out.iter().copied().eq(p.ticks()));
+    }
 }

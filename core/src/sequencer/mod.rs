@@ -13,6 +13,7 @@
 //! plan + Ticks + PinMap --compile--> word segments + (segment, repeat) steps  (compile.rs)
 //! program --Cost::of--> rows clocked, pixels digitised, frame time, rate       (cost.rs)
 //! program --check_program--> overlaps, phase counts, samples out of reset     (check.rs)
+//! program --Cursor::fill--> the words in play order, chunk by chunk (DMA ring) (expand.rs)
 //! ```
 //! Each tick is one `u32` BSRR word for the clock port ([`lines::PinMap`]); the firmware's
 //! timer-paced DMA writes the words of each step `repeat` times. The compiler writes into
@@ -33,6 +34,7 @@ pub const TABLE_RAM_BYTES: usize = 64 * 1024;
 pub mod check;
 pub mod compile;
 pub mod cost;
+pub mod expand;
 pub mod lines;
 pub mod plan;
 pub mod timing;
@@ -40,6 +42,7 @@ pub mod timing;
 pub use check::{SequenceError, check_program};
 pub use compile::{CompileError, Program, REST, SEGMENTS, SegmentId, Step, compile, rest};
 pub use cost::Cost;
+pub use expand::Cursor;
 pub use lines::{Line, LineSet, Phases, PinMap, PinMapError};
 pub use plan::{Binning, MAX_WINDOWS, PlanError, ReadoutPlan};
 pub use timing::{Limit, Limits, Ticks, Timing, TimingError};
