@@ -14,7 +14,9 @@
 mod app;
 mod calib_store;
 mod lines;
+mod memory;
 mod readout;
+mod sequencer;
 mod telemetry;
 
 use defmt_rtt as _;
@@ -31,10 +33,16 @@ use static_cell::ConstStaticCell;
 static TRACKER_BUFFERS: ConstStaticCell<TrackerBuffers> =
     ConstStaticCell::new(TrackerBuffers::new());
 
+/// The sequencer's compiled frame (56 KB, CPU-only, cacheable `.bss`).
+static SEQ_TABLES: ConstStaticCell<sequencer::Tables> =
+    ConstStaticCell::new(sequencer::Tables::new());
+
 bind_interrupts!(
-    /// Interrupts the drivers need: DMA1 stream 0 carries SPI1 RX (the ADC samples).
+    /// Interrupts the drivers need: DMA1 stream 0 carries SPI1 RX (the ADC samples), DMA1
+    /// stream 1 the clock words (TIM6 update into GPIOE BSRR).
     struct Irqs {
         DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
+        DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
     }
 );
 
@@ -97,10 +105,42 @@ async fn main(spawner: Spawner) {
 
     let table = calib_store::load().ok();
 
-    if let Err(e) = lines::init() {
+    let dma_region = match memory::init() {
+        Ok(r) => r,
+        Err(e) => {
+            defmt::error!("DMA region and caches: {}", e);
+            return;
+        }
+    };
+    let memory::DmaRegion {
+        ring,
+        lines: line_bufs,
+    } = dma_region;
+
+    if let Err(e) = lines::init(line_bufs) {
         defmt::error!("line buffers: {}", e);
         return;
     }
+
+    let clock_pins = [
+        p.PE0.into(),
+        p.PE1.into(),
+        p.PE2.into(),
+        p.PE3.into(),
+        p.PE4.into(),
+        p.PE5.into(),
+        p.PE6.into(),
+        p.PE7.into(),
+        p.PE8.into(),
+        p.PE9.into(),
+        p.PE10.into(),
+        p.PE11.into(),
+        p.PE12.into(),
+        p.PE13.into(),
+        p.PE14.into(),
+        p.PE15.into(),
+    ];
+    let seq = sequencer::Sequencer::new(p.TIM6, p.DMA1_CH1, Irqs, clock_pins, ring);
 
     let spi = Spi::new_rxonly(
         p.SPI1,
@@ -119,4 +159,8 @@ async fn main(spawner: Spawner) {
     };
     spawn_or_log(spawner, "tracker", app::tracker_task(table, buffers));
     spawn_or_log(spawner, "readout", readout::readout_task(adc));
+    match SEQ_TABLES.try_take() {
+        Some(tables) => spawn_or_log(spawner, "sequencer", sequencer::sequencer_task(seq, tables)),
+        None => defmt::error!("sequencer tables already taken"),
+    }
 }

@@ -77,9 +77,10 @@ pub struct Step {
 }
 
 impl Step {
-    /// A placeholder for step buffers.
+    /// A placeholder for step buffers (all zero bits, so a static buffer of them stays in
+    /// `.bss`).
     pub const EMPTY: Self = Self {
-        segment: SegmentId::Idle,
+        segment: SegmentId::FrameTransfer,
         repeat: 0,
     };
 }
