@@ -13,7 +13,7 @@
 //! ([`crate::memory`]); the tables it is fed from are CPU-only and cacheable.
 //!
 //! # Cost
-//! One word copy per tick played: at 1 MHz pixels 8 M words/s, ~2 % of the 480 MHz M7. The
+//! One word copy per tick played: at 1 MHz pixels 8 M words/s (not yet measured). The
 //! ring holds [`RING_WORDS`] ticks (512 us at 125 ns): the feeder must run once per half
 //! ring (256 us), or the clocks stall (an underrun, reported as [`SeqError::Underrun`]).
 //!
