@@ -5,17 +5,19 @@
 //! in [`DmaRegion`], a 32 KB-aligned static of at most 32 KB in `.bss` (AXI SRAM, which DMA1
 //! reaches; DTCM it does not), and MPU region 0 makes exactly that block normal memory,
 //! non-cacheable, non-executable. Everything else (stack, tracker state, the sequencer's
-//! tables, code) is cached. Cost: none per transfer; 20 KB of AXI SRAM served uncached.
+//! tables, code) is cached. Cost: none per transfer; 32 KB of AXI SRAM (20 KB used) served
+//! uncached.
 
 use crate::lines::{BUFFERS, LINE_LEN, LineBuf};
 use crate::sequencer::RING_WORDS;
-use static_cell::ConstStaticCell;
+use core::cell::UnsafeCell;
+use core::sync::atomic::{AtomicBool, Ordering};
 
 /// log2 of the region's size and alignment (32 KB).
 const REGION_LOG2: u32 = 15;
 
 /// Every buffer a DMA stream reads or writes.
-#[repr(C, align(32768))]
+#[repr(C)]
 pub struct DmaRegion {
     /// The sequencer's ring of BSRR words (DMA1 stream 1 reads).
     pub ring: [u32; RING_WORDS],
@@ -25,10 +27,29 @@ pub struct DmaRegion {
 
 const _: () = assert!(core::mem::size_of::<DmaRegion>() <= 1 << REGION_LOG2);
 
-static DMA_REGION: ConstStaticCell<DmaRegion> = ConstStaticCell::new(DmaRegion {
+/// The region, aligned to its size as the MPU requires. (A `ConstStaticCell` would put its
+/// flag beside a 32 KB-aligned value and double the block; the flag lives apart instead.)
+#[repr(C, align(32768))]
+struct Aligned(UnsafeCell<DmaRegion>);
+
+// SAFETY: the only access is the one `&mut` that `take` hands out, once (`TAKEN`).
+unsafe impl Sync for Aligned {}
+
+static DMA_REGION: Aligned = Aligned(UnsafeCell::new(DmaRegion {
     ring: [0; RING_WORDS],
     lines: [[0; LINE_LEN]; BUFFERS],
-});
+}));
+
+static TAKEN: AtomicBool = AtomicBool::new(false);
+
+/// The region, the first time only.
+fn take() -> Option<&'static mut DmaRegion> {
+    if TAKEN.swap(true, Ordering::AcqRel) {
+        return None;
+    }
+    // SAFETY: `TAKEN` was false, so no other reference to the region exists or will.
+    Some(unsafe { &mut *DMA_REGION.0.get() })
+}
 
 /// Why the caches were left off.
 #[derive(Clone, Copy, Debug, defmt::Format)]
@@ -44,7 +65,7 @@ pub enum MemoryError {
 /// Takes the DMA region, makes it non-cacheable, then turns on the I-cache and the D-cache.
 /// Call once, before any DMA starts.
 pub fn init() -> Result<&'static mut DmaRegion, MemoryError> {
-    let region = DMA_REGION.try_take().ok_or(MemoryError::AlreadyTaken)?;
+    let region = take().ok_or(MemoryError::AlreadyTaken)?;
     let base = core::ptr::from_mut(region) as u32;
     if base & ((1 << REGION_LOG2) - 1) != 0 {
         return Err(MemoryError::Misaligned(base));
