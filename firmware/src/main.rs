@@ -23,7 +23,7 @@ use defmt_rtt as _;
 use embassy_executor::{SpawnError, SpawnToken, Spawner};
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::spi::Spi;
-use embassy_stm32::{Config, bind_interrupts, dma, peripherals};
+use embassy_stm32::{Config, bind_interrupts, dma, interrupt, peripherals};
 use panic_probe as _;
 use startrack_core::tracker::TrackerBuffers;
 use static_cell::ConstStaticCell;
@@ -32,6 +32,18 @@ use static_cell::ConstStaticCell;
 /// zero, so in `.bss`; the tracker sets them up in place.
 static TRACKER_BUFFERS: ConstStaticCell<TrackerBuffers> =
     ConstStaticCell::new(TrackerBuffers::new());
+
+/// The executor of the sequencer's feeder: interrupt-driven (UART4's vector, unused
+/// otherwise) at a priority above thread mode, so the tracker's long frames cannot delay the
+/// refill of the clock ring.
+static EXECUTOR_CLOCKS: embassy_executor::InterruptExecutor =
+    embassy_executor::InterruptExecutor::new();
+
+#[interrupt]
+unsafe fn UART4() {
+    // SAFETY: UART4's vector serves only this executor, started once in `main`.
+    unsafe { EXECUTOR_CLOCKS.on_interrupt() }
+}
 
 /// The sequencer's compiled frame (56 KB, CPU-only, cacheable `.bss`).
 static SEQ_TABLES: ConstStaticCell<sequencer::Tables> =
@@ -160,7 +172,15 @@ async fn main(spawner: Spawner) {
     spawn_or_log(spawner, "tracker", app::tracker_task(table, buffers));
     spawn_or_log(spawner, "readout", readout::readout_task(adc));
     match SEQ_TABLES.try_take() {
-        Some(tables) => spawn_or_log(spawner, "sequencer", sequencer::sequencer_task(seq, tables)),
+        Some(tables) => {
+            use interrupt::{InterruptExt, Priority};
+            interrupt::UART4.set_priority(Priority::P6);
+            let clocks = EXECUTOR_CLOCKS.start(interrupt::UART4);
+            match sequencer::sequencer_task(seq, tables) {
+                Ok(token) => clocks.spawn(token),
+                Err(e) => defmt::error!("cannot spawn sequencer: {}", e),
+            }
+        }
         None => defmt::error!("sequencer tables already taken"),
     }
 }

@@ -15,7 +15,8 @@
 //! # Cost
 //! One word copy per tick played: at 1 MHz pixels 8 M words/s (not yet measured). The
 //! ring holds [`RING_WORDS`] ticks (512 us at 125 ns): the feeder must run once per half
-//! ring (256 us), or the clocks stall (an underrun, reported as [`SeqError::Underrun`]).
+//! ring (256 us), or the clocks stall (an underrun, reported as [`SeqError::Underrun`]). It
+//! therefore runs in an interrupt-level executor (`main.rs`), which preempts the tracker.
 //!
 //! # What this does not do yet
 //! The ADC samples are still read by the timer-paced SPI bursts of [`crate::readout`]: the
