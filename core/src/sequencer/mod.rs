@@ -14,6 +14,8 @@
 //! program --Cost::of--> rows clocked, pixels digitised, frame time, rate       (cost.rs)
 //! program --check_program--> overlaps, phase counts, samples out of reset     (check.rs)
 //! program --Cursor::fill--> the words in play order, chunk by chunk (DMA ring) (expand.rs)
+//! program --LineJobs--> per line: rows, read runs, ADC words, last tick   (lines_out.rs)
+//! ADC words --LineJob::unpack--> the raw line in the core's layout         (lines_out.rs)
 //! ```
 //! Each tick is one `u32` BSRR word for the clock port ([`lines::PinMap`]); the firmware's
 //! timer-paced DMA writes the words of each step `repeat` times. The compiler writes into
@@ -36,6 +38,7 @@ pub mod compile;
 pub mod cost;
 pub mod expand;
 pub mod lines;
+pub mod lines_out;
 pub mod plan;
 pub mod timing;
 
@@ -44,5 +47,6 @@ pub use compile::{CompileError, Program, REST, SEGMENTS, SegmentId, Step, compil
 pub use cost::Cost;
 pub use expand::Cursor;
 pub use lines::{Line, LineSet, Phases, PinMap, PinMapError};
-pub use plan::{Binning, MAX_WINDOWS, PlanError, ReadoutPlan};
+pub use lines_out::{LineJob, LineJobs, UnpackError};
+pub use plan::{Binning, MAX_WINDOWS, PlanError, ReadoutPlan, ShiftRuns};
 pub use timing::{Limit, Limits, Ticks, Timing, TimingError};

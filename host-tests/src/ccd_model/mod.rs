@@ -84,6 +84,7 @@ pub struct CcdModel {
     reset_settle: u64,
     signal_settle: u64,
     samples: Vec<[i64; 2]>,
+    sample_ticks: Vec<u64>,
     /// What went wrong so far.
     pub faults: Faults,
     /// Electrons drained through the dump gate.
@@ -136,6 +137,7 @@ impl CcdModel {
             reset_settle: u64::from(ticks.reset_settle),
             signal_settle: u64::from(ticks.signal_settle),
             samples: Vec::new(),
+            sample_ticks: Vec::new(),
             faults: Faults::default(),
             dumped_e: 0,
         };
@@ -181,6 +183,11 @@ impl CcdModel {
     /// The samples taken, `[left, right]` node charge at each CONVST.
     pub fn samples(&self) -> &[[i64; 2]] {
         &self.samples
+    }
+
+    /// The tick of each sample (1 = the first word run).
+    pub fn sample_ticks(&self) -> &[u64] {
+        &self.sample_ticks
     }
 
     /// Correlated double sampling: signal minus reset level of each sample pair.
@@ -281,6 +288,7 @@ impl CcdModel {
                 self.faults.unsettled_samples += 1;
             }
             self.samples.push(self.node_e);
+            self.sample_ticks.push(t);
         }
     }
 
