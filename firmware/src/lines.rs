@@ -1,14 +1,17 @@
-//! The raw line buffers and their zero-copy hand-off from readout to processing.
+//! The raw line buffers and their hand-off from readout to processing.
 //!
 //! Two line buffers (ping-pong) circulate between the readout task and the processing task
 //! by ownership: a buffer is a `&'static mut LineBuf` that travels through two channels,
 //!
 //! ```text
-//!   FREE ──> readout (DMA fills it) ──> FILLED ──> process (reads it) ──> FREE
+//!   FREE ──> readout (unpacks the line's ADC words into it) ──> FILLED
+//!        ──> process (reads it) ──> FREE
 //! ```
 //!
-//! so while processing works on one line the DMA fills the other, no line is ever copied,
-//! and the borrow checker guarantees that the CPU never reads a buffer the DMA is writing.
+//! so while processing works on one line the readout fills the other, and the borrow
+//! checker guarantees that no two tasks hold a buffer at once. The ADC words themselves
+//! arrive by SPI DMA in a separate sample buffer and are put in their raw columns by the
+//! readout (`LineJob::unpack`: a line read through windows fills only the columns read).
 //!
 //! Placement: the buffers are part of [`crate::memory::DmaRegion`], in `.bss` (AXI SRAM at
 //! 0x2400_0000, which every DMA master reaches; the DTCM would not be) and made

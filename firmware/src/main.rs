@@ -127,6 +127,7 @@ async fn main(spawner: Spawner) {
     let memory::DmaRegion {
         ring,
         lines: line_bufs,
+        samples,
     } = dma_region;
 
     if let Err(e) = lines::init(line_bufs) {
@@ -170,7 +171,7 @@ async fn main(spawner: Spawner) {
         return;
     };
     spawn_or_log(spawner, "tracker", app::tracker_task(table, buffers));
-    spawn_or_log(spawner, "readout", readout::readout_task(adc));
+    spawn_or_log(spawner, "readout", readout::readout_task(adc, samples));
     match SEQ_TABLES.try_take() {
         Some(tables) => {
             use interrupt::{InterruptExt, Priority};

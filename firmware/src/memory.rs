@@ -5,7 +5,7 @@
 //! in [`DmaRegion`], a 32 KB-aligned static of at most 32 KB in `.bss` (AXI SRAM, which DMA1
 //! reaches; DTCM it does not), and MPU region 0 makes exactly that block normal memory,
 //! non-cacheable, non-executable. Everything else (stack, tracker state, the sequencer's
-//! tables, code) is cached. Cost: none per transfer; 32 KB of AXI SRAM (20 KB used) served
+//! tables, code) is cached. Cost: none per transfer; 32 KB of AXI SRAM (23 KB used) served
 //! uncached.
 
 use crate::lines::{BUFFERS, LINE_LEN, LineBuf};
@@ -21,8 +21,10 @@ const REGION_LOG2: u32 = 15;
 pub struct DmaRegion {
     /// The sequencer's ring of BSRR words (DMA1 stream 1 reads).
     pub ring: [u32; RING_WORDS],
-    /// The raw line buffers (SPI1 RX DMA writes).
+    /// The raw line buffers (processing reads them).
     pub lines: [LineBuf; BUFFERS],
+    /// One line's ADC words (SPI1 RX DMA writes), before they are unpacked into a line.
+    pub samples: [u16; LINE_LEN],
 }
 
 const _: () = assert!(core::mem::size_of::<DmaRegion>() <= 1 << REGION_LOG2);
@@ -38,6 +40,7 @@ unsafe impl Sync for Aligned {}
 static DMA_REGION: Aligned = Aligned(UnsafeCell::new(DmaRegion {
     ring: [0; RING_WORDS],
     lines: [[0; LINE_LEN]; BUFFERS],
+    samples: [0; LINE_LEN],
 }));
 
 static TAKEN: AtomicBool = AtomicBool::new(false);

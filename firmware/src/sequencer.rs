@@ -18,11 +18,16 @@
 //! ring (256 us), or the clocks stall (an underrun, reported as [`SeqError::Underrun`]). It
 //! therefore runs in an interrupt-level executor (`main.rs`), which preempts the tracker.
 //!
-//! # What this does not do yet
-//! The ADC samples are still read by the timer-paced SPI bursts of [`crate::readout`]: the
-//! SPI reads are not yet started from the program's lines (the ADC board must buffer a
-//! line; see docs/hardware.md). The waveforms on the port are checked with a logic analyser
-//! against the HIL steps before a CCD is connected.
+//! # Lines to the ADC reader
+//! As the feeder queues a frame it walks the program's line jobs (`LineJobs`): when a job's
+//! last word is queued it goes to [`LINE_JOBS`] with the instant its last sample will be
+//! taken (from the words still ahead of it in the ring and the tick), and the readout task
+//! reads that line's words from the ADC board after that instant ([`crate::readout`]). The
+//! board must buffer the samples of at least a line and a half ring (docs/hardware.md).
+//!
+//! # Not yet
+//! The frames are full frames: the tracker's requests (windows) are not routed here, and
+//! the waveforms have not been seen on a board (docs/hardware.md has the HIL steps).
 
 use embassy_stm32::Peri;
 use embassy_stm32::dma::{self, Priority, TransferOptions, WritableRingBuffer};
@@ -32,7 +37,10 @@ use embassy_stm32::peripherals::{DMA1_CH1, TIM6};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::UpDma;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
-use startrack_core::sequencer::{Cursor, PinMap, Program, Step};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_time::{Duration, Instant};
+use startrack_core::sequencer::{Cursor, LineJob, LineJobs, PinMap, Program, Step};
 
 /// The clock port's pin map: line `l` on PE`l` (I1-I3 PE0-2, S1-S3 PE3-5, R1L-R3L PE6-8,
 /// R1R-R3R PE9-11, RG PE12, SW PE13, DG PE14, CONVST PE15).
@@ -66,6 +74,20 @@ impl Tables {
     }
 }
 
+/// A digitised line for the ADC reader.
+pub struct LineReady {
+    /// Frame number since the clocks started (wraps).
+    pub frame: u32,
+    /// When its last sample is taken.
+    pub due: Instant,
+    /// What it digitises and where each word goes.
+    pub job: LineJob,
+}
+
+/// Lines queued on the clock port, for the readout task. Sixteen: a ring's worth of the
+/// shortest (windowed) lines.
+pub static LINE_JOBS: Channel<CriticalSectionRawMutex, LineReady, 16> = Channel::new();
+
 /// Why the clocks stopped.
 #[derive(Clone, Copy, Debug, defmt::Format)]
 pub enum SeqError {
@@ -79,6 +101,12 @@ pub struct Sequencer {
     ring: WritableRingBuffer<'static, u32>,
     _pins: [Output<'static>; 16],
     running: bool,
+    /// Words queued since the clocks started.
+    queued: u64,
+    /// Frames queued since the clocks started.
+    frame: u32,
+    /// Line jobs the readout had no room for.
+    pub dropped_lines: u32,
 }
 
 impl Sequencer {
@@ -110,6 +138,9 @@ impl Sequencer {
             ring,
             _pins: pins,
             running: false,
+            queued: 0,
+            frame: 0,
+            dropped_lines: 0,
         }
     }
 
@@ -119,6 +150,10 @@ impl Sequencer {
     pub async fn play(&mut self, program: &Program<'_, '_>) -> Result<(), SeqError> {
         let mut cursor = Cursor::START;
         let mut chunk = [0u32; 256];
+        let frame_start = self.queued;
+        let frame = self.frame;
+        self.frame = self.frame.wrapping_add(1);
+        let mut jobs = LineJobs::new(program).peekable();
         if !self.running {
             let hz = 1_000_000_000_000 / u64::from(program.tick_ps().max(1));
             self.timer.stop();
@@ -134,6 +169,7 @@ impl Sequencer {
                     .ring
                     .write_immediate(chunk.get(..n).unwrap_or(&[]))
                     .map_err(|_| SeqError::Underrun)?;
+                self.queued += written as u64;
                 if written < n {
                     pending = written..n;
                     break;
@@ -145,10 +181,13 @@ impl Sequencer {
             self.ring.start();
             self.timer.start();
             self.running = true;
+            let rest = chunk.get(pending).unwrap_or(&[]);
             self.ring
-                .write_exact(chunk.get(pending).unwrap_or(&[]))
+                .write_exact(rest)
                 .await
                 .map_err(|_| SeqError::Underrun)?;
+            self.queued += rest.len() as u64;
+            self.send_jobs(&mut jobs, frame, frame_start, program.tick_ps());
         }
         loop {
             let n = cursor.fill(program, &mut chunk);
@@ -159,6 +198,30 @@ impl Sequencer {
                 .write_exact(chunk.get(..n).unwrap_or(&[]))
                 .await
                 .map_err(|_| SeqError::Underrun)?;
+            self.queued += n as u64;
+            self.send_jobs(&mut jobs, frame, frame_start, program.tick_ps());
+        }
+    }
+
+    /// Sends every job whose words are all queued, with the instant of its last sample.
+    fn send_jobs(
+        &mut self,
+        jobs: &mut core::iter::Peekable<LineJobs<'_, '_, '_>>,
+        frame: u32,
+        frame_start: u64,
+        tick_ps: u32,
+    ) {
+        // Words queued but not yet played.
+        let ahead = self.ring.len().unwrap_or(0) as u64;
+        let played = self.queued.saturating_sub(ahead);
+        let now = Instant::now();
+        while let Some(job) = jobs.next_if(|j| frame_start + j.end_tick <= self.queued) {
+            let ticks_left = (frame_start + job.end_tick).saturating_sub(played);
+            let due =
+                now + Duration::from_micros((ticks_left * u64::from(tick_ps)).div_ceil(1_000_000));
+            if LINE_JOBS.try_send(LineReady { frame, due, job }).is_err() {
+                self.dropped_lines = self.dropped_lines.wrapping_add(1);
+            }
         }
     }
 
@@ -168,6 +231,7 @@ impl Sequencer {
         self.timer.enable_update_dma(false);
         self.ring.request_reset();
         self.running = false;
+        self.queued = 0;
     }
 }
 
