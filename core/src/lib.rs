@@ -26,6 +26,7 @@ pub mod centroid;
 pub mod detect;
 pub mod geometry;
 pub mod safe;
+pub mod sequencer;
 pub mod store;
 pub mod table;
 pub mod tracker;

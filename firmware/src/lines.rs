@@ -1,27 +1,26 @@
-//! The raw line buffers and their zero-copy hand-off from readout to processing.
+//! The raw line buffers and their hand-off from readout to processing.
 //!
 //! Two line buffers (ping-pong) circulate between the readout task and the processing task
 //! by ownership: a buffer is a `&'static mut LineBuf` that travels through two channels,
 //!
 //! ```text
-//!   FREE ──> readout (DMA fills it) ──> FILLED ──> process (reads it) ──> FREE
+//!   FREE ──> readout (unpacks the line's ADC words into it) ──> FILLED
+//!        ──> process (reads it) ──> FREE
 //! ```
 //!
-//! so while processing works on one line the DMA fills the other, no line is ever copied,
-//! and the borrow checker guarantees that the CPU never reads a buffer the DMA is writing.
+//! so while processing works on one line the readout fills the other, and the borrow
+//! checker guarantees that no two tasks hold a buffer at once. The ADC words themselves
+//! arrive by SPI DMA in a separate sample buffer and are put in their raw columns by the
+//! readout (`LineJob::unpack`: a line read through windows fills only the columns read).
 //!
-//! Placement: the buffers are ordinary statics, so they go to `.bss`, which `memory.x` puts
-//! in RAM = the AXI SRAM at 0x2400_0000. Every DMA master (DMA1/DMA2/MDMA) reaches the AXI
-//! SRAM; the DTCM at 0x2000_0000 would not be reachable, which is why nothing here uses a
-//! `link_section`. The data cache is left disabled (neither cortex-m-rt nor embassy-stm32
-//! enables it), so DMA writes are seen by the CPU without cache maintenance; whoever enables
-//! the D-cache must invalidate a buffer before reading it or make this region non-cacheable
-//! through the MPU.
+//! Placement: the buffers are part of [`crate::memory::DmaRegion`], in `.bss` (AXI SRAM at
+//! 0x2400_0000, which every DMA master reaches; the DTCM would not be) and made
+//! non-cacheable by the MPU, so with the D-cache on the CPU still sees what the DMA wrote
+//! without cache maintenance.
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use startrack_core::geometry::ReadoutGeometry;
-use static_cell::ConstStaticCell;
 
 /// The readout mode of this firmware: the CCD47-20 read through both outputs.
 pub const GEOMETRY: ReadoutGeometry = ReadoutGeometry::CCD47_20_DUAL;
@@ -45,9 +44,6 @@ pub struct RawLine {
     pub samples: &'static mut LineBuf,
 }
 
-/// The line buffers themselves, zero-initialised in `.bss` (AXI SRAM, DMA-reachable).
-static BUFS: ConstStaticCell<[LineBuf; BUFFERS]> = ConstStaticCell::new([[0; LINE_LEN]; BUFFERS]);
-
 /// Buffers ready to be filled by the readout DMA.
 pub static FREE: Channel<CriticalSectionRawMutex, &'static mut LineBuf, BUFFERS> = Channel::new();
 
@@ -57,15 +53,13 @@ pub static FILLED: Channel<CriticalSectionRawMutex, RawLine, BUFFERS> = Channel:
 /// Why the buffer pool could not be set up.
 #[derive(Clone, Copy, Debug, defmt::Format)]
 pub enum PoolError {
-    /// [`init`] was called twice.
-    AlreadyInitialised,
     /// The free channel refused a buffer (cannot happen: it holds [`BUFFERS`]).
     FreeChannelFull,
 }
 
-/// Puts every line buffer in [`FREE`]. Call once, before the readout task starts.
-pub fn init() -> Result<(), PoolError> {
-    let bufs = BUFS.try_take().ok_or(PoolError::AlreadyInitialised)?;
+/// Puts every line buffer (from the DMA region) in [`FREE`]. Call once, before the readout
+/// task starts.
+pub fn init(bufs: &'static mut [LineBuf; BUFFERS]) -> Result<(), PoolError> {
     for buf in bufs.iter_mut() {
         FREE.try_send(buf).map_err(|_| PoolError::FreeChannelFull)?;
     }

@@ -2,14 +2,13 @@
 //!
 //! What runs: clocks at 480 MHz, the watchdog ([`watchdog`]), the fault record kept over a
 //! reset ([`safe_state`]), the table store in flash bank 2 and the calibration table copied
-//! from it ([`flash_store`]), the sensor temperature ([`mcu_temp`]), the line
-//! readout by SPI DMA into ping-pong buffers ([`readout`], [`lines`]), and the core's
+//! from it ([`flash_store`]), the sensor temperature ([`mcu_temp`]), the CCD clocks played
+//! from the core's compiled program by timer-paced DMA into GPIOE ([`sequencer`], with the
+//! caches and the DMA region in [`memory`]), the line readout by SPI DMA in step with them
+//! ([`readout`], [`lines`]), and the core's
 //! tracker application bound to those and to the log ([`app`], [`telemetry`]): every
 //! processing step, from the bias of a line to a star's centroid and the mode changes, is
 //! the core's. This crate holds hardware and tasks only.
-//!
-//! Boundary, honestly: there is no CCD clock sequencer yet, so no CCD is driven; lines are
-//! SPI bursts paced by a timer (see [`readout`]). The defmt log is the only telemetry.
 #![no_std]
 #![no_main]
 
@@ -17,8 +16,10 @@ mod app;
 mod flash_store;
 mod lines;
 mod mcu_temp;
+mod memory;
 mod readout;
 mod safe_state;
+mod sequencer;
 mod telemetry;
 mod watchdog;
 
@@ -28,7 +29,7 @@ use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::spi::Spi;
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{Config, bind_interrupts, dma, flash, peripherals};
+use embassy_stm32::{Config, bind_interrupts, dma, flash, interrupt, peripherals};
 use panic_probe as _;
 use startrack_core::safe::SetupFaults;
 use startrack_core::store::TableKind;
@@ -40,11 +41,29 @@ use static_cell::ConstStaticCell;
 static TRACKER_BUFFERS: ConstStaticCell<TrackerBuffers> =
     ConstStaticCell::new(TrackerBuffers::new());
 
+/// The executor of the sequencer's feeder: interrupt-driven (UART4's vector, unused
+/// otherwise) at a priority above thread mode, so the tracker's long frames cannot delay the
+/// refill of the clock ring.
+static EXECUTOR_CLOCKS: embassy_executor::InterruptExecutor =
+    embassy_executor::InterruptExecutor::new();
+
+#[interrupt]
+unsafe fn UART4() {
+    // SAFETY: UART4's vector serves only this executor, started once in `main`.
+    unsafe { EXECUTOR_CLOCKS.on_interrupt() }
+}
+
+/// The sequencer's compiled frame (56 KB, CPU-only, cacheable `.bss`).
+static SEQ_TABLES: ConstStaticCell<sequencer::Tables> =
+    ConstStaticCell::new(sequencer::Tables::new());
+
 bind_interrupts!(
-    /// Interrupts the drivers need: DMA1 stream 0 carries SPI1 RX (the ADC samples); the
-    /// flash interrupt ends an async erase of bank 2.
+    /// Interrupts the drivers need: DMA1 stream 0 carries SPI1 RX (the ADC samples), DMA1
+    /// stream 1 the clock words (TIM6 update into GPIOE BSRR); the flash interrupt ends an
+    /// async erase of bank 2.
     struct Irqs {
         DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
+        DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
         FLASH => flash::InterruptHandler;
     }
 );
@@ -168,18 +187,57 @@ async fn main(spawner: Spawner) {
     faults |= SetupFaults::EXTERNAL_THERMOMETER;
 
     let mut fatal = SetupFaults::empty();
-    if let Err(e) = lines::init() {
-        defmt::error!("line buffers: {}", e);
-        fatal |= SetupFaults::LINE_BUFFERS;
-    }
+    // The DMA block (clock ring, line buffers, SPI samples) in its non-cacheable MPU region,
+    // and the caches on.
+    let dma_region = match memory::init() {
+        Ok(r) => Some(r),
+        Err(e) => {
+            defmt::error!("DMA region and caches: {}", e);
+            fatal |= SetupFaults::READOUT;
+            None
+        }
+    };
+    let (ring, samples) = match dma_region {
+        Some(memory::DmaRegion {
+            ring,
+            lines: line_bufs,
+            samples,
+        }) => {
+            if let Err(e) = lines::init(line_bufs) {
+                defmt::error!("line buffers: {}", e);
+                fatal |= SetupFaults::LINE_BUFFERS;
+            }
+            (Some(ring), Some(samples))
+        }
+        None => (None, None),
+    };
     let buffers = TRACKER_BUFFERS.try_take();
     if buffers.is_none() {
         defmt::error!("tracker buffers already taken");
         fatal |= SetupFaults::TRACKER_BUFFERS;
     }
 
-    let started = match (fatal.is_empty(), buffers) {
-        (true, Some(buffers)) => {
+    let started = match (fatal.is_empty(), buffers, ring, samples) {
+        (true, Some(buffers), Some(ring), Some(samples)) => {
+            let clock_pins = [
+                p.PE0.into(),
+                p.PE1.into(),
+                p.PE2.into(),
+                p.PE3.into(),
+                p.PE4.into(),
+                p.PE5.into(),
+                p.PE6.into(),
+                p.PE7.into(),
+                p.PE8.into(),
+                p.PE9.into(),
+                p.PE10.into(),
+                p.PE11.into(),
+                p.PE12.into(),
+                p.PE13.into(),
+                p.PE14.into(),
+                p.PE15.into(),
+            ];
+            let seq = sequencer::Sequencer::new(p.TIM6, p.DMA1_CH1, Irqs, clock_pins, ring);
             let spi = Spi::new_rxonly(
                 p.SPI1,
                 p.PA5,
@@ -195,11 +253,32 @@ async fn main(spawner: Spawner) {
                 "tracker",
                 app::tracker_task(table, buffers, thermometer),
             );
-            let readout = spawn_or_log(spawner, "readout", readout::readout_task(adc));
-            if !(tracker && readout) {
+            let readout = spawn_or_log(spawner, "readout", readout::readout_task(adc, samples));
+            let clocks = match SEQ_TABLES.try_take() {
+                Some(tables) => {
+                    use interrupt::{InterruptExt, Priority};
+                    interrupt::UART4.set_priority(Priority::P6);
+                    let clocks = EXECUTOR_CLOCKS.start(interrupt::UART4);
+                    match sequencer::sequencer_task(seq, tables) {
+                        Ok(token) => {
+                            clocks.spawn(token);
+                            true
+                        }
+                        Err(e) => {
+                            defmt::error!("cannot spawn sequencer: {}", e);
+                            false
+                        }
+                    }
+                }
+                None => {
+                    defmt::error!("sequencer tables already taken");
+                    false
+                }
+            };
+            if !(tracker && readout && clocks) {
                 fatal |= SetupFaults::TASK_SPAWN;
             }
-            tracker && readout
+            tracker && readout && clocks
         }
         _ => false,
     };

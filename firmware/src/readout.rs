@@ -15,24 +15,29 @@
 //! (`DMA1_CH0`, routed by DMAMUX1); PA7 (SPI1_MOSI) is not used because the NUCLEO wires it
 //! to the Ethernet PHY.
 //!
-//! # What this does not do yet
-//! There is no CCD clock sequencer yet, so nothing drives the CCD or paces the ADC: each
-//! line is a plain SPI burst of 1072 words started by a timer tick ([`LINE_PERIOD`]) that
-//! stands in for the sequencer's "line ready" event. With no ADC on the pins the samples are
-//! whatever MISO reads (the pull-down makes that 0). The sequencer will replace the ticker
-//! and drive the ADC's conversion start; the buffer hand-off stays as it is.
+//! # In step with the clocks
+//! Each line comes from the sequencer ([`crate::sequencer::LINE_JOBS`]): the job says how
+//! many words the line digitised (read pixels x outputs, in the order the pixels left the
+//! register) and when its last sample is taken. After that instant the line's words are read
+//! in one SPI burst into the sample buffer (DMA), then put in their raw columns
+//! (`LineJob::unpack`) in a free line buffer, which goes on to processing. The ADC board
+//! therefore buffers the samples (a FIFO of at least a line and the sequencer's ring, see
+//! docs/hardware.md); with no ADC on the pins every word reads 0 (MISO pulled down).
 
 use crate::lines::{FILLED, FREE, GEOMETRY, LINE_LEN, LineBuf, RawLine};
+use crate::sequencer::LINE_JOBS;
 use embassy_stm32::gpio::Output;
 use embassy_stm32::mode::Async;
 use embassy_stm32::spi::{self, Spi, mode::Master};
 use embassy_stm32::time::Hertz;
-use embassy_time::{Duration, Ticker};
+use embassy_time::{Duration, Timer};
 
 /// SPI clock for the ADC read-out: 30 MHz, so a line (1072 x 16 bits) takes 572 us.
 pub const SPI_HZ: Hertz = Hertz(30_000_000);
 
-/// Line period while no sequencer paces the readout: 2 ms, about 2 s per 1033-line frame.
+/// The line period the tracker's exposure setting assumes (`app.rs`: lines x this). The
+/// sequencer's full frame is faster (docs/sequencer.md); its exposure is not yet handed to
+/// the tracker.
 pub const LINE_PERIOD: Duration = Duration::from_millis(2);
 
 /// The SPI configuration for the ADC: mode 0, MSB first, 16-bit words (set per transfer by
@@ -58,51 +63,35 @@ impl AdcLink {
         Self { spi, cs }
     }
 
-    /// Reads one line into `buf` by DMA, chip select held low for the whole line.
-    async fn read_line(&mut self, buf: &mut LineBuf) -> Result<(), spi::Error> {
+    /// Reads `words.len()` samples by DMA, chip select held low for the whole burst.
+    async fn read_words(&mut self, words: &mut [u16]) -> Result<(), spi::Error> {
         self.cs.set_low();
-        let result = self.spi.read(&mut buf[..]).await;
+        let result = self.spi.read(words).await;
         self.cs.set_high();
         result
     }
 }
 
-/// Position of the next line in the frame.
-struct LineCounter {
-    frame: u32,
-    line: u16,
-}
-
-impl LineCounter {
-    fn advance(&mut self) {
-        self.line += 1;
-        if self.line >= GEOMETRY.lines {
-            self.line = 0;
-            self.frame = self.frame.wrapping_add(1);
-        }
-    }
-}
-
-/// The readout task: one line per tick, into whichever buffer is free, then on to
-/// processing. When processing has not yet returned a buffer (it fell behind by a whole
-/// line) the overrun is counted and logged and the readout waits for a buffer.
+/// The readout task: for each line the sequencer clocked, wait for its last sample, read its
+/// words into `samples` (DMA), unpack them into a free line buffer and hand it to
+/// processing. When processing has not yet returned a buffer the overrun is counted and
+/// logged and the readout waits for one.
 #[embassy_executor::task]
-pub async fn readout_task(mut adc: AdcLink) -> ! {
+pub async fn readout_task(mut adc: AdcLink, samples: &'static mut [u16; LINE_LEN]) -> ! {
     defmt::info!(
-        "readout: {} samples/line, {} lines/frame, SPI {} Hz, line period {} us (no sequencer: timer-paced)",
+        "readout: up to {} samples/line, {} lines/frame, SPI {} Hz, lines from the sequencer",
         LINE_LEN,
         GEOMETRY.lines,
-        SPI_HZ.0,
-        LINE_PERIOD.as_micros()
+        SPI_HZ.0
     );
-    let mut ticker = Ticker::every(LINE_PERIOD);
-    let mut pos = LineCounter { frame: 0, line: 0 };
     // A buffer kept back after a failed transfer, reused before asking FREE.
     let mut spare: Option<&'static mut LineBuf> = None;
     let mut overruns: u32 = 0;
 
     loop {
-        ticker.next().await;
+        let ready = LINE_JOBS.receive().await;
+        Timer::at(ready.due).await;
+        let (frame, line) = (ready.frame, ready.job.line);
         let buf = match spare.take() {
             Some(buf) => buf,
             None => match FREE.try_receive() {
@@ -111,36 +100,36 @@ pub async fn readout_task(mut adc: AdcLink) -> ! {
                     overruns = overruns.wrapping_add(1);
                     defmt::warn!(
                         "readout: no free line buffer at frame {} line {} (overruns: {})",
-                        pos.frame,
-                        pos.line,
+                        frame,
+                        line,
                         overruns
                     );
                     FREE.receive().await
                 }
             },
         };
-        match adc.read_line(buf).await {
-            Ok(()) => {
+        let n = (ready.job.words as usize).min(LINE_LEN);
+        let words = &mut samples[..n];
+        if let Err(e) = adc.read_words(words).await {
+            // The line is lost; line indices stay tied to the sensor's rows.
+            defmt::error!("readout: SPI error {} at frame {} line {}", e, frame, line);
+            spare = Some(buf);
+            continue;
+        }
+        match ready.job.unpack(GEOMETRY.outputs, 1, words, &mut buf[..]) {
+            Ok(_) => {
                 FILLED
                     .send(RawLine {
-                        frame: pos.frame,
-                        line: pos.line,
+                        frame,
+                        line,
                         samples: buf,
                     })
                     .await;
             }
             Err(e) => {
-                // The line is lost; the frame position still advances so that line indices
-                // stay tied to the sensor's rows.
-                defmt::error!(
-                    "readout: SPI error {} at frame {} line {}",
-                    e,
-                    pos.frame,
-                    pos.line
-                );
+                defmt::error!("readout: frame {} line {}: {}", frame, line, e);
                 spare = Some(buf);
             }
         }
-        pos.advance();
     }
 }

@@ -58,6 +58,9 @@ enum Command {
     Figures(startrack_host::cli::figures::FiguresArgs),
     /// Cost per star against accuracy (Pareto frontier) and failure maps of every centroid method.
     Tradeoff(startrack_host::cli::tradeoff::TradeoffArgs),
+    /// One frame of the CCD sequencer: rows clocked, pixels digitised, frame time and update
+    /// rate, computed from the compiled program (CSV).
+    ReadoutPlan(startrack_host::cli::readout_plan::ReadoutPlanArgs),
 }
 
 #[derive(Subcommand)]
@@ -113,6 +116,13 @@ fn main() -> ExitCode {
         },
         Command::Figures(args) => startrack_host::cli::figures::run(&args),
         Command::Tradeoff(args) => startrack_host::cli::tradeoff::run(&args),
+        Command::ReadoutPlan(args) => match startrack_host::cli::readout_plan::run(&args) {
+            Ok(text) => {
+                print!("{text}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail("readout-plan", &e),
+        },
         Command::Demo { seed, stars } => match startrack_host::demo::run(seed, stars) {
             Ok(report) => {
                 startrack_host::demo::print(&report);

@@ -6,6 +6,7 @@ pub mod accuracy;
 pub mod calib_build;
 pub mod figures;
 pub mod process;
+pub mod readout_plan;
 pub mod sil;
 pub mod simulate;
 pub mod tradeoff;
