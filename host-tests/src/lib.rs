@@ -7,6 +7,7 @@ pub mod demo;
 pub mod figures;
 pub mod fits;
 pub mod home;
+pub mod link_home;
 pub mod pixcorr;
 pub mod sil;
 pub mod sim;
