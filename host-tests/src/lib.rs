@@ -6,6 +6,7 @@ pub mod cli;
 pub mod demo;
 pub mod figures;
 pub mod fits;
+pub mod ground;
 pub mod home;
 pub mod link_home;
 pub mod pixcorr;

@@ -229,6 +229,8 @@ pub struct ServeConfig {
     pub link_noise: f64,
     /// Stop after this many frames (`None`: run until killed).
     pub max_frames: Option<u32>,
+    /// Stop when this is set (checked between frames and in the link phase).
+    pub stop: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 /// Counts of a [`serve`] run.
@@ -304,7 +306,11 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
         });
         let mut thermometer = FixedTemperature(None);
         loop {
-            if config.max_frames.is_some_and(|m| report.frames >= m) {
+            let stopped = config
+                .stop
+                .as_ref()
+                .is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed));
+            if stopped || config.max_frames.is_some_and(|m| report.frames >= m) {
                 return Ok(report);
             }
             // The link phase.
