@@ -125,19 +125,12 @@ impl Ground {
         })
     }
 
-    /// The framed bytes of telecommand `kind` with `data` and its request id.
+    /// The framed bytes of telecommand `kind` with `data` and its request id (the next
+    /// sequence count).
     pub fn telecommand(&mut self, kind: MessageType, data: &[u8]) -> (Vec<u8>, u32) {
-        let sp = SpHeader::new_for_unseg_tc(u11::new(p::APID_CONTROL), u14::new(self.seq), 0);
+        let seq = self.seq;
         self.seq = (self.seq + 1) & 0x3FFF;
-        let sec = PusTcSecondaryHeader::new_simple(MessageTypeId::new(kind.service, kind.subtype));
-        let tc = PusTcCreator::new(sp, sec, data, CreatorConfig::default());
-        let mut pkt = vec![0u8; tc.len_written()];
-        let n = tc.write_to_slice(&mut pkt).unwrap_or(0);
-        pkt.truncate(n);
-        let mut framed = vec![0u8; encoded_len_max(pkt.len())];
-        let m = encode(&pkt, &mut framed).unwrap_or(0);
-        framed.truncate(m);
-        (framed, request_id(&pkt))
+        frame_telecommand(kind, data, seq)
     }
 
     /// Sends raw bytes (a framed command, or anything).
@@ -432,6 +425,20 @@ impl Ground {
         }
         Ok(px)
     }
+}
+
+/// Telecommand `kind` with `data` and sequence count `seq`, COBS-framed, and its request id.
+pub fn frame_telecommand(kind: MessageType, data: &[u8], seq: u16) -> (Vec<u8>, u32) {
+    let sp = SpHeader::new_for_unseg_tc(u11::new(p::APID_CONTROL), u14::new(seq & 0x3FFF), 0);
+    let sec = PusTcSecondaryHeader::new_simple(MessageTypeId::new(kind.service, kind.subtype));
+    let tc = PusTcCreator::new(sp, sec, data, CreatorConfig::default());
+    let mut pkt = vec![0u8; tc.len_written()];
+    let n = tc.write_to_slice(&mut pkt).unwrap_or(0);
+    pkt.truncate(n);
+    let mut framed = vec![0u8; encoded_len_max(pkt.len())];
+    let m = encode(&pkt, &mut framed).unwrap_or(0);
+    framed.truncate(m);
+    (framed, request_id(&pkt))
 }
 
 /// A telemetry packet's fields, or `None` if it is not a PUS-C TM with a good CRC.

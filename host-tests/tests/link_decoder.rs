@@ -10,7 +10,7 @@ use startrack_core::link::protocol::{self as p, MessageType};
 use startrack_core::link::telemetry::Reader;
 use startrack_core::link::{LinkService, NoWindows, Targets};
 use startrack_core::tracker::{Tracker, TrackerBuffers, TrackerConfig};
-use startrack_host::ground::{Tm, decode_tm};
+use startrack_host::ground::{Tm, decode_tm, frame_telecommand};
 use startrack_host::link_home::MemoryTables;
 
 /// Runs `bytes` through a fresh link bound to a fresh tracker; returns the link and the
@@ -47,23 +47,9 @@ fn feed(chunks: &[&[u8]]) -> (Box<LinkService>, Vec<Tm>) {
     (link, tm)
 }
 
-/// A framed telecommand.
+/// A framed telecommand and its request id.
 fn tc(kind: MessageType, data: &[u8], seq: u16) -> (Vec<u8>, u32) {
-    use arbitrary_int::{u11, u14};
-    use spacepackets::SpHeader;
-    use spacepackets::ecss::CreatorConfig;
-    use spacepackets::ecss::MessageTypeId;
-    use spacepackets::ecss::tc::{PusTcCreator, PusTcSecondaryHeader};
-    let sp = SpHeader::new_for_unseg_tc(u11::new(p::APID_CONTROL), u14::new(seq & 0x3FFF), 0);
-    let sec = PusTcSecondaryHeader::new_simple(MessageTypeId::new(kind.service, kind.subtype));
-    let tc = PusTcCreator::new(sp, sec, data, CreatorConfig::default());
-    let mut pkt = vec![0u8; tc.len_written()];
-    tc.write_to_slice(&mut pkt).expect("write");
-    let mut framed = vec![0u8; encoded_len_max(pkt.len())];
-    let n = encode(&pkt, &mut framed).expect("encode");
-    framed.truncate(n);
-    let id = u32::from_be_bytes([pkt[0], pkt[1], pkt[2], pkt[3]]);
-    (framed, id)
+    frame_telecommand(kind, data, seq)
 }
 
 /// (accepted, rejected with code) verification reports for request `id`.
