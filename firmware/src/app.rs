@@ -9,7 +9,7 @@
 //! | clock | embassy-time's `Instant` |
 //! | temperature | none yet: the table's hot-pixel reference temperature is used (the frame summary says so) |
 //! | table | the flash table checked at start-up ([`crate::calib_store`]), or none |
-//! | telemetry | the defmt log ([`crate::telemetry`]) |
+//! | telemetry | the defmt log ([`crate::telemetry`]) and the link ([`crate::link`]), served between frames |
 //!
 //! The readout free-runs without a sequencer, so the tracker's [`ReadoutRequest`] is not
 //! sent anywhere yet: every line is read whole, which serves any request. The exposure is
@@ -143,9 +143,29 @@ pub async fn tracker_task(
     let mut source = ChannelLines::new();
     let mut clock = BoardClock;
     let mut thermometer = FixedTemperature(None);
+    let mut store = crate::link::ReadOnlyTables::new(
+        table.map(|t| u32::try_from(t.len_bytes()).unwrap_or(u32::MAX)),
+    );
     let mut tables = FixedTable(table);
-    let mut telemetry = DefmtTelemetry;
+    let mut log = DefmtTelemetry;
+    let Some(link) = crate::link::SERVICE
+        .try_uninit()
+        .map(|slot| slot.write(startrack_core::link::LinkService::new()))
+    else {
+        defmt::error!("link service already taken");
+        return;
+    };
     loop {
+        crate::link::serve(link, &mut tracker, &mut store);
+        if link.reset_requested() {
+            // Let the transmit task send the acceptance, then reset.
+            embassy_time::Timer::after_millis(50).await;
+            cortex_m::peripheral::SCB::sys_reset();
+        }
+        let mut telemetry = crate::link::Tee {
+            log: &mut log,
+            link: &mut *link,
+        };
         let mut ports = Ports {
             clock: &mut clock,
             thermometer: &mut thermometer,
@@ -153,5 +173,6 @@ pub async fn tracker_task(
             telemetry: &mut telemetry,
         };
         let Ok(_) = tracker.run_frame(&mut source, &mut ports).await;
+        link.end_of_frame(&store);
     }
 }

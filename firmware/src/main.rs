@@ -7,13 +7,16 @@
 //! the core's. This crate holds hardware and tasks only.
 //!
 //! Boundary, honestly: there is no CCD clock sequencer yet, so no CCD is driven; lines are
-//! SPI bursts paced by a timer (see [`readout`]). The defmt log is the only telemetry.
+//! SPI bursts paced by a timer (see [`readout`]). Telemetry goes to the defmt log and to the
+//! command and telemetry link on USART3 ([`link`]); table uploads are refused until the flash
+//! slots are bound.
 #![no_std]
 #![no_main]
 
 mod app;
 mod calib_store;
 mod lines;
+mod link;
 mod readout;
 mod telemetry;
 
@@ -21,7 +24,7 @@ use defmt_rtt as _;
 use embassy_executor::{SpawnError, SpawnToken, Spawner};
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::spi::Spi;
-use embassy_stm32::{Config, bind_interrupts, dma, peripherals};
+use embassy_stm32::{Config, bind_interrupts, dma, peripherals, usart};
 use panic_probe as _;
 use startrack_core::tracker::TrackerBuffers;
 use static_cell::ConstStaticCell;
@@ -35,6 +38,9 @@ bind_interrupts!(
     /// Interrupts the drivers need: DMA1 stream 0 carries SPI1 RX (the ADC samples).
     struct Irqs {
         DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
+        USART3 => usart::InterruptHandler<peripherals::USART3>;
+        DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+        DMA1_STREAM2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
     }
 );
 
@@ -117,6 +123,34 @@ async fn main(spawner: Spawner) {
         defmt::error!("tracker buffers already taken");
         return;
     };
+    // The link: USART3 (ST-LINK virtual COM port), DMA1 stream 1 receive ring, stream 2
+    // transmit. Without it the tracker still runs (its telemetry then only in the log).
+    let mut uart_config = usart::Config::default();
+    uart_config.baudrate = link::BAUD;
+    match (
+        usart::Uart::new(
+            p.USART3,
+            p.PD9,
+            p.PD8,
+            p.DMA1_CH2,
+            p.DMA1_CH1,
+            Irqs,
+            uart_config,
+        ),
+        link::DMA_RING.try_take(),
+    ) {
+        (Ok(uart), Some(ring)) => {
+            let (tx, rx) = uart.split();
+            spawn_or_log(
+                spawner,
+                "link rx",
+                link::link_rx_task(rx.into_ring_buffered(ring)),
+            );
+            spawn_or_log(spawner, "link tx", link::link_tx_task(tx));
+        }
+        (Err(e), _) => defmt::error!("link: USART3 configuration refused: {}", e),
+        (_, None) => defmt::error!("link: DMA ring already taken"),
+    }
     spawn_or_log(spawner, "tracker", app::tracker_task(table, buffers));
     spawn_or_log(spawner, "readout", readout::readout_task(adc));
 }

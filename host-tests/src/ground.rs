@@ -3,7 +3,7 @@
 //! telecommands with `spacepackets`, frames them with COBS, and reads the telemetry back
 //! with the core's own layouts ([`startrack_core::link::telemetry`]).
 //!
-//! Every command waits for its TM[1,1] or TM[1,2] (matched by request id); a rejection is a
+//! Every command waits for its `TM[1,1]` or `TM[1,2]` (matched by request id); a rejection is a
 //! [`GroundError::Rejected`] with the tracker's reason.
 
 use arbitrary_int::{u11, u14};
@@ -98,7 +98,7 @@ pub struct Ground {
     pub bad_packets: u32,
 }
 
-/// Request id of a telecommand: its packet id and sequence control, as TM[1,x] echo them.
+/// Request id of a telecommand: its packet id and sequence control, as `TM[1,x]` echo them.
 fn request_id(packet: &[u8]) -> u32 {
     packet
         .get(..4)

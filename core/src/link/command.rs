@@ -41,28 +41,28 @@ pub struct WindowRequest {
 /// A telecommand, read.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Command<'a> {
-    /// TC[17,1].
+    /// `TC[17,1]`.
     Ping,
-    /// TC[3,27].
+    /// `TC[3,27]`.
     Housekeeping,
-    /// TC[3,31]: period, frames (0: on request only).
+    /// `TC[3,31]`: period, frames (0: on request only).
     HousekeepingPeriod(u16),
-    /// TC[130,1].
+    /// `TC[130,1]`.
     SetMode(Mode),
-    /// TC[130,2]: `count` valid entries.
+    /// `TC[130,2]`: `count` valid entries.
     SetParams {
         /// The parameters.
         params: [ParamValue; MAX_PARAMS],
         /// How many of `params` are set.
         count: usize,
     },
-    /// TC[130,3].
+    /// `TC[130,3]`.
     Reset,
-    /// TC[131,1]: frames (0: stop, 65535: every frame).
+    /// `TC[131,1]`: frames (0: stop, 65535: every frame).
     Stars(u16),
-    /// TC[132,1].
+    /// `TC[132,1]`.
     Window(WindowRequest),
-    /// TC[133,1].
+    /// `TC[133,1]`.
     TableBegin {
         /// Table kind.
         kind: u8,
@@ -71,23 +71,23 @@ pub enum Command<'a> {
         /// CRC-32/ISO-HDLC of the whole table.
         crc32: u32,
     },
-    /// TC[133,2].
+    /// `TC[133,2]`.
     TableChunk {
         /// Byte offset in the table.
         offset: u32,
         /// The bytes.
         data: &'a [u8],
     },
-    /// TC[133,3].
+    /// `TC[133,3]`.
     TableCommit,
-    /// TC[133,4].
+    /// `TC[133,4]`.
     TableAbort,
-    /// TC[133,5].
+    /// `TC[133,5]`.
     TableReport(u8),
 }
 
 /// Why a telecommand was not executed. Codes ([`Self::code`]) and parameters are stable:
-/// they go to the ground in TM[1,2] and in the anomaly event.
+/// they go to the ground in `TM[1,2]` and in the anomaly event.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
@@ -116,7 +116,7 @@ pub enum Rejection {
 }
 
 impl Rejection {
-    /// The reason code in TM[1,2].
+    /// The reason code in `TM[1,2]`.
     pub const fn code(self) -> u16 {
         match self {
             Self::Checksum => 1,
@@ -132,7 +132,7 @@ impl Rejection {
         }
     }
 
-    /// The reason's parameter in TM[1,2]: the APID, the service << 8 | subtype, the upload
+    /// The reason's parameter in `TM[1,2]`: the APID, the service << 8 | subtype, the upload
     /// refusal's code << 16 | (its expected offset's low 16 bits), or 0.
     pub fn parameter(self) -> u32 {
         match self {

@@ -44,6 +44,7 @@ pub const TABLE_KIND_CALIBRATION: u8 = 1;
 
 /// A service type and subtype.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct MessageType {
     /// PUS service type.
     pub service: u8,
@@ -55,49 +56,49 @@ const fn mt(service: u8, subtype: u8) -> MessageType {
     MessageType { service, subtype }
 }
 
-/// TM[1,1]: the telecommand was accepted and executed.
+/// `TM[1,1]`: the telecommand was accepted and executed.
 pub const TM_ACCEPTED: MessageType = mt(1, 1);
-/// TM[1,2]: the telecommand was rejected, with a [`super::Rejection`] code.
+/// `TM[1,2]`: the telecommand was rejected, with a [`super::Rejection`] code.
 pub const TM_REJECTED: MessageType = mt(1, 2);
-/// TC[3,27]: send one housekeeping report now.
+/// `TC[3,27]`: send one housekeeping report now.
 pub const TC_HOUSEKEEPING: MessageType = mt(3, 27);
-/// TC[3,31]: housekeeping report period, frames (0: only on request).
+/// `TC[3,31]`: housekeeping report period, frames (0: only on request).
 pub const TC_HOUSEKEEPING_PERIOD: MessageType = mt(3, 31);
-/// TM[3,25]: a housekeeping report.
+/// `TM[3,25]`: a housekeeping report.
 pub const TM_HOUSEKEEPING: MessageType = mt(3, 25);
-/// TM[5,1]: an informative event.
+/// `TM[5,1]`: an informative event.
 pub const TM_EVENT_INFO: MessageType = mt(5, 1);
-/// TM[5,2]: an anomaly event (a rejected command, a refused table).
+/// `TM[5,2]`: an anomaly event (a rejected command, a refused table).
 pub const TM_EVENT_ANOMALY: MessageType = mt(5, 2);
-/// TC[17,1]: are you alive.
+/// `TC[17,1]`: are you alive.
 pub const TC_PING: MessageType = mt(17, 1);
-/// TM[17,2]: alive.
+/// `TM[17,2]`: alive.
 pub const TM_PONG: MessageType = mt(17, 2);
-/// TC[130,1]: set the mode from the next frame on.
+/// `TC[130,1]`: set the mode from the next frame on.
 pub const TC_SET_MODE: MessageType = mt(130, 1);
-/// TC[130,2]: set configuration parameters from the next frame on.
+/// `TC[130,2]`: set configuration parameters from the next frame on.
 pub const TC_SET_PARAMS: MessageType = mt(130, 2);
-/// TC[130,3]: reset the tracker.
+/// `TC[130,3]`: reset the tracker.
 pub const TC_RESET: MessageType = mt(130, 3);
-/// TC[131,1]: send the star list of the next N frames.
+/// `TC[131,1]`: send the star list of the next N frames.
 pub const TC_STARS: MessageType = mt(131, 1);
-/// TM[131,2]: one frame's star list.
+/// `TM[131,2]`: one frame's star list.
 pub const TM_STARS: MessageType = mt(131, 2);
-/// TC[132,1]: read a raw or calibrated window of the next frame.
+/// `TC[132,1]`: read a raw or calibrated window of the next frame.
 pub const TC_WINDOW: MessageType = mt(132, 1);
-/// TM[132,2]: one row of a window.
+/// `TM[132,2]`: one row of a window.
 pub const TM_WINDOW_ROW: MessageType = mt(132, 2);
-/// TC[133,1]: begin a table upload.
+/// `TC[133,1]`: begin a table upload.
 pub const TC_TABLE_BEGIN: MessageType = mt(133, 1);
-/// TC[133,2]: one chunk of the table.
+/// `TC[133,2]`: one chunk of the table.
 pub const TC_TABLE_CHUNK: MessageType = mt(133, 2);
-/// TC[133,3]: commit the uploaded table.
+/// `TC[133,3]`: commit the uploaded table.
 pub const TC_TABLE_COMMIT: MessageType = mt(133, 3);
-/// TC[133,4]: abort the upload.
+/// `TC[133,4]`: abort the upload.
 pub const TC_TABLE_ABORT: MessageType = mt(133, 4);
-/// TC[133,5]: report the table in force.
+/// `TC[133,5]`: report the table in force.
 pub const TC_TABLE_REPORT: MessageType = mt(133, 5);
-/// TM[133,6]: the table in force.
+/// `TM[133,6]`: the table in force.
 pub const TM_TABLE_REPORT: MessageType = mt(133, 6);
 
 /// Which way a message goes.

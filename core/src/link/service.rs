@@ -3,7 +3,7 @@
 //! ([`LinkService::poll`]), passes it as the tracker's telemetry port, and sends what
 //! [`LinkService::transmit`] gives when the UART can take it.
 //!
-//! - Every telecommand gets TM[1,1] (executed) or TM[1,2] with its [`Rejection`]; a
+//! - Every telecommand gets `TM[1,1]` (executed) or `TM[1,2]` with its [`Rejection`]; a
 //!   rejection is also an anomaly event. A packet with a bad CRC or an unreadable header is
 //!   rejected with the request id of its first four bytes when it has them.
 //! - Telemetry waits in two bounded queues of COBS frames: `urgent` (verification reports,
@@ -11,7 +11,7 @@
 //!   packet that does not fit its queue is dropped and counted (`tm_dropped`): a slow link
 //!   loses telemetry, never frame time, and command answers are the last to go.
 //! - Nothing blocks and nothing panics; every buffer is fixed: the receive frame
-//!   ([`MAX_TC_LEN`] + COBS overhead), the queues ([`URGENT_QUEUE_BYTES`],
+//!   ([`p::MAX_TC_LEN`] + COBS overhead), the queues ([`URGENT_QUEUE_BYTES`],
 //!   [`BULK_QUEUE_BYTES`]), one telemetry packet's scratch.
 //!
 //! Cost: per received byte a push (and per packet a CRC-16 and the command); per frame one
@@ -90,8 +90,11 @@ pub struct LinkService {
     totals: FrameTotals,
     last: Option<FrameSummary>,
     stars: heapless::Vec<StarRecord, { p::MAX_LINK_STARS }>,
-    star_frames: u16,
-    hk_period: u16,
+    /// Star lists still to send (`None`: every frame). Zero-valued defaults throughout, so
+    /// a static service costs no flash.
+    star_frames: Option<u16>,
+    /// Housekeeping period, frames (`None`: [`Self::DEFAULT_HK_PERIOD`]).
+    hk_period: Option<u16>,
     frames_since_hk: u16,
     staged: Option<TrackerConfig>,
     window: Option<(WindowRequest, u16)>,
@@ -162,8 +165,8 @@ impl LinkService {
             },
             last: None,
             stars: heapless::Vec::new(),
-            star_frames: u16::MAX,
-            hk_period: Self::DEFAULT_HK_PERIOD,
+            star_frames: None,
+            hk_period: None,
             frames_since_hk: 0,
             staged: None,
             window: None,
@@ -305,11 +308,12 @@ impl LinkService {
     /// Called by the home after each frame (after the tracker reported it to this sink):
     /// periodic housekeeping.
     pub fn end_of_frame(&mut self, tables: &dyn TableUpload) {
-        if self.hk_period == 0 {
+        let period = self.hk_period.unwrap_or(Self::DEFAULT_HK_PERIOD);
+        if period == 0 {
             return;
         }
         self.frames_since_hk = self.frames_since_hk.saturating_add(1);
-        if self.frames_since_hk >= self.hk_period {
+        if self.frames_since_hk >= period {
             self.frames_since_hk = 0;
             self.send_housekeeping(tables);
         }
@@ -429,7 +433,7 @@ impl LinkService {
             Command::Ping => self.answer = Answer::Pong,
             Command::Housekeeping => self.answer = Answer::Housekeeping,
             Command::HousekeepingPeriod(f) => {
-                self.hk_period = f;
+                self.hk_period = Some(f);
                 self.frames_since_hk = 0;
             }
             Command::SetMode(m) => t.tracker.command_mode(m).map_err(|e| match e {
@@ -444,7 +448,7 @@ impl LinkService {
                 self.staged = Some(c);
             }
             Command::Reset => self.reset = true,
-            Command::Stars(n) => self.star_frames = n,
+            Command::Stars(n) => self.star_frames = (n != u16::MAX).then_some(n),
             Command::Window(req) => {
                 if self.window.is_some() || !t.windows.check(&req) {
                     return Err(Rejection::WindowUnavailable);
@@ -575,11 +579,11 @@ impl TelemetrySink for LinkService {
         add(&mut t.track_lost, u32::from(s.track_lost));
         add(&mut t.stars_dropped, u32::from(s.stars_dropped));
         self.last = Some(*s);
-        if self.star_frames > 0 {
+        if self.star_frames != Some(0) {
             let len = encode_stars(s.frame, s.mode, &self.stars, &mut self.data).unwrap_or(0);
             self.send(p::APID_STARS, p::TM_STARS, len, Queue::Bulk);
-            if self.star_frames != u16::MAX {
-                self.star_frames -= 1;
+            if let Some(n) = self.star_frames.as_mut() {
+                *n = n.saturating_sub(1);
             }
         }
         self.stars.clear();

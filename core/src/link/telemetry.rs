@@ -136,9 +136,9 @@ pub struct LinkCounters {
     pub framing_errors: u32,
     /// Packets whose CRC-16 was wrong.
     pub crc_errors: u32,
-    /// Telecommands executed (TM[1,1] sent or queued).
+    /// Telecommands executed (`TM[1,1]` sent or queued).
     pub accepted: u32,
-    /// Telecommands rejected, for any reason (TM[1,2]).
+    /// Telecommands rejected, for any reason (`TM[1,2]`).
     pub rejected: u32,
     /// Telemetry packets queued.
     pub tm_queued: u32,
@@ -172,7 +172,7 @@ pub struct FrameTotals {
     pub stars_dropped: u32,
 }
 
-/// The housekeeping report TM[3,25] (structure id 1).
+/// The housekeeping report `TM[3,25]` (structure id 1).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Housekeeping {
     /// The last frame's mode.
@@ -494,7 +494,7 @@ pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usiz
     Some((frame, mode, count))
 }
 
-/// Event numbers of TM[5,1] and TM[5,2].
+/// Event numbers of `TM[5,1]` and `TM[5,2]`.
 pub mod event {
     /// Mode change: frame u32, from u8, to u8, reason u8.
     pub const MODE_CHANGE: u16 = 1;
