@@ -96,6 +96,10 @@ pub struct Ground {
     timeout: Duration,
     /// Packets that did not decode (bad CRC, not PUS-C TM).
     pub bad_packets: u32,
+    /// Times a command is sent again after a corrupted or unanswered attempt (2).
+    pub retries: u32,
+    /// Times a table upload resumed after a lost or corrupted chunk.
+    pub resumes: u32,
 }
 
 /// Request id of a telecommand: its packet id and sequence control, as `TM[1,x]` echo them.
@@ -122,6 +126,8 @@ impl Ground {
             seq: 0,
             timeout,
             bad_packets: 0,
+            retries: 2,
+            resumes: 0,
         })
     }
 
@@ -215,18 +221,30 @@ impl Ground {
         }
     }
 
-    /// Sends a command and waits for its acceptance; returns the packets seen meanwhile.
+    /// Sends a command and waits for its acceptance; returns the packets seen meanwhile. A
+    /// command that arrived corrupted (rejected for its checksum or as malformed) or went
+    /// unanswered for a share of the timeout is sent again, up to [`Self::retries`] times.
     pub fn command(
         &mut self,
         command: &'static str,
         kind: MessageType,
         data: &[u8],
     ) -> Result<Vec<Tm>, GroundError> {
-        let deadline = Instant::now() + self.timeout;
-        let id = self.send(kind, data)?;
+        let attempts = self.retries + 1;
+        let share = self.timeout / attempts;
         let mut seen = Vec::new();
-        self.verification(id, command, deadline, &mut seen)?;
-        Ok(seen)
+        let mut last = GroundError::Timeout(format!("{command}: no verification"));
+        for _ in 0..attempts {
+            let deadline = Instant::now() + share;
+            let id = self.send(kind, data)?;
+            match self.verification(id, command, deadline, &mut seen) {
+                Ok(()) => return Ok(seen),
+                Err(e @ GroundError::Rejected { code: 1 | 2, .. })
+                | Err(e @ GroundError::Timeout(_)) => last = e,
+                Err(e) => return Err(e),
+            }
+        }
+        Err(last)
     }
 
     /// Sends a command and returns, after its acceptance, the first answer of `answer` on
@@ -299,28 +317,10 @@ impl Ground {
         begin.extend_from_slice(&total.to_be_bytes());
         begin.extend_from_slice(&crc.to_be_bytes());
         self.command("table-begin", p::TC_TABLE_BEGIN, &begin)?;
-        let mut in_flight = std::collections::VecDeque::new();
-        let mut seen = Vec::new();
-        for (k, part) in table.chunks(chunk).enumerate() {
-            let mut d = ((k * chunk) as u32).to_be_bytes().to_vec();
-            d.extend_from_slice(part);
-            let id = self.send(p::TC_TABLE_CHUNK, &d)?;
-            in_flight.push_back(id);
-            if in_flight.len() >= window.max(1) {
-                let first = in_flight.pop_front().unwrap_or(0);
-                let deadline = Instant::now() + self.timeout;
-                if let Err(e) = self.verification(first, "table-chunk", deadline, &mut seen) {
-                    let _ = self.send(p::TC_TABLE_ABORT, &[]);
-                    return Err(e);
-                }
-            }
-        }
-        while let Some(id) = in_flight.pop_front() {
-            let deadline = Instant::now() + self.timeout;
-            if let Err(e) = self.verification(id, "table-chunk", deadline, &mut seen) {
-                let _ = self.send(p::TC_TABLE_ABORT, &[]);
-                return Err(e);
-            }
+        let chunks: Vec<&[u8]> = table.chunks(chunk).collect();
+        if let Err(e) = self.send_chunks(&chunks, chunk, window.max(1)) {
+            let _ = self.send(p::TC_TABLE_ABORT, &[]);
+            return Err(e);
         }
         self.command("table-commit", p::TC_TABLE_COMMIT, &[])?;
         let t = self.ask(
@@ -344,6 +344,91 @@ impl Ground {
             )));
         }
         Ok(info)
+    }
+
+    /// Sends `chunks` (each `chunk` bytes but the last) with `window` in flight. The store
+    /// takes chunks in order only, so the first chunk without an acceptance is where the
+    /// upload stands: a chunk rejected, or lost (a later one answered first, or nothing
+    /// answered in a share of the timeout), makes the upload resume there; an out-of-order
+    /// refusal says where the store is (the low 16 bits of its offset).
+    fn send_chunks(
+        &mut self,
+        chunks: &[&[u8]],
+        chunk: usize,
+        window: usize,
+    ) -> Result<(), GroundError> {
+        const MAX_RESUMES: u32 = 64;
+        let share = self.timeout / (self.retries + 1);
+        let mut in_flight: std::collections::VecDeque<(usize, u32)> = Default::default();
+        let (mut next, mut done) = (0usize, 0usize);
+        let mut deadline = Instant::now() + share;
+        while done < chunks.len() {
+            while next < chunks.len() && in_flight.len() < window {
+                let mut d = ((next * chunk) as u32).to_be_bytes().to_vec();
+                d.extend_from_slice(chunks[next]);
+                in_flight.push_back((next, self.send(p::TC_TABLE_CHUNK, &d)?));
+                next += 1;
+            }
+            let verdict = match self.next_tm(deadline) {
+                Ok(t) => t,
+                Err(GroundError::Timeout(_)) => {
+                    // Nothing answered: resume at the first chunk not accepted.
+                    self.resume(&mut in_flight, &mut next, done, MAX_RESUMES)?;
+                    deadline = Instant::now() + share;
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            if verdict.apid != p::APID_CONTROL
+                || (verdict.kind != p::TM_ACCEPTED && verdict.kind != p::TM_REJECTED)
+            {
+                continue;
+            }
+            let mut r = Reader::new(&verdict.data);
+            let Some(pos) = r
+                .u32()
+                .and_then(|id| in_flight.iter().position(|&(_, i)| i == id))
+            else {
+                continue;
+            };
+            deadline = Instant::now() + share;
+            if pos == 0 && verdict.kind == p::TM_ACCEPTED {
+                in_flight.pop_front();
+                done += 1;
+                continue;
+            }
+            // The first chunk in flight failed or was lost. An out-of-order refusal names
+            // where the store stands.
+            let (code, param) = (r.u16(), r.u32());
+            let stands = match (code, param) {
+                (Some(9), Some(v)) if v >> 16 == 5 => (done..chunks.len().min(done + 64))
+                    .find(|&k| (k * chunk) as u32 & 0xFFFF == v & 0xFFFF),
+                _ => None,
+            };
+            if let Some(k) = stands {
+                done = k;
+            }
+            self.resume(&mut in_flight, &mut next, done, MAX_RESUMES)?;
+        }
+        Ok(())
+    }
+
+    fn resume(
+        &mut self,
+        in_flight: &mut std::collections::VecDeque<(usize, u32)>,
+        next: &mut usize,
+        done: usize,
+        max: u32,
+    ) -> Result<(), GroundError> {
+        self.resumes += 1;
+        if self.resumes > max {
+            return Err(GroundError::Timeout(format!(
+                "table-chunk: the upload stalled at chunk {done} after {max} resumptions"
+            )));
+        }
+        in_flight.clear();
+        *next = done;
+        Ok(())
     }
 
     /// The star lists of the next `frames` frames (frame, mode, stars); star lists are then
