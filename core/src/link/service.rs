@@ -21,7 +21,7 @@ use super::command::{Command, Rejection, WindowKind, WindowRequest};
 use super::framing::{Deframer, Pushed, encode, encoded_len_max};
 use super::protocol::{self as p, MessageType};
 use super::telemetry::{
-    EVENT_DATA_LEN, FrameTotals, HK_LEN, Housekeeping, LinkCounters, Writer, encode_stars, event,
+    EVENT_DATA_LEN, FrameTotals, Housekeeping, LinkCounters, Writer, encode_stars, event,
     tracker_event,
 };
 use super::upload::{TableInfo, TableUpload};
@@ -301,7 +301,6 @@ impl LinkService {
     pub fn send_housekeeping(&mut self, tables: &dyn TableUpload) {
         let hk = self.housekeeping(tables);
         let len = hk.encode(&mut self.data).unwrap_or(0);
-        debug_assert_eq!(len, HK_LEN);
         self.send(p::APID_HOUSEKEEPING, p::TM_HOUSEKEEPING, len, Queue::Bulk);
     }
 
