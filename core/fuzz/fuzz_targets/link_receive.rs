@@ -72,10 +72,11 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     let mut buffers = Box::new(TrackerBuffers::new());
+    // The board's capacity (the flight configuration reports up to 32 stars).
     let Ok(mut tracker) =
-        Tracker::<8>::new(TrackerConfig::FLIGHT, ReadoutGeometry::CCD47_20_DUAL, &mut buffers)
+        Tracker::<32>::new(TrackerConfig::FLIGHT, ReadoutGeometry::CCD47_20_DUAL, &mut buffers)
     else {
-        return;
+        panic!("the flight configuration is refused");
     };
     let mut store = Store::default();
     let mut link = Box::new(LinkService::new());

@@ -212,12 +212,12 @@ impl LinkService {
                 }
                 Pushed::Packet(n) => {
                     self.counters.packets = self.counters.packets.wrapping_add(1);
-                    let mut pkt = [0u8; p::MAX_TC_LEN];
-                    let Some(dst) = pkt.get_mut(..n) else {
-                        self.counters.framing_errors = self.counters.framing_errors.wrapping_add(1);
-                        continue;
-                    };
-                    dst.copy_from_slice(self.rx.packet(n));
+                    // A frame decodes to at most its own length, so any decoded packet fits
+                    // (one longer than a telecommand may be is rejected as malformed).
+                    let mut pkt = [0u8; RX_FRAME];
+                    let src = self.rx.packet(n);
+                    let dst = pkt.get_mut(..src.len()).unwrap_or_default();
+                    dst.copy_from_slice(src);
                     self.handle(dst, targets);
                 }
             }
@@ -393,6 +393,9 @@ impl LinkService {
         pkt: &[u8],
         targets: &mut Targets<'_, '_, '_, N>,
     ) -> Result<(), Rejection> {
+        if pkt.len() > p::MAX_TC_LEN {
+            return Err(Rejection::Malformed);
+        }
         let tc = match PusTcReader::new(pkt) {
             Ok(tc) => tc,
             Err(PusError::ChecksumFailure(_)) => {
