@@ -67,14 +67,21 @@ impl TableUpload for Store {
     }
 }
 
+static BUFFERS: std::sync::Mutex<Option<&'static mut TrackerBuffers>> =
+    std::sync::Mutex::new(None);
+
 fuzz_target!(|data: &[u8]| {
     let Some((&mode, rest)) = data.split_first() else {
         return;
     };
-    let mut buffers = Box::new(TrackerBuffers::new());
+    // The tracker's 68 KB of buffers are allocated once; the tracker itself is made afresh
+    // each run (it sets the buffers up again), so no run depends on the ones before it.
+    let mut slot = BUFFERS.lock().unwrap_or_else(|e| e.into_inner());
+    let buffers: &mut TrackerBuffers =
+        slot.get_or_insert_with(|| Box::leak(Box::new(TrackerBuffers::new())));
     // The board's capacity (the flight configuration reports up to 32 stars).
     let Ok(mut tracker) =
-        Tracker::<32>::new(TrackerConfig::FLIGHT, ReadoutGeometry::CCD47_20_DUAL, &mut buffers)
+        Tracker::<32>::new(TrackerConfig::FLIGHT, ReadoutGeometry::CCD47_20_DUAL, buffers)
     else {
         panic!("the flight configuration is refused");
     };
