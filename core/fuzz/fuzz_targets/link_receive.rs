@@ -12,7 +12,9 @@ use libfuzzer_sys::fuzz_target;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::framing::{encode, encoded_len_max};
 use startrack_core::link::protocol::MAX_TC_LEN;
-use startrack_core::link::{LinkService, NoWindows, TableInfo, TableUpload, Targets, UploadRefusal};
+use startrack_core::link::{
+    LinkService, NoWindows, TableInfo, TableUpload, Targets, UploadRefusal,
+};
 use startrack_core::tracker::{Tracker, TrackerBuffers, TrackerConfig};
 
 /// A table store that keeps nothing but the upload's position (the in-memory host store
@@ -67,8 +69,7 @@ impl TableUpload for Store {
     }
 }
 
-static BUFFERS: std::sync::Mutex<Option<&'static mut TrackerBuffers>> =
-    std::sync::Mutex::new(None);
+static BUFFERS: std::sync::Mutex<Option<&'static mut TrackerBuffers>> = std::sync::Mutex::new(None);
 
 fuzz_target!(|data: &[u8]| {
     let Some((&mode, rest)) = data.split_first() else {
@@ -80,9 +81,11 @@ fuzz_target!(|data: &[u8]| {
     let buffers: &mut TrackerBuffers =
         slot.get_or_insert_with(|| Box::leak(Box::new(TrackerBuffers::new())));
     // The board's capacity (the flight configuration reports up to 32 stars).
-    let Ok(mut tracker) =
-        Tracker::<32>::new(TrackerConfig::FLIGHT, ReadoutGeometry::CCD47_20_DUAL, buffers)
-    else {
+    let Ok(mut tracker) = Tracker::<32>::new(
+        TrackerConfig::FLIGHT,
+        ReadoutGeometry::CCD47_20_DUAL,
+        buffers,
+    ) else {
         panic!("the flight configuration is refused");
     };
     let mut store = Store::default();
