@@ -14,6 +14,7 @@ use crate::home::{FrameClock, SimLines, block_on};
 use crate::sil::{self, SilConfig};
 use crate::sim::{SensorParams, Simulator, Star};
 use rand::{RngExt, SeedableRng};
+use startrack_core::calib::{FrameCalibration, FrameConditions};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::{
@@ -22,6 +23,7 @@ use startrack_core::link::{
 };
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{FixedTemperature, Ports, TableStore, Tracker, TrackerBuffers};
+use startrack_core::units::Electrons;
 use startrack_core::window::Rect;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -146,7 +148,9 @@ impl TableStore<'static> for MemoryTables {
     }
 }
 
-/// Raw diagnostic windows from the simulated sensor: the frame after the request.
+/// Diagnostic windows from the simulated sensor, of the frame after the request: raw, or
+/// calibrated with the table in force as the tracker calibrates a window (the frame's line
+/// levels and dark scale, then the per-pixel formula), in e- x 64.
 pub struct SimWindows {
     /// The sensor.
     pub params: SensorParams,
@@ -154,7 +158,11 @@ pub struct SimWindows {
     pub stars: Vec<Star>,
     /// Its frame number (the noise draw).
     pub frame: u32,
-    rendered: Option<(WindowRequest, Vec<u16>)>,
+    /// The table in force (calibrated windows need one).
+    pub table: Option<CalibTable<'static>>,
+    /// Exposure for the hot pixels' dark law, ms.
+    pub exposure_ms: u32,
+    rendered: Option<(WindowRequest, Vec<i32>)>,
 }
 
 impl SimWindows {
@@ -164,6 +172,8 @@ impl SimWindows {
             params,
             stars: Vec::new(),
             frame: 0,
+            table: None,
+            exposure_ms: 0,
             rendered: None,
         }
     }
@@ -174,8 +184,7 @@ impl WindowReader for SimWindows {
         let g = self.params.geometry;
         let inside = u32::from(r.x0) + u32::from(r.side_px) <= u32::from(g.active_cols)
             && u32::from(r.y0) + u32::from(r.side_px) <= u32::from(g.active_rows);
-        // Calibrated windows need the frame's levels and the table: not served by the SIL.
-        if !inside || r.kind != WindowKind::Raw {
+        if !inside {
             return false;
         }
         let sim = Simulator {
@@ -188,7 +197,19 @@ impl WindowReader for SimWindows {
             width: r.side_px,
             height: r.side_px,
         };
-        self.rendered = Some((*r, sim.render_window(rect)));
+        let px = match r.kind {
+            WindowKind::Raw => sim.render_window(rect).into_iter().map(i32::from).collect(),
+            WindowKind::Calibrated => {
+                let Some(table) = self.table else {
+                    return false;
+                };
+                match calibrated_window(&sim, table, self.exposure_ms, rect) {
+                    Some(px) => px,
+                    None => return false,
+                }
+            }
+        };
+        self.rendered = Some((*r, px));
         true
     }
 
@@ -203,14 +224,31 @@ impl WindowReader for SimWindows {
         let start = usize::from(row) * side;
         match px.get(start..start + side) {
             Some(src) if out.len() == side => {
-                for (o, v) in out.iter_mut().zip(src) {
-                    *o = i32::from(*v);
-                }
+                out.copy_from_slice(src);
                 true
             }
             _ => false,
         }
     }
+}
+
+/// Window `rect` of `sim`'s frame calibrated with `table`, e- x 64 (I26F6 bits).
+fn calibrated_window(
+    sim: &Simulator,
+    table: CalibTable<'static>,
+    exposure_ms: u32,
+    rect: Rect,
+) -> Option<Vec<i32>> {
+    let raw = crate::demo::render_frame(sim);
+    let levels = crate::home::frame_levels(&table, &raw).ok()?;
+    let conditions = FrameConditions {
+        dark_scale_e: levels.dark_scale_e.unwrap_or(Electrons::ZERO),
+        exposure_ms,
+        temperature_k: table.hot_pixels().reference_temperature_k(),
+    };
+    let cal = FrameCalibration::new(table, conditions);
+    let (e, _, _) = levels.calibrate_window(&cal, &raw, rect).ok()?;
+    Some(e.into_iter().map(|v| v.to_bits()).collect())
 }
 
 /// Between two frames the link is served at least this long, ms.
@@ -318,6 +356,8 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             let hard_end = Instant::now() + Duration::from_millis(LINK_PHASE_MAX_MS);
             windows.frame = frame;
             windows.stars = sil::stars_at(&base, sc.drift_px, frame);
+            windows.table = tables.active_table();
+            windows.exposure_ms = sc.tracker.exposure_ms;
             loop {
                 if client.is_none()
                     && let Ok((s, _)) = listener.accept()

@@ -163,6 +163,19 @@ fn ground_drives_the_sil_over_tcp() {
     assert!(px.iter().all(|&v| (0..=65535).contains(&v)));
     assert!(px.iter().any(|&v| v > 0));
 
+    // A calibrated window of a corner without stars: the bias, the dark and the gains are
+    // taken off, leaving noise around zero electrons (the raw one sits on the bias).
+    let raw = g.window(2, 2, 8, WindowKind::Raw).expect("raw window");
+    let cal = g
+        .window(2, 2, 8, WindowKind::Calibrated)
+        .expect("calibrated window");
+    let mean = |v: &[i32], scale: f64| v.iter().map(|&x| f64::from(x) * scale).sum::<f64>() / 64.0;
+    assert!(mean(&raw, 1.0) > 100.0, "raw ADU on the bias: {raw:?}");
+    assert!(
+        mean(&cal, 1.0 / 64.0).abs() < 10.0,
+        "calibrated e-: {cal:?}"
+    );
+
     // Reset: the tracker restarts at frame 0 and keeps the uploaded table.
     g.reset().expect("reset");
     let h = g.status().expect("status after reset");
