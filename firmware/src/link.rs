@@ -13,7 +13,7 @@
 //! neither can stall the frame loop.
 //!
 //! Memory: the pipes ([`RX_PIPE_BYTES`] + [`TX_PIPE_BYTES`]) and the DMA ring
-//! ([`DMA_RING_BYTES`]) in `.bss`, the service (~14 KB) in the tracker task's static.
+//! ([`DMA_RING_BYTES`]) in `.bss`, the service (~16 KB) in the tracker task's static.
 
 use core::sync::atomic::{AtomicU32, Ordering};
 use embassy_stm32::mode::Async;
@@ -40,7 +40,7 @@ pub const DMA_RING_BYTES: usize = 1024;
 
 /// The service, owned by the tracker task. A `StaticCell` set up at run time, so it lives in
 /// `.bss`: a constant one would go to `.data` (the queues' uninitialised bytes are not
-/// zeros), costing its ~14 KB twice, in flash and RAM.
+/// zeros), costing its ~16 KB twice, in flash and RAM.
 pub static SERVICE: static_cell::StaticCell<LinkService> = static_cell::StaticCell::new();
 /// The receive DMA ring (AXI SRAM, which DMA1 reaches).
 pub static DMA_RING: static_cell::ConstStaticCell<[u8; DMA_RING_BYTES]> =

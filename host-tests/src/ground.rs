@@ -100,6 +100,8 @@ pub struct Ground {
     pub retries: u32,
     /// Times a table upload resumed after a lost or corrupted chunk.
     pub resumes: u32,
+    /// Attempts the last [`Self::command`] took.
+    pub last_attempts: u32,
 }
 
 /// Request id of a telecommand: its packet id and sequence control, as `TM[1,x]` echo them.
@@ -128,6 +130,7 @@ impl Ground {
             bad_packets: 0,
             retries: 2,
             resumes: 0,
+            last_attempts: 0,
         })
     }
 
@@ -234,7 +237,8 @@ impl Ground {
         let share = self.timeout / attempts;
         let mut seen = Vec::new();
         let mut last = GroundError::Timeout(format!("{command}: no verification"));
-        for _ in 0..attempts {
+        for attempt in 1..=attempts {
+            self.last_attempts = attempt;
             let deadline = Instant::now() + share;
             let id = self.send(kind, data)?;
             match self.verification(id, command, deadline, &mut seen) {
@@ -316,13 +320,32 @@ impl Ground {
         let mut begin = vec![p::TABLE_KIND_CALIBRATION];
         begin.extend_from_slice(&total.to_be_bytes());
         begin.extend_from_slice(&crc.to_be_bytes());
-        self.command("table-begin", p::TC_TABLE_BEGIN, &begin)?;
+        // A clean start: an upload left by an interrupted ground tool is dropped (one ground
+        // station commands the tracker).
+        self.command("table-abort", p::TC_TABLE_ABORT, &[])?;
+        // A command sent again because its answer was late may find its first copy executed:
+        // a begin then meets its own upload (busy), a commit finds none (not started). The
+        // table report at the end says whether the table in force is this one.
+        let own = |g: &Self, e: &GroundError, refusal: u16| {
+            g.last_attempts > 1
+                && matches!(e, GroundError::Rejected { code: 9, parameter, .. }
+                    if parameter >> 16 == u32::from(refusal))
+        };
+        if let Err(e) = self.command("table-begin", p::TC_TABLE_BEGIN, &begin)
+            && !own(self, &e, UploadRefusal::Busy.code())
+        {
+            return Err(e);
+        }
         let chunks: Vec<&[u8]> = table.chunks(chunk).collect();
         if let Err(e) = self.send_chunks(&chunks, chunk, window.max(1)) {
             let _ = self.send(p::TC_TABLE_ABORT, &[]);
             return Err(e);
         }
-        self.command("table-commit", p::TC_TABLE_COMMIT, &[])?;
+        if let Err(e) = self.command("table-commit", p::TC_TABLE_COMMIT, &[])
+            && !own(self, &e, UploadRefusal::NotStarted.code())
+        {
+            return Err(e);
+        }
         let t = self.ask(
             "table-report",
             p::TC_TABLE_REPORT,

@@ -252,3 +252,11 @@ fn fuzz_regressions() {
         assert_eq!(c.accepted + c.rejected, c.packets);
     }
 }
+
+/// The service's memory as the docs state it (~16 KB: core/src/link/mod.rs, docs/protocol.md).
+#[test]
+fn link_service_size() {
+    let n = std::mem::size_of::<LinkService>();
+    println!("LinkService: {n} bytes");
+    assert!((15_000..=16_500).contains(&n), "{n} bytes");
+}

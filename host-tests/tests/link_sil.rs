@@ -248,8 +248,8 @@ fn a_noisy_link_loses_commands_never_the_tracker() {
     // One received byte in 5,000 has a bit flipped: a 1 KB chunk arrives corrupted about
     // one time in five.
     let server = Server::start(2e-4);
-    // A lost command is sent again after 2 s (a share of the 12 s timeout).
-    let mut g = Ground::connect(server.port, Duration::from_secs(12)).expect("connect");
+    // A lost command is sent again after 5 s (a share of the 30 s timeout).
+    let mut g = Ground::connect(server.port, Duration::from_secs(30)).expect("connect");
     g.retries = 5;
     for _ in 0..20 {
         g.ping().expect("ping through noise");

@@ -40,7 +40,7 @@ fn random_commands_through_noise_keep_the_tracker_consistent() {
         })
     });
     let port = rx.recv_timeout(Duration::from_secs(60)).expect("port");
-    let mut g = Ground::connect(port, Duration::from_secs(12)).expect("connect");
+    let mut g = Ground::connect(port, Duration::from_secs(30)).expect("connect");
     g.retries = 5;
 
     let tables: Vec<Vec<u8>> = [3u8, 4]
@@ -102,7 +102,8 @@ fn random_commands_through_noise_keep_the_tracker_consistent() {
     }
     stop.store(true, Ordering::Relaxed);
     let report = server.join().expect("server").expect("served");
-    assert_eq!(report.resets, resets);
+    // A reset whose acceptance came late is sent again: at least the commanded ones.
+    assert!(report.resets >= resets, "{report:?}");
     println!(
         "{steps} steps, {} frames, {resets} resets, {} resumed uploads",
         report.frames, g.resumes
