@@ -239,6 +239,9 @@ impl LinkService {
                 break;
             };
             if !targets.windows.read_row(&req, row, vals) {
+                // The source lost the window: the rest is not sent (the ground sees rows
+                // missing), and the next window request is free to start.
+                row = req.side_px;
                 break;
             }
             let mut w = Writer::new(&mut self.data);
