@@ -25,6 +25,7 @@ pub mod calib;
 pub mod centroid;
 pub mod detect;
 pub mod geometry;
+pub mod link;
 pub mod safe;
 pub mod sequencer;
 pub mod store;

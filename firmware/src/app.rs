@@ -154,9 +154,29 @@ pub async fn tracker_task(
     };
     let mut source = ChannelLines::new();
     let mut clock = BoardClock;
+    let mut store = crate::link::ReadOnlyTables::new(
+        table.map(|t| u32::try_from(t.len_bytes()).unwrap_or(u32::MAX)),
+    );
     let mut tables = FixedTable(table);
-    let mut telemetry = DefmtTelemetry;
+    let mut log = DefmtTelemetry;
+    let Some(link) = crate::link::SERVICE
+        .try_uninit()
+        .map(|slot| slot.write(startrack_core::link::LinkService::new()))
+    else {
+        defmt::error!("link service already taken");
+        return;
+    };
     loop {
+        crate::link::serve(link, &mut tracker, &mut store);
+        if link.reset_requested() {
+            // Let the transmit task send the acceptance, then reset.
+            embassy_time::Timer::after_millis(50).await;
+            cortex_m::peripheral::SCB::sys_reset();
+        }
+        let mut telemetry = crate::link::Tee {
+            log: &mut log,
+            link: &mut *link,
+        };
         let mut ports = Ports {
             clock: &mut clock,
             thermometer: &mut thermometer,
@@ -164,6 +184,7 @@ pub async fn tracker_task(
             telemetry: &mut telemetry,
         };
         let Ok(summary) = tracker.run_frame(&mut source, &mut ports).await;
+        link.end_of_frame(&store);
         watchdog::progress();
         let (k, source_used) = (thermometer.last_k(), thermometer.source());
         safe_state::update_health(|h| {

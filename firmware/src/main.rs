@@ -9,12 +9,16 @@
 //! tracker application bound to those and to the log ([`app`], [`telemetry`]): every
 //! processing step, from the bias of a line to a star's centroid and the mode changes, is
 //! the core's. This crate holds hardware and tasks only.
+//!
+//! Telemetry goes to the defmt log and to the command and telemetry link on USART3
+//! ([`link`]); table uploads are refused until the flash slots are bound to it.
 #![no_std]
 #![no_main]
 
 mod app;
 mod flash_store;
 mod lines;
+mod link;
 mod mcu_temp;
 mod memory;
 mod readout;
@@ -29,7 +33,7 @@ use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::spi::Spi;
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{Config, bind_interrupts, dma, flash, interrupt, peripherals};
+use embassy_stm32::{Config, bind_interrupts, dma, flash, interrupt, peripherals, usart};
 use panic_probe as _;
 use startrack_core::safe::SetupFaults;
 use startrack_core::store::TableKind;
@@ -59,11 +63,14 @@ static SEQ_TABLES: ConstStaticCell<sequencer::Tables> =
 
 bind_interrupts!(
     /// Interrupts the drivers need: DMA1 stream 0 carries SPI1 RX (the ADC samples), DMA1
-    /// stream 1 the clock words (TIM6 update into GPIOE BSRR); the flash interrupt ends an
-    /// async erase of bank 2.
+    /// stream 1 the clock words (TIM6 update into GPIOE BSRR), streams 2 and 3 the link's
+    /// USART3 transmit and receive; the flash interrupt ends an async erase of bank 2.
     struct Irqs {
         DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
         DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+        DMA1_STREAM2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
+        DMA1_STREAM3 => dma::InterruptHandler<peripherals::DMA1_CH3>;
+        USART3 => usart::InterruptHandler<peripherals::USART3>;
         FLASH => flash::InterruptHandler;
     }
 );
@@ -197,24 +204,56 @@ async fn main(spawner: Spawner) {
             None
         }
     };
-    let (ring, samples) = match dma_region {
+    let (ring, samples, uart_bufs) = match dma_region {
         Some(memory::DmaRegion {
             ring,
             lines: line_bufs,
             samples,
+            uart_rx,
+            uart_tx,
         }) => {
             if let Err(e) = lines::init(line_bufs) {
                 defmt::error!("line buffers: {}", e);
                 fatal |= SetupFaults::LINE_BUFFERS;
             }
-            (Some(ring), Some(samples))
+            (Some(ring), Some(samples), Some((uart_rx, uart_tx)))
         }
-        None => (None, None),
+        None => (None, None, None),
     };
     let buffers = TRACKER_BUFFERS.try_take();
     if buffers.is_none() {
         defmt::error!("tracker buffers already taken");
         fatal |= SetupFaults::TRACKER_BUFFERS;
+    }
+
+    // The link: USART3 (ST-LINK virtual COM port), DMA1 stream 3 receive ring, stream 2
+    // transmit, both buffers in the non-cacheable DMA region. Without it the tracker still
+    // runs (its telemetry then only in the log).
+    let mut uart_config = usart::Config::default();
+    uart_config.baudrate = link::BAUD;
+    match (
+        usart::Uart::new(
+            p.USART3,
+            p.PD9,
+            p.PD8,
+            p.DMA1_CH2,
+            p.DMA1_CH3,
+            Irqs,
+            uart_config,
+        ),
+        uart_bufs,
+    ) {
+        (Ok(uart), Some((rx_ring, tx_buf))) => {
+            let (tx, rx) = uart.split();
+            spawn_or_log(
+                spawner,
+                "link rx",
+                link::link_rx_task(rx.into_ring_buffered(rx_ring)),
+            );
+            spawn_or_log(spawner, "link tx", link::link_tx_task(tx, tx_buf));
+        }
+        (Err(e), _) => defmt::error!("link: USART3 configuration refused: {}", e),
+        (_, None) => defmt::error!("link: no DMA buffers"),
     }
 
     let started = match (fatal.is_empty(), buffers, ring, samples) {

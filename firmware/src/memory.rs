@@ -5,10 +5,11 @@
 //! in [`DmaRegion`], a 32 KB-aligned static of at most 32 KB in `.bss` (AXI SRAM, which DMA1
 //! reaches; DTCM it does not), and MPU region 0 makes exactly that block normal memory,
 //! non-cacheable, non-executable. Everything else (stack, tracker state, the sequencer's
-//! tables, code) is cached. Cost: none per transfer; 32 KB of AXI SRAM (23 KB used) served
+//! tables, code) is cached. Cost: none per transfer; 32 KB of AXI SRAM (25 KB used) served
 //! uncached.
 
 use crate::lines::{BUFFERS, LINE_LEN, LineBuf};
+use crate::link::{RX_RING_BYTES, TX_DMA_BYTES};
 use crate::sequencer::RING_WORDS;
 use core::cell::UnsafeCell;
 use core::sync::atomic::{AtomicBool, Ordering};
@@ -25,6 +26,10 @@ pub struct DmaRegion {
     pub lines: [LineBuf; BUFFERS],
     /// One line's ADC words (SPI1 RX DMA writes), before they are unpacked into a line.
     pub samples: [u16; LINE_LEN],
+    /// The link's USART3 receive ring (DMA1 stream 3 writes).
+    pub uart_rx: [u8; RX_RING_BYTES],
+    /// The link's USART3 transmit buffer (DMA1 stream 2 reads).
+    pub uart_tx: [u8; TX_DMA_BYTES],
 }
 
 const _: () = assert!(core::mem::size_of::<DmaRegion>() <= 1 << REGION_LOG2);
@@ -41,6 +46,8 @@ static DMA_REGION: Aligned = Aligned(UnsafeCell::new(DmaRegion {
     ring: [0; RING_WORDS],
     lines: [[0; LINE_LEN]; BUFFERS],
     samples: [0; LINE_LEN],
+    uart_rx: [0; RX_RING_BYTES],
+    uart_tx: [0; TX_DMA_BYTES],
 }));
 
 static TAKEN: AtomicBool = AtomicBool::new(false);

@@ -206,25 +206,7 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         ..SensorParams::default()
     };
     let base = scene(config, &params);
-    let curves = if config.pixcorr_curves {
-        let spec = |background| CurveSpec {
-            a_px: f64::from(config.tracker.psf_a_px),
-            box_side: config.tracker.box_px(),
-            power: CogPower::One,
-            background,
-            knots: 33,
-        };
-        build_curves(&[
-            spec(PixCorrBackground::PerimeterMedian),
-            spec(PixCorrBackground::Given),
-        ])
-        .map_err(|(i, e)| format!("pixel-phase curve {i}: {e:?}"))?
-    } else {
-        Vec::new()
-    };
-    let table_bytes = Simulator::new(params.clone(), Vec::new())
-        .truth_table_with_curves(TruthSections::ALL, 0, &curves)
-        .map_err(|e| e.to_string())?;
+    let table_bytes = truth_table(config, &params)?;
     let table = CalibTable::parse(&table_bytes).map_err(|e| e.to_string())?;
     let mut buffers = Box::new(TrackerBuffers::new());
     let mut tracker = Box::new(
@@ -270,6 +252,30 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         frames,
         events: recorder.events,
     })
+}
+
+/// The sensor's true calibration table (per pixel) as the SIL starts with it, with the
+/// pixel-phase curves `config` asks for.
+pub fn truth_table(config: &SilConfig, params: &SensorParams) -> Result<Vec<u8>, String> {
+    let curves = if config.pixcorr_curves {
+        let spec = |background| CurveSpec {
+            a_px: f64::from(config.tracker.psf_a_px),
+            box_side: config.tracker.box_px(),
+            power: CogPower::One,
+            background,
+            knots: 33,
+        };
+        build_curves(&[
+            spec(PixCorrBackground::PerimeterMedian),
+            spec(PixCorrBackground::Given),
+        ])
+        .map_err(|(i, e)| format!("pixel-phase curve {i}: {e:?}"))?
+    } else {
+        Vec::new()
+    };
+    Simulator::new(params.clone(), Vec::new())
+        .truth_table_with_curves(TruthSections::ALL, 0, &curves)
+        .map_err(|e| e.to_string())
 }
 
 /// Matches a frame's reported stars to its truth.

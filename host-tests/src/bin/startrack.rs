@@ -50,6 +50,8 @@ enum Command {
     /// Run the tracker application live on the simulated sensor over a drifting scene
     /// (software in the loop); telemetry and truth as CSV.
     Sil(startrack_host::cli::sil::SilArgs),
+    /// The ground tool: command a tracker's link (`startrack sil --port P`) and read it.
+    Gse(startrack_host::cli::gse::GseArgs),
     /// Write a simulated raw frame, its star truth and the true calibration maps to a folder.
     Simulate(startrack_host::cli::simulate::SimulateArgs),
     /// Every centroid method's RMS error over the Cramer-Rao bound, by Monte Carlo (markdown).
@@ -110,6 +112,19 @@ fn main() -> ExitCode {
             }
             Err(e) => fail("accuracy", &e),
         },
+        Command::Sil(args) if args.port.is_some() => match startrack_host::cli::sil::serve(&args) {
+            Ok(_) => ExitCode::SUCCESS,
+            Err(e) => fail("sil", &e),
+        },
+        Command::Gse(args) => {
+            match startrack_host::cli::gse::run(&args, &mut std::io::stdout().lock()) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("startrack gse: {e}");
+                    ExitCode::from(e.exit_code())
+                }
+            }
+        }
         Command::Sil(args) => match startrack_host::cli::sil::run(&args) {
             Ok(_) => ExitCode::SUCCESS,
             Err(e) => fail("sil", &e),

@@ -5,6 +5,7 @@
 pub mod accuracy;
 pub mod calib_build;
 pub mod figures;
+pub mod gse;
 pub mod process;
 pub mod readout_plan;
 pub mod sil;

@@ -38,6 +38,14 @@ pub struct SilArgs {
     /// Truth CSV (one row per true star per frame).
     #[arg(long)]
     pub truth: Option<PathBuf>,
+    /// Serve the tracker's command and telemetry link on TCP 127.0.0.1:PORT (standing in
+    /// for the UART) and run until stopped; `--frames`, `--telemetry` and `--truth` are then
+    /// not used (drive it with `startrack gse --port PORT`).
+    #[arg(long)]
+    pub port: Option<u16>,
+    /// With `--port`: probability that a received byte has a bit flipped (seeded).
+    #[arg(long, default_value_t = 0.0)]
+    pub link_noise: f64,
 }
 
 /// The SIL configuration of `args`.
@@ -113,6 +121,29 @@ pub fn write_truth(out: &mut dyn Write, report: &SilReport) -> std::io::Result<(
         }
     }
     Ok(())
+}
+
+/// Runs `startrack sil --port P`: the SIL with its link on TCP, until stopped.
+pub fn serve(args: &SilArgs) -> Result<crate::link_home::ServeReport, CliError> {
+    let Some(port) = args.port else {
+        return Err(CliError::Usage("--port is needed to serve the link".into()));
+    };
+    if !(0.0..=1.0).contains(&args.link_noise) {
+        return Err(CliError::Usage(
+            "--link-noise: a probability, 0 to 1".into(),
+        ));
+    }
+    let config = crate::link_home::ServeConfig {
+        sil: config_of(args)?,
+        port,
+        link_noise: args.link_noise,
+        max_frames: None,
+        stop: None,
+    };
+    crate::link_home::serve(&config, &mut |p| {
+        eprintln!("startrack sil: link on 127.0.0.1:{p}");
+    })
+    .map_err(CliError::Usage)
 }
 
 /// Runs `startrack sil`.

@@ -1,0 +1,34 @@
+//! The command and telemetry link: how the spacecraft's on-board computer commands and reads
+//! the tracker over a serial line (RS-422 in flight; TCP on 127.0.0.1 in the
+//! software-in-the-loop).
+//!
+//! ```text
+//! UART bytes -> framing (COBS, 0x00-delimited)  -> CCSDS Space Packet, PUS-C TC, CRC-16
+//!            -> command (typed, or a Rejection) -> the tracker / the table store
+//! tracker records, events, answers -> PUS-C TM (APID, service, subtype, uptime, CRC-16)
+//!            -> COBS frame -> urgent or bulk queue -> UART as it can take them
+//! ```
+//!
+//! One job a module: [`protocol`] (every number, and the table `docs/protocol.md` is made
+//! from), [`framing`], [`command`] (reading a command; its rejection reasons),
+//! [`telemetry`] (the reports' layouts), [`upload`] (the table-store port), [`service`]
+//! (the state that ties them together, and the tracker's telemetry port).
+//!
+//! Packets are read and written with the `spacepackets` crate (no std, no alloc): the
+//! standard's header fields and CRC are not hand-coded here.
+//!
+//! Memory: [`LinkService`] is ~16 KB (15,856 bytes on the board: the two queues 10 KB, a
+//! receive frame and three packet buffers of ~1.1 KB; the host test `link_decoder` bounds
+//! it). Cost: see [`service`].
+
+pub mod command;
+pub mod framing;
+pub mod protocol;
+pub mod service;
+pub mod telemetry;
+pub mod upload;
+
+pub use command::{Command, Rejection, WindowKind, WindowRequest};
+pub use service::{LinkService, NoWindows, Targets, WindowReader};
+pub use telemetry::{FrameTotals, Housekeeping, LinkCounters};
+pub use upload::{TableInfo, TableUpload, UploadRefusal};

@@ -1,0 +1,555 @@
+//! Telemetry source data: the housekeeping report, a frame's star list, the events and the
+//! verification reports, each a fixed big-endian layout written into a slice (and read back
+//! by the ground tool with the same code). The layouts are tabled in `docs/protocol.md`,
+//! generated from [`HK_FIELDS`] and [`STAR_FIELDS`].
+//!
+//! Cost: a few stores per field; a 32-star list is 902 bytes.
+
+use super::command::mode_number;
+use super::protocol::{MAX_LINK_STARS, STAR_BYTES};
+use super::upload::TableInfo;
+use crate::tracker::{Event, Mode, ModeReason, StarFlags, StarRecord, TemperatureSource};
+
+/// Writes big-endian fields into a slice; a field that does not fit marks it failed.
+pub struct Writer<'a> {
+    buf: &'a mut [u8],
+    at: usize,
+    ok: bool,
+}
+
+impl<'a> Writer<'a> {
+    /// Writes from the start of `buf`.
+    pub fn new(buf: &'a mut [u8]) -> Self {
+        Self {
+            buf,
+            at: 0,
+            ok: true,
+        }
+    }
+
+    /// Appends raw bytes.
+    pub fn bytes(&mut self, b: &[u8]) -> &mut Self {
+        match self.buf.get_mut(self.at..self.at + b.len()) {
+            Some(dst) => {
+                dst.copy_from_slice(b);
+                self.at += b.len();
+            }
+            None => self.ok = false,
+        }
+        self
+    }
+
+    /// Appends a `u8`.
+    pub fn u8(&mut self, v: u8) -> &mut Self {
+        self.bytes(&[v])
+    }
+
+    /// Appends a `u16`.
+    pub fn u16(&mut self, v: u16) -> &mut Self {
+        self.bytes(&v.to_be_bytes())
+    }
+
+    /// Appends a `u32`.
+    pub fn u32(&mut self, v: u32) -> &mut Self {
+        self.bytes(&v.to_be_bytes())
+    }
+
+    /// Appends a `u64`.
+    pub fn u64(&mut self, v: u64) -> &mut Self {
+        self.bytes(&v.to_be_bytes())
+    }
+
+    /// Appends an `f32` (IEEE 754 bits).
+    pub fn f32(&mut self, v: f32) -> &mut Self {
+        self.u32(v.to_bits())
+    }
+
+    /// Bytes written, or `None` if something did not fit.
+    pub fn finish(&self) -> Option<usize> {
+        self.ok.then_some(self.at)
+    }
+}
+
+/// Reads big-endian fields from a slice; reading past its end gives `None`.
+pub struct Reader<'a> {
+    buf: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    /// Reads from the start of `buf`.
+    pub fn new(buf: &'a [u8]) -> Self {
+        Self { buf, at: 0 }
+    }
+
+    /// The next `n` bytes.
+    pub fn bytes(&mut self, n: usize) -> Option<&'a [u8]> {
+        let b = self.buf.get(self.at..self.at.checked_add(n)?)?;
+        self.at += n;
+        Some(b)
+    }
+
+    fn array<const K: usize>(&mut self) -> Option<[u8; K]> {
+        self.bytes(K)?.try_into().ok()
+    }
+
+    /// A `u8`.
+    pub fn u8(&mut self) -> Option<u8> {
+        self.array::<1>().map(|[b]| b)
+    }
+
+    /// A `u16`.
+    pub fn u16(&mut self) -> Option<u16> {
+        self.array().map(u16::from_be_bytes)
+    }
+
+    /// A `u32`.
+    pub fn u32(&mut self) -> Option<u32> {
+        self.array().map(u32::from_be_bytes)
+    }
+
+    /// A `u64`.
+    pub fn u64(&mut self) -> Option<u64> {
+        self.array().map(u64::from_be_bytes)
+    }
+
+    /// An `f32`.
+    pub fn f32(&mut self) -> Option<f32> {
+        self.u32().map(f32::from_bits)
+    }
+
+    /// Bytes left.
+    pub fn rest(&self) -> &'a [u8] {
+        self.buf.get(self.at..).unwrap_or(&[])
+    }
+}
+
+/// The link's own counters, since start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LinkCounters {
+    /// Bytes received.
+    pub rx_bytes: u32,
+    /// Frames decoded into a packet.
+    pub packets: u32,
+    /// Frames that were not valid COBS or overran the receive buffer.
+    pub framing_errors: u32,
+    /// Packets whose CRC-16 was wrong.
+    pub crc_errors: u32,
+    /// Telecommands executed (`TM[1,1]` sent or queued).
+    pub accepted: u32,
+    /// Telecommands rejected, for any reason (`TM[1,2]`).
+    pub rejected: u32,
+    /// Telemetry packets queued.
+    pub tm_queued: u32,
+    /// Telemetry packets dropped because their queue was full (a slow link).
+    pub tm_dropped: u32,
+    /// Stars not sent because a frame had more than a star list holds.
+    pub stars_not_sent: u32,
+}
+
+/// The tracker's loss counters summed over every frame since start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrameTotals {
+    /// Frames ended.
+    pub frames: u32,
+    /// Lines refused.
+    pub lines_refused: u32,
+    /// Acquisition candidates lost by the detector's full list.
+    pub candidates_dropped: u32,
+    /// Acquisition windows that could not wait for their rows.
+    pub windows_dropped: u32,
+    /// Acquisition windows whose rows had left the line ring.
+    pub ring_lost: u32,
+    /// Windows that could not be calibrated.
+    pub calib_failed: u32,
+    /// Tracking windows that could not be placed.
+    pub track_refused: u32,
+    /// Tracking windows without a star.
+    pub track_lost: u32,
+    /// Stars not reported because the star list was full.
+    pub stars_dropped: u32,
+}
+
+/// The housekeeping report `TM[3,25]` (structure id 1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Housekeeping {
+    /// The last frame's mode.
+    pub mode: Mode,
+    /// The mode the rules give the next frame.
+    pub next_mode: Mode,
+    /// The last frame had a calibration table.
+    pub calibrated: bool,
+    /// Where the temperature came from.
+    pub temperature_source: TemperatureSource,
+    /// Sensor temperature used, K (U16F16 bits in telemetry).
+    pub temperature_k_bits: u32,
+    /// The last frame's number.
+    pub frame: u32,
+    /// The last frame's reported stars.
+    pub stars: u16,
+    /// The last frame's usable centroids.
+    pub centroids: u16,
+    /// Loss counters since start.
+    pub totals: FrameTotals,
+    /// Link counters since start.
+    pub link: LinkCounters,
+    /// The calibration table in force.
+    pub table: Option<TableInfo>,
+    /// Time since start, us.
+    pub uptime_us: u64,
+}
+
+/// Every housekeeping field in order: name, type, meaning.
+pub const HK_FIELDS: [(&str, &str, &str); 34] = [
+    ("sid", "u16", "structure id, 1"),
+    (
+        "mode",
+        "u8",
+        "last frame's mode (0 standby, 1 acquisition, 2 tracking)",
+    ),
+    ("next_mode", "u8", "the next frame's mode by the rules"),
+    ("calibrated", "u8", "1: a calibration table was in force"),
+    (
+        "temperature_source",
+        "u8",
+        "0 sensor, 1 table reference, 2 none",
+    ),
+    (
+        "temperature_k",
+        "u32",
+        "sensor temperature, K x 65536 (U16F16)",
+    ),
+    ("frame", "u32", "last frame's number"),
+    ("stars", "u16", "last frame's reported stars"),
+    ("centroids", "u16", "last frame's usable centroids"),
+    ("frames", "u32", "frames since start"),
+    ("lines_refused", "u32", "lines refused since start"),
+    (
+        "candidates_dropped",
+        "u32",
+        "acquisition candidates lost, since start",
+    ),
+    (
+        "windows_dropped",
+        "u32",
+        "acquisition windows dropped, since start",
+    ),
+    (
+        "ring_lost",
+        "u32",
+        "windows whose rows left the ring, since start",
+    ),
+    ("calib_failed", "u32", "windows not calibrated, since start"),
+    (
+        "track_refused",
+        "u32",
+        "tracking windows not placed, since start",
+    ),
+    (
+        "track_lost",
+        "u32",
+        "tracking windows without a star, since start",
+    ),
+    (
+        "stars_dropped",
+        "u32",
+        "stars over the star list, since start",
+    ),
+    ("rx_bytes", "u32", "link bytes received"),
+    ("packets", "u32", "frames decoded into a packet"),
+    ("framing_errors", "u32", "frames not COBS or too long"),
+    ("crc_errors", "u32", "packets with a wrong CRC-16"),
+    ("accepted", "u32", "telecommands executed"),
+    ("rejected", "u32", "telecommands rejected"),
+    ("tm_queued", "u32", "telemetry packets queued"),
+    (
+        "tm_dropped",
+        "u32",
+        "telemetry packets dropped (queue full)",
+    ),
+    ("stars_not_sent", "u32", "stars over a star-list packet"),
+    ("table_kind", "u8", "kind of the table in force"),
+    ("table_present", "u8", "1: a table is in force"),
+    ("table_len", "u32", "its length, bytes"),
+    ("table_crc32", "u32", "its CRC-32"),
+    ("table_sequence", "u32", "its store sequence number"),
+    ("uptime_us", "u64", "time since start, us"),
+    ("spare", "u16", "0"),
+];
+
+/// Size of a field type of [`HK_FIELDS`] or [`STAR_FIELDS`], bytes.
+pub const fn type_len(t: &str) -> usize {
+    match t.as_bytes() {
+        b"u8" => 1,
+        b"u16" => 2,
+        b"u32" | b"f32" => 4,
+        b"u64" => 8,
+        _ => 0,
+    }
+}
+
+/// Length of the housekeeping source data, bytes.
+#[allow(
+    clippy::indexing_slicing,
+    reason = "evaluated at compile time: a bad index fails the build, never the program"
+)]
+pub const HK_LEN: usize = {
+    let mut n = 0;
+    let mut i = 0;
+    while i < HK_FIELDS.len() {
+        n += type_len(HK_FIELDS[i].1);
+        i += 1;
+    }
+    n
+};
+
+/// Every field of one star in a star list: name, type, meaning.
+pub const STAR_FIELDS: [(&str, &str, &str); 7] = [
+    ("x_px", "f32", "column, px"),
+    ("y_px", "f32", "row, px"),
+    ("flux_e", "f32", "background-subtracted signal, e-"),
+    ("snr", "f32", "SNR of flux_e"),
+    ("sigma_x_px", "f32", "1-sigma error of x_px, px"),
+    ("sigma_y_px", "f32", "1-sigma error of y_px, px"),
+    ("flags", "u32", "StarFlags bits (docs/formats.md)"),
+];
+
+const fn source_number(s: TemperatureSource) -> u8 {
+    match s {
+        TemperatureSource::Sensor => 0,
+        TemperatureSource::TableReference => 1,
+        TemperatureSource::None => 2,
+    }
+}
+
+const fn source_of(n: u8) -> Option<TemperatureSource> {
+    match n {
+        0 => Some(TemperatureSource::Sensor),
+        1 => Some(TemperatureSource::TableReference),
+        2 => Some(TemperatureSource::None),
+        _ => None,
+    }
+}
+
+impl Housekeeping {
+    /// Writes the report; `None` if `out` is shorter than [`HK_LEN`].
+    pub fn encode(&self, out: &mut [u8]) -> Option<usize> {
+        let t = &self.totals;
+        let l = &self.link;
+        let table = self.table.unwrap_or(TableInfo {
+            kind: 0,
+            len_bytes: 0,
+            crc32: 0,
+            sequence: 0,
+        });
+        let mut w = Writer::new(out);
+        w.u16(1)
+            .u8(mode_number(self.mode))
+            .u8(mode_number(self.next_mode))
+            .u8(u8::from(self.calibrated))
+            .u8(source_number(self.temperature_source))
+            .u32(self.temperature_k_bits)
+            .u32(self.frame)
+            .u16(self.stars)
+            .u16(self.centroids);
+        for v in [
+            t.frames,
+            t.lines_refused,
+            t.candidates_dropped,
+            t.windows_dropped,
+            t.ring_lost,
+            t.calib_failed,
+            t.track_refused,
+            t.track_lost,
+            t.stars_dropped,
+            l.rx_bytes,
+            l.packets,
+            l.framing_errors,
+            l.crc_errors,
+            l.accepted,
+            l.rejected,
+            l.tm_queued,
+            l.tm_dropped,
+            l.stars_not_sent,
+        ] {
+            w.u32(v);
+        }
+        w.u8(table.kind)
+            .u8(u8::from(self.table.is_some()))
+            .u32(table.len_bytes)
+            .u32(table.crc32)
+            .u32(table.sequence)
+            .u64(self.uptime_us)
+            .u16(0);
+        w.finish()
+    }
+
+    /// Reads a report written by [`Self::encode`].
+    pub fn decode(d: &[u8]) -> Option<Self> {
+        use super::command::mode_of;
+        if d.len() != HK_LEN {
+            return None;
+        }
+        let mut r = Reader::new(d);
+        if r.u16()? != 1 {
+            return None;
+        }
+        let mode = mode_of(r.u8()?)?;
+        let next_mode = mode_of(r.u8()?)?;
+        let calibrated = r.u8()? != 0;
+        let temperature_source = source_of(r.u8()?)?;
+        let temperature_k_bits = r.u32()?;
+        let frame = r.u32()?;
+        let stars = r.u16()?;
+        let centroids = r.u16()?;
+        let totals = FrameTotals {
+            frames: r.u32()?,
+            lines_refused: r.u32()?,
+            candidates_dropped: r.u32()?,
+            windows_dropped: r.u32()?,
+            ring_lost: r.u32()?,
+            calib_failed: r.u32()?,
+            track_refused: r.u32()?,
+            track_lost: r.u32()?,
+            stars_dropped: r.u32()?,
+        };
+        let link = LinkCounters {
+            rx_bytes: r.u32()?,
+            packets: r.u32()?,
+            framing_errors: r.u32()?,
+            crc_errors: r.u32()?,
+            accepted: r.u32()?,
+            rejected: r.u32()?,
+            tm_queued: r.u32()?,
+            tm_dropped: r.u32()?,
+            stars_not_sent: r.u32()?,
+        };
+        let kind = r.u8()?;
+        let present = r.u8()? != 0;
+        let info = TableInfo {
+            kind,
+            len_bytes: r.u32()?,
+            crc32: r.u32()?,
+            sequence: r.u32()?,
+        };
+        let uptime_us = r.u64()?;
+        Some(Self {
+            mode,
+            next_mode,
+            calibrated,
+            temperature_source,
+            temperature_k_bits,
+            frame,
+            stars,
+            centroids,
+            totals,
+            link,
+            table: present.then_some(info),
+            uptime_us,
+        })
+    }
+}
+
+/// Writes a star list's source data: frame u32, mode u8, count u8, the stars.
+pub fn encode_stars(frame: u32, mode: Mode, stars: &[StarRecord], out: &mut [u8]) -> Option<usize> {
+    let stars = stars.get(..stars.len().min(MAX_LINK_STARS))?;
+    let mut w = Writer::new(out);
+    w.u32(frame)
+        .u8(mode_number(mode))
+        .u8(u8::try_from(stars.len()).ok()?);
+    for s in stars {
+        w.f32(s.x_px)
+            .f32(s.y_px)
+            .f32(s.flux_e)
+            .f32(s.snr)
+            .f32(s.sigma_x_px)
+            .f32(s.sigma_y_px)
+            .u32(s.flags.bits());
+    }
+    w.finish()
+}
+
+/// A star list read back: frame, mode, and the stars in `out` (their count returned).
+pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usize)> {
+    let mut r = Reader::new(d);
+    let frame = r.u32()?;
+    let mode = super::command::mode_of(r.u8()?)?;
+    let count = usize::from(r.u8()?);
+    if r.rest().len() != count * STAR_BYTES || count > out.len() {
+        return None;
+    }
+    for slot in out.iter_mut().take(count) {
+        *slot = StarRecord {
+            x_px: r.f32()?,
+            y_px: r.f32()?,
+            flux_e: r.f32()?,
+            snr: r.f32()?,
+            sigma_x_px: r.f32()?,
+            sigma_y_px: r.f32()?,
+            flags: StarFlags::from_bits_retain(r.u32()?),
+        };
+    }
+    Some((frame, mode, count))
+}
+
+/// Event numbers of `TM[5,1]` and `TM[5,2]`.
+pub mod event {
+    /// Mode change: frame u32, from u8, to u8, reason u8.
+    pub const MODE_CHANGE: u16 = 1;
+    /// Table in force changed: frame u32, length u32.
+    pub const TABLE_CHANGED: u16 = 2;
+    /// Configuration applied: frame u32.
+    pub const CONFIG_APPLIED: u16 = 3;
+    /// A telecommand was rejected (anomaly): request id u32, reason u16, parameter u32.
+    pub const COMMAND_REJECTED: u16 = 4;
+    /// A table upload was committed: kind u8, length u32, CRC-32 u32, sequence u32.
+    pub const TABLE_ACCEPTED: u16 = 5;
+    /// A table upload was refused at commit (anomaly): kind u8, refusal u16.
+    pub const TABLE_REFUSED: u16 = 6;
+}
+
+/// Bytes of event data after the event number (zero-padded).
+pub const EVENT_DATA_LEN: usize = 16;
+
+const fn reason_number(r: ModeReason) -> u8 {
+    match r {
+        ModeReason::Start => 0,
+        ModeReason::Command => 1,
+        ModeReason::Acquired => 2,
+        ModeReason::TooFewStars => 3,
+        ModeReason::Reacquire => 4,
+        ModeReason::NoTable => 5,
+        ModeReason::TableAvailable => 6,
+    }
+}
+
+/// A tracker event's number and data.
+pub fn tracker_event(e: &Event) -> (u16, [u8; EVENT_DATA_LEN]) {
+    let mut d = [0u8; EVENT_DATA_LEN];
+    let mut w = Writer::new(&mut d);
+    let id = match *e {
+        Event::ModeChange {
+            frame,
+            from,
+            to,
+            reason,
+        } => {
+            w.u32(frame)
+                .u8(mode_number(from))
+                .u8(mode_number(to))
+                .u8(reason_number(reason));
+            event::MODE_CHANGE
+        }
+        Event::TableChanged { frame, len_bytes } => {
+            w.u32(frame).u32(len_bytes);
+            event::TABLE_CHANGED
+        }
+        Event::ConfigApplied { frame } => {
+            w.u32(frame);
+            event::CONFIG_APPLIED
+        }
+    };
+    (id, d)
+}

@@ -1,0 +1,195 @@
+//! The command and telemetry link on the board: USART3 (the NUCLEO's ST-LINK virtual COM
+//! port, PD8 TX / PD9 RX; an RS-422 transceiver on the same pins in flight) at
+//! [`BAUD`], receive by DMA into a ring buffer, transmit by DMA. The protocol is the core's
+//! [`LinkService`] (docs/protocol.md); this file moves bytes only.
+//!
+//! Two tasks beside readout and processing: [`link_rx_task`] copies what the DMA ring
+//! received into the [`RX`] pipe, [`link_tx_task`] sends what the [`TX`] pipe holds. The
+//! tracker task owns the [`LinkService`] and serves it between frames ([`serve`]): it takes
+//! the received bytes (commands act on the tracker there, never mid-frame) and moves queued
+//! telemetry into [`TX`] as far as it has room, without waiting. A slow link therefore
+//! leaves telemetry in the service's queues (dropped and counted when they are full), and
+//! a flood of bytes fills [`RX`] (the excess is dropped and counted by the receive task):
+//! neither can stall the frame loop.
+//!
+//! Memory: the pipes ([`RX_PIPE_BYTES`] + [`TX_PIPE_BYTES`]) in `.bss`, the DMA ring
+//! ([`RX_RING_BYTES`]) and transmit buffer ([`TX_DMA_BYTES`]) in the non-cacheable DMA
+//! region, the service (~16 KB) in the tracker task's static.
+
+use core::sync::atomic::{AtomicU32, Ordering};
+use embassy_stm32::mode::Async;
+use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::pipe::Pipe;
+use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
+use startrack_core::link::{
+    LinkService, NoWindows, TableInfo, TableUpload, Targets, UploadRefusal,
+};
+use startrack_core::tracker::{
+    Event, FrameSummary, LineSummary, StarRecord, TelemetrySink, Tracker,
+};
+
+/// The link's bit rate (the ST-LINK V3 bridge takes it; an RS-422 line up to 10 Mbit/s).
+pub const BAUD: u32 = 921_600;
+/// Bytes received and not yet served: what arrives in one frame at [`BAUD`] with room (a
+/// ground station that keeps 8 chunks of 1 KB in flight needs ~9 KB).
+pub const RX_PIPE_BYTES: usize = 16 * 1024;
+/// Telemetry handed to the transmit task and not yet sent.
+pub const TX_PIPE_BYTES: usize = 4 * 1024;
+/// The receive DMA ring (half-transfer and transfer-complete interrupts at 512 bytes), in the
+/// non-cacheable DMA region ([`crate::memory::DmaRegion`]).
+pub const RX_RING_BYTES: usize = 1024;
+/// The transmit DMA buffer, in the same region: the D-cache would otherwise hide the bytes
+/// the CPU copies into it from the DMA.
+pub const TX_DMA_BYTES: usize = 512;
+
+/// The service, owned by the tracker task. A `StaticCell` set up at run time, so it lives in
+/// `.bss`: a constant one would go to `.data` (the queues' uninitialised bytes are not
+/// zeros), costing its ~16 KB twice, in flash and RAM.
+pub static SERVICE: static_cell::StaticCell<LinkService> = static_cell::StaticCell::new();
+
+/// Received bytes, from the receive task to the tracker task.
+pub static RX: Pipe<CriticalSectionRawMutex, RX_PIPE_BYTES> = Pipe::new();
+/// Telemetry bytes, from the tracker task to the transmit task.
+pub static TX: Pipe<CriticalSectionRawMutex, TX_PIPE_BYTES> = Pipe::new();
+/// Received bytes dropped because [`RX`] was full, and receive errors (overrun, framing,
+/// noise) of the USART.
+pub static RX_DROPPED: AtomicU32 = AtomicU32::new(0);
+/// USART receive errors (the ring is restarted after each).
+pub static RX_ERRORS: AtomicU32 = AtomicU32::new(0);
+
+/// Copies the DMA ring's bytes into [`RX`]; a full pipe drops them (counted).
+#[embassy_executor::task]
+pub async fn link_rx_task(mut rx: RingBufferedUartRx<'static>) {
+    let mut buf = [0u8; 256];
+    loop {
+        match rx.read(&mut buf).await {
+            Ok(n) => {
+                let bytes = buf.get(..n).unwrap_or_default();
+                let taken = RX.try_write(bytes).unwrap_or(0);
+                if taken < n {
+                    RX_DROPPED.fetch_add((n - taken) as u32, Ordering::Relaxed);
+                }
+            }
+            Err(e) => {
+                // The ring restarts on its next read; the partial frame fails its COBS or
+                // CRC check and is counted by the service.
+                RX_ERRORS.fetch_add(1, Ordering::Relaxed);
+                defmt::warn!("link: receive error {}", e);
+            }
+        }
+    }
+}
+
+/// Sends what [`TX`] holds.
+#[embassy_executor::task]
+pub async fn link_tx_task(mut tx: UartTx<'static, Async>, buf: &'static mut [u8; TX_DMA_BYTES]) {
+    loop {
+        let n = TX.read(buf).await;
+        if let Err(e) = tx.write(buf.get(..n).unwrap_or_default()).await {
+            defmt::warn!("link: transmit error {}", e);
+        }
+    }
+}
+
+/// One link service round between frames: received bytes executed, telemetry moved into
+/// [`TX`] while it has room. Never waits.
+pub fn serve<const N: usize>(
+    link: &mut LinkService,
+    tracker: &mut Tracker<'static, '_, N>,
+    tables: &mut dyn TableUpload,
+) {
+    let mut buf = [0u8; 256];
+    link.set_time(embassy_time::Instant::now().as_micros());
+    while let Ok(n) = RX.try_read(&mut buf) {
+        let mut targets = Targets {
+            tracker: &mut *tracker,
+            tables: &mut *tables,
+            windows: &mut NoWindows,
+        };
+        link.receive(buf.get(..n).unwrap_or_default(), &mut targets);
+    }
+    loop {
+        let room = (TX_PIPE_BYTES - TX.len()).min(buf.len());
+        let n = link.transmit(buf.get_mut(..room).unwrap_or_default());
+        if n == 0 {
+            break;
+        }
+        // The room was checked; a short write cannot happen with one writer.
+        let _ = TX.try_write(buf.get(..n).unwrap_or_default());
+    }
+}
+
+/// The table store until the flash slots are bound: the table checked at start-up, read
+/// only. Every upload is refused with [`UploadRefusal::Storage`].
+pub struct ReadOnlyTables {
+    /// The start-up table, if any.
+    pub active: Option<TableInfo>,
+}
+
+impl ReadOnlyTables {
+    /// The store of a start-up table of `len_bytes` bytes (CRC-32 not computed: 0).
+    pub const fn new(len_bytes: Option<u32>) -> Self {
+        Self {
+            active: match len_bytes {
+                Some(len_bytes) => Some(TableInfo {
+                    kind: TABLE_KIND_CALIBRATION,
+                    len_bytes,
+                    crc32: 0,
+                    sequence: 0,
+                }),
+                None => None,
+            },
+        }
+    }
+}
+
+impl TableUpload for ReadOnlyTables {
+    fn begin(&mut self, _kind: u8, _total_len: u32, _crc32: u32) -> Result<(), UploadRefusal> {
+        Err(UploadRefusal::Storage)
+    }
+
+    fn chunk(&mut self, _offset: u32, _data: &[u8]) -> Result<(), UploadRefusal> {
+        Err(UploadRefusal::NotStarted)
+    }
+
+    fn commit(&mut self) -> Result<TableInfo, UploadRefusal> {
+        Err(UploadRefusal::NotStarted)
+    }
+
+    fn abort(&mut self) {}
+
+    fn active(&self, kind: u8) -> Option<TableInfo> {
+        self.active.filter(|i| i.kind == kind)
+    }
+}
+
+/// The tracker's telemetry to both the defmt log and the link.
+pub struct Tee<'a> {
+    /// The log.
+    pub log: &'a mut dyn TelemetrySink,
+    /// The link.
+    pub link: &'a mut LinkService,
+}
+
+impl TelemetrySink for Tee<'_> {
+    fn line(&mut self, summary: &LineSummary) {
+        self.log.line(summary);
+        self.link.line(summary);
+    }
+
+    fn star(&mut self, frame: u32, star: &StarRecord) {
+        self.log.star(frame, star);
+        self.link.star(frame, star);
+    }
+
+    fn frame(&mut self, summary: &FrameSummary) {
+        self.log.frame(summary);
+        self.link.frame(summary);
+    }
+
+    fn event(&mut self, event: &Event) {
+        self.log.event(event);
+        self.link.event(event);
+    }
+}

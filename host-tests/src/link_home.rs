@@ -1,0 +1,466 @@
+//! The link's host home: the table store in memory ([`MemoryTables`], the host binding of
+//! the core's table-upload port), the simulated sensor as the diagnostic window source
+//! ([`SimWindows`]), and the software-in-the-loop served over TCP ([`serve`]): the core's
+//! [`LinkService`] on 127.0.0.1:P standing in for the UART, optionally with seeded bit
+//! errors on the received bytes (`--link-noise`).
+//!
+//! The server runs frames back to back; between two frames it serves the link for up to
+//! [`LINK_PHASE_MS`] (longer while bytes keep arriving, at most [`LINK_PHASE_MAX_MS`]), so
+//! a table upload goes at the TCP's speed and a frame never waits for the ground.
+//!
+//! Cost: the frames' (see [`crate::sil`]); the link adds a few us a packet.
+
+use crate::home::{FrameClock, SimLines, block_on};
+use crate::sil::{self, SilConfig};
+use crate::sim::{SensorParams, Simulator, Star};
+use rand::{RngExt, SeedableRng};
+use startrack_core::calib::{FrameCalibration, FrameConditions};
+use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
+use startrack_core::link::{
+    LinkService, TableInfo, TableUpload, Targets, UploadRefusal, WindowKind, WindowReader,
+    WindowRequest,
+};
+use startrack_core::table::CalibTable;
+use startrack_core::tracker::{FixedTemperature, Ports, TableStore, Tracker, TrackerBuffers};
+use startrack_core::units::Electrons;
+use startrack_core::window::Rect;
+use std::io::{ErrorKind, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::time::{Duration, Instant};
+
+/// The CRC-32 of table uploads (CRC-32/ISO-HDLC, zlib's).
+pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// Largest table the memory store takes, bytes (a per-pixel table of the CCD47-20 is ~3 MB;
+/// the board's flash slot is 128 KB).
+pub const MEMORY_MAX_TABLE: u32 = 8 << 20;
+
+struct Upload {
+    kind: u8,
+    total_len: u32,
+    crc32: u32,
+    bytes: Vec<u8>,
+}
+
+/// The table store in memory: the table in force (a committed table is kept for the rest of
+/// the process, as flash keeps it), and the upload under way.
+pub struct MemoryTables {
+    geometry: ReadoutGeometry,
+    active: Option<(CalibTable<'static>, TableInfo)>,
+    upload: Option<Upload>,
+    sequence: u32,
+}
+
+/// Leaks `bytes` and parses them as a table of `geometry`.
+fn keep(bytes: Vec<u8>, geometry: &ReadoutGeometry) -> Option<CalibTable<'static>> {
+    let t = CalibTable::parse(bytes.leak()).ok()?;
+    (t.geometry() == geometry).then_some(t)
+}
+
+impl MemoryTables {
+    /// A store for tables of `geometry`, with `initial` in force if it is a usable table.
+    pub fn new(geometry: ReadoutGeometry, initial: Option<Vec<u8>>) -> Self {
+        let active = initial.and_then(|b| {
+            let info = TableInfo {
+                kind: TABLE_KIND_CALIBRATION,
+                len_bytes: u32::try_from(b.len()).ok()?,
+                crc32: CRC32.checksum(&b),
+                sequence: 0,
+            };
+            keep(b, &geometry).map(|t| (t, info))
+        });
+        Self {
+            geometry,
+            active,
+            upload: None,
+            sequence: 0,
+        }
+    }
+}
+
+impl TableUpload for MemoryTables {
+    fn begin(&mut self, kind: u8, total_len: u32, crc32: u32) -> Result<(), UploadRefusal> {
+        if self.upload.is_some() {
+            return Err(UploadRefusal::Busy);
+        }
+        if kind != TABLE_KIND_CALIBRATION {
+            return Err(UploadRefusal::UnknownKind);
+        }
+        if total_len == 0 || total_len > MEMORY_MAX_TABLE {
+            return Err(UploadRefusal::TooLong);
+        }
+        self.upload = Some(Upload {
+            kind,
+            total_len,
+            crc32,
+            bytes: Vec::new(),
+        });
+        Ok(())
+    }
+
+    fn chunk(&mut self, offset: u32, data: &[u8]) -> Result<(), UploadRefusal> {
+        let u = self.upload.as_mut().ok_or(UploadRefusal::NotStarted)?;
+        let at = u32::try_from(u.bytes.len()).map_err(|_| UploadRefusal::TooLong)?;
+        if offset != at {
+            return Err(UploadRefusal::OutOfOrder { expected: at });
+        }
+        let end = u64::from(at) + data.len() as u64;
+        if end > u64::from(u.total_len) {
+            return Err(UploadRefusal::TooLong);
+        }
+        u.bytes.extend_from_slice(data);
+        Ok(())
+    }
+
+    fn commit(&mut self) -> Result<TableInfo, UploadRefusal> {
+        let u = self.upload.take().ok_or(UploadRefusal::NotStarted)?;
+        if u.bytes.len() as u64 != u64::from(u.total_len) {
+            return Err(UploadRefusal::Incomplete);
+        }
+        if CRC32.checksum(&u.bytes) != u.crc32 {
+            return Err(UploadRefusal::CrcMismatch);
+        }
+        let table = keep(u.bytes, &self.geometry).ok_or(UploadRefusal::Invalid)?;
+        self.sequence += 1;
+        let info = TableInfo {
+            kind: u.kind,
+            len_bytes: u.total_len,
+            crc32: u.crc32,
+            sequence: self.sequence,
+        };
+        self.active = Some((table, info));
+        Ok(info)
+    }
+
+    fn abort(&mut self) {
+        self.upload = None;
+    }
+
+    fn active(&self, kind: u8) -> Option<TableInfo> {
+        self.active.map(|(_, i)| i).filter(|i| i.kind == kind)
+    }
+}
+
+impl TableStore<'static> for MemoryTables {
+    fn active_table(&mut self) -> Option<CalibTable<'static>> {
+        self.active.map(|(t, _)| t)
+    }
+}
+
+/// Diagnostic windows from the simulated sensor, of the frame after the request: raw, or
+/// calibrated with the table in force as the tracker calibrates a window (the frame's line
+/// levels and dark scale, then the per-pixel formula), in e- x 64.
+pub struct SimWindows {
+    /// The sensor.
+    pub params: SensorParams,
+    /// The stars of the frame to render.
+    pub stars: Vec<Star>,
+    /// Its frame number (the noise draw).
+    pub frame: u32,
+    /// The table in force (calibrated windows need one).
+    pub table: Option<CalibTable<'static>>,
+    /// Exposure for the hot pixels' dark law, ms.
+    pub exposure_ms: u32,
+    rendered: Option<(WindowRequest, Vec<i32>)>,
+}
+
+impl SimWindows {
+    /// A source for `params`' sensor.
+    pub fn new(params: SensorParams) -> Self {
+        Self {
+            params,
+            stars: Vec::new(),
+            frame: 0,
+            table: None,
+            exposure_ms: 0,
+            rendered: None,
+        }
+    }
+}
+
+impl WindowReader for SimWindows {
+    fn check(&mut self, r: &WindowRequest) -> bool {
+        let g = self.params.geometry;
+        let inside = u32::from(r.x0) + u32::from(r.side_px) <= u32::from(g.active_cols)
+            && u32::from(r.y0) + u32::from(r.side_px) <= u32::from(g.active_rows);
+        if !inside {
+            return false;
+        }
+        let sim = Simulator {
+            frame: self.frame,
+            ..Simulator::new(self.params.clone(), self.stars.clone())
+        };
+        let rect = Rect {
+            x0: r.x0,
+            y0: r.y0,
+            width: r.side_px,
+            height: r.side_px,
+        };
+        let px = match r.kind {
+            WindowKind::Raw => sim.render_window(rect).into_iter().map(i32::from).collect(),
+            WindowKind::Calibrated => {
+                let Some(table) = self.table else {
+                    return false;
+                };
+                match calibrated_window(&sim, table, self.exposure_ms, rect) {
+                    Some(px) => px,
+                    None => return false,
+                }
+            }
+        };
+        self.rendered = Some((*r, px));
+        true
+    }
+
+    fn read_row(&mut self, r: &WindowRequest, row: u16, out: &mut [i32]) -> bool {
+        let Some((req, px)) = &self.rendered else {
+            return false;
+        };
+        if req != r {
+            return false;
+        }
+        let side = usize::from(r.side_px);
+        let start = usize::from(row) * side;
+        match px.get(start..start + side) {
+            Some(src) if out.len() == side => {
+                out.copy_from_slice(src);
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+/// Window `rect` of `sim`'s frame calibrated with `table`, e- x 64 (I26F6 bits).
+fn calibrated_window(
+    sim: &Simulator,
+    table: CalibTable<'static>,
+    exposure_ms: u32,
+    rect: Rect,
+) -> Option<Vec<i32>> {
+    let raw = crate::demo::render_frame(sim);
+    let levels = crate::home::frame_levels(&table, &raw).ok()?;
+    let conditions = FrameConditions {
+        dark_scale_e: levels.dark_scale_e.unwrap_or(Electrons::ZERO),
+        exposure_ms,
+        temperature_k: table.hot_pixels().reference_temperature_k(),
+    };
+    let cal = FrameCalibration::new(table, conditions);
+    let (e, _, _) = levels.calibrate_window(&cal, &raw, rect).ok()?;
+    Some(e.into_iter().map(|v| v.to_bits()).collect())
+}
+
+/// Between two frames the link is served at least this long, ms.
+pub const LINK_PHASE_MS: u64 = 20;
+/// ...and at most this long while bytes keep arriving, ms.
+pub const LINK_PHASE_MAX_MS: u64 = 500;
+
+/// What [`serve`] runs.
+#[derive(Clone, Debug)]
+pub struct ServeConfig {
+    /// The scene, the sensor and the tracker.
+    pub sil: SilConfig,
+    /// TCP port on 127.0.0.1 (0: any free port, reported through `on_listen`).
+    pub port: u16,
+    /// Probability that a received byte has one bit flipped (seeded by the scene's seed).
+    pub link_noise: f64,
+    /// Stop after this many frames (`None`: run until killed).
+    pub max_frames: Option<u32>,
+    /// Stop when this is set (checked between frames and in the link phase).
+    pub stop: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+}
+
+/// Counts of a [`serve`] run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ServeReport {
+    /// Frames run.
+    pub frames: u32,
+    /// Resets performed.
+    pub resets: u32,
+    /// Bytes received and sent.
+    pub rx_bytes: u64,
+    /// Bytes sent.
+    pub tx_bytes: u64,
+}
+
+/// One connected ground station.
+struct Client {
+    stream: TcpStream,
+    out: Vec<u8>,
+}
+
+impl Client {
+    /// Sends what it can of `out` without waiting; `false` when the ground hung up.
+    fn flush(&mut self, sent: &mut u64) -> bool {
+        while !self.out.is_empty() {
+            match self.stream.write(&self.out) {
+                Ok(0) => return false,
+                Ok(n) => {
+                    self.out.drain(..n);
+                    *sent += n as u64;
+                }
+                Err(e) if e.kind() == ErrorKind::WouldBlock => return true,
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(_) => return false,
+            }
+        }
+        true
+    }
+}
+
+/// Runs the SIL with its link on TCP: frames back to back, the link served between them.
+/// `on_listen` is called once with the bound port.
+pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<ServeReport, String> {
+    let listener = TcpListener::bind(("127.0.0.1", config.port)).map_err(|e| e.to_string())?;
+    listener.set_nonblocking(true).map_err(|e| e.to_string())?;
+    on_listen(listener.local_addr().map_err(|e| e.to_string())?.port());
+
+    let sc = &config.sil;
+    let params = SensorParams {
+        seed: sc.seed,
+        ..SensorParams::default()
+    };
+    let base = sil::scene(sc, &params);
+    let table = sil::truth_table(sc, &params)?;
+    let mut tables = MemoryTables::new(params.geometry, Some(table));
+    let mut windows = SimWindows::new(params.clone());
+    let mut noise = rand_chacha::ChaCha8Rng::seed_from_u64(sc.seed ^ 0x4e4f_4953);
+    let mut report = ServeReport::default();
+    let mut client: Option<Client> = None;
+    let mut buffers = Box::new(TrackerBuffers::new());
+    let mut frame = 0u32;
+    let start = Instant::now();
+
+    'boot: loop {
+        let mut tracker = Box::new(
+            Tracker::<{ sil::SIL_CAPACITY }>::new(sc.tracker, params.geometry, &mut buffers)
+                .map_err(|e| e.to_string())?,
+        );
+        let mut link = Box::new(LinkService::new());
+        let mut source = SimLines::new(|k| Simulator {
+            frame: k,
+            ..Simulator::new(params.clone(), sil::stars_at(&base, sc.drift_px, k))
+        });
+        let mut thermometer = FixedTemperature(None);
+        loop {
+            let stopped = config
+                .stop
+                .as_ref()
+                .is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed));
+            if stopped || config.max_frames.is_some_and(|m| report.frames >= m) {
+                return Ok(report);
+            }
+            // The link phase.
+            let phase_end = Instant::now() + Duration::from_millis(LINK_PHASE_MS);
+            let hard_end = Instant::now() + Duration::from_millis(LINK_PHASE_MAX_MS);
+            windows.frame = frame;
+            windows.stars = sil::stars_at(&base, sc.drift_px, frame);
+            windows.table = tables.active_table();
+            windows.exposure_ms = sc.tracker.exposure_ms;
+            loop {
+                if client.is_none()
+                    && let Ok((s, _)) = listener.accept()
+                {
+                    let _ = s.set_nodelay(true);
+                    if s.set_nonblocking(true).is_ok() {
+                        client = Some(Client {
+                            stream: s,
+                            out: Vec::new(),
+                        });
+                    }
+                }
+                let mut got = false;
+                if let Some(c) = client.as_mut() {
+                    let mut buf = [0u8; 512];
+                    match c.stream.read(&mut buf) {
+                        Ok(0) => client = None,
+                        Ok(n) => {
+                            got = true;
+                            report.rx_bytes += n as u64;
+                            let bytes = buf.get_mut(..n).unwrap_or_default();
+                            if config.link_noise > 0.0 {
+                                for b in bytes.iter_mut() {
+                                    if noise.random_bool(config.link_noise.min(1.0)) {
+                                        *b ^= 1 << noise.random_range(0..8);
+                                    }
+                                }
+                            }
+                            link.set_time(start.elapsed().as_micros() as u64);
+                            let mut targets = Targets {
+                                tracker: &mut tracker,
+                                tables: &mut tables,
+                                windows: &mut windows,
+                            };
+                            link.receive(bytes, &mut targets);
+                        }
+                        Err(e)
+                            if matches!(
+                                e.kind(),
+                                ErrorKind::WouldBlock | ErrorKind::Interrupted
+                            ) => {}
+                        Err(_) => client = None,
+                    }
+                }
+                {
+                    let mut targets = Targets {
+                        tracker: &mut tracker,
+                        tables: &mut tables,
+                        windows: &mut windows,
+                    };
+                    link.poll(&mut targets);
+                }
+                drain(&mut link, &mut client, &mut report);
+                if link.reset_requested() {
+                    report.resets += 1;
+                    frame = 0;
+                    continue 'boot;
+                }
+                let now = Instant::now();
+                if now >= hard_end || (now >= phase_end && !got) {
+                    break;
+                }
+                if !got {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            }
+            // The frame.
+            let mut clock = FrameClock {
+                frame,
+                period_us: sc.period_us,
+            };
+            link.set_time(start.elapsed().as_micros() as u64);
+            let mut ports = Ports {
+                clock: &mut clock,
+                thermometer: &mut thermometer,
+                tables: &mut tables,
+                telemetry: &mut *link,
+            };
+            let Ok(_) = block_on(tracker.run_frame(&mut source, &mut ports));
+            link.end_of_frame(&tables);
+            drain(&mut link, &mut client, &mut report);
+            report.frames += 1;
+            frame += 1;
+        }
+    }
+}
+
+/// Moves the link's queued telemetry to the client (all of it: TCP is the fast UART here);
+/// without a client it is discarded, as a UART with nobody listening would.
+fn drain(link: &mut LinkService, client: &mut Option<Client>, report: &mut ServeReport) {
+    let mut buf = [0u8; 4096];
+    loop {
+        let n = link.transmit(&mut buf);
+        if n == 0 {
+            break;
+        }
+        if let Some(c) = client.as_mut() {
+            c.out.extend_from_slice(buf.get(..n).unwrap_or_default());
+        }
+    }
+    if let Some(c) = client.as_mut()
+        && !c.flush(&mut report.tx_bytes)
+    {
+        *client = None;
+    }
+}

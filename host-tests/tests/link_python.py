@@ -1,0 +1,43 @@
+"""Decodes the tracker's telemetry with the PyPI `spacepackets` package (an independent PUS
+implementation): every packet's CRC-16, APID, service and subtype, and the star list's and the
+housekeeping's fields against what the Rust side wrote.
+
+Usage: python3 link_python.py PACKETS_FILE EXPECTED_JSON (written by the test link_python.rs).
+Exit 0 and one line "spacepackets decoded N packets" on success."""
+import json
+import struct
+import sys
+
+from spacepackets.ecss.tm import PusTm
+
+
+def main() -> int:
+    packets = [bytes.fromhex(l) for l in open(sys.argv[1]).read().split()]
+    expected = json.load(open(sys.argv[2]))
+    assert len(packets) == len(expected), (len(packets), len(expected))
+    for raw, want in zip(packets, expected):
+        tm = PusTm.unpack(raw, timestamp_len=8)  # verifies the CRC-16
+        got = (tm.apid, tm.service, tm.subservice)
+        assert got == (want["apid"], want["service"], want["subtype"]), (got, want)
+        assert struct.unpack(">Q", tm.timestamp)[0] == want["time_us"], want
+        data = tm.source_data
+        assert data.hex() == want["data"], want
+        if "stars" in want:
+            frame, mode, count = struct.unpack(">IBB", data[:6])
+            assert (frame, mode, count) == (want["frame"], want["mode"], len(want["stars"]))
+            for k, star in enumerate(want["stars"]):
+                fields = struct.unpack(">6fI", data[6 + 28 * k : 6 + 28 * (k + 1)])
+                for a, b in zip(fields[:6], star[:6]):
+                    assert abs(a - b) <= 1e-6 * max(1.0, abs(b)), (fields, star)
+                assert fields[6] == star[6]
+        if "housekeeping" in want:
+            sid, mode, next_mode = struct.unpack(">HBB", data[:4])
+            assert (sid, mode, next_mode) == (1, want["mode"], want["next_mode"]), data[:4]
+            # uptime_us: the u64 before the 2 spare bytes at the end.
+            assert struct.unpack(">Q", data[-10:-2])[0] == want["time_us"]
+    print(f"spacepackets decoded {len(packets)} packets")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

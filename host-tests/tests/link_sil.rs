@@ -1,0 +1,277 @@
+//! The SIL served over TCP and driven by the ground client and `startrack gse`: status,
+//! mode, table upload, star lists, a raw window, reset, and the errors' exit codes.
+
+use startrack_core::link::WindowKind;
+use startrack_core::tracker::Mode;
+use startrack_host::cli::gse::{self, GseArgs, GseCommand};
+use startrack_host::ground::{Ground, GroundError};
+use startrack_host::link_home::{ServeConfig, ServeReport, serve};
+use startrack_host::sil::SilConfig;
+use startrack_host::sim::truth::TruthSections;
+use startrack_host::sim::{SensorParams, Simulator};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+struct Server {
+    port: u16,
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<Result<ServeReport, String>>>,
+}
+
+impl Server {
+    fn start(link_noise: f64) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let config = ServeConfig {
+            sil: SilConfig {
+                stars: 8,
+                ..SilConfig::default()
+            },
+            port: 0,
+            link_noise,
+            max_frames: Some(200),
+            stop: Some(stop.clone()),
+        };
+        let (tx, rx) = mpsc::channel();
+        let handle = std::thread::spawn(move || {
+            serve(&config, &mut |p| {
+                let _ = tx.send(p);
+            })
+        });
+        let port = rx
+            .recv_timeout(Duration::from_secs(60))
+            .expect("the server reports its port");
+        Self {
+            port,
+            stop,
+            handle: Some(handle),
+        }
+    }
+
+    fn finish(mut self) -> ServeReport {
+        self.stop.store(true, Ordering::Relaxed);
+        self.handle
+            .take()
+            .expect("joined once")
+            .join()
+            .expect("server thread")
+            .expect("server ran")
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+fn tiled_table() -> Vec<u8> {
+    Simulator::new(SensorParams::default(), Vec::new())
+        .truth_table_tiled(TruthSections::ALL, 3)
+        .expect("table")
+}
+
+#[test]
+fn ground_drives_the_sil_over_tcp() {
+    let server = Server::start(0.0);
+    let mut g = Ground::connect(server.port, Duration::from_secs(60)).expect("connect");
+    g.ping().expect("ping");
+
+    // Status before and after frames: the counters move, the table is the boot table.
+    let h0 = g.status().expect("status");
+    let boot_table = h0.table.expect("the SIL boots with the truth table");
+    assert_eq!(boot_table.sequence, 0);
+    assert!(h0.link.accepted >= 1, "{h0:?}");
+
+    // Star lists: frame numbers consecutive, stars found once acquisition ran.
+    let lists = g.stars(3).expect("stars");
+    assert_eq!(lists.len(), 3);
+    for w in lists.windows(2) {
+        assert_eq!(w[1].0, w[0].0 + 1, "consecutive frames");
+    }
+    assert!(
+        lists
+            .iter()
+            .any(|(_, m, s)| *m != Mode::Standby && !s.is_empty()),
+        "{lists:?}"
+    );
+
+    // Tracking can be refused (typed), standby accepted and taken at the next frame.
+    g.set_mode(Mode::Standby).expect("standby accepted");
+    let lists = g.stars(2).expect("stars");
+    assert_eq!(lists.last().map(|l| l.1), Some(Mode::Standby));
+    match g.set_mode(Mode::Tracking) {
+        Err(GroundError::Rejected { code, .. }) => assert_eq!(code, 7, "nothing to track"),
+        other => panic!("tracking from standby: {other:?}"),
+    }
+
+    // Table upload: a tiled table in chunks, committed, in force with a new sequence.
+    let table = tiled_table();
+    let info = g.upload_table(&table, 1000, 8).expect("upload");
+    assert_eq!(info.len_bytes as usize, table.len());
+    assert_eq!(info.sequence, 1);
+    // A corrupt table is refused at commit (CRC-32 announced for other bytes), the one in
+    // force kept.
+    let mut bad = table.clone();
+    bad[100] ^= 0xFF;
+    let crc_ok = startrack_host::link_home::CRC32.checksum(&table);
+    let mut begin = vec![1u8];
+    begin.extend_from_slice(&(bad.len() as u32).to_be_bytes());
+    begin.extend_from_slice(&crc_ok.to_be_bytes());
+    g.command(
+        "table-begin",
+        startrack_core::link::protocol::TC_TABLE_BEGIN,
+        &begin,
+    )
+    .expect("begin");
+    for (k, part) in bad.chunks(1024).enumerate() {
+        let mut d = ((k * 1024) as u32).to_be_bytes().to_vec();
+        d.extend_from_slice(part);
+        g.command("chunk", startrack_core::link::protocol::TC_TABLE_CHUNK, &d)
+            .expect("chunk");
+    }
+    match g.command(
+        "commit",
+        startrack_core::link::protocol::TC_TABLE_COMMIT,
+        &[],
+    ) {
+        Err(GroundError::Rejected {
+            code, parameter, ..
+        }) => {
+            assert_eq!(code, 9);
+            assert_eq!(parameter >> 16, 7, "CRC-32 mismatch");
+        }
+        other => panic!("corrupt table committed: {other:?}"),
+    }
+    let h = g.status().expect("status");
+    assert_eq!(
+        h.table.map(|t| t.sequence),
+        Some(1),
+        "the good upload stays in force"
+    );
+
+    // Back to acquisition with the uploaded table: stars again.
+    g.set_mode(Mode::Acquisition).expect("acquisition");
+    let lists = g.stars(2).expect("stars");
+    assert!(lists.iter().any(|(_, _, s)| !s.is_empty()), "{lists:?}");
+
+    // A raw window of the next frame.
+    let px = g.window(100, 200, 16, WindowKind::Raw).expect("window");
+    assert_eq!(px.len(), 256);
+    assert!(px.iter().all(|&v| (0..=65535).contains(&v)));
+    assert!(px.iter().any(|&v| v > 0));
+
+    // A calibrated window of a corner without stars: the bias, the dark and the gains are
+    // taken off, leaving noise around zero electrons (the raw one sits on the bias).
+    let raw = g.window(2, 2, 8, WindowKind::Raw).expect("raw window");
+    let cal = g
+        .window(2, 2, 8, WindowKind::Calibrated)
+        .expect("calibrated window");
+    let mean = |v: &[i32], scale: f64| v.iter().map(|&x| f64::from(x) * scale).sum::<f64>() / 64.0;
+    assert!(mean(&raw, 1.0) > 100.0, "raw ADU on the bias: {raw:?}");
+    assert!(
+        mean(&cal, 1.0 / 64.0).abs() < 10.0,
+        "calibrated e-: {cal:?}"
+    );
+
+    // Reset: the tracker restarts at frame 0 and keeps the uploaded table.
+    g.reset().expect("reset");
+    let h = g.status().expect("status after reset");
+    assert_eq!(h.table.map(|t| t.sequence), Some(1));
+    assert!(
+        h.link.accepted <= 2,
+        "a fresh link's counters: {:?}",
+        h.link
+    );
+    drop(g);
+    let report = server.finish();
+    assert_eq!(report.resets, 1);
+}
+
+#[test]
+fn gse_command_prints_json_and_exits_by_error_kind() {
+    let server = Server::start(0.0);
+    let args = |command| GseArgs {
+        port: server.port,
+        timeout_s: 60.0,
+        command,
+    };
+    let mut out = Vec::new();
+    gse::run(&args(GseCommand::Status), &mut out).expect("status");
+    let v: serde_json::Value = serde_json::from_slice(&out).expect("JSON");
+    assert!(
+        v["mode"].is_string() && v["link"]["accepted"].as_u64() >= Some(1),
+        "{v}"
+    );
+
+    let e = gse::run(
+        &args(GseCommand::Mode {
+            mode: "sleep".into(),
+        }),
+        &mut Vec::new(),
+    )
+    .expect_err("unknown mode");
+    assert_eq!(e.exit_code(), 1, "{e}");
+
+    let mut csv = Vec::new();
+    gse::run(
+        &args(GseCommand::Stars {
+            frames: 1,
+            out: None,
+        }),
+        &mut csv,
+    )
+    .expect("stars");
+    let csv = String::from_utf8(csv).expect("utf-8");
+    assert!(csv.starts_with("frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags\n"));
+
+    let port = server.port;
+    let _ = server.finish();
+    // Nobody listening any more: a link error, exit code 3, one line.
+    let e = gse::run(
+        &GseArgs {
+            port,
+            timeout_s: 2.0,
+            command: GseCommand::Ping,
+        },
+        &mut Vec::new(),
+    )
+    .expect_err("no server");
+    assert_eq!(e.exit_code(), 3, "{e}");
+    assert!(!e.to_string().contains('\n'));
+}
+
+#[test]
+fn a_noisy_link_loses_commands_never_the_tracker() {
+    // One received byte in 5,000 has a bit flipped: a 1 KB chunk arrives corrupted about
+    // one time in five.
+    let server = Server::start(2e-4);
+    // A lost command is sent again after 5 s (a share of the 30 s timeout).
+    let mut g = Ground::connect(server.port, Duration::from_secs(30)).expect("connect");
+    g.retries = 5;
+    for _ in 0..20 {
+        g.ping().expect("ping through noise");
+    }
+    let table = tiled_table();
+    let info = g
+        .upload_table(&table, 1024, 8)
+        .expect("upload through noise");
+    assert_eq!(info.len_bytes as usize, table.len());
+    assert_eq!(
+        info.crc32,
+        startrack_host::link_home::CRC32.checksum(&table),
+        "the table in force is the one sent, byte for byte"
+    );
+    let h = g.status().expect("status");
+    let l = h.link;
+    assert!(
+        g.resumes > 0 && l.crc_errors + l.framing_errors > 0,
+        "noise seen: {l:?}"
+    );
+    // Every decoded packet got one verification; the corrupted ones were rejected.
+    assert_eq!(l.accepted + l.rejected, l.packets, "{l:?}");
+    assert!(l.rejected >= l.crc_errors, "{l:?}");
+    let _ = server.finish();
+}

@@ -1,0 +1,111 @@
+//! A SIL soak over the link: seeded random commands (pings, modes, star lists, parameters,
+//! table uploads, resets) through a noisy link, checking after each step that the tracker
+//! answers, that a table stays in force and only changes by a committed upload, and that the
+//! counters agree. `LINK_SOAK_STEPS` sets the length (default 12; the long run:
+//! `LINK_SOAK_STEPS=2000 cargo test --release -p startrack-host --test link_soak`).
+
+use rand::{RngExt, SeedableRng};
+use startrack_core::link::protocol as p;
+use startrack_core::tracker::Mode;
+use startrack_host::ground::{Ground, GroundError};
+use startrack_host::link_home::{CRC32, ServeConfig, serve};
+use startrack_host::sil::SilConfig;
+use startrack_host::sim::truth::TruthSections;
+use startrack_host::sim::{SensorParams, Simulator};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+#[test]
+fn random_commands_through_noise_keep_the_tracker_consistent() {
+    let steps: u32 = std::env::var("LINK_SOAK_STEPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(12);
+    let stop = Arc::new(AtomicBool::new(false));
+    let config = ServeConfig {
+        sil: SilConfig {
+            stars: 6,
+            ..SilConfig::default()
+        },
+        port: 0,
+        link_noise: 1e-4,
+        max_frames: None,
+        stop: Some(stop.clone()),
+    };
+    let (tx, rx) = std::sync::mpsc::channel();
+    let server = std::thread::spawn(move || {
+        serve(&config, &mut |p| {
+            let _ = tx.send(p);
+        })
+    });
+    let port = rx.recv_timeout(Duration::from_secs(60)).expect("port");
+    let mut g = Ground::connect(port, Duration::from_secs(30)).expect("connect");
+    g.retries = 5;
+
+    let tables: Vec<Vec<u8>> = [3u8, 4]
+        .iter()
+        .map(|&tile| {
+            Simulator::new(SensorParams::default(), Vec::new())
+                .truth_table_tiled(TruthSections::ALL, tile)
+                .expect("table")
+        })
+        .collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(13);
+    let mut in_force = g.status().expect("status").table.expect("boot table");
+    let mut resets = 0;
+    for step in 0..steps {
+        match rng.random_range(0..10) {
+            0 => {
+                g.reset().expect("reset");
+                resets += 1;
+            }
+            1 => {
+                let t = &tables[rng.random_range(0..tables.len())];
+                let info = g.upload_table(t, 1024, 8).expect("upload");
+                assert_eq!(info.crc32, CRC32.checksum(t));
+                assert!(info.sequence > in_force.sequence || in_force.sequence == 0);
+                in_force = info;
+            }
+            2 | 3 => {
+                let m = [Mode::Standby, Mode::Acquisition, Mode::Tracking][rng.random_range(0..3)];
+                match g.set_mode(m) {
+                    Ok(()) => {}
+                    Err(GroundError::Rejected { code: 7, .. }) => assert_eq!(m, Mode::Tracking),
+                    Err(e) => panic!("step {step}: mode {m:?}: {e}"),
+                }
+            }
+            4 => {
+                // A parameter, valid or not: accepted, or refused with a typed reason.
+                let v: u32 = rng.random_range(0..40);
+                let mut d = vec![7u8];
+                d.extend_from_slice(&v.to_be_bytes());
+                match g.command("set-params", p::TC_SET_PARAMS, &d) {
+                    Ok(_) => assert!((1..=32).contains(&v), "max_stars {v} accepted"),
+                    Err(GroundError::Rejected { code: 8, .. }) => {
+                        assert!(!(1..=32).contains(&v))
+                    }
+                    Err(e) => panic!("step {step}: set-params: {e}"),
+                }
+            }
+            5 | 6 => {
+                let lists = g.stars(1).expect("stars");
+                assert_eq!(lists.len(), 1);
+            }
+            _ => g.ping().expect("ping"),
+        }
+        let h = g.status().expect("status");
+        let l = h.link;
+        assert_eq!(l.accepted + l.rejected, l.packets, "step {step}: {l:?}");
+        assert_eq!(h.table, Some(in_force), "step {step}: the table in force");
+        assert!(h.totals.frames <= h.frame + 1, "step {step}: {h:?}");
+    }
+    stop.store(true, Ordering::Relaxed);
+    let report = server.join().expect("server").expect("served");
+    // A reset whose acceptance came late is sent again: at least the commanded ones.
+    assert!(report.resets >= resets, "{report:?}");
+    println!(
+        "{steps} steps, {} frames, {resets} resets, {} resumed uploads",
+        report.frames, g.resumes
+    );
+}
