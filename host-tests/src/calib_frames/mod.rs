@@ -403,12 +403,17 @@ impl Products {
     pub fn table(&self, tile_log2: u8) -> Result<Vec<u8>, CliError> {
         let g = self.geometry;
         let gains = crate::cli::calib_build::args::encode_gains(&self.gain_e_per_adu)?;
+        // A hot pixel's map value is its own dark over the regular one (up to hundreds):
+        // the core uses its law instead, so the map holds the regular 1 there, as it would
+        // for a pixel without a defect, and a tile is not pulled by its hot pixels.
+        let hot_at: std::collections::HashSet<(usize, usize)> =
+            self.hot.iter().map(|h| (h.col, h.row)).collect();
         let dark: Vec<DarkRel> = crate::sim::truth::tile_means(&g, tile_log2, &|x, y| {
-            f64::from(
-                self.dark_rel
-                    .get(g.raw_line_of_y(y), g.raw_col_of_x(x))
-                    .unwrap_or(1.0),
-            )
+            let (col, line) = (g.raw_col_of_x(x), g.raw_line_of_y(y));
+            if hot_at.contains(&(col, line)) {
+                return 1.0;
+            }
+            f64::from(self.dark_rel.get(line, col).unwrap_or(1.0))
         })
         .into_iter()
         .map(DarkRel::saturating_from_num)
