@@ -100,7 +100,7 @@ fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
             .ptc
             .iter()
             .filter(|q| usize::from(q.output) == o)
-            .map(|q| (q.mean_adu, q.var_adu2))
+            .map(|q| (q.mean_adu / 1e3, q.var_adu2 / 1e3))
             .collect();
         let bv = p.bias_var_adu2.get(o).copied().unwrap_or(0.0);
         let g = p.gain_e_per_adu.get(o).copied().unwrap_or(1.0);
@@ -108,7 +108,7 @@ fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
         series.push(Series::solid(format!("output {o}: measured"), pts, o));
         series.push(Series {
             label: format!("output {o}: fit, gain {g:.4} e-/ADU"),
-            points: vec![(0.0, bv), (top, bv + top / g)],
+            points: vec![(0.0, bv / 1e3), (top, (bv + 1e3 * top / g) / 1e3)],
             color: o,
             dashed: true,
         });
@@ -118,8 +118,8 @@ fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
         "ptc.png",
         &Chart {
             title: "Photon transfer: temporal variance against mean signal".into(),
-            x_label: "mean signal above bias, ADU".into(),
-            y_label: "var(A - B) / 2, ADU^2".into(),
+            x_label: "mean signal above bias, kADU".into(),
+            y_label: "var(A - B) / 2, thousand ADU^2".into(),
             log_x: false,
             log_y: false,
         },
@@ -152,7 +152,10 @@ fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
             })
             .collect();
         series.push(Series::solid(
-            format!("hot ({}, {}): doubling {:.2} K", h.col, h.row, h.doubling_k),
+            format!(
+                "hot ({}, {}), fitted law: doubling {:.2} K",
+                h.col, h.row, h.doubling_k
+            ),
             pts,
             i + 1,
         ));
