@@ -232,6 +232,83 @@ impl LabSet {
     }
 }
 
+impl LabSet {
+    /// Writes the sensor's truth for the products into `dir` (not a folder of frames:
+    /// `calib frames` would refuse these files): `flat.fits` (active area, each output's mean
+    /// 1), `dark_rel.fits` (full readout, the regular relative dark over the mean of the
+    /// covered pixels that are neither hot nor telegraph, as the core's estimator sees them),
+    /// `column_bias.fits` (one line, ADU) and `defects.fits` (full readout, 1 for a hot or
+    /// telegraph pixel). Cost: a few draws per element of the readout.
+    pub fn write_truth(&self, dir: &Path) -> Result<Vec<PathBuf>, FitsError> {
+        use crate::fits::{MapF32, write_map};
+        std::fs::create_dir_all(dir).map_err(|e| FitsError::Io {
+            path: dir.to_path_buf(),
+            msg: e.to_string(),
+        })?;
+        let s = self.sensor();
+        let g = self.geometry;
+        let (lines, len) = (usize::from(g.lines), g.line_len());
+        let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+        let defect = |c: usize, l: usize| {
+            s.hot_rate_e_per_s(c, l).is_some() || s.telegraph_step_e(c, l).is_some()
+        };
+        let (mut sum, mut n) = (0.0, 0usize);
+        for l in 0..lines {
+            for (a, b) in g.covered_cols() {
+                for c in (a..b).filter(|&c| !defect(c, l)) {
+                    sum += s.dark_rel(c, l);
+                    n += 1;
+                }
+            }
+        }
+        let norm = if n == 0 { 1.0 } else { sum / n as f64 };
+        let map = |rows: usize, cols: usize, f: &dyn Fn(usize, usize) -> f64| MapF32 {
+            rows,
+            cols,
+            data: (0..rows * cols)
+                .map(|i| f(i / cols, i % cols) as f32)
+                .collect(),
+            keys: Vec::new(),
+        };
+        let half = cols / usize::from(g.outputs).max(1);
+        let mut mean = [0.0f64; 2];
+        for y in 0..rows {
+            for x in 0..cols {
+                if let Some(m) = mean.get_mut((x / half.max(1)).min(1)) {
+                    *m += s.flat(x, y) / (half * rows) as f64;
+                }
+            }
+        }
+        let files = [
+            (
+                "flat.fits",
+                map(rows, cols, &|y, x| {
+                    s.flat(x, y) / mean.get((x / half.max(1)).min(1)).copied().unwrap_or(1.0)
+                }),
+            ),
+            (
+                "dark_rel.fits",
+                map(lines, len, &|l, c| s.dark_rel(c, l) / norm),
+            ),
+            (
+                "column_bias.fits",
+                map(1, len, &|_, c| s.column_bias_adu(c)),
+            ),
+            (
+                "defects.fits",
+                map(lines, len, &|l, c| f64::from(u8::from(defect(c, l)))),
+            ),
+        ];
+        let mut paths = Vec::new();
+        for (name, m) in files {
+            let p = dir.join(name);
+            write_map(&p, &m)?;
+            paths.push(p);
+        }
+        Ok(paths)
+    }
+}
+
 /// Adds string keywords to the primary header of an existing FITS file.
 pub fn write_string_keys(path: &Path, keys: &[(&str, &str)]) -> Result<(), FitsError> {
     let err = |e: fitsio::errors::Error| FitsError::Cfitsio {

@@ -17,9 +17,11 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Sensor {
     /// The CCD47-20 read through both outputs, 1033 x 1072.
+    #[value(name = "ccd47-20")]
     Ccd4720,
     /// The small test readout of the lab-set tests: 128 x 128 active, the CCD47-20's
     /// over-scan and covered strips, 130 lines.
+    #[value(name = "test-128")]
     Test128,
 }
 
@@ -65,6 +67,10 @@ pub struct LabSetArgs {
     /// The readout to simulate.
     #[arg(long, value_enum, default_value_t = Sensor::Ccd4720)]
     pub sensor: Sensor,
+    /// Also write the sensor's truth (flat, relative dark, column bias, defects) as FITS
+    /// into this folder, to judge other tools' products against.
+    #[arg(long)]
+    pub truth_dir: Option<PathBuf>,
 }
 
 /// The FITS files of `dirs`, sorted by path.
@@ -131,5 +137,9 @@ pub fn run_lab_set(args: &LabSetArgs) -> Result<Vec<PathBuf>, CliError> {
     };
     let paths = set.write(Path::new(&args.out))?;
     println!("wrote {} frames in {}", paths.len(), args.out.display());
+    if let Some(dir) = &args.truth_dir {
+        let t = set.write_truth(dir)?;
+        println!("wrote {} truth maps in {}", t.len(), dir.display());
+    }
     Ok(paths)
 }
