@@ -14,8 +14,8 @@
 //! 1/2 in each frame); read noise, column bias, DSNU and PRNU as the basic sensor.
 //!
 //! Cost: one rendered raw sample per element of every frame (the basic sensor's cost, see
-//! [`crate::sim::render`]); the small set of the tests ([`LabSet::small`]) is about 100
-//! frames of 23 k samples, the CCD47-20 set ([`LabSet::ccd47_20`]) 131 frames of 1.1 M.
+//! [`crate::sim::render`]); the small set of the tests ([`LabSet::small`]) is 78 frames of
+//! 22 880 samples, the CCD47-20 set ([`LabSet::ccd47_20`]) 78 frames of 1.1 M.
 
 use crate::fits::{FitsError, RawFrame, write_raw_frame};
 use crate::sim::effects::{DarkLaw, HotPixels, TelegraphPixels};

@@ -336,8 +336,7 @@ fn check_saturation(
     info: &FrameInfo,
 ) -> Result<(), FramesError> {
     let (mut top, mut n) = (0usize, 0usize);
-    for (l, line) in f.lines().enumerate().take(usize::from(g.active_rows)) {
-        let _ = l;
+    for line in f.lines().take(usize::from(g.active_rows)) {
         for (c, v) in line.iter().enumerate() {
             if g.segment(c) == Some(Segment::Active) {
                 n += 1;
