@@ -2,6 +2,7 @@
 //! and the tests share. The core runs here unchanged, exactly as on the Cortex-M7.
 
 pub mod accuracy;
+pub mod calib_frames;
 pub mod ccd_model;
 pub mod cli;
 pub mod demo;

@@ -69,6 +69,10 @@ enum Command {
 enum CalibCommand {
     /// Build a table from bias, dark and flat FITS maps, gains and a hot-pixel CSV.
     Build(startrack_host::cli::calib_build::CalibBuildArgs),
+    /// Build a table and a report from raw lab frames (bias, flat pairs, darks).
+    Frames(startrack_host::cli::calib_frames::CalibFramesArgs),
+    /// Write a simulated lab set of raw frames (to try `calib frames` on).
+    LabSet(startrack_host::cli::calib_frames::LabSetArgs),
 }
 
 /// Prints `startrack NAME: error` on one line and fails.
@@ -88,6 +92,18 @@ fn main() -> ExitCode {
             match startrack_host::cli::calib_build::run(&args) {
                 Ok(_) => ExitCode::SUCCESS,
                 Err(e) => fail("calib build", &e),
+            }
+        }
+        Command::Calib(CalibCommand::Frames(args)) => {
+            match startrack_host::cli::calib_frames::run(&args) {
+                Ok(_) => ExitCode::SUCCESS,
+                Err(e) => fail("calib frames", &e),
+            }
+        }
+        Command::Calib(CalibCommand::LabSet(args)) => {
+            match startrack_host::cli::calib_frames::run_lab_set(&args) {
+                Ok(_) => ExitCode::SUCCESS,
+                Err(e) => fail("calib lab-set", &e),
             }
         }
         Command::Simulate(args) => match startrack_host::cli::simulate::run(&args) {

@@ -4,6 +4,7 @@
 
 pub mod accuracy;
 pub mod calib_build;
+pub mod calib_frames;
 pub mod figures;
 pub mod gse;
 pub mod process;

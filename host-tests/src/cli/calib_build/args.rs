@@ -89,7 +89,7 @@ pub(super) fn parse_gains(s: &str, outputs: usize) -> Result<Vec<f64>, CliError>
 }
 
 /// The gains as the table stores them; each must be in (0, 16) e-/ADU.
-pub(super) fn encode_gains(g: &[f64]) -> Result<Vec<GainEPerAdu>, CliError> {
+pub fn encode_gains(g: &[f64]) -> Result<Vec<GainEPerAdu>, CliError> {
     g.iter()
         .map(|&v| {
             if v.is_finite() && v > 0.0 && v < 16.0 {

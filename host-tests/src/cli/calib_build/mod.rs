@@ -114,16 +114,22 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
     };
     let (curves, curve_notes) = curves_from_args(args)?;
     notes.extend(curve_notes);
-    let buf = if curves.is_empty() {
-        let mut buf = vec![0u8; spec.encoded_len()];
-        let n = write_table(&spec, &mut buf).map_err(CliError::TableWrite)?;
-        buf.truncate(n);
-        buf
-    } else {
-        write_table_with_curves(&spec, &curves).map_err(CliError::TableWrite)?
-    };
+    let buf = encode(&spec, &curves)?;
     let n = buf.len();
     Ok((buf, BuildReport { bytes: n, notes }))
+}
+
+/// Encodes `spec` (and the pixel-phase `curves`, none: no section) into the table's bytes:
+/// the one table writer of `calib build` and `calib frames`.
+pub fn encode(spec: &TableSpec<'_>, curves: &[crate::pixcorr::Curve]) -> Result<Vec<u8>, CliError> {
+    if curves.is_empty() {
+        let mut buf = vec![0u8; spec.encoded_len()];
+        let n = write_table(spec, &mut buf).map_err(CliError::TableWrite)?;
+        buf.truncate(n);
+        Ok(buf)
+    } else {
+        write_table_with_curves(spec, curves).map_err(CliError::TableWrite)
+    }
 }
 
 /// Runs `startrack calib build`: writes the table and prints what each input became.

@@ -1,0 +1,441 @@
+//! Calibration from raw lab frames: `startrack calib frames` turns bias frames, flat pairs and
+//! darks at several exposures and temperatures (raw CCD47-20 readouts in FITS, sorted by
+//! `IMAGETYP`, `EXPTIME`, `CCDTEMP`, `DATE-OBS`) into a calibration table and a report.
+//!
+//! One stage per file, in the order the frames are read:
+//! - [`read`]: headers, sorting, flat pairs, and every bad input as one line naming the file;
+//! - [`bias`]: master bias and the column bias against each line's over-scan;
+//! - [`ptc`]: gain and read noise per output by photon transfer, and the non-linearity;
+//! - [`dark`]: the relative dark map normalised by the core's covered-pixel estimator, and the
+//!   hot pixels with their own rate and doubling temperature;
+//! - [`flat`]: the flat field per output;
+//! - [`rts`]: telegraph pixels from the longest time-ordered dark series;
+//! - [`report`]: `report.json`, `hot.csv`, `rts.csv`, the maps as FITS and the PNG figures;
+//! - [`labset`]: a simulated lab set with the simulator's truth, for the tests and the docs.
+//!
+//! Memory is bounded whatever the number of frames: each file is read once, whole, and
+//! folded into running sums (a few maps of the readout, one per dark temperature); one frame
+//! (2.2 MB for the CCD47-20) is held at a time. The table is encoded by `calib build`'s
+//! writer ([`crate::cli::calib_build::encode`]). Cost: reading each file plus a few
+//! operations per sample; the darks add one median of the over-scan and one sort of the
+//! covered pixels per line (the core's own level and dark-scale code).
+
+pub mod bias;
+pub mod dark;
+pub mod flat;
+pub mod labset;
+pub mod ptc;
+pub mod read;
+pub mod report;
+pub mod rts;
+
+pub use read::{FrameInfo, FrameKind, FramesError, Inventory};
+
+use crate::cli::CliError;
+use crate::cli::calib_build::{column_bias_from_map, encode, flat_from_map};
+use crate::fits::MapF32;
+use dark::HotFit;
+use fixed::types::U8F8;
+use ptc::PairPoint;
+use startrack_core::geometry::{Output, ReadoutGeometry, Segment};
+use startrack_core::table::{CalibTable, HotPixel, HotPolicy, MapSpec, TableSpec};
+use startrack_core::units::{ColumnBiasAdu, DarkRel, ERatePerS, GainEPerAdu, Kelvin};
+use std::path::PathBuf;
+
+/// Share of a flat's active pixels at the ADC's top above which the flat is refused.
+pub const SATURATED_SHARE: f64 = 0.001;
+
+/// Hot pixels with a rate above this at 293 K are excluded rather than corrected (`calib
+/// build`'s default, 10 000 e- in 1 s).
+pub const HOT_EXCLUDE_ABOVE_E_PER_S: f64 = 10_000.0;
+
+/// Everything measured from a lab set.
+#[derive(Clone, Debug)]
+pub struct Products {
+    /// Readout geometry.
+    pub geometry: ReadoutGeometry,
+    /// Gain per output, e-/ADU.
+    pub gain_e_per_adu: Vec<f64>,
+    /// Read noise per output, e- rms.
+    pub read_noise_e: Vec<f64>,
+    /// Bias-pair variance per output (read noise and rounding), ADU^2.
+    pub bias_var_adu2: Vec<f64>,
+    /// Largest relative departure from a linear response per output.
+    pub nonlinearity: Vec<f64>,
+    /// Photon transfer points (every flat pair on every output).
+    pub ptc: Vec<PairPoint>,
+    /// Master bias, ADU, full readout.
+    pub master_bias: MapF32,
+    /// Column bias per raw column, as the table stores it.
+    pub column_bias: Vec<ColumnBiasAdu>,
+    /// Relative dark, full readout (the core's covered dark scale = 1).
+    pub dark_rel: MapF32,
+    /// The covered pixels' dark rate per temperature: (K, e-/s).
+    pub covered_rates: Vec<(f64, f64)>,
+    /// Hot pixels with their laws (raw coordinates).
+    pub hot: Vec<HotFit>,
+    /// Hot candidates without a usable temperature law.
+    pub hot_unfitted: usize,
+    /// Flat field, active area, each output's mean 1.
+    pub flat: MapF32,
+    /// Telegraph pixels (raw column, raw line).
+    pub rts: Vec<(usize, usize)>,
+    /// The series they come from: (EXPTIME s, CCDTEMP K, frames); `None` without one.
+    pub rts_series: Option<(f64, f64, u32)>,
+    /// Frames read: bias, flats, darks.
+    pub frames: (usize, usize, usize),
+    /// What was done with what, one line each.
+    pub notes: Vec<String>,
+}
+
+/// A table with `gains` and the column bias only, for the core's level and dark-scale code.
+fn level_table(
+    g: &ReadoutGeometry,
+    gains: &[f64],
+    column_bias: &[ColumnBiasAdu],
+) -> Result<Vec<u8>, FramesError> {
+    let gains: Vec<GainEPerAdu> = crate::cli::calib_build::args::encode_gains(gains)
+        .map_err(|e| FramesError::Missing(e.to_string()))?;
+    let spec = TableSpec {
+        geometry: *g,
+        saturation_adu: u16::MAX,
+        gains: &gains,
+        column_bias: Some(column_bias),
+        dark_rel: None,
+        flat_inv: None,
+        hot_ref_k: Kelvin::from_num(293),
+        hot: &[],
+        telegraph: &[],
+    };
+    encode(&spec, &[]).map_err(|e| FramesError::Missing(e.to_string()))
+}
+
+fn table_err(e: impl std::fmt::Display) -> FramesError {
+    FramesError::Missing(format!("internal table: {e}"))
+}
+
+/// The (EXPTIME, CCDTEMP) setting with the most darks, and its count.
+fn longest_series(darks: &[FrameInfo]) -> Option<((f64, f64), u32)> {
+    let mut counts: Vec<((f64, f64), u32)> = Vec::new();
+    for d in darks {
+        let k = (d.exptime_s, d.ccdtemp_k);
+        match counts.iter_mut().find(|(s, _)| *s == k) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((k, 1)),
+        }
+    }
+    counts.into_iter().max_by_key(|(_, n)| *n)
+}
+
+/// Reads every frame of `paths` once and measures every product for geometry `g`; `tick`
+/// is called after each file (a progress bar).
+pub fn calibrate(
+    paths: &[PathBuf],
+    g: &ReadoutGeometry,
+    tick: &dyn Fn(),
+) -> Result<Products, FramesError> {
+    let inv = read::inventory(paths, g)?;
+    let mut notes = Vec::new();
+    let outputs = usize::from(g.outputs);
+    // Bias: master bias and the pairs' variance.
+    let mut bias = bias::BiasAccum::new(g);
+    let mut prev = None;
+    let mut bias_var = vec![(0.0f64, 0usize); outputs];
+    for info in &inv.bias {
+        let f = read::read_frame(info, g)?;
+        bias.add(&f);
+        match prev.take() {
+            None => prev = Some(f),
+            Some(a) => {
+                for (o, slot) in bias_var.iter_mut().enumerate() {
+                    let p = ptc::pair_point(&a, &f, g, Output(o as u8), &[], 0.0);
+                    slot.0 += p.var_adu2;
+                    slot.1 += 1;
+                }
+            }
+        }
+        tick();
+    }
+    let master_bias = bias.master();
+    let (column_bias, clamped) = column_bias_from_map(g, &master_bias);
+    let cb_adu: Vec<f64> = column_bias.iter().map(|c| c.to_num::<f64>()).collect();
+    let bias_var_adu2: Vec<f64> = bias_var
+        .iter()
+        .map(|(s, n)| s / (*n).max(1) as f64)
+        .collect();
+    notes.push(format!(
+        "column bias from {} bias frames ({} pairs for the read noise){}",
+        bias.frames(),
+        bias_var.first().map_or(0, |b| b.1),
+        if clamped > 0 {
+            format!(", {clamped} columns clamped")
+        } else {
+            String::new()
+        }
+    ));
+    // Flats: photon transfer points, then the sums of the flat.
+    let gain1 = vec![1.0; outputs];
+    let lt = level_table(g, &gain1, &column_bias)?;
+    let t1 = CalibTable::parse(&lt).map_err(table_err)?;
+    let mut flat = flat::FlatAccum::new(g);
+    let mut points = Vec::new();
+    let range_adu: Vec<f64> = (0..outputs)
+        .map(|o| {
+            let (s, e) = g.overscan_cols(Output(o as u8));
+            let n = (e - s) * master_bias.rows;
+            let sum: f64 = master_bias
+                .data
+                .chunks_exact(master_bias.cols.max(1))
+                .flat_map(|l| l.get(s..e).unwrap_or(&[]).iter())
+                .map(|v| f64::from(*v))
+                .sum();
+            65535.0 - sum / n.max(1) as f64
+        })
+        .collect();
+    for (a_info, b_info) in &inv.flat_pairs {
+        let a = read::read_frame(a_info, g)?;
+        tick();
+        let b = read::read_frame(b_info, g)?;
+        tick();
+        for (f, info) in [(&a, a_info), (&b, b_info)] {
+            check_saturation(f, g, info)?;
+            flat.add(f, &t1, info.exptime_s, info.ccdtemp_k)
+                .ok_or_else(|| {
+                    FramesError::Missing(format!(
+                        "{}: a line without over-scan levels",
+                        info.path.display()
+                    ))
+                })?;
+        }
+        for o in 0..outputs {
+            points.push(ptc::pair_point(
+                &a,
+                &b,
+                g,
+                Output(o as u8),
+                &cb_adu,
+                a_info.exptime_s,
+            ));
+        }
+    }
+    if !inv.unpaired_flats.is_empty() {
+        notes.push(format!(
+            "{} flats without a partner of equal EXPTIME not used",
+            inv.unpaired_flats.len()
+        ));
+    }
+    let mut fits = Vec::new();
+    for o in 0..outputs {
+        let pts: Vec<PairPoint> = points
+            .iter()
+            .filter(|p| usize::from(p.output) == o)
+            .copied()
+            .collect();
+        let bv = bias_var_adu2.get(o).copied().unwrap_or(0.0);
+        let range = range_adu.get(o).copied().unwrap_or(65535.0);
+        let fit = ptc::fit_output(&pts, bv, range, read::MIN_FLAT_PAIRS).ok_or_else(|| {
+            FramesError::Missing(format!(
+                "too few flats: output {o} has fewer than {} pairs in the linear range (below {:.0} % of the ADC's range)",
+                read::MIN_FLAT_PAIRS,
+                100.0 * ptc::LINEAR_FRACTION
+            ))
+        })?;
+        notes.push(format!(
+            "output {o}: gain {:.4} e-/ADU, read noise {:.3} e- from {} flat pairs",
+            fit.gain_e_per_adu, fit.read_noise_e, fit.pairs_fitted
+        ));
+        fits.push(fit);
+    }
+    let gains: Vec<f64> = fits.iter().map(|f| f.gain_e_per_adu).collect();
+    let read_noise_e: Vec<f64> = fits.iter().map(|f| f.read_noise_e).collect();
+    // Darks: relative map, hot pixels, and the series for telegraph pixels.
+    let gt = level_table(g, &gains, &column_bias)?;
+    let tg = CalibTable::parse(&gt).map_err(table_err)?;
+    let mut darks = dark::DarkAccum::new(g);
+    let series = longest_series(&inv.darks).filter(|(_, n)| *n >= rts::MIN_SERIES_FRAMES);
+    let mut series_acc = series.map(|_| rts::SeriesAccum::new(g));
+    for info in &inv.darks {
+        let f = read::read_frame(info, g)?;
+        darks
+            .add(&f, &tg, info.exptime_s, info.ccdtemp_k)
+            .ok_or_else(|| {
+                FramesError::Missing(format!(
+                    "{}: no covered pixels to scale the dark",
+                    info.path.display()
+                ))
+            })?;
+        if let (Some(((t, temp), _)), Some(acc)) = (series, series_acc.as_mut())
+            && info.exptime_s == t
+            && info.ccdtemp_k == temp
+        {
+            acc.add(&f, &cb_adu);
+        }
+        tick();
+    }
+    let dark_rel = darks.relative_map().ok_or_else(|| {
+        FramesError::Missing(
+            "the darks' covered pixels hold no dark signal: no relative dark map".into(),
+        )
+    })?;
+    if darks.covered_rates().len() < 2 {
+        notes.push(
+            "darks at one temperature: hot pixels have no temperature law (none listed)".into(),
+        );
+    }
+    let (hot, hot_unfitted) = darks.hot_pixels(&read_noise_e);
+    notes.push(format!(
+        "relative dark from {} darks at {} temperatures; {} hot pixels ({} candidates without a law)",
+        darks.frames(),
+        darks.groups.len(),
+        hot.len(),
+        hot_unfitted
+    ));
+    let (rts, rts_series) = match (series, series_acc) {
+        (Some(((t, temp), n)), Some(acc)) => {
+            let found = acc.telegraph(&gains, &bias_var_adu2);
+            notes.push(format!(
+                "{} telegraph pixels from a {n}-frame series ({t} s, {temp} K)",
+                found.len()
+            ));
+            (found, Some((t, temp, n)))
+        }
+        _ => {
+            notes.push(format!(
+                "no dark series of at least {} frames at one setting: no telegraph pixels",
+                rts::MIN_SERIES_FRAMES
+            ));
+            (Vec::new(), None)
+        }
+    };
+    let flat_map = flat.flat(&gains, &dark_rel, &hot);
+    Ok(Products {
+        geometry: *g,
+        nonlinearity: fits.iter().map(|f| f.nonlinearity).collect(),
+        gain_e_per_adu: gains,
+        read_noise_e,
+        bias_var_adu2,
+        ptc: points,
+        master_bias,
+        column_bias,
+        dark_rel,
+        covered_rates: darks.covered_rates(),
+        hot,
+        hot_unfitted,
+        flat: flat_map,
+        rts,
+        rts_series,
+        frames: (inv.bias.len(), 2 * inv.flat_pairs.len(), inv.darks.len()),
+        notes,
+    })
+}
+
+/// Refuses a flat with more than [`SATURATED_SHARE`] of its active pixels at 65535 ADU.
+fn check_saturation(
+    f: &crate::fits::RawFrame,
+    g: &ReadoutGeometry,
+    info: &FrameInfo,
+) -> Result<(), FramesError> {
+    let (mut top, mut n) = (0usize, 0usize);
+    for line in f.lines().take(usize::from(g.active_rows)) {
+        for (c, v) in line.iter().enumerate() {
+            if g.segment(c) == Some(Segment::Active) {
+                n += 1;
+                top += usize::from(*v == u16::MAX);
+            }
+        }
+    }
+    let share = top as f64 / n.max(1) as f64;
+    if share > SATURATED_SHARE {
+        return Err(FramesError::Saturated {
+            path: info.path.clone(),
+            fraction: share,
+        });
+    }
+    Ok(())
+}
+
+impl Products {
+    /// The hot pixels of the active area as table entries, sorted by (y, x).
+    pub fn hot_entries(&self) -> Vec<HotPixel> {
+        let g = self.geometry;
+        let mut v: Vec<HotPixel> = self
+            .hot
+            .iter()
+            .filter(|h| {
+                g.segment(h.col) == Some(Segment::Active) && h.row < usize::from(g.active_rows)
+            })
+            .filter_map(|h| {
+                let doubling = U8F8::checked_from_num(h.doubling_k).filter(|d| *d > U8F8::ZERO)?;
+                Some(HotPixel {
+                    x: (h.col - g.first_active_col()) as u16,
+                    y: h.row as u16,
+                    rate_e_per_s: ERatePerS::saturating_from_num(h.rate_e_per_s_at_293k),
+                    doubling_k: doubling,
+                    policy: if h.rate_e_per_s_at_293k > HOT_EXCLUDE_ABOVE_E_PER_S {
+                        HotPolicy::Exclude
+                    } else {
+                        HotPolicy::Correct
+                    },
+                })
+            })
+            .collect();
+        v.sort_by_key(|h| (h.y, h.x));
+        v
+    }
+
+    /// The telegraph pixels of the active area (x, y), sorted by (y, x).
+    pub fn telegraph_entries(&self) -> Vec<(u16, u16)> {
+        let g = self.geometry;
+        let mut v: Vec<(u16, u16)> = self
+            .rts
+            .iter()
+            .filter(|(c, r)| {
+                g.segment(*c) == Some(Segment::Active) && *r < usize::from(g.active_rows)
+            })
+            .map(|(c, r)| ((c - g.first_active_col()) as u16, *r as u16))
+            .collect();
+        v.sort_by_key(|&(x, y)| (y, x));
+        v
+    }
+
+    /// The calibration table (maps in tiles of 2^`tile_log2` pixels, 0: per pixel).
+    pub fn table(&self, tile_log2: u8) -> Result<Vec<u8>, CliError> {
+        let g = self.geometry;
+        let gains = crate::cli::calib_build::args::encode_gains(&self.gain_e_per_adu)?;
+        // A hot pixel's map value is its own dark over the regular one (up to hundreds):
+        // the core uses its law instead, so the map holds the regular 1 there, as it would
+        // for a pixel without a defect, and a tile is not pulled by its hot pixels.
+        let hot_at: std::collections::HashSet<(usize, usize)> =
+            self.hot.iter().map(|h| (h.col, h.row)).collect();
+        let dark: Vec<DarkRel> = crate::sim::truth::tile_means(&g, tile_log2, &|x, y| {
+            let (col, line) = (g.raw_col_of_x(x), g.raw_line_of_y(y));
+            if hot_at.contains(&(col, line)) {
+                return 1.0;
+            }
+            f64::from(self.dark_rel.get(line, col).unwrap_or(1.0))
+        })
+        .into_iter()
+        .map(DarkRel::saturating_from_num)
+        .collect();
+        let (flat_inv, _) = flat_from_map(&g, &self.flat, tile_log2);
+        let (hot, telegraph) = (self.hot_entries(), self.telegraph_entries());
+        let spec = TableSpec {
+            geometry: g,
+            saturation_adu: u16::MAX,
+            gains: &gains,
+            column_bias: Some(&self.column_bias),
+            dark_rel: Some(MapSpec {
+                tile_log2,
+                tiles: &dark,
+            }),
+            flat_inv: Some(MapSpec {
+                tile_log2,
+                tiles: &flat_inv,
+            }),
+            hot_ref_k: Kelvin::from_num(293),
+            hot: &hot,
+            telegraph: &telegraph,
+        };
+        encode(&spec, &[])
+    }
+}

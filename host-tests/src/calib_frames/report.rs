@@ -1,0 +1,177 @@
+//! The report directory of `calib frames`:
+//!
+//! | file | contents |
+//! |---|---|
+//! | `report.json` | `gain_e_per_adu`, `read_noise_e`, `nonlinearity` (one per output), photon transfer points, covered dark rate per temperature, counts, notes |
+//! | `hot.csv` | `col,row,rate_e_per_s_at_293k,doubling_k` (raw readout coordinates) |
+//! | `rts.csv` | `col,row` (raw readout coordinates) |
+//! | `master_bias.fits`, `dark_rel.fits`, `flat.fits` | the maps for DS9 (full readout, full readout, active area) |
+//! | `ptc.png`, `dark_temperature.png` | photon transfer per output; dark rate against temperature (covered pixels and hot pixels) |
+//!
+//! The PNGs are drawn by the figures' chart code ([`crate::figures::plot`]); without a font
+//! they are skipped with a reason. Cost: writing the maps, a few kilobytes else.
+
+use super::Products;
+use crate::cli::{CliError, write_file};
+use crate::figures::Written;
+use crate::figures::plot::{Chart, Series, lines};
+use crate::fits::write_map;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// The JSON report.
+pub fn json(p: &Products) -> serde_json::Value {
+    serde_json::json!({
+        "gain_e_per_adu": p.gain_e_per_adu,
+        "read_noise_e": p.read_noise_e,
+        "nonlinearity": p.nonlinearity,
+        "bias_variance_adu2": p.bias_var_adu2,
+        "frames": { "bias": p.frames.0, "flat": p.frames.1, "dark": p.frames.2 },
+        "ptc": p.ptc.iter().map(|q| serde_json::json!({
+            "output": q.output, "exptime_s": q.exptime_s,
+            "mean_adu": q.mean_adu, "variance_adu2": q.var_adu2, "pixels": q.pixels,
+        })).collect::<Vec<_>>(),
+        "covered_dark_e_per_s": p.covered_rates.iter()
+            .map(|(t, r)| serde_json::json!({ "ccdtemp_k": t, "rate_e_per_s": r }))
+            .collect::<Vec<_>>(),
+        "hot_pixels": p.hot.len(),
+        "hot_without_law": p.hot_unfitted,
+        "telegraph_pixels": p.rts.len(),
+        "telegraph_series": p.rts_series.map(|(t, k, n)| serde_json::json!({
+            "exptime_s": t, "ccdtemp_k": k, "frames": n })),
+        "notes": p.notes,
+    })
+}
+
+/// Writes every file of the report into `dir` (created if needed); returns what was written
+/// and the PNGs skipped.
+pub fn write(p: &Products, dir: &Path) -> Result<Written, CliError> {
+    std::fs::create_dir_all(dir).map_err(|e| CliError::Io {
+        path: dir.to_path_buf(),
+        msg: e.to_string(),
+    })?;
+    let mut w = Written::default();
+    let put = |name: &str, bytes: &[u8], w: &mut Written| -> Result<(), CliError> {
+        let path = dir.join(name);
+        write_file(&path, bytes)?;
+        w.files.push(path);
+        Ok(())
+    };
+    let text =
+        serde_json::to_string_pretty(&json(p)).map_err(|e| CliError::Usage(e.to_string()))?;
+    put("report.json", text.as_bytes(), &mut w)?;
+    let mut hot = String::from("col,row,rate_e_per_s_at_293k,doubling_k\n");
+    for h in &p.hot {
+        let _ = writeln!(
+            hot,
+            "{},{},{:.4},{:.4}",
+            h.col, h.row, h.rate_e_per_s_at_293k, h.doubling_k
+        );
+    }
+    put("hot.csv", hot.as_bytes(), &mut w)?;
+    let mut rts = String::from("col,row\n");
+    for (c, r) in &p.rts {
+        let _ = writeln!(rts, "{c},{r}");
+    }
+    put("rts.csv", rts.as_bytes(), &mut w)?;
+    for (name, map) in [
+        ("master_bias.fits", &p.master_bias),
+        ("dark_rel.fits", &p.dark_rel),
+        ("flat.fits", &p.flat),
+    ] {
+        let path: PathBuf = dir.join(name);
+        write_map(&path, map)?;
+        w.files.push(path);
+    }
+    figures(p, dir, &mut w)?;
+    Ok(w)
+}
+
+/// The report's PNGs.
+fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
+    let fig = |e: crate::figures::FigureError| CliError::Io {
+        path: e.path,
+        msg: e.message,
+    };
+    let outputs = p.gain_e_per_adu.len();
+    let mut series = Vec::new();
+    for o in 0..outputs {
+        let pts: Vec<(f64, f64)> = p
+            .ptc
+            .iter()
+            .filter(|q| usize::from(q.output) == o)
+            .map(|q| (q.mean_adu / 1e3, q.var_adu2 / 1e3))
+            .collect();
+        let bv = p.bias_var_adu2.get(o).copied().unwrap_or(0.0);
+        let g = p.gain_e_per_adu.get(o).copied().unwrap_or(1.0);
+        let top = pts.iter().map(|q| q.0).fold(0.0, f64::max);
+        series.push(Series::solid(format!("output {o}: measured"), pts, o));
+        series.push(Series {
+            label: format!("output {o}: fit, gain {g:.4} e-/ADU"),
+            points: vec![(0.0, bv / 1e3), (top, (bv + 1e3 * top / g) / 1e3)],
+            color: o,
+            dashed: true,
+        });
+    }
+    lines(
+        dir,
+        "ptc.png",
+        &Chart {
+            title: "Photon transfer: temporal variance against mean signal".into(),
+            x_label: "mean signal above bias, kADU".into(),
+            y_label: "var(A - B) / 2, thousand ADU^2".into(),
+            log_x: false,
+            log_y: false,
+        },
+        &series,
+        w,
+    )
+    .map_err(fig)?;
+    let mut series = vec![Series::solid(
+        "covered pixels (regular dark)".into(),
+        p.covered_rates.clone(),
+        0,
+    )];
+    let temps: Vec<f64> = p.covered_rates.iter().map(|c| c.0).collect();
+    let mut hot: Vec<_> = p.hot.clone();
+    hot.sort_by(|a, b| b.rate_e_per_s_at_293k.total_cmp(&a.rate_e_per_s_at_293k));
+    for (i, h) in hot
+        .iter()
+        .step_by((hot.len() / 4).max(1))
+        .take(4)
+        .enumerate()
+    {
+        let pts = temps
+            .iter()
+            .map(|t| {
+                (
+                    *t,
+                    h.rate_e_per_s_at_293k
+                        * 2f64.powf((t - super::dark::HOT_REFERENCE_K) / h.doubling_k),
+                )
+            })
+            .collect();
+        series.push(Series::solid(
+            format!(
+                "hot ({}, {}), fitted law: doubling {:.2} K",
+                h.col, h.row, h.doubling_k
+            ),
+            pts,
+            i + 1,
+        ));
+    }
+    lines(
+        dir,
+        "dark_temperature.png",
+        &Chart {
+            title: "Dark rate against temperature".into(),
+            x_label: "CCDTEMP, K".into(),
+            y_label: "dark rate, e-/s".into(),
+            log_x: false,
+            log_y: true,
+        },
+        &series,
+        w,
+    )
+    .map_err(fig)
+}

@@ -1,0 +1,145 @@
+//! `startrack calib frames DIR... --out TABLE --report-dir DIR`: a calibration table and a
+//! report from raw lab frames (see [`crate::calib_frames`]), and `startrack calib lab-set
+//! --out DIR`, which writes a simulated lab set to try it on. Every `*.fits`/`*.fit` file of
+//! the folders is read; a bad input stops the run with one line naming the file and the
+//! problem, and no table is written. Cost: reading each file once and a few operations per
+//! sample (1.2 s and 81 MB for the CCD47-20 lab set of 78 frames, in release); a progress
+//! bar on a terminal. Writing that lab set takes about 3 minutes (simulating 86 M samples).
+
+use super::{CliError, write_file};
+use crate::calib_frames::labset::LabSet;
+use crate::calib_frames::{Products, calibrate, report};
+use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::table::MAX_TILE_LOG2;
+use std::path::{Path, PathBuf};
+
+/// The readouts `calib frames` and `calib lab-set` know.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Sensor {
+    /// The CCD47-20 read through both outputs, 1033 x 1072.
+    #[value(name = "ccd47-20")]
+    Ccd4720,
+    /// The small test readout of the lab-set tests: 128 x 128 active, the CCD47-20's
+    /// over-scan and covered strips, 130 lines.
+    #[value(name = "test-128")]
+    Test128,
+}
+
+impl Sensor {
+    /// Its readout geometry.
+    pub fn geometry(self) -> ReadoutGeometry {
+        match self {
+            Self::Ccd4720 => ReadoutGeometry::CCD47_20_DUAL,
+            Self::Test128 => LabSet::small(0).geometry,
+        }
+    }
+}
+
+/// Options of `startrack calib frames`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct CalibFramesArgs {
+    /// Folders of raw FITS frames (IMAGETYP, EXPTIME, CCDTEMP, DATE-OBS in each header).
+    #[arg(required = true)]
+    pub dirs: Vec<PathBuf>,
+    /// Output table file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Folder for report.json, hot.csv, rts.csv, the maps as FITS and the PNGs.
+    #[arg(long)]
+    pub report_dir: PathBuf,
+    /// Map tiles of 2^N pixels: 0 is per pixel; 3 (8x8) fits the firmware's CALIB sector.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=i64::from(MAX_TILE_LOG2)))]
+    pub tile_log2: u8,
+    /// The readout of the frames.
+    #[arg(long, value_enum, default_value_t = Sensor::Ccd4720)]
+    pub sensor: Sensor,
+}
+
+/// Options of `startrack calib lab-set`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct LabSetArgs {
+    /// Output folder (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed of the simulated sensor and of the frames' noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The readout to simulate.
+    #[arg(long, value_enum, default_value_t = Sensor::Ccd4720)]
+    pub sensor: Sensor,
+    /// Also write the sensor's truth (flat, relative dark, column bias, defects) as FITS
+    /// into this folder, to judge other tools' products against.
+    #[arg(long)]
+    pub truth_dir: Option<PathBuf>,
+}
+
+/// The FITS files of `dirs`, sorted by path.
+pub fn fits_files(dirs: &[PathBuf]) -> Result<Vec<PathBuf>, CliError> {
+    let mut v = Vec::new();
+    for d in dirs {
+        let rd = std::fs::read_dir(d).map_err(|e| CliError::Io {
+            path: d.clone(),
+            msg: e.to_string(),
+        })?;
+        for e in rd.flatten() {
+            let p = e.path();
+            let ext = p.extension().and_then(|x| x.to_str()).unwrap_or("");
+            if ext.eq_ignore_ascii_case("fits") || ext.eq_ignore_ascii_case("fit") {
+                v.push(p);
+            }
+        }
+    }
+    v.sort();
+    if v.is_empty() {
+        return Err(CliError::Usage(format!(
+            "no .fits files in {}",
+            dirs.iter()
+                .map(|d| d.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    Ok(v)
+}
+
+/// Runs `startrack calib frames`: measures, writes the report, then the table.
+pub fn run(args: &CalibFramesArgs) -> Result<Products, CliError> {
+    let files = fits_files(&args.dirs)?;
+    let bar = indicatif::ProgressBar::new(files.len() as u64);
+    let tick = || bar.inc(1);
+    let products = calibrate(&files, &args.sensor.geometry(), &tick)
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    bar.finish_and_clear();
+    let table = products.table(args.tile_log2)?;
+    let written = report::write(&products, &args.report_dir)?;
+    write_file(&args.out, &table)?;
+    for n in &products.notes {
+        println!("{n}");
+    }
+    for s in &written.skipped_png {
+        println!("skipped {s}");
+    }
+    println!(
+        "wrote {} ({} bytes) and {} files in {}",
+        args.out.display(),
+        table.len(),
+        written.files.len(),
+        args.report_dir.display()
+    );
+    Ok(products)
+}
+
+/// Runs `startrack calib lab-set`: writes the frames and prints how many.
+pub fn run_lab_set(args: &LabSetArgs) -> Result<Vec<PathBuf>, CliError> {
+    let set = match args.sensor {
+        Sensor::Ccd4720 => LabSet::ccd47_20(args.seed),
+        Sensor::Test128 => LabSet::small(args.seed),
+    };
+    let paths = set.write(Path::new(&args.out))?;
+    println!("wrote {} frames in {}", paths.len(), args.out.display());
+    if let Some(dir) = &args.truth_dir {
+        let t = set.write_truth(dir)?;
+        println!("wrote {} truth maps in {}", t.len(), dir.display());
+    }
+    Ok(paths)
+}
