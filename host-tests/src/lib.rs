@@ -10,4 +10,5 @@ pub mod home;
 pub mod pixcorr;
 pub mod sil;
 pub mod sim;
+pub mod sky;
 pub mod tradeoff;
