@@ -4,10 +4,12 @@
 
 pub mod accuracy;
 pub mod calib_build;
+pub mod catalog;
 pub mod figures;
 pub mod process;
 pub mod sil;
 pub mod simulate;
+pub mod solve;
 pub mod tradeoff;
 
 use crate::fits::FitsError;

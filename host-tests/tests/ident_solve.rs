@@ -1,0 +1,100 @@
+//! `startrack catalog build`, `catalog case` and `solve` end to end: the catalog written to
+//! a file solves a written case, and every attitude in the output agrees with the truth
+//! within its own covariance.
+
+use startrack_core::attitude::Quat;
+use startrack_host::cli::catalog::{CatalogBuildArgs, CatalogCaseArgs, run_build, run_case};
+use startrack_host::cli::solve::{SolveArgs, run};
+
+fn read_csv(path: &std::path::Path) -> Vec<Vec<String>> {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect()
+}
+
+#[test]
+fn solve_writes_every_field_with_attitude_and_covariance() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let cat = dir.path().join("catalog.bin");
+    let built = run_build(&CatalogBuildArgs {
+        out: cat.clone(),
+        list: None,
+        mag_limit: 6.5,
+        fov_deg: 15.0,
+        max_separation_deg: 12.0,
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        std::fs::metadata(&cat).map(|m| m.len()).ok(),
+        Some(built.bytes.len() as u64)
+    );
+    let case = dir.path().join("case");
+    run_case(&CatalogCaseArgs {
+        out: case.clone(),
+        fields: 40,
+        seed: 9,
+        sigma_px: 0.2,
+        false_stars: 3,
+        dropout: 0.1,
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    let out = dir.path().join("out.csv");
+    let s = run(&SolveArgs {
+        case: case.clone(),
+        out: out.clone(),
+        catalog: Some(cat),
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((s.fields, s.solved), (40, 40));
+    let rows = read_csv(&out);
+    let truth = read_csv(&case.join("truth.csv"));
+    assert_eq!(rows.len(), 40);
+    let num = |r: &[String], i: usize| r[i].parse::<f64>().unwrap_or(f64::NAN);
+    for (r, t) in rows.iter().zip(&truth) {
+        assert_eq!(r[0], t[0]);
+        assert_eq!(r[1], "1");
+        let q = Quat([num(r, 2), num(r, 3), num(r, 4), num(r, 5)]);
+        let qt = Quat([num(t, 1), num(t, 2), num(t, 3), num(t, 4)]);
+        let e = q.error_vector(qt);
+        // Each axis within 5 sigma of its own variance.
+        for (k, var_col) in [(0, 7), (1, 10), (2, 12)] {
+            let sigma = num(r, var_col).sqrt();
+            assert!(
+                e[k].abs() < 5.0 * sigma,
+                "field {}: axis {k} error {:e} sigma {:e}",
+                r[0],
+                e[k],
+                sigma
+            );
+        }
+    }
+}
+
+#[test]
+fn solve_names_a_bad_case() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    std::fs::write(
+        dir.path().join("case.json"),
+        "{\"focal_length_px\": -1, \"principal_point_px\": [0, 0]}",
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let err = run(&SolveArgs {
+        case: dir.path().to_path_buf(),
+        out: dir.path().join("o.csv"),
+        catalog: None,
+    });
+    assert!(err.is_err());
+    std::fs::write(dir.path().join("case.json"), "not json").unwrap_or_else(|e| panic!("{e}"));
+    let msg = run(&SolveArgs {
+        case: dir.path().to_path_buf(),
+        out: dir.path().join("o.csv"),
+        catalog: None,
+    })
+    .err()
+    .map(|e| e.to_string())
+    .unwrap_or_default();
+    assert!(msg.contains("case.json"), "{msg}");
+}
