@@ -98,3 +98,20 @@ proptest! {
         let _ = Catalog::parse(&bytes);
     }
 }
+
+/// The committed catalog that the Cortex-M7 bench links (`firmware/src/bin/m7bench/ident.rs`)
+/// is the one `startrack catalog build` makes from the committed list.
+#[test]
+fn committed_catalog_is_the_build_of_the_committed_list() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/catalog-15deg.bin");
+    let committed = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let built = startrack_host::sky::build::default_catalog()
+        .unwrap_or_else(|e| panic!("{e}"))
+        .bytes;
+    assert!(
+        committed == built,
+        "{} is stale: startrack catalog build --out {}",
+        path.display(),
+        path.display()
+    );
+}

@@ -1,14 +1,14 @@
 //! Star identification: which catalog star each measured star is, lost in space (no prior)
 //! or tracking (from a prior attitude several degrees off), with a bounded false-match
-//! probability. No allocation: the work lives on the stack (about 10 KB, 8 KB of it a bitmap
-//! of the catalog's stars).
+//! probability. No allocation: the work lives on the stack (about 10 KB, 8 KB of it the
+//! sorted pairs of one separation window, [`IK_CAPACITY`]).
 //!
 //! # Lost in space: triangles from the pair database, then statistical verification
 //! Measured triangles of the brightest [`IdentConfig::pattern_stars`] stars are tried in the
 //! pyramid order (Mortari et al. 2004: indices spread so a false or missing star spoils few
 //! triangles). For a triangle (i, j, k), the k-vector gives the catalog pairs whose separation
 //! is within [`IdentConfig::pair_tolerance_rad`] of `d_ij`; for each orientation (a, b) the
-//! pairs near `d_ik` holding `a` give `c`, and `c` must sit at `d_jk` from `b` (from the
+//! pairs near `d_ik` holding `a` (sorted by star once per triangle) give `c`, and `c` must sit at `d_jk` from `b` (from the
 //! catalog directions: no third search) with the same handedness. Each such catalog triangle
 //! is a hypothesis: its 3-star attitude is checked against every measured star.
 //!
@@ -35,8 +35,8 @@
 //! direction by at most `theta`), at most [`MAX_CANDIDATES`] each. Triangles are formed from
 //! candidates only and verified as above.
 //!
-//! Cost: a lost-in-space triangle costs about `2 P_ij P_ik` pair reads (`P` the pairs in a
-//! tolerance window, tens to a few hundred), a hypothesis a 3-star q-method and `n` cone
+//! Cost: a lost-in-space triangle costs a sort of `2 P_ik` entries and `2 P_ij` binary
+//! searches (`P` the pairs in a tolerance window, a few hundred), a hypothesis a 3-star q-method and `n` cone
 //! searches; a tracking triangle a few dozen angle checks.
 
 use crate::attitude::{self, Attitude, Observation, Quat, angle_between, cross, dot};
@@ -147,20 +147,8 @@ impl core::fmt::Display for IdentError {
 
 impl core::error::Error for IdentError {}
 
-/// Words of the star bitmap (one bit per possible catalog star: 8 KB).
-const MARK_WORDS: usize = 2048;
-
-fn mark(marks: &mut [u32; MARK_WORDS], star: u16) {
-    if let Some(w) = marks.get_mut(usize::from(star / 32)) {
-        *w |= 1 << (star % 32);
-    }
-}
-
-fn marked(marks: &[u32; MARK_WORDS], star: u16) -> bool {
-    marks
-        .get(usize::from(star / 32))
-        .is_some_and(|w| w & (1 << (star % 32)) != 0)
-}
+/// Entries of the (star, partner) scratch of one triangle's `d_ik` pairs (8 KB).
+pub const IK_CAPACITY: usize = 2048;
 
 /// The pyramid order of triangles over `n` stars (Mortari): (i, i+dj, i+dj+dk).
 struct Triangles {
@@ -255,7 +243,7 @@ pub fn lost_in_space(
     let np = n.min(cfg.pattern_stars);
     let tol = cfg.pair_tolerance_rad;
     let max_sep = cat.max_separation_rad();
-    let mut marks = [0u32; MARK_WORDS];
+    let mut scratch = [(0u16, 0u16); IK_CAPACITY];
     let mut hyps = 0u32;
     for (i, j, k) in Triangles::new(np) {
         let (vi, vj, vk) = (dir_of(stars, i), dir_of(stars, j), dir_of(stars, k));
@@ -268,34 +256,50 @@ pub fn lost_in_space(
             continue;
         }
         let hand = handedness(vi, vj, vk, tol * dij.min(dik));
-        // Mark every star of a pair near d_ik, so that a pair near d_ij whose vertex `a` is
-        // in none of them costs one bit test instead of a scan.
+        // The pairs near d_ik as (star, partner) both ways, sorted by star: the partners `c`
+        // of a vertex `a` are then a binary search away. A range too long for the scratch
+        // (never with the default tolerance) falls back to a scan of the range per `a`.
         let ik_range = cat.pairs_between(dik - tol, dik + tol);
-        marks.fill(0);
-        for pk in ik_range.clone() {
-            if let Some(p) = cat.pair(pk) {
-                mark(&mut marks, p.a);
-                mark(&mut marks, p.b);
+        let fits = 2 * ik_range.len() <= IK_CAPACITY;
+        let mut len = 0usize;
+        if fits {
+            for pk in ik_range.clone() {
+                let Some(p) = cat.pair(pk) else { continue };
+                for e in [(p.a, p.b), (p.b, p.a)] {
+                    if let Some(slot) = scratch.get_mut(len) {
+                        *slot = e;
+                        len += 1;
+                    }
+                }
             }
         }
+        let by_star = scratch.get_mut(..len).unwrap_or(&mut []);
+        by_star.sort_unstable();
+        let by_star = &*by_star;
         for pi in cat.pairs_between(dij - tol, dij + tol) {
             let Some(pij) = cat.pair(pi) else { continue };
             for (a, b) in [(pij.a, pij.b), (pij.b, pij.a)] {
-                if !marked(&marks, a) {
+                let lo = by_star.partition_point(|e| e.0 < a);
+                let hi = by_star.partition_point(|e| e.0 <= a);
+                if fits && lo == hi {
                     continue;
                 }
                 let (Some(ra), Some(rb)) = (cat.dir(a.into()), cat.dir(b.into())) else {
                     continue;
                 };
-                for pk in ik_range.clone() {
-                    let Some(pik) = cat.pair(pk) else { continue };
-                    let c = if pik.a == a {
-                        pik.b
-                    } else if pik.b == a {
-                        pik.a
-                    } else {
-                        continue;
-                    };
+                let sorted = by_star.get(lo..hi).unwrap_or(&[]).iter().map(|e| e.1);
+                let scanned = (if fits { 0..0 } else { ik_range.clone() })
+                    .filter_map(|pk| cat.pair(pk))
+                    .filter_map(|p| {
+                        if p.a == a {
+                            Some(p.b)
+                        } else if p.b == a {
+                            Some(p.a)
+                        } else {
+                            None
+                        }
+                    });
+                for c in sorted.chain(scanned) {
                     let Some(rc) = cat.dir(c.into()) else {
                         continue;
                     };
