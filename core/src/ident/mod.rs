@@ -1,7 +1,8 @@
 //! Star identification: which catalog star each measured star is, lost in space (no prior)
 //! or tracking (from a prior attitude several degrees off), with a bounded false-match
-//! probability. No allocation: the work lives on the stack (about 10 KB, 8 KB of it the
-//! sorted pairs of one separation window, [`IK_CAPACITY`]).
+//! probability. No allocation: the work lives on the stack (lost in space about 12 KB, 8 KB
+//! of it the sorted pairs of one separation window, [`IK_CAPACITY`]; tracking about 5 KB:
+//! the high-water marks `cargo m7-bench` prints).
 //!
 //! # Lost in space: triangles from the pair database, then statistical verification
 //! Measured triangles of the brightest [`IdentConfig::pattern_stars`] stars are tried in the
@@ -36,8 +37,10 @@
 //! candidates only and verified as above.
 //!
 //! Cost: a lost-in-space triangle costs a sort of `2 P_ik` entries and `2 P_ij` binary
-//! searches (`P` the pairs in a tolerance window, a few hundred), a hypothesis a 3-star q-method and `n` cone
-//! searches; a tracking triangle a few dozen angle checks.
+//! searches (`P` the pairs in a tolerance window, a few hundred), a hypothesis a 3-star
+//! q-method and `n` cone searches; a tracking triangle a few dozen angle checks. On the
+//! Cortex-M7 (`cargo m7-bench`, 15 degree fields) lost in space takes about 1.6 M
+//! instructions a field (median) and 6.7 M at the 99th percentile, tracking 0.38 M.
 
 use crate::attitude::{self, Attitude, Observation, Quat, angle_between, cross, dot};
 use crate::catalog::Catalog;

@@ -7,11 +7,13 @@
 //! Tracking starts from the true attitude turned by 2 degrees.
 //!
 //! Timed: `ident::lost_in_space` (or `ident::track`) on the measured directions; not timed:
-//! rendering the field. Every field must solve, else the bench fails. Cost of the bench
+//! rendering the field. Also printed, as a `#` line: the stack each uses (high-water mark of
+//! a painted stack, one field each). Every field must solve, else the bench fails. Cost of the bench
 //! itself: a cone search and a projection per field.
 
 use crate::harness::{Bench, Out};
 use crate::inputs::Lcg;
+use core::fmt::Write as _;
 use core::hint::black_box;
 use startrack_core::attitude::{Camera, Quat};
 use startrack_core::catalog::Catalog;
@@ -93,6 +95,50 @@ fn random_quat(rng: &mut Lcg) -> Quat {
     }
 }
 
+/// Bytes of stack painted below the caller's frame for the high-water mark.
+const PAINT_BYTES: usize = 48 * 1024;
+const PAINT: u32 = 0x5A5A_A5A5;
+
+fn stack_pointer() -> usize {
+    let sp: usize;
+    // SAFETY: reads the stack pointer register, nothing else.
+    unsafe { core::arch::asm!("mov {}, sp", out(reg) sp, options(nomem, nostack)) };
+    sp
+}
+
+/// Paints `PAINT_BYTES` below the current stack pointer (less a margin for this frame).
+#[inline(never)]
+fn paint_stack() {
+    let top = (stack_pointer() - 256) & !3;
+    let mut p = top - PAINT_BYTES;
+    while p < top {
+        // SAFETY: the bench's RAM is 4 MB with the stack at its top and nothing else in
+        // these 48 KB below the live frames; the words are written, then only read.
+        unsafe { (p as *mut u32).write_volatile(PAINT) };
+        p += 4;
+    }
+}
+
+/// Bytes of stack used below `base` since [`paint_stack`]: from the lowest word that no
+/// longer holds the paint.
+fn stack_used(base: usize) -> usize {
+    let bottom = ((base - 256) & !3) - PAINT_BYTES;
+    let mut p = bottom;
+    // SAFETY: the same painted words, read back.
+    while p < base && unsafe { (p as *const u32).read_volatile() } == PAINT {
+        p += 4;
+    }
+    base - p
+}
+
+/// Measures the stack `f` uses, in bytes.
+fn stack_of(mut f: impl FnMut()) -> usize {
+    let base = stack_pointer();
+    paint_stack();
+    f();
+    stack_used(base)
+}
+
 /// Measures and prints the stages.
 pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static str> {
     let cat = Catalog::parse(CATALOG).map_err(|_| "catalog does not parse")?;
@@ -128,6 +174,27 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
             return Err("a tracking field did not solve");
         }
     }
+    // Stack high-water mark of one field each way (a comment line: the CSV is instructions).
+    let q = random_quat(rng);
+    let n = render(&cat, &cam, q, rng, &mut meas);
+    let stars = meas.get(..n).ok_or("field")?;
+    let lis_stack = stack_of(|| {
+        let _ = black_box(ident::lost_in_space(&cat, black_box(stars), &cfg));
+    });
+    let prior = Quat::from_axis_angle([1.0, 0.0, 0.0], 2f64.to_radians()) * q;
+    let trk_stack = stack_of(|| {
+        let _ = black_box(ident::track(
+            &cat,
+            black_box(stars),
+            prior,
+            2.1f64.to_radians(),
+            &cfg,
+        ));
+    });
+    let _ = writeln!(
+        out,
+        "# ident stack high-water: lost in space {lis_stack} bytes, tracking {trk_stack} bytes"
+    );
     lis.sort_unstable();
     trk.sort_unstable();
     let at = |v: &[u64; FIELDS], p: usize| v.get((FIELDS - 1) * p / 100).copied().unwrap_or(0);
