@@ -171,3 +171,22 @@ fn errors_match_the_covariance_in_monte_carlo() {
         assert!((s.nees_mean - 3.0).abs() <= 0.2, "NEES {}", s.nees_mean);
     }
 }
+
+/// Stellar aberration: an observer at 30 km/s (Earth's orbit) sees a star 90 degrees from
+/// its apex moved towards the apex by v/c = 20.6 arcsec; a star at the apex does not move.
+#[test]
+fn aberration_moves_stars_towards_the_apex_by_v_over_c() {
+    let v = [30_000.0, 0.0, 0.0];
+    let star = [0.0, 0.0, 1.0];
+    let seen = attitude::aberrate(star, v);
+    let shift = attitude::angle_between(star, seen);
+    let expected = (30_000.0 / attitude::C_M_PER_S).atan();
+    assert!(
+        (shift - expected).abs() < 1e-12,
+        "{shift:e} vs {expected:e}"
+    );
+    assert!((shift.to_degrees() * 3600.0 - 20.64).abs() < 0.01);
+    assert!(seen[0] > 0.0, "towards the apex: {seen:?}");
+    let apex = attitude::aberrate([1.0, 0.0, 0.0], v);
+    assert!(attitude::angle_between(apex, [1.0, 0.0, 0.0]) < 1e-15);
+}
