@@ -39,6 +39,7 @@ fn solve_writes_every_field_with_attitude_and_covariance() {
         sigma_px: 0.2,
         false_stars: 3,
         dropout: 0.1,
+        prior_error_deg: None,
     })
     .unwrap_or_else(|e| panic!("{e}"));
     let out = dir.path().join("out.csv");
@@ -46,6 +47,8 @@ fn solve_writes_every_field_with_attitude_and_covariance() {
         case: case.clone(),
         out: out.clone(),
         catalog: Some(cat),
+        prior: None,
+        prior_error_deg: 2.0,
     })
     .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((s.fields, s.solved), (40, 40));
@@ -85,6 +88,8 @@ fn solve_names_a_bad_case() {
         case: dir.path().to_path_buf(),
         out: dir.path().join("o.csv"),
         catalog: None,
+        prior: None,
+        prior_error_deg: 2.0,
     });
     assert!(err.is_err());
     std::fs::write(dir.path().join("case.json"), "not json").unwrap_or_else(|e| panic!("{e}"));
@@ -92,9 +97,48 @@ fn solve_names_a_bad_case() {
         case: dir.path().to_path_buf(),
         out: dir.path().join("o.csv"),
         catalog: None,
+        prior: None,
+        prior_error_deg: 2.0,
     })
     .err()
     .map(|e| e.to_string())
     .unwrap_or_default();
     assert!(msg.contains("case.json"), "{msg}");
+}
+
+#[test]
+fn solve_tracks_from_priors_2_degrees_off() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let case = dir.path().join("case");
+    run_case(&CatalogCaseArgs {
+        out: case.clone(),
+        fields: 30,
+        seed: 11,
+        sigma_px: 0.3,
+        false_stars: 3,
+        dropout: 0.1,
+        prior_error_deg: Some(2.0),
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    let out = dir.path().join("out.csv");
+    let s = run(&SolveArgs {
+        case: case.clone(),
+        out: out.clone(),
+        catalog: None,
+        prior: Some(case.join("prior.csv")),
+        prior_error_deg: 2.0,
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((s.fields, s.solved), (30, 30));
+    // The priors really are 2 degrees off the truth.
+    let truth = read_csv(&case.join("truth.csv"));
+    let prior = read_csv(&case.join("prior.csv"));
+    for (t, p) in truth.iter().zip(&prior) {
+        let q = |r: &[String]| Quat([1, 2, 3, 4].map(|i| r[i].parse::<f64>().unwrap_or(f64::NAN)));
+        let e = q(p).error_vector(q(t));
+        let deg = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+            .sqrt()
+            .to_degrees();
+        assert!((deg - 2.0).abs() < 1e-6, "{deg}");
+    }
 }

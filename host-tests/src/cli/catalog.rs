@@ -4,7 +4,8 @@
 //!
 //! A case folder holds `case.json` (`focal_length_px`, `principal_point_px` [x, y], `k1`,
 //! `centroid_sigma_px`), `fields/NNNNNN.csv` (`x_px,y_px,flux_e`, brightest first) and
-//! `truth.csv` (`field,qw,qx,qy,qz`: ICRS to camera, Hamilton, scalar first).
+//! `truth.csv` (`field,qw,qx,qy,qz`: ICRS to camera, Hamilton, scalar first), and with
+//! `--prior-error-deg` a `prior.csv` of the same form for tracking.
 
 use super::{CliError, write_file};
 use crate::sky::build::{BuildSpec, Built, build};
@@ -12,6 +13,7 @@ use crate::sky::field::{self, FieldSpec};
 use crate::sky::{default_list_path, read_list};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -86,6 +88,10 @@ pub struct CatalogCaseArgs {
     /// Probability that a star is missing.
     #[arg(long, default_value_t = 0.1)]
     pub dropout: f64,
+    /// Also write `prior.csv` (`field,qw,qx,qy,qz`): each true attitude turned by this
+    /// many degrees about a random axis, the prior of `startrack solve --prior`.
+    #[arg(long)]
+    pub prior_error_deg: Option<f64>,
 }
 
 /// Writes a case rendered from the repo's catalog (15 degree field, CCD47-20).
@@ -112,6 +118,9 @@ pub fn run_case(args: &CatalogCaseArgs) -> Result<(), CliError> {
     write_file(&dir.join("case.json"), json.as_bytes())?;
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
     let mut truth = String::from("field,qw,qx,qy,qz\n");
+    let mut prior = truth.clone();
+    // The priors draw from their own generator, so a case is the same with or without them.
+    let mut prior_rng = ChaCha8Rng::seed_from_u64(args.seed ^ 0x005e_ed0f_9e10);
     for i in 0..args.fields {
         let q = field::random_attitude(&mut rng);
         let stars = field::render(&cat, q, &spec, &mut rng);
@@ -123,6 +132,17 @@ pub fn run_case(args: &CatalogCaseArgs) -> Result<(), CliError> {
         write_file(&fields_dir.join(format!("{name}.csv")), csv.as_bytes())?;
         let [w, x, y, z] = q.0;
         let _ = writeln!(truth, "{name},{w:.12},{x:.12},{y:.12},{z:.12}");
+        if let Some(deg) = args.prior_error_deg {
+            let axis = field::random_attitude(&mut prior_rng).rotate([0.0, 0.0, 1.0]);
+            let p = (Quat::from_axis_angle(axis, deg.to_radians()) * q)
+                .normalized()
+                .unwrap_or(q);
+            let [w, x, y, z] = p.0;
+            let _ = writeln!(prior, "{name},{w:.12},{x:.12},{y:.12},{z:.12}");
+        }
+    }
+    if args.prior_error_deg.is_some() {
+        write_file(&dir.join("prior.csv"), prior.as_bytes())?;
     }
     write_file(&dir.join("truth.csv"), truth.as_bytes())
 }

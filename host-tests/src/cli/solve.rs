@@ -1,5 +1,6 @@
-//! `startrack solve --case DIR --out FILE`: lost-in-space identification and attitude of
-//! every field of a case (see [`super::catalog`] for the folder layout), with the core's
+//! `startrack solve --case DIR --out FILE`: lost-in-space identification (or, with
+//! `--prior`, tracking identification from a prior attitude) and attitude of every field of
+//! a case (see [`super::catalog`] for the folder layout), with the core's
 //! `ident` and `attitude` exactly as the firmware runs them.
 //!
 //! `FILE` gets one row per field: `field,solved,qw,qx,qy,qz,time_us`, then the attitude
@@ -10,7 +11,7 @@
 
 use super::{CliError, read_file, write_file};
 use serde::Deserialize;
-use startrack_core::attitude::Camera;
+use startrack_core::attitude::{Camera, Quat};
 use startrack_core::catalog::Catalog;
 use startrack_core::ident::{self, IdentConfig, Measured};
 use std::fmt::Write as _;
@@ -30,6 +31,13 @@ pub struct SolveArgs {
     /// a 15 degree field).
     #[arg(long)]
     pub catalog: Option<PathBuf>,
+    /// Track instead of lost in space: the prior attitude of each field, a CSV
+    /// `field,qw,qx,qy,qz` (as `catalog case --prior-error-deg` writes).
+    #[arg(long)]
+    pub prior: Option<PathBuf>,
+    /// How far off the priors may be, deg (any axis).
+    #[arg(long, default_value_t = 2.0)]
+    pub prior_error_deg: f64,
 }
 
 /// `case.json`.
@@ -93,6 +101,31 @@ fn read_field(path: &Path) -> Result<Vec<[f64; 3]>, CliError> {
     Ok(out)
 }
 
+/// The priors file: field name to attitude.
+fn read_priors(path: &Path) -> Result<std::collections::HashMap<String, Quat>, CliError> {
+    let text = String::from_utf8(read_file(path)?).unwrap_or_default();
+    let mut out = std::collections::HashMap::new();
+    for (n, line) in text.lines().enumerate().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let q: Option<Vec<f64>> = f
+            .get(1..5)
+            .map(|v| v.iter().filter_map(|x| x.trim().parse().ok()).collect());
+        match (f.first(), q) {
+            (Some(name), Some(q)) if q.len() == 4 => {
+                out.insert((*name).to_string(), Quat([q[0], q[1], q[2], q[3]]));
+            }
+            _ => {
+                return Err(CliError::Csv {
+                    path: path.to_path_buf(),
+                    line: n + 1,
+                    msg: "expected field,qw,qx,qy,qz".into(),
+                });
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// Solves every field of the case and writes the CSV.
 pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
     let json_path = args.case.join("case.json");
@@ -123,6 +156,7 @@ pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
         k1: case.k1,
     };
     let cfg = IdentConfig::for_camera(case.focal_length_px, case.centroid_sigma_px);
+    let priors = args.prior.as_deref().map(read_priors).transpose()?;
     let fields_dir = args.case.join("fields");
     let mut names: Vec<PathBuf> = std::fs::read_dir(&fields_dir)
         .map_err(|e| CliError::Io {
@@ -155,7 +189,13 @@ pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
                 }
             })
             .collect();
-        let result = ident::lost_in_space(&cat, &meas, &cfg);
+        let result = match &priors {
+            None => ident::lost_in_space(&cat, &meas, &cfg),
+            Some(p) => match p.get(&name) {
+                Some(q) => ident::track(&cat, &meas, *q, args.prior_error_deg.to_radians(), &cfg),
+                None => Err(ident::IdentError::BadInput),
+            },
+        };
         let us = t0.elapsed().as_secs_f64() * 1e6;
         times.push(us);
         match result {
