@@ -67,7 +67,7 @@ fn run_lis(fields: usize, seed: u64, spec: &FieldSpec) -> Tally {
         mismatched: 0,
         matched: 0,
     };
-    for _ in 0..fields {
+    for f in 0..fields {
         let q = field::random_attitude(&mut rng);
         let stars = field::render(&cat, q, spec, &mut rng);
         let meas = field::measured(&stars, &spec.camera, spec.sigma_px);
@@ -78,6 +78,16 @@ fn run_lis(fields: usize, seed: u64, spec: &FieldSpec) -> Tally {
                 t.worst_bound = t.worst_bound.max(sol.false_probability);
                 if !is_right(&sol, q) {
                     t.wrong += 1;
+                    let e = sol.attitude.q.error_vector(q);
+                    println!(
+                        "wrong: field {f}, error {e:?} rad, sigmas ({:e}, {:e}) rad, {} matched, {} not the true star, bound {:e}, {} stars",
+                        sol.attitude.boresight_sigma_rad(),
+                        sol.attitude.roll_sigma_rad(),
+                        sol.matches.len(),
+                        mismatched_stars(&sol, &stars),
+                        sol.false_probability,
+                        stars.len()
+                    );
                 }
                 t.matched += sol.matches.len();
                 t.mismatched += mismatched_stars(&sol, &stars);

@@ -20,9 +20,11 @@
 //!
 //! # Verification and the false-match bound
 //! A hypothesis attitude maps each measured star to the sky; it matches when a catalog star
-//! lies within [`IdentConfig::match_radius_rad`]. The attitude is refit from all matches and
-//! the stars matched again; a match whose residual from the refit exceeds [`TIGHT_SIGMAS`] of
-//! its own sigma is dropped (an almost-right attitude pulled by a false star loses it here). If the hypothesis is wrong, each of the `n - 3` non-basis stars
+//! lies within [`IdentConfig::match_radius_rad`]. In rounds (at most [`MAX_REFITS`], until
+//! the matches stop changing) the attitude is refit from the matches, every star matched
+//! again, the attitude refit, and a match whose residual exceeds [`TIGHT_SIGMAS`] of its own
+//! sigma dropped (an attitude pulled by a false star or a wrong neighbour loses it here).
+//! If the hypothesis is wrong, each of the `n - 3` non-basis stars
 //! matches by chance with probability at most `p = N_max (1 - cos r) / (1 - cos R)`, `N_max`
 //! the most catalog stars in any field cone of radius `R` (from the catalog header), `r` the
 //! match radius. The chance that a wrong hypothesis matches `m` or more of them is the
@@ -40,7 +42,7 @@
 //! searches (`P` the pairs in a tolerance window, a few hundred), a hypothesis a 3-star
 //! q-method and `n` cone searches; a tracking triangle a few dozen angle checks. On the
 //! Cortex-M7 (`cargo m7-bench`, 15 degree fields) lost in space takes about 1.6 M
-//! instructions a field (median) and 6.7 M at the 99th percentile, tracking 0.38 M.
+//! instructions a field (median) and 6.7 M at the 99th percentile, tracking 0.39 M.
 
 use crate::attitude::{self, Attitude, Observation, Quat, angle_between, cross, dot};
 use crate::catalog::Catalog;
@@ -54,6 +56,8 @@ pub const MAX_CANDIDATES: usize = 16;
 /// A final match's residual is at most this many of its sigmas (a 2-D Gaussian passes
 /// 5 sigma with probability 1 - 4e-6).
 pub const TIGHT_SIGMAS: f64 = 5.0;
+/// Most match-and-refit rounds of a hypothesis (they stop when the matches stop changing).
+pub const MAX_REFITS: usize = 6;
 /// Fewest matched stars in a solution (three for the triangle and one more).
 pub const MIN_MATCHES: usize = 4;
 
@@ -449,17 +453,32 @@ fn hypothesis(
         o.icrs = cat.dir(c.into())?;
     }
     let first = attitude::solve(&obs).ok()?;
-    let (matches, _) = match_all(cat, stars, n, first.q, cfg.match_radius_rad);
+    let (mut matches, _) = match_all(cat, stars, n, first.q, cfg.match_radius_rad);
     if matches.len() < MIN_MATCHES {
         return None;
     }
-    // Refit from every match, then keep only the stars within TIGHT_SIGMAS of their own
-    // sigma of the refit attitude (an almost-right attitude pulled by a false star or a
-    // wrong double loses them here), and refit once more.
-    let refit = fit(cat, stars, &matches)?;
-    let (matches, _) = match_all(cat, stars, n, refit.q, cfg.match_radius_rad);
-    let refit = fit(cat, stars, &matches)?;
-    let matches = keep_consistent(cat, stars, &matches, refit.q);
+    // Rounds of: refit from the matches, match every star again, refit, and keep only the
+    // stars within TIGHT_SIGMAS of their own sigma of that fit (an attitude pulled by a false
+    // star or a wrong neighbour loses them here); until the matches stop changing. A
+    // triangle's attitude can be off in roll enough that the stars far from it fall outside
+    // the match radius, or on a neighbour, until a round brings them in. The largest set
+    // seen is kept.
+    let mut best: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
+    for _ in 0..MAX_REFITS {
+        let refit = fit(cat, stars, &matches)?;
+        let (all, _) = match_all(cat, stars, n, refit.q, cfg.match_radius_rad);
+        let refit = fit(cat, stars, &all)?;
+        let next = keep_consistent(cat, stars, &all, refit.q);
+        let same = next == matches;
+        matches = next;
+        if matches.len() > best.len() {
+            best = matches.clone();
+        }
+        if same || matches.len() < MIN_MATCHES {
+            break;
+        }
+    }
+    let matches = best;
     if matches.len() < MIN_MATCHES {
         return None;
     }
