@@ -21,10 +21,13 @@
     clippy::indexing_slicing
 )]
 
+pub mod attitude;
 pub mod calib;
+pub mod catalog;
 pub mod centroid;
 pub mod detect;
 pub mod geometry;
+pub mod ident;
 pub mod link;
 pub mod safe;
 pub mod sequencer;

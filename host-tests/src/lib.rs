@@ -15,4 +15,5 @@ pub mod link_home;
 pub mod pixcorr;
 pub mod sil;
 pub mod sim;
+pub mod sky;
 pub mod tradeoff;

@@ -63,6 +63,19 @@ enum Command {
     /// One frame of the CCD sequencer: rows clocked, pixels digitised, frame time and update
     /// rate, computed from the compiled program (CSV).
     ReadoutPlan(startrack_host::cli::readout_plan::ReadoutPlanArgs),
+    /// The on-board star catalog, and solve cases rendered from it.
+    #[command(subcommand)]
+    Catalog(CatalogCommand),
+    /// Identify the stars of every field of a case and write each attitude with its covariance.
+    Solve(startrack_host::cli::solve::SolveArgs),
+}
+
+#[derive(Subcommand)]
+enum CatalogCommand {
+    /// Build the catalog (stars and identification database) from the Hipparcos list.
+    Build(startrack_host::cli::catalog::CatalogBuildArgs),
+    /// Write a `solve` case: fields rendered at random attitudes, and the true attitudes.
+    Case(startrack_host::cli::catalog::CatalogCaseArgs),
 }
 
 #[derive(Subcommand)]
@@ -144,6 +157,42 @@ fn main() -> ExitCode {
         Command::Sil(args) => match startrack_host::cli::sil::run(&args) {
             Ok(_) => ExitCode::SUCCESS,
             Err(e) => fail("sil", &e),
+        },
+        Command::Catalog(CatalogCommand::Build(args)) => {
+            match startrack_host::cli::catalog::run_build(&args) {
+                Ok(b) => {
+                    println!(
+                        "wrote {}: {} bytes, {} stars, {} pattern stars, {} pairs, at most {} stars in a field cone",
+                        args.out.display(),
+                        b.bytes.len(),
+                        b.stars,
+                        b.pattern_stars,
+                        b.pairs,
+                        b.max_field_stars
+                    );
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail("catalog build", &e),
+            }
+        }
+        Command::Catalog(CatalogCommand::Case(args)) => {
+            match startrack_host::cli::catalog::run_case(&args) {
+                Ok(()) => {
+                    println!("wrote {} fields to {}", args.fields, args.out.display());
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail("catalog case", &e),
+            }
+        }
+        Command::Solve(args) => match startrack_host::cli::solve::run(&args) {
+            Ok(s) => {
+                println!(
+                    "{} of {} fields solved; time per field: median {:.0} us, p99 {:.0} us",
+                    s.solved, s.fields, s.median_us, s.p99_us
+                );
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail("solve", &e),
         },
         Command::Figures(args) => startrack_host::cli::figures::run(&args),
         Command::Tradeoff(args) => startrack_host::cli::tradeoff::run(&args),

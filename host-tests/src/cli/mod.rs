@@ -5,12 +5,14 @@
 pub mod accuracy;
 pub mod calib_build;
 pub mod calib_frames;
+pub mod catalog;
 pub mod figures;
 pub mod gse;
 pub mod process;
 pub mod readout_plan;
 pub mod sil;
 pub mod simulate;
+pub mod solve;
 pub mod tradeoff;
 
 use crate::fits::FitsError;

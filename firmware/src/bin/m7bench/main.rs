@@ -10,8 +10,9 @@
 //! - the stage families, in the order they print: [`line_path`] (levels, dark scale, line
 //!   calibration), [`scan`] (the streaming scan), [`track`] (a tracking frame), [`window`]
 //!   (a star window's calibration and the fused raw-window CoG), [`centroid`] (the
-//!   centroid methods on calibrated windows) and [`tracker`] (the tracker application's
-//!   acquisition and tracking frames, every line).
+//!   centroid methods on calibrated windows), [`tracker`] (the tracker application's
+//!   acquisition and tracking frames, every line) and [`ident`] (star identification and
+//!   attitude, lost in space and tracking).
 //!
 //! Cost: QEMU runs the whole bench in well under a second of host time; `cargo m7-bench`'s
 //! time is the release build (fat LTO). Uses neither embassy nor defmt; linked with its own
@@ -22,6 +23,7 @@
 
 mod centroid;
 mod harness;
+mod ident;
 mod inputs;
 mod line_path;
 mod scan;
@@ -167,5 +169,7 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         &mut rng,
     )?;
     // Last, so that its draws do not change the other stages' inputs.
-    tracker::run(out, &bench, &table, &mut rng)
+    tracker::run(out, &bench, &table, &mut rng)?;
+    // Its own generator: the identification fields do not move the other stages' inputs.
+    ident::run(out, &bench, &mut Lcg(0x1d_5eed))
 }

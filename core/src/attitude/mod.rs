@@ -1,0 +1,269 @@
+//! Attitude from identified stars: Davenport's q-method in f64, and the attitude's 3x3
+//! covariance from each star's direction sigma.
+//!
+//! Each observation pairs a measured camera-frame unit vector `b_i` with its catalog ICRS
+//! unit vector `r_i` and the 1-sigma angular error of `b_i`, `sigma_i` (rad, isotropic across
+//! the line of sight). The attitude `A` maximises Wahba's gain `sum w_i b_i . A r_i` with
+//! `w_i = 1 / sigma_i^2`: it is the eigenvector of Davenport's 4x4 matrix `K` with the largest
+//! eigenvalue, found here by cyclic Jacobi rotations (at most [`MAX_SWEEPS`] sweeps of six
+//! rotations; each sweep about 300 flops).
+//!
+//! Why the q-method with Jacobi: it is exact and has no singular rotation, so it needs no
+//! reference rotation (QUEST and ESOQ2 solve the characteristic equation and divide by a
+//! term that vanishes at 180 degrees, which is why they carry one); it stays accurate in a
+//! narrow field where `K`'s two largest eigenvalues are close (the eigenvector error is
+//! `eps / gap`, about 1e-13 for a 15 degree field in f64), and its cost is a few thousand
+//! flops, small beside identification.
+//!
+//! Covariance: `P = (sum w_i (I - b_i b_i^T))^-1` (Shuster), rad^2, of the small rotation
+//! vector `e` (camera frame) with `A_est = exp(e) A_true`: `P[0][0]`, `P[1][1]` are the
+//! cross-boresight variances, `P[2][2]` the roll variance. It is exact to first order in
+//! the sigmas; `startrack-host`'s Monte Carlo tests check it (errors against the bound, the
+//! normalised error squared at 3).
+//!
+//! Stellar aberration: [`aberrate`] moves a catalog direction by the observer's velocity
+//! (first order in v/c, the residual below 1 mas at orbital speeds) before it is matched.
+
+mod camera;
+mod quat;
+
+pub use camera::{Camera, UNDISTORT_ITERATIONS};
+
+pub use quat::{Quat, angle_between, cross, dot, mat_t_vec, mat_vec, norm};
+
+/// Most Jacobi sweeps; a 4x4 converges to f64 precision in 5-6.
+pub const MAX_SWEEPS: usize = 12;
+
+/// Speed of light, m/s.
+pub const C_M_PER_S: f64 = 299_792_458.0;
+
+/// One identified star.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Observation {
+    /// Measured direction, camera frame, unit vector.
+    pub camera: [f64; 3],
+    /// Catalog direction, ICRS, unit vector.
+    pub icrs: [f64; 3],
+    /// 1-sigma angular error of `camera` in each axis across the line of sight, rad (> 0).
+    pub sigma_rad: f64,
+}
+
+/// An attitude and its covariance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Attitude {
+    /// ICRS to camera, Hamilton, scalar first, `w >= 0`.
+    pub q: Quat,
+    /// Covariance of the error rotation vector in the camera frame, rad^2 (x, y across the
+    /// boresight, z roll).
+    pub cov_rad2: [[f64; 3]; 3],
+}
+
+impl Attitude {
+    /// 1-sigma cross-boresight error bound, rad: `sqrt(P_xx + P_yy)`.
+    pub fn boresight_sigma_rad(&self) -> f64 {
+        libm::sqrt(self.cov_rad2[0][0] + self.cov_rad2[1][1])
+    }
+
+    /// 1-sigma roll error bound, rad: `sqrt(P_zz)`.
+    pub fn roll_sigma_rad(&self) -> f64 {
+        libm::sqrt(self.cov_rad2[2][2])
+    }
+
+    /// The normalised error squared `e^T P^-1 e` of an error vector `e` (rad, camera frame);
+    /// its mean over many fields is 3 when the covariance is consistent.
+    pub fn nees(&self, e: [f64; 3]) -> Option<f64> {
+        let inv = inverse3(&self.cov_rad2)?;
+        Some(dot(e, mat_vec(&inv, e)))
+    }
+}
+
+/// Why no attitude was computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum AttitudeError {
+    /// Fewer than two observations.
+    TooFewStars,
+    /// An observation is not finite, not a unit vector, or has a sigma that is not positive.
+    BadObservation,
+    /// The directions do not fix the rotation (all parallel): no unique attitude, singular
+    /// covariance.
+    Degenerate,
+}
+
+impl core::fmt::Display for AttitudeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::TooFewStars => "attitude needs two stars or more",
+            Self::BadObservation => "attitude: an observation is not a finite unit vector",
+            Self::Degenerate => "attitude: the stars do not fix the rotation",
+        })
+    }
+}
+
+impl core::error::Error for AttitudeError {}
+
+/// The attitude that best fits `obs` (Wahba's problem, weights `1 / sigma^2`) and its
+/// covariance.
+pub fn solve(obs: &[Observation]) -> Result<Attitude, AttitudeError> {
+    if obs.len() < 2 {
+        return Err(AttitudeError::TooFewStars);
+    }
+    let mut b = [[0.0f64; 3]; 3];
+    let mut info = [[0.0f64; 3]; 3];
+    let mut w_max = 0.0f64;
+    for o in obs {
+        let ok = |v: [f64; 3]| v.iter().all(|c| c.is_finite()) && (norm(v) - 1.0).abs() < 1e-6;
+        if !(ok(o.camera) && ok(o.icrs) && o.sigma_rad > 0.0 && o.sigma_rad.is_finite()) {
+            return Err(AttitudeError::BadObservation);
+        }
+        let w = 1.0 / (o.sigma_rad * o.sigma_rad);
+        w_max = w_max.max(w);
+        for (r, (br, ir)) in b.iter_mut().zip(info.iter_mut()).enumerate() {
+            let bc = o.camera.get(r).copied().unwrap_or(0.0);
+            for (c, (bv, iv)) in br.iter_mut().zip(ir.iter_mut()).enumerate() {
+                *bv += w * bc * o.icrs.get(c).copied().unwrap_or(0.0);
+                let delta = if r == c { 1.0 } else { 0.0 };
+                *iv += w * (delta - bc * o.camera.get(c).copied().unwrap_or(0.0));
+            }
+        }
+    }
+    let cov_rad2 = inverse3(&info).ok_or(AttitudeError::Degenerate)?;
+    // A weight scale keeps K's entries near 1 whatever the sigmas.
+    let s = 1.0 / (w_max * obs.len() as f64);
+    let b = b.map(|r| r.map(|v| v * s));
+    let sigma = b[0][0] + b[1][1] + b[2][2];
+    let z = [b[1][2] - b[2][1], b[2][0] - b[0][2], b[0][1] - b[1][0]];
+    // Davenport's K for the vector-first quaternion (qv, q4) with A = (q4^2 - |qv|^2) I +
+    // 2 qv qv^T - 2 q4 [qv x].
+    let mut k = [[0.0f64; 4]; 4];
+    for r in 0..3 {
+        for c in 0..3 {
+            let v = b.get(r).and_then(|row| row.get(c)).copied().unwrap_or(0.0)
+                + b.get(c).and_then(|row| row.get(r)).copied().unwrap_or(0.0)
+                - if r == c { sigma } else { 0.0 };
+            set4(&mut k, r, c, v);
+        }
+        set4(&mut k, r, 3, z.get(r).copied().unwrap_or(0.0));
+        set4(&mut k, 3, r, z.get(r).copied().unwrap_or(0.0));
+    }
+    set4(&mut k, 3, 3, sigma);
+    let (vals, vecs) = jacobi4(k);
+    let best = (0..4)
+        .max_by(|&i, &j| get4(&vals, i).total_cmp(&get4(&vals, j)))
+        .unwrap_or(0);
+    let col = |r: usize| {
+        vecs.get(r)
+            .and_then(|row| row.get(best))
+            .copied()
+            .unwrap_or(0.0)
+    };
+    // A = R(q) for the Hamilton quaternion (q4, -qv).
+    let q = Quat([col(3), -col(0), -col(1), -col(2)])
+        .normalized()
+        .ok_or(AttitudeError::Degenerate)?;
+    Ok(Attitude { q, cov_rad2 })
+}
+
+/// The direction `dir` (unit) as seen by an observer moving at `velocity_m_per_s` (ICRS,
+/// barycentric): `(u + v/c) / |u + v/c|`, first order in v/c.
+pub fn aberrate(dir: [f64; 3], velocity_m_per_s: [f64; 3]) -> [f64; 3] {
+    let u = [
+        dir[0] + velocity_m_per_s[0] / C_M_PER_S,
+        dir[1] + velocity_m_per_s[1] / C_M_PER_S,
+        dir[2] + velocity_m_per_s[2] / C_M_PER_S,
+    ];
+    let n = norm(u);
+    if n > 0.0 && n.is_finite() {
+        u.map(|c| c / n)
+    } else {
+        dir
+    }
+}
+
+fn get4(v: &[f64; 4], i: usize) -> f64 {
+    v.get(i).copied().unwrap_or(0.0)
+}
+
+fn at4(m: &[[f64; 4]; 4], r: usize, c: usize) -> f64 {
+    m.get(r).and_then(|row| row.get(c)).copied().unwrap_or(0.0)
+}
+
+fn set4(m: &mut [[f64; 4]; 4], r: usize, c: usize, v: f64) {
+    if let Some(x) = m.get_mut(r).and_then(|row| row.get_mut(c)) {
+        *x = v;
+    }
+}
+
+/// Eigenvalues and eigenvectors (columns) of a symmetric 4x4, by cyclic Jacobi rotations.
+fn jacobi4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
+    let mut v = [[0.0f64; 4]; 4];
+    for i in 0..4 {
+        set4(&mut v, i, i, 1.0);
+    }
+    const PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+    for _ in 0..MAX_SWEEPS {
+        let off: f64 = PAIRS
+            .iter()
+            .map(|&(p, q)| {
+                let x = at4(&a, p, q);
+                x * x
+            })
+            .sum();
+        let diag: f64 = (0..4)
+            .map(|i| {
+                let x = at4(&a, i, i);
+                x * x
+            })
+            .sum();
+        if off <= 1e-32 * diag || off == 0.0 {
+            break;
+        }
+        for &(p, q) in &PAIRS {
+            let apq = at4(&a, p, q);
+            if apq == 0.0 {
+                continue;
+            }
+            let theta = (at4(&a, q, q) - at4(&a, p, p)) / (2.0 * apq);
+            let t = 1.0 / (theta.abs() + libm::sqrt(theta * theta + 1.0));
+            let t = if theta < 0.0 { -t } else { t };
+            let c = 1.0 / libm::sqrt(t * t + 1.0);
+            let s = t * c;
+            for k in 0..4 {
+                let (akp, akq) = (at4(&a, k, p), at4(&a, k, q));
+                set4(&mut a, k, p, c * akp - s * akq);
+                set4(&mut a, k, q, s * akp + c * akq);
+            }
+            for k in 0..4 {
+                let (apk, aqk) = (at4(&a, p, k), at4(&a, q, k));
+                set4(&mut a, p, k, c * apk - s * aqk);
+                set4(&mut a, q, k, s * apk + c * aqk);
+            }
+            for k in 0..4 {
+                let (vkp, vkq) = (at4(&v, k, p), at4(&v, k, q));
+                set4(&mut v, k, p, c * vkp - s * vkq);
+                set4(&mut v, k, q, s * vkp + c * vkq);
+            }
+        }
+    }
+    (
+        [at4(&a, 0, 0), at4(&a, 1, 1), at4(&a, 2, 2), at4(&a, 3, 3)],
+        v,
+    )
+}
+
+/// Inverse of a 3x3 by its adjugate; `None` when it is singular to f64 precision.
+pub fn inverse3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+    let [[a, b, c], [d, e, f], [g, h, i]] = *m;
+    let co = [
+        [e * i - f * h, c * h - b * i, b * f - c * e],
+        [f * g - d * i, a * i - c * g, c * d - a * f],
+        [d * h - e * g, b * g - a * h, a * e - b * d],
+    ];
+    let det = a * co[0][0] + b * co[1][0] + c * co[2][0];
+    let scale = m.iter().flatten().map(|x| x.abs()).fold(0.0f64, f64::max);
+    if !det.is_finite() || det.abs() <= 1e-13 * scale * scale * scale {
+        return None;
+    }
+    Some(co.map(|r| r.map(|x| x / det)))
+}
