@@ -166,6 +166,9 @@ pub async fn tracker_task(
         defmt::error!("link service already taken");
         return;
     };
+    // The faults of the set-up steps that did not stop the tracker (no table, no board
+    // thermometer), for housekeeping.
+    link.set_setup_faults(safe_state::setup_faults().bits());
     loop {
         crate::link::serve(link, &mut tracker, &mut store);
         if link.reset_requested() {

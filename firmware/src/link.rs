@@ -109,6 +109,41 @@ pub fn serve<const N: usize>(
         };
         link.receive(buf.get(..n).unwrap_or_default(), &mut targets);
     }
+    send_queued(link, &mut buf);
+}
+
+/// The service for the safe standby: [`SERVICE`] with the set-up `faults` in its
+/// housekeeping, or `None` if the tracker task already holds it (the tracker then serves the
+/// link itself).
+pub fn standby_service(
+    faults: startrack_core::safe::SetupFaults,
+) -> Option<&'static mut LinkService> {
+    let link = SERVICE
+        .try_uninit()
+        .map(|slot| slot.write(LinkService::new()))?;
+    link.set_setup_faults(faults.bits());
+    Some(link)
+}
+
+/// One link round in the safe standby (no tracker): received bytes executed with
+/// [`LinkService::receive_standby`], telemetry moved into [`TX`]; a reset command resets.
+pub async fn serve_standby(link: &mut LinkService) {
+    let mut buf = [0u8; 256];
+    let mut tables = ReadOnlyTables::new(None);
+    link.set_time(embassy_time::Instant::now().as_micros());
+    while let Ok(n) = RX.try_read(&mut buf) {
+        link.receive_standby(buf.get(..n).unwrap_or_default(), &mut tables);
+    }
+    send_queued(link, &mut buf);
+    if link.reset_requested() {
+        // Let the transmit task send the acceptance, then reset.
+        embassy_time::Timer::after_millis(50).await;
+        cortex_m::peripheral::SCB::sys_reset();
+    }
+}
+
+/// Moves queued telemetry into [`TX`] while it has room; never waits.
+fn send_queued(link: &mut LinkService, buf: &mut [u8]) {
     loop {
         let room = (TX_PIPE_BYTES - TX.len()).min(buf.len());
         let n = link.transmit(buf.get_mut(..room).unwrap_or_default());

@@ -10,8 +10,10 @@
 //! - [`reset_cause`] reads and clears RCC_RSR.
 //! - [`HEALTH`] is the core's [`Health`], updated by the tracker task after every frame.
 //! - [`standby_forever`] is where a set-up failure ends up (through [`enter_standby`] and
-//!   [`standby_task`]): no frame processing, the watchdog fed, housekeeping logged (and, once
-//!   the link is bound, answered).
+//!   [`standby_task`]): no frame processing, the watchdog fed, housekeeping logged, and the
+//!   link served with no tracker ([`crate::link::serve_standby`]): ping, housekeeping with the
+//!   set-up faults, tables and reset answered; mode and configuration commands refused with
+//!   their own reason.
 
 use crate::watchdog;
 use core::cell::Cell;
@@ -90,20 +92,34 @@ pub fn update_health(f: impl FnOnce(&mut Health)) {
     });
 }
 
+/// The set-up faults recorded in housekeeping at this boot.
+pub fn setup_faults() -> SetupFaults {
+    HEALTH.lock(Cell::get).setup_faults
+}
+
 /// How often standby logs housekeeping.
 const STANDBY_LOG_EVERY: Duration = Duration::from_secs(10);
 
-/// The safe standby after a set-up failure: no frame processing; once a second the
-/// watchdog's progress is marked (the loop is alive) and every 10 s housekeeping is logged.
+/// How often standby serves the link.
+const STANDBY_SERVE_EVERY: Duration = Duration::from_millis(50);
+
+/// The safe standby after a set-up failure: no frame processing; every 50 ms the link is
+/// served (if the tracker task does not hold it) and the watchdog's progress marked (the loop
+/// is alive); every 10 s housekeeping is logged.
 pub async fn standby_forever(faults: SetupFaults) -> ! {
     update_health(|h| h.setup_faults |= faults);
     defmt::error!("safe standby: set-up faults {}", faults);
-    let mut ticks = 0u32;
+    let mut link = crate::link::standby_service(faults);
+    let per_log = STANDBY_LOG_EVERY.as_ticks() / STANDBY_SERVE_EVERY.as_ticks().max(1);
+    let mut ticks = 0u64;
     loop {
-        Timer::after(Duration::from_secs(1)).await;
+        Timer::after(STANDBY_SERVE_EVERY).await;
+        if let Some(link) = link.as_deref_mut() {
+            crate::link::serve_standby(link).await;
+        }
         watchdog::progress();
         ticks = ticks.wrapping_add(1);
-        if u64::from(ticks) % STANDBY_LOG_EVERY.as_secs() == 0 {
+        if ticks.is_multiple_of(per_log.max(1)) {
             update_health(|_| {});
             let h = HEALTH.lock(Cell::get);
             defmt::warn!("standby housekeeping: {}", h);

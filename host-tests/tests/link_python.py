@@ -33,7 +33,7 @@ def main() -> int:
         if "housekeeping" in want:
             sid, mode, next_mode = struct.unpack(">HBB", data[:4])
             assert (sid, mode, next_mode) == (1, want["mode"], want["next_mode"]), data[:4]
-            # uptime_us: the u64 before the 2 spare bytes at the end.
+            # uptime_us: the u64 before the u16 setup_faults at the end.
             assert struct.unpack(">Q", data[-10:-2])[0] == want["time_us"]
     print(f"spacepackets decoded {len(packets)} packets")
     return 0

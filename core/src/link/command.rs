@@ -113,6 +113,10 @@ pub enum Rejection {
     Upload(UploadRefusal),
     /// The window cannot be read (no source, or one window is already being sent).
     WindowUnavailable,
+    /// The tracker application is not running (the safe standby after a set-up fault, which
+    /// housekeeping's `setup_faults` names): mode and configuration commands have nothing to
+    /// act on. Housekeeping, tables and reset are still served.
+    Standby,
 }
 
 impl Rejection {
@@ -129,6 +133,7 @@ impl Rejection {
             Self::Config(_) => 8,
             Self::Upload(_) => 9,
             Self::WindowUnavailable => 10,
+            Self::Standby => 11,
         }
     }
 
@@ -162,6 +167,7 @@ impl Rejection {
             8 => "configuration refused",
             9 => "table upload refused",
             10 => "window unavailable",
+            11 => "tracker not running (safe standby)",
             _ => "unknown reason",
         }
     }

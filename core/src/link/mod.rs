@@ -29,6 +29,6 @@ pub mod telemetry;
 pub mod upload;
 
 pub use command::{Command, Rejection, WindowKind, WindowRequest};
-pub use service::{LinkService, NoWindows, Targets, WindowReader};
+pub use service::{LinkService, NoWindows, Targets, TrackerControl, WindowReader};
 pub use telemetry::{FrameTotals, Housekeeping, LinkCounters};
 pub use upload::{TableInfo, TableUpload, UploadRefusal};

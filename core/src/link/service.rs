@@ -26,7 +26,8 @@ use super::telemetry::{
 };
 use super::upload::{TableInfo, TableUpload};
 use crate::tracker::{
-    Event, FrameSummary, Mode, StarRecord, TelemetrySink, Tracker, TrackerConfig,
+    CommandError, ConfigError, Event, FrameSummary, Mode, StarRecord, TelemetrySink, Tracker,
+    TrackerConfig,
 };
 use arbitrary_int::{u11, u14};
 use heapless::Deque;
@@ -67,6 +68,39 @@ impl WindowReader for NoWindows {
     }
 }
 
+/// What the link's mode and configuration commands act on: the tracker application
+/// ([`Tracker`] implements it). A trait so that the same service also runs with no tracker
+/// at all (the safe standby, [`LinkService::receive_standby`]).
+pub trait TrackerControl {
+    /// Asks for `mode` from the next frame ([`Tracker::command_mode`]).
+    fn command_mode(&mut self, mode: Mode) -> Result<(), CommandError>;
+    /// The configuration in force.
+    fn config(&self) -> TrackerConfig;
+    /// Replaces the configuration if it passes its checks ([`Tracker::set_config`]).
+    fn set_config(&mut self, config: TrackerConfig) -> Result<(), ConfigError>;
+}
+
+impl<const N: usize> TrackerControl for Tracker<'_, '_, N> {
+    fn command_mode(&mut self, mode: Mode) -> Result<(), CommandError> {
+        Tracker::command_mode(self, mode)
+    }
+
+    fn config(&self) -> TrackerConfig {
+        *Tracker::config(self)
+    }
+
+    fn set_config(&mut self, config: TrackerConfig) -> Result<(), ConfigError> {
+        Tracker::set_config(self, config)
+    }
+}
+
+/// What a command acts on inside the service: the tracker if one runs.
+struct Ctx<'a> {
+    tracker: Option<&'a mut dyn TrackerControl>,
+    tables: &'a mut dyn TableUpload,
+    windows: &'a mut dyn WindowReader,
+}
+
 /// What commands act on, for one call.
 pub struct Targets<'a, 't, 'b, const N: usize> {
     /// The tracker application.
@@ -101,6 +135,7 @@ pub struct LinkService {
     reset: bool,
     now_us: u64,
     answer: Answer,
+    setup_faults: u16,
 }
 
 impl Default for LinkService {
@@ -173,6 +208,7 @@ impl LinkService {
             reset: false,
             now_us: 0,
             answer: Answer::None,
+            setup_faults: 0,
         }
     }
 
@@ -203,6 +239,35 @@ impl LinkService {
 
     /// Takes received bytes, executing every telecommand they complete.
     pub fn receive<const N: usize>(&mut self, bytes: &[u8], targets: &mut Targets<'_, '_, '_, N>) {
+        let mut ctx = Ctx {
+            tracker: Some(&mut *targets.tracker),
+            tables: &mut *targets.tables,
+            windows: &mut *targets.windows,
+        };
+        self.receive_ctx(bytes, &mut ctx);
+    }
+
+    /// Takes received bytes when no tracker runs (the safe standby after a set-up fault):
+    /// ping, housekeeping (with the faults set by [`Self::set_setup_faults`]), tables and
+    /// reset are served as always; mode and configuration commands are rejected with
+    /// [`Rejection::Standby`], window requests with [`Rejection::WindowUnavailable`].
+    pub fn receive_standby(&mut self, bytes: &[u8], tables: &mut dyn TableUpload) {
+        let mut windows = NoWindows;
+        let mut ctx = Ctx {
+            tracker: None,
+            tables,
+            windows: &mut windows,
+        };
+        self.receive_ctx(bytes, &mut ctx);
+    }
+
+    /// Records the set-up steps that failed at this boot (`safe::SetupFaults` bits; those
+    /// above bit 15 are not reported), for housekeeping.
+    pub fn set_setup_faults(&mut self, bits: u32) {
+        self.setup_faults = u16::try_from(bits & 0xFFFF).unwrap_or(u16::MAX);
+    }
+
+    fn receive_ctx(&mut self, bytes: &[u8], targets: &mut Ctx<'_>) {
         for &b in bytes {
             self.counters.rx_bytes = self.counters.rx_bytes.wrapping_add(1);
             match self.rx.push(b) {
@@ -222,12 +287,16 @@ impl LinkService {
                 }
             }
         }
-        self.poll(targets);
+        self.poll_windows(&mut *targets.windows);
     }
 
     /// Work between frames: sends the rows of a window being read as the bulk queue has
     /// room.
     pub fn poll<const N: usize>(&mut self, targets: &mut Targets<'_, '_, '_, N>) {
+        self.poll_windows(&mut *targets.windows);
+    }
+
+    fn poll_windows(&mut self, windows: &mut dyn WindowReader) {
         let Some((req, mut row)) = self.window else {
             return;
         };
@@ -238,7 +307,7 @@ impl LinkService {
             let Some(vals) = values.get_mut(..side) else {
                 break;
             };
-            if !targets.windows.read_row(&req, row, vals) {
+            if !windows.read_row(&req, row, vals) {
                 // The source lost the window: the rest is not sent (the ground sees rows
                 // missing), and the next window request is free to start.
                 row = req.side_px;
@@ -297,6 +366,7 @@ impl LinkService {
             link: self.counters,
             table: tables.active(p::TABLE_KIND_CALIBRATION),
             uptime_us: self.now_us,
+            setup_faults: self.setup_faults,
         }
     }
 
@@ -322,7 +392,7 @@ impl LinkService {
     }
 
     /// One decoded packet.
-    fn handle<const N: usize>(&mut self, pkt: &[u8], targets: &mut Targets<'_, '_, '_, N>) {
+    fn handle(&mut self, pkt: &[u8], targets: &mut Ctx<'_>) {
         let request_id = match pkt.get(..4) {
             Some(&[a, b, c, d]) => Some(u32::from_be_bytes([a, b, c, d])),
             _ => None,
@@ -354,7 +424,7 @@ impl LinkService {
     }
 
     /// Reports sent after a command's acceptance (its answer follows the acceptance).
-    fn after_accept<const N: usize>(&mut self, targets: &mut Targets<'_, '_, '_, N>) {
+    fn after_accept(&mut self, targets: &mut Ctx<'_>) {
         match core::mem::replace(&mut self.answer, Answer::None) {
             Answer::None => {}
             Answer::Pong => self.send(p::APID_CONTROL, p::TM_PONG, 0, Queue::Urgent),
@@ -387,15 +457,11 @@ impl LinkService {
                 self.send_event(event::TABLE_ACCEPTED, &d, false);
             }
         }
-        self.poll(targets);
+        self.poll_windows(&mut *targets.windows);
     }
 
     /// Reads and executes one packet.
-    fn execute<const N: usize>(
-        &mut self,
-        pkt: &[u8],
-        targets: &mut Targets<'_, '_, '_, N>,
-    ) -> Result<(), Rejection> {
+    fn execute(&mut self, pkt: &[u8], targets: &mut Ctx<'_>) -> Result<(), Rejection> {
         if pkt.len() > p::MAX_TC_LEN {
             return Err(Rejection::Malformed);
         }
@@ -429,11 +495,7 @@ impl LinkService {
         self.apply(cmd, targets)
     }
 
-    fn apply<const N: usize>(
-        &mut self,
-        cmd: Command<'_>,
-        t: &mut Targets<'_, '_, '_, N>,
-    ) -> Result<(), Rejection> {
+    fn apply(&mut self, cmd: Command<'_>, t: &mut Ctx<'_>) -> Result<(), Rejection> {
         match cmd {
             Command::Ping => self.answer = Answer::Pong,
             Command::Housekeeping => self.answer = Answer::Housekeeping,
@@ -441,15 +503,19 @@ impl LinkService {
                 self.hk_period = Some(f);
                 self.frames_since_hk = 0;
             }
-            Command::SetMode(m) => t.tracker.command_mode(m).map_err(|e| match e {
-                crate::tracker::CommandError::NothingToTrack => Rejection::NothingToTrack,
-            })?,
+            Command::SetMode(m) => {
+                let tracker = t.tracker.as_deref_mut().ok_or(Rejection::Standby)?;
+                tracker.command_mode(m).map_err(|e| match e {
+                    CommandError::NothingToTrack => Rejection::NothingToTrack,
+                })?;
+            }
             Command::SetParams { params, count } => {
-                let mut c = self.staged.unwrap_or(*t.tracker.config());
+                let tracker = t.tracker.as_deref_mut().ok_or(Rejection::Standby)?;
+                let mut c = self.staged.unwrap_or(tracker.config());
                 for &(id, v) in params.iter().take(count) {
                     set_param(&mut c, id, v)?;
                 }
-                t.tracker.set_config(c).map_err(Rejection::Config)?;
+                tracker.set_config(c).map_err(Rejection::Config)?;
                 self.staged = Some(c);
             }
             Command::Reset => self.reset = true,

@@ -199,6 +199,8 @@ pub struct Housekeeping {
     pub table: Option<TableInfo>,
     /// Time since start, us.
     pub uptime_us: u64,
+    /// The set-up steps that failed at this boot (`safe::SetupFaults` bits 0-15; 0: none).
+    pub setup_faults: u16,
 }
 
 /// Every housekeeping field in order: name, type, meaning.
@@ -276,7 +278,11 @@ pub const HK_FIELDS: [(&str, &str, &str); 34] = [
     ("table_crc32", "u32", "its CRC-32"),
     ("table_sequence", "u32", "its store sequence number"),
     ("uptime_us", "u64", "time since start, us"),
-    ("spare", "u16", "0"),
+    (
+        "setup_faults",
+        "u16",
+        "set-up steps that failed at this boot (SetupFaults bits, docs/storage.md); 0: none",
+    ),
 ];
 
 /// Size of a field type of [`HK_FIELDS`] or [`STAR_FIELDS`], bytes.
@@ -382,7 +388,7 @@ impl Housekeeping {
             .u32(table.crc32)
             .u32(table.sequence)
             .u64(self.uptime_us)
-            .u16(0);
+            .u16(self.setup_faults);
         w.finish()
     }
 
@@ -435,6 +441,7 @@ impl Housekeeping {
             sequence: r.u32()?,
         };
         let uptime_us = r.u64()?;
+        let setup_faults = r.u16()?;
         Some(Self {
             mode,
             next_mode,
@@ -448,6 +455,7 @@ impl Housekeeping {
             link,
             table: present.then_some(info),
             uptime_us,
+            setup_faults,
         })
     }
 }

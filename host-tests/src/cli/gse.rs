@@ -144,6 +144,7 @@ pub fn status_json(h: &Housekeeping) -> serde_json::Value {
         "stars": h.stars,
         "centroids": h.centroids,
         "uptime_us": h.uptime_us,
+        "setup_faults": h.setup_faults,
         "totals": {
             "frames": t.frames,
             "lines_refused": t.lines_refused,
