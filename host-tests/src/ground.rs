@@ -87,6 +87,27 @@ pub struct Tm {
     pub data: Vec<u8>,
 }
 
+/// A command's verification report: accepted, or rejected with its reason code and parameter.
+pub type Verdict = Result<(), (u16, u32)>;
+
+impl Tm {
+    /// The request id and verdict if this is a verification report (`TM[1,1]`, `TM[1,2]`).
+    pub fn verdict(&self) -> Option<(u32, Verdict)> {
+        if self.apid != p::APID_CONTROL {
+            return None;
+        }
+        let mut r = Reader::new(&self.data);
+        let id = r.u32()?;
+        match self.kind {
+            k if k == p::TM_ACCEPTED => Some((id, Ok(()))),
+            k if k == p::TM_REJECTED => {
+                Some((id, Err((r.u16().unwrap_or(0), r.u32().unwrap_or(0)))))
+            }
+            _ => None,
+        }
+    }
+}
+
 /// A connection to the tracker.
 pub struct Ground {
     stream: TcpStream,
@@ -204,23 +225,19 @@ impl Ground {
                 }
                 e => e,
             })?;
-            if t.apid == p::APID_CONTROL && (t.kind == p::TM_ACCEPTED || t.kind == p::TM_REJECTED) {
-                let mut r = Reader::new(&t.data);
-                if r.u32() != Some(id) {
-                    continue;
+            match t.verdict() {
+                Some((i, Ok(()))) if i == id => return Ok(()),
+                Some((i, Err((code, parameter)))) if i == id => {
+                    return Err(GroundError::Rejected {
+                        command,
+                        code,
+                        parameter,
+                    });
                 }
-                if t.kind == p::TM_ACCEPTED {
-                    return Ok(());
-                }
-                let code = r.u16().unwrap_or(0);
-                let parameter = r.u32().unwrap_or(0);
-                return Err(GroundError::Rejected {
-                    command,
-                    code,
-                    parameter,
-                });
+                // Another command's report (one sent before this, answered late).
+                Some(_) => {}
+                None => seen.push(t),
             }
-            seen.push(t);
         }
     }
 

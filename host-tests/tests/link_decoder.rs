@@ -55,18 +55,9 @@ fn tc(kind: MessageType, data: &[u8], seq: u16) -> (Vec<u8>, u32) {
 /// (accepted, rejected with code) verification reports for request `id`.
 fn verdicts(tm: &[Tm], id: u32) -> Vec<Result<(), u16>> {
     tm.iter()
-        .filter(|t| t.apid == p::APID_CONTROL)
-        .filter_map(|t| {
-            let mut r = Reader::new(&t.data);
-            if r.u32() != Some(id) {
-                return None;
-            }
-            match t.kind {
-                k if k == p::TM_ACCEPTED => Some(Ok(())),
-                k if k == p::TM_REJECTED => Some(Err(r.u16().unwrap_or(0))),
-                _ => None,
-            }
-        })
+        .filter_map(Tm::verdict)
+        .filter(|&(i, _)| i == id)
+        .map(|(_, v)| v.map_err(|(code, _)| code))
         .collect()
 }
 

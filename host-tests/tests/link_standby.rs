@@ -5,7 +5,7 @@
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::framing::{Deframer, Pushed, encoded_len_max};
 use startrack_core::link::protocol::{self as p, MessageType};
-use startrack_core::link::telemetry::{Housekeeping, Reader};
+use startrack_core::link::telemetry::Housekeeping;
 use startrack_core::link::{LinkService, Rejection};
 use startrack_core::safe::SetupFaults;
 use startrack_core::tracker::Mode;
@@ -34,18 +34,9 @@ fn command(
     }
     let verdicts: Vec<Result<(), u16>> = tm
         .iter()
-        .filter(|t| t.apid == p::APID_CONTROL)
-        .filter_map(|t| {
-            let mut r = Reader::new(&t.data);
-            if r.u32() != Some(id) {
-                return None;
-            }
-            match t.kind {
-                k if k == p::TM_ACCEPTED => Some(Ok(())),
-                k if k == p::TM_REJECTED => Some(Err(r.u16().unwrap_or(0))),
-                _ => None,
-            }
-        })
+        .filter_map(|t| t.verdict())
+        .filter(|&(i, _)| i == id)
+        .map(|(_, v)| v.map_err(|(code, _)| code))
         .collect();
     assert_eq!(
         verdicts.len(),
