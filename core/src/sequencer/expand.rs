@@ -33,24 +33,48 @@ impl Cursor {
                 break;
             };
             let seg = program.segment(step.segment);
-            if self.repeat >= step.repeat || seg.is_empty() {
+            if self.repeat >= step.repeat || seg.is_empty() || self.word >= seg.len() {
                 self.step += 1;
                 self.repeat = 0;
                 self.word = 0;
                 continue;
             }
-            let src = seg.get(self.word..).unwrap_or(&[]);
+            let len = seg.len();
+            // Words left in the step: the rest of this repeat and the repeats after it.
+            let left =
+                (len - self.word) as u64 + u64::from(step.repeat - self.repeat - 1) * len as u64;
             let dst = out.get_mut(n..).unwrap_or(&mut []);
-            let k = src.len().min(dst.len());
-            if let (Some(d), Some(s)) = (dst.get_mut(..k), src.get(..k)) {
-                d.copy_from_slice(s);
+            let k = dst.len().min(usize::try_from(left).unwrap_or(usize::MAX));
+            let Some((dst, _)) = dst.split_at_mut_checked(k) else {
+                break;
+            };
+            // The rest of the current repeat, then whole repeats, then the start of one: a
+            // store a word and a short loop a repeat (segments are 1 to ~100 words, repeated
+            // up to thousands of times).
+            let head = seg.get(self.word..).unwrap_or(&[]);
+            let (first, rest) = dst
+                .split_at_mut_checked(head.len().min(dst.len()))
+                .unwrap_or((&mut [], &mut []));
+            for (d, s) in first.iter_mut().zip(head) {
+                *d = *s;
+            }
+            if let [word] = seg {
+                rest.fill(*word);
+            } else {
+                let mut whole = rest.chunks_exact_mut(len);
+                for c in &mut whole {
+                    for (d, s) in c.iter_mut().zip(seg) {
+                        *d = *s;
+                    }
+                }
+                for (d, s) in whole.into_remainder().iter_mut().zip(seg) {
+                    *d = *s;
+                }
             }
             n += k;
-            self.word += k;
-            if self.word >= seg.len() {
-                self.word = 0;
-                self.repeat += 1;
-            }
+            let pos = self.word + k;
+            self.repeat += u32::try_from(pos / len).unwrap_or(u32::MAX);
+            self.word = pos % len;
         }
         n
     }

@@ -25,6 +25,7 @@ mod harness;
 mod inputs;
 mod line_path;
 mod scan;
+mod sequencer;
 mod track;
 mod tracker;
 mod window;
@@ -166,6 +167,7 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         &curve,
         &mut rng,
     )?;
+    sequencer::run(out, &bench)?;
     // Last, so that its draws do not change the other stages' inputs.
     tracker::run(out, &bench, &table, &mut rng)
 }
