@@ -5,7 +5,7 @@
 //!
 //! | port | on this board |
 //! |---|---|
-//! | lines | [`ChannelLines`]: the readout task's DMA'd line buffers ([`crate::lines`]) |
+//! | lines | [`ChannelLines`]: the request to the sequencer, the readout task's DMA'd line buffers back ([`crate::lines`]) |
 //! | clock | embassy-time's `Instant` |
 //! | temperature | [`BoardThermometer`]: the CCD board's sensor (not wired yet), else the MCU's ([`crate::mcu_temp`]) |
 //! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none |
@@ -14,13 +14,12 @@
 //! After every frame the task marks the watchdog's progress ([`crate::watchdog`]) and adds
 //! the frame to housekeeping ([`crate::safe_state::HEALTH`]).
 //!
-//! The readout free-runs without a sequencer, so the tracker's [`ReadoutRequest`] is not
-//! sent anywhere yet: every line is read whole, which serves any request. The exposure is
-//! taken as one frame period of the timer-paced readout.
+//! Each frame's [`ReadoutRequest`] (full frame, or the tracking windows) and the configured
+//! exposure go to the CCD sequencer ([`crate::sequencer`]), which compiles and plays that
+//! frame next; only the lines its plan digitises come back.
 
 use crate::lines::{FILLED, FREE, GEOMETRY, LineBuf, RawLine};
 use crate::mcu_temp::{McuThermometer, NoBoardSensor};
-use crate::readout::LINE_PERIOD;
 use crate::telemetry::DefmtTelemetry;
 use crate::{safe_state, watchdog};
 use core::convert::Infallible;
@@ -37,42 +36,68 @@ pub type BoardThermometer = FallbackThermometer<NoBoardSensor, McuThermometer>;
 /// Stars a frame the board keeps (candidates, windows, reported stars).
 pub const MAX_STARS: usize = 32;
 
-/// Exposure assumed for the hot-pixel law: one frame period of the timer-paced readout.
-const EXPOSURE_MS: u32 = (GEOMETRY.lines as u64 * LINE_PERIOD.as_millis()) as u32;
+/// The exposure at start-up, ms: the flight configuration's (1 s), so that every frame's
+/// integration is the configured one (a full frame reads in 0.55 s, docs/sequencer.md); a
+/// command sets a shorter one to reach the tracking rate.
+const EXPOSURE_MS: u32 = TrackerConfig::FLIGHT.exposure_ms;
 
-/// The line buffers of the readout task as the tracker's line source. A frame is the run
-/// of lines the readout numbered with one frame number; the buffer handed out last goes
-/// back to the readout at the next call.
+/// How long a line may take beyond the exposure before the frame is ended without it (a
+/// full frame's readout is 0.55 s at 1 MHz).
+const LINE_TIMEOUT_US: u64 = 1_000_000;
+
+/// The sequencer's lines as the tracker's line source. `start_frame` sends the request
+/// (windows copied) and the exposure to the sequencer ([`crate::sequencer::REQUESTS`]),
+/// which compiles and plays it; `next_line` then hands over the lines read for that frame
+/// (tagged with its number), in order, up to the one marked last. Lines of older frames
+/// are given back unread; a line of a later frame ends this one. The buffer handed out last
+/// goes back to the readout at the next call.
 pub struct ChannelLines {
     /// The buffer lent by the last `next_line`.
     lent: Option<&'static mut LineBuf>,
-    /// A line of the next frame, received while looking for the end of this one.
+    /// A line of a later frame, received while looking for the end of this one.
     held: Option<RawLine>,
-    /// The readout frame being delivered (`None` until its first line).
-    frame: Option<u32>,
+    /// The tracker's frame being delivered.
+    frame: u32,
     /// The frame's last line was delivered.
     ended: bool,
+    /// The frame reads no line (no window): `next_line` waits this long (the exposure, while
+    /// the frame is clocked) and ends it, us.
+    no_lines_us: Option<u64>,
+    /// The exposure sent with each request, us.
+    exposure_us: u32,
 }
 
 impl ChannelLines {
-    /// A source that takes the readout's lines from the next one on.
-    pub const fn new() -> Self {
+    /// A source that asks for frames with an exposure of `exposure_ms`.
+    pub const fn new(exposure_ms: u32) -> Self {
         Self {
             lent: None,
             held: None,
-            frame: None,
-            ended: false,
+            frame: 0,
+            ended: true,
+            no_lines_us: None,
+            exposure_us: exposure_ms.saturating_mul(1000),
         }
+    }
+
+    /// The exposure of the frames requested from now on.
+    pub fn set_exposure_ms(&mut self, exposure_ms: u32) {
+        self.exposure_us = exposure_ms.saturating_mul(1000);
     }
 
     /// Gives the lent buffer back to the readout.
     fn release(&mut self) {
-        if let Some(buf) = self.lent.take()
-            && FREE.try_send(buf).is_err()
-        {
-            // Cannot happen: FREE holds as many entries as there are buffers.
-            defmt::error!("lines: free-buffer channel full, a line buffer is lost");
+        if let Some(buf) = self.lent.take() {
+            give_back(buf);
         }
+    }
+}
+
+/// Returns a line buffer to the readout.
+fn give_back(buf: &'static mut LineBuf) {
+    if FREE.try_send(buf).is_err() {
+        // Cannot happen: FREE holds as many entries as there are buffers.
+        defmt::error!("lines: free-buffer channel full, a line buffer is lost");
     }
 }
 
@@ -81,41 +106,66 @@ impl LineSource for ChannelLines {
 
     async fn start_frame(
         &mut self,
-        _frame: u32,
-        _request: &ReadoutRequest<'_>,
+        frame: u32,
+        request: &ReadoutRequest<'_>,
     ) -> Result<(), Infallible> {
         self.release();
-        self.frame = None;
+        self.frame = frame;
         self.ended = false;
+        // No window: nothing to read (the frame is still clocked, for its exposure).
+        self.no_lines_us = matches!(request, ReadoutRequest::Windows(w) if w.is_empty())
+            .then_some(u64::from(self.exposure_us));
+        crate::sequencer::REQUESTS.signal(crate::sequencer::FrameRequest::new(
+            frame,
+            request,
+            self.exposure_us,
+        ));
         Ok(())
     }
 
     async fn next_line(&mut self) -> Result<Option<SourceLine<'_>>, Infallible> {
         self.release();
-        if self.ended {
-            return Ok(None);
+        let timeout =
+            embassy_time::Duration::from_micros(u64::from(self.exposure_us) + LINE_TIMEOUT_US);
+        if let Some(us) = self.no_lines_us.take() {
+            embassy_time::Timer::after_micros(us).await;
+            self.ended = true;
         }
-        let raw = match self.held.take() {
-            Some(raw) => raw,
-            None => FILLED.receive().await,
-        };
-        match self.frame {
-            Some(f) if f != raw.frame => {
-                // A line of the next frame: this frame lost its last lines.
+        loop {
+            if self.ended {
+                return Ok(None);
+            }
+            let raw = match self.held.take() {
+                Some(raw) => raw,
+                None => match embassy_time::with_timeout(timeout, FILLED.receive()).await {
+                    Ok(raw) => raw,
+                    Err(_) => {
+                        defmt::warn!("lines: frame {} ended, no line in time", self.frame);
+                        self.ended = true;
+                        return Ok(None);
+                    }
+                },
+            };
+            // Wrapping distance of the line's frame from this one.
+            let ahead = raw.frame.wrapping_sub(self.frame) as i32;
+            if ahead < 0 {
+                give_back(raw.samples);
+                continue;
+            }
+            if ahead > 0 {
+                // A line of a later frame: this frame lost its last lines.
                 self.held = Some(raw);
                 self.ended = true;
                 return Ok(None);
             }
-            Some(_) => {}
-            None => self.frame = Some(raw.frame),
+            self.ended = raw.last;
+            let line = raw.line;
+            let samples: &LineBuf = self.lent.insert(raw.samples);
+            return Ok(Some(SourceLine {
+                line,
+                samples: &samples[..],
+            }));
         }
-        self.ended = raw.line + 1 >= GEOMETRY.lines;
-        let line = raw.line;
-        let samples: &LineBuf = self.lent.insert(raw.samples);
-        Ok(Some(SourceLine {
-            line,
-            samples: &samples[..],
-        }))
     }
 }
 
@@ -152,7 +202,7 @@ pub async fn tracker_task(
             return;
         }
     };
-    let mut source = ChannelLines::new();
+    let mut source = ChannelLines::new(EXPOSURE_MS);
     let mut clock = BoardClock;
     let mut store = crate::link::ReadOnlyTables::new(
         table.map(|t| u32::try_from(t.len_bytes()).unwrap_or(u32::MAX)),
@@ -186,6 +236,7 @@ pub async fn tracker_task(
             tables: &mut tables,
             telemetry: &mut telemetry,
         };
+        source.set_exposure_ms(tracker.config().exposure_ms);
         let Ok(summary) = tracker.run_frame(&mut source, &mut ports).await;
         link.end_of_frame(&store);
         watchdog::progress();

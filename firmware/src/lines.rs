@@ -36,10 +36,12 @@ pub type LineBuf = [u16; LINE_LEN];
 
 /// A filled line on its way to processing.
 pub struct RawLine {
-    /// Frame number since boot (wraps).
+    /// The tracker's frame number of the request the line was read for (wraps).
     pub frame: u32,
     /// Raw line index within the frame, 0-based (`0..GEOMETRY.lines`).
     pub line: u16,
+    /// The frame's last digitised line (a windowed frame ends before `GEOMETRY.lines`).
+    pub last: bool,
     /// The samples; the buffer goes back to [`FREE`] once processed.
     pub samples: &'static mut LineBuf,
 }

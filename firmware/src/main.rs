@@ -57,9 +57,10 @@ unsafe fn UART4() {
     unsafe { EXECUTOR_CLOCKS.on_interrupt() }
 }
 
-/// The sequencer's compiled frame (56 KB, CPU-only, cacheable `.bss`).
-static SEQ_TABLES: ConstStaticCell<sequencer::Tables> =
-    ConstStaticCell::new(sequencer::Tables::new());
+/// The sequencer's compiled frames, one played while the next is compiled (2 x 56 KB,
+/// CPU-only, cacheable `.bss`).
+static SEQ_TABLES: ConstStaticCell<[sequencer::Tables; 2]> =
+    ConstStaticCell::new([sequencer::Tables::new(), sequencer::Tables::new()]);
 
 bind_interrupts!(
     /// Interrupts the drivers need: DMA1 stream 0 carries SPI1 RX (the ADC samples), DMA1
@@ -293,12 +294,13 @@ async fn main(spawner: Spawner) {
                 app::tracker_task(table, buffers, thermometer),
             );
             let readout = spawn_or_log(spawner, "readout", readout::readout_task(adc, samples));
+            let plans = spawn_or_log(spawner, "plan", sequencer::plan_task());
             let clocks = match SEQ_TABLES.try_take() {
-                Some(tables) => {
+                Some([a, b]) => {
                     use interrupt::{InterruptExt, Priority};
                     interrupt::UART4.set_priority(Priority::P6);
                     let clocks = EXECUTOR_CLOCKS.start(interrupt::UART4);
-                    match sequencer::sequencer_task(seq, tables) {
+                    match sequencer::sequencer_task(seq, [a, b]) {
                         Ok(token) => {
                             clocks.spawn(token);
                             true
@@ -314,10 +316,10 @@ async fn main(spawner: Spawner) {
                     false
                 }
             };
-            if !(tracker && readout && clocks) {
+            if !(tracker && readout && clocks && plans) {
                 fatal |= SetupFaults::TASK_SPAWN;
             }
-            tracker && readout && clocks
+            tracker && readout && clocks && plans
         }
         _ => false,
     };

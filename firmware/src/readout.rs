@@ -16,7 +16,9 @@
 //! to the Ethernet PHY.
 //!
 //! # In step with the clocks
-//! Each line comes from the sequencer ([`crate::sequencer::LINE_JOBS`]): the job says how
+//! Each line comes from the sequencer ([`crate::sequencer::LINE_JOBS`]), only the lines the
+//! frame's plan digitises (the tracker's windows, or every line), each tagged with its raw
+//! line index, the tracker's frame number and whether it ends the frame: the job says how
 //! many words the line digitised (read pixels x outputs, in the order the pixels left the
 //! register) and when its last sample is taken. After that instant the line's words are read
 //! in one SPI burst into the sample buffer (DMA), then put in their raw columns
@@ -30,15 +32,10 @@ use embassy_stm32::gpio::Output;
 use embassy_stm32::mode::Async;
 use embassy_stm32::spi::{self, Spi, mode::Master};
 use embassy_stm32::time::Hertz;
-use embassy_time::{Duration, Timer};
+use embassy_time::Timer;
 
 /// SPI clock for the ADC read-out: 30 MHz, so a line (1072 x 16 bits) takes 572 us.
 pub const SPI_HZ: Hertz = Hertz(30_000_000);
-
-/// The line period the tracker's exposure setting assumes (`app.rs`: lines x this). The
-/// sequencer's full frame is faster (docs/sequencer.md); its exposure is not yet handed to
-/// the tracker.
-pub const LINE_PERIOD: Duration = Duration::from_millis(2);
 
 /// The SPI configuration for the ADC: mode 0, MSB first, 16-bit words (set per transfer by
 /// the word type), MISO pulled down so that an unconnected ADC reads 0.
@@ -91,7 +88,7 @@ pub async fn readout_task(mut adc: AdcLink, samples: &'static mut [u16; LINE_LEN
     loop {
         let ready = LINE_JOBS.receive().await;
         Timer::at(ready.due).await;
-        let (frame, line) = (ready.frame, ready.job.line);
+        let (frame, line, last) = (ready.frame, ready.job.line, ready.last);
         let buf = match spare.take() {
             Some(buf) => buf,
             None => match FREE.try_receive() {
@@ -122,6 +119,7 @@ pub async fn readout_task(mut adc: AdcLink, samples: &'static mut [u16; LINE_LEN
                     .send(RawLine {
                         frame,
                         line,
+                        last,
                         samples: buf,
                     })
                     .await;

@@ -184,12 +184,55 @@ impl<'w, 's> Program<'w, 's> {
         })
     }
 
+    /// The program without its borrows ([`ProgramParts`]): what a firmware keeps to play
+    /// tables it compiled in one task from another, the buffers passed by ownership.
+    pub const fn parts(&self) -> ProgramParts {
+        ProgramParts {
+            words_len: self.words.len(),
+            spans: self.spans,
+            steps_len: self.steps.len(),
+            tick_ps: self.tick_ps,
+            outputs: self.outputs,
+            binning: self.binning,
+            exposure_us: self.exposure_us,
+        }
+    }
+
     /// Every word of the frame in play order (what the DMA writes), without allocating.
     pub fn ticks(&self) -> impl Iterator<Item = u32> + '_ {
         self.steps.iter().flat_map(move |s| {
             core::iter::repeat_n(self.segment(s.segment), s.repeat as usize)
                 .flatten()
                 .copied()
+        })
+    }
+}
+
+/// A compiled program's shape without its buffers ([`Program::parts`]); [`Self::view`]
+/// puts it back over the word and step buffers it was compiled into. Cost: 80 bytes, `Copy`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProgramParts {
+    words_len: usize,
+    spans: [(u32, u32); SEGMENTS],
+    steps_len: usize,
+    tick_ps: u32,
+    outputs: u8,
+    binning: u16,
+    exposure_us: u32,
+}
+
+impl ProgramParts {
+    /// The program over `words` and `steps` (the buffers given to [`compile`], unchanged
+    /// since); `None` when they are shorter than the program.
+    pub fn view<'w, 's>(&self, words: &'w [u32], steps: &'s [Step]) -> Option<Program<'w, 's>> {
+        Some(Program {
+            words: words.get(..self.words_len)?,
+            spans: self.spans,
+            steps: steps.get(..self.steps_len)?,
+            tick_ps: self.tick_ps,
+            outputs: self.outputs,
+            binning: self.binning,
+            exposure_us: self.exposure_us,
         })
     }
 }
@@ -426,4 +469,38 @@ pub fn compile<'w, 's>(
         binning: b,
         exposure_us: plan.exposure_us(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::ReadoutGeometry;
+    use crate::sequencer::{Binning, Limits, Timing};
+    use crate::tracker::ReadoutRequest;
+
+    #[test]
+    fn parts_view_gives_back_the_same_program() {
+        let plan = ReadoutPlan::new(
+            ReadoutGeometry::CCD47_20_DUAL,
+            ReadoutRequest::FullFrame,
+            Binning::X1,
+            1000,
+        );
+        let ticks = Timing::at_pixel_rate(1_000_000).validate(&Limits::CCD47_20);
+        assert!(plan.is_ok() && ticks.is_ok());
+        let (Ok(plan), Ok(ticks)) = (plan, ticks) else {
+            return;
+        };
+        let mut words = [0u32; 4096];
+        let mut steps = [Step::EMPTY; 5120];
+        let compiled = compile(&plan, &ticks, &PinMap::IN_ORDER, &mut words, &mut steps);
+        assert!(compiled.is_ok());
+        let Ok(parts) = compiled.map(|p| p.parts()) else {
+            return;
+        };
+        let again = parts.view(&words, &steps);
+        assert!(again.is_some_and(|p| p.parts() == parts && p.steps().len() > 1000));
+        // Buffers shorter than the program give nothing.
+        assert!(parts.view(&words[..10], &steps).is_none());
+    }
 }

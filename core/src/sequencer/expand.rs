@@ -3,7 +3,8 @@
 //! to the next within one tick, so the CPU writes the words of the program, in play order,
 //! into the half of the ring the DMA has just played; the cursor remembers where it stopped
 //! (step, repeat, word). Cost: one word copy per tick played (a tick of 125 ns at 1 MHz
-//! pixels is 60 core cycles of the 480 MHz M7).
+//! pixels is 60 core cycles of the 480 MHz M7); 6.0 instructions a word on QEMU's M7 for a
+//! 30-window tracking frame (`cargo m7-bench`, `sequencer_feed_words`).
 
 use super::compile::Program;
 
@@ -33,24 +34,45 @@ impl Cursor {
                 break;
             };
             let seg = program.segment(step.segment);
-            if self.repeat >= step.repeat || seg.is_empty() {
+            if self.repeat >= step.repeat || seg.is_empty() || self.word >= seg.len() {
                 self.step += 1;
                 self.repeat = 0;
                 self.word = 0;
                 continue;
             }
-            let src = seg.get(self.word..).unwrap_or(&[]);
+            let len = seg.len();
+            // Words left in the step: the rest of this repeat and the repeats after it.
+            let left =
+                (len - self.word) as u64 + u64::from(step.repeat - self.repeat - 1) * len as u64;
             let dst = out.get_mut(n..).unwrap_or(&mut []);
-            let k = src.len().min(dst.len());
-            if let (Some(d), Some(s)) = (dst.get_mut(..k), src.get(..k)) {
-                d.copy_from_slice(s);
+            let k = dst.len().min(usize::try_from(left).unwrap_or(usize::MAX));
+            let Some((dst, _)) = dst.split_at_mut_checked(k) else {
+                break;
+            };
+            // The rest of the current repeat, then whole repeats and the start of one
+            // (segments are 1 to ~320 words, repeated up to thousands of times).
+            let head = seg.get(self.word..).unwrap_or(&[]);
+            let (first, rest) = dst
+                .split_at_mut_checked(head.len().min(dst.len()))
+                .unwrap_or((&mut [], &mut []));
+            for (d, s) in first.iter_mut().zip(head) {
+                *d = *s;
+            }
+            // Whole repeats: one copy of the segment, then the written part copied after
+            // itself (memmove, doubling), so a short segment costs what a long one does.
+            for (d, s) in rest.iter_mut().zip(seg) {
+                *d = *s;
+            }
+            let mut filled = len.min(rest.len());
+            while filled < rest.len() {
+                let c = filled.min(rest.len() - filled);
+                rest.copy_within(0..c, filled);
+                filled += c;
             }
             n += k;
-            self.word += k;
-            if self.word >= seg.len() {
-                self.word = 0;
-                self.repeat += 1;
-            }
+            let pos = self.word + k;
+            self.repeat += u32::try_from(pos / len).unwrap_or(u32::MAX);
+            self.word = pos % len;
         }
         n
     }

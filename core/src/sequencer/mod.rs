@@ -43,7 +43,9 @@ pub mod plan;
 pub mod timing;
 
 pub use check::{SequenceError, check_program};
-pub use compile::{CompileError, Program, REST, SEGMENTS, SegmentId, Step, compile, rest};
+pub use compile::{
+    CompileError, Program, ProgramParts, REST, SEGMENTS, SegmentId, Step, compile, rest,
+};
 pub use cost::Cost;
 pub use expand::Cursor;
 pub use lines::{Line, LineSet, Phases, PinMap, PinMapError};

@@ -27,6 +27,7 @@ mod ident;
 mod inputs;
 mod line_path;
 mod scan;
+mod sequencer;
 mod track;
 mod tracker;
 mod window;
@@ -168,6 +169,7 @@ fn run(out: &mut Out) -> Result<(), &'static str> {
         &curve,
         &mut rng,
     )?;
+    sequencer::run(out, &bench)?;
     // Last, so that its draws do not change the other stages' inputs.
     tracker::run(out, &bench, &table, &mut rng)?;
     // Its own generator: the identification fields do not move the other stages' inputs.

@@ -1,0 +1,83 @@
+//! Stages `sequencer_compile` and `sequencer_feed`, per tracking frame of 30 windows of
+//! 11 x 11 at 1 MHz pixels through both outputs (the board's plan): what the board's
+//! sequencer costs the M7 besides the tracker. `sequencer_compile`: the plan and the
+//! compiler into the board's table sizes (thread mode, once a frame); `sequencer_feed`:
+//! the feeder's work for the frame, every word copied out in 256-word chunks
+//! (`Cursor::fill`, as into the DMA ring) and the line jobs walked (`LineJobs`, with the
+//! look-ahead that marks the last line). The DMA ring's own waits are not counted.
+
+use crate::harness::{Bench, Out};
+use crate::inputs::G;
+use startrack_core::sequencer::{
+    Binning, Cost, Cursor, Limits, LineJobs, PinMap, ReadoutPlan, Step, Timing, compile,
+};
+use startrack_core::tracker::ReadoutRequest;
+use startrack_core::window::Rect;
+
+/// Windows of the tracking frame.
+const WINDOWS: usize = 30;
+
+pub fn run(out: &mut Out, bench: &Bench) -> Result<(), &'static str> {
+    let mut rects = [Rect {
+        x0: 0,
+        y0: 0,
+        width: 11,
+        height: 11,
+    }; WINDOWS];
+    for (i, r) in rects.iter_mut().enumerate() {
+        let i = i as u16;
+        r.x0 = 20 + 33 * i;
+        r.y0 = 10 + 33 * i;
+    }
+    let ticks = Timing::at_pixel_rate(1_000_000)
+        .validate(&Limits::CCD47_20)
+        .map_err(|_| "sequencer: timing refused")?;
+    let mut words = [0u32; 1024];
+    let mut steps = [Step::EMPTY; 4096];
+    let mut parts = None;
+    let t_compile = bench.measure(|| {
+        let plan = ReadoutPlan::new(G, ReadoutRequest::Windows(&rects), Binning::X1, 0);
+        parts = plan.ok().and_then(|plan| {
+            compile(&plan, &ticks, &PinMap::IN_ORDER, &mut words, &mut steps)
+                .ok()
+                .map(|p| p.parts())
+        });
+    });
+    let parts = parts.ok_or("sequencer: 30 windows do not compile")?;
+    let program = parts
+        .view(&words, &steps)
+        .ok_or("sequencer: tables shorter than the program")?;
+    let mut chunk = [0u32; 256];
+    let (mut copied, mut lines, mut last) = (0usize, 0u32, false);
+    let t_words = bench.measure(|| {
+        let mut cursor = Cursor::START;
+        loop {
+            let n = cursor.fill(&program, &mut chunk);
+            copied += n;
+            if n < chunk.len() {
+                break;
+            }
+        }
+    });
+    let t_jobs = bench.measure(|| {
+        let mut jobs = LineJobs::new(&program).peekable();
+        while let Some(job) = jobs.next() {
+            lines += u32::from(job.rows);
+            last = jobs.peek().is_none();
+        }
+    });
+    if lines != (WINDOWS * 11) as u32 {
+        return Err("sequencer: not every line of the frame");
+    }
+    if !last {
+        return Err("sequencer: no last line");
+    }
+    let total: u64 = Cost::of(&program).ticks_by_segment.iter().sum();
+    if copied as u64 != total {
+        return Err("sequencer: not every word of the frame");
+    }
+    bench.row(out, "sequencer_compile", "frame_30_windows", t_compile, 1);
+    bench.row(out, "sequencer_feed_words", "frame_30_windows", t_words, 1);
+    bench.row(out, "sequencer_feed_jobs", "frame_30_windows", t_jobs, 1);
+    Ok(())
+}
