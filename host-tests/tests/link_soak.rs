@@ -32,6 +32,7 @@ fn random_commands_through_noise_keep_the_tracker_consistent() {
         link_noise: 1e-4,
         max_frames: None,
         stop: Some(stop.clone()),
+        flash: None,
     };
     let (tx, rx) = std::sync::mpsc::channel();
     let server = std::thread::spawn(move || {
