@@ -21,10 +21,7 @@ use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
-use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
-use startrack_core::link::{
-    LinkService, NoWindows, TableInfo, TableUpload, Targets, UploadRefusal,
-};
+use startrack_core::link::{LinkService, NoWindows, TableUpload, Targets};
 use startrack_core::tracker::{
     Event, FrameSummary, LineSummary, StarRecord, TelemetrySink, Tracker,
 };
@@ -117,50 +114,6 @@ pub fn serve<const N: usize>(
         }
         // The room was checked; a short write cannot happen with one writer.
         let _ = TX.try_write(buf.get(..n).unwrap_or_default());
-    }
-}
-
-/// The table store until the flash slots are bound: the table checked at start-up, read
-/// only. Every upload is refused with [`UploadRefusal::Storage`].
-pub struct ReadOnlyTables {
-    /// The start-up table, if any.
-    pub active: Option<TableInfo>,
-}
-
-impl ReadOnlyTables {
-    /// The store of a start-up table of `len_bytes` bytes (CRC-32 not computed: 0).
-    pub const fn new(len_bytes: Option<u32>) -> Self {
-        Self {
-            active: match len_bytes {
-                Some(len_bytes) => Some(TableInfo {
-                    kind: TABLE_KIND_CALIBRATION,
-                    len_bytes,
-                    crc32: 0,
-                    sequence: 0,
-                }),
-                None => None,
-            },
-        }
-    }
-}
-
-impl TableUpload for ReadOnlyTables {
-    fn begin(&mut self, _kind: u8, _total_len: u32, _crc32: u32) -> Result<(), UploadRefusal> {
-        Err(UploadRefusal::Storage)
-    }
-
-    fn chunk(&mut self, _offset: u32, _data: &[u8]) -> Result<(), UploadRefusal> {
-        Err(UploadRefusal::NotStarted)
-    }
-
-    fn commit(&mut self) -> Result<TableInfo, UploadRefusal> {
-        Err(UploadRefusal::NotStarted)
-    }
-
-    fn abort(&mut self) {}
-
-    fn active(&self, kind: u8) -> Option<TableInfo> {
-        self.active.filter(|i| i.kind == kind)
     }
 }
 
