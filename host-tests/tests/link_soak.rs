@@ -233,6 +233,10 @@ fn flash_store_soak_with_power_cuts_keeps_a_committed_table() {
         let l = h.link;
         assert_eq!(l.accepted + l.rejected, l.packets, "step {step}: {l:?}");
         assert_eq!(h.table, Some(in_force), "step {step}: the table in force");
+        if step % 100 == 0 {
+            // Progress of a long run (frames of the boots before this one).
+            eprintln!("flash soak: step {step}, {uploads} uploads, {cuts} cuts, {frames} frames");
+        }
     }
     b.stop.store(true, Ordering::Relaxed);
     let report = b.server.join().expect("server").expect("served");
