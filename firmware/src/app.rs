@@ -8,7 +8,7 @@
 //! | lines | [`ChannelLines`]: the request to the sequencer, the readout task's DMA'd line buffers back ([`crate::lines`]) |
 //! | clock | embassy-time's `Instant` |
 //! | temperature | [`BoardThermometer`]: the CCD board's sensor (not wired yet), else the MCU's ([`crate::mcu_temp`]) |
-//! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none |
+//! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none; uploads through the link go to the flash store ([`crate::flash_store::with_link_tables`]) and are used from the next start |
 //! | telemetry | the defmt log ([`crate::telemetry`]) |
 //!
 //! After every frame the task marks the watchdog's progress ([`crate::watchdog`]) and adds
@@ -204,9 +204,7 @@ pub async fn tracker_task(
     };
     let mut source = ChannelLines::new(EXPOSURE_MS);
     let mut clock = BoardClock;
-    let mut store = crate::link::ReadOnlyTables::new(
-        table.map(|t| u32::try_from(t.len_bytes()).unwrap_or(u32::MAX)),
-    );
+    let mut store = crate::flash_store::HeldTables::new();
     let mut tables = FixedTable(table);
     let mut log = DefmtTelemetry;
     let Some(link) = crate::link::SERVICE
@@ -220,7 +218,9 @@ pub async fn tracker_task(
     // thermometer), for housekeeping.
     link.set_setup_faults(safe_state::setup_faults().bits());
     loop {
-        crate::link::serve(link, &mut tracker, &mut store);
+        crate::flash_store::with_link_tables(&mut store, |tables| {
+            crate::link::serve(link, &mut tracker, tables);
+        });
         if link.reset_requested() {
             // Let the transmit task send the acceptance, then reset.
             embassy_time::Timer::after_millis(50).await;

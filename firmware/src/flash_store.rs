@@ -10,29 +10,41 @@
 //! - [`mount`] mounts the store at start-up; [`load_calibration`] copies the calibration
 //!   table in force into [`TABLE_RAM_B`] bytes of RAM (checking its CRC again) and has the
 //!   core parse it there.
-//! - [`erase_pending`] is the erase step of an upload for the task that owns the store (the
-//!   link's, when it is bound): never the frame loop.
+//! - [`erase_pending`] is the erase step of an upload, run by [`erase_task`]: never the
+//!   frame loop.
+//! - The link's uploads: the mounted store is shared ([`share`], [`SHARED`], an embassy-sync
+//!   mutex) between the tracker task, which serves the link between frames through the
+//!   core's [`FlashTables`] ([`with_link_tables`]), and [`erase_task`], which erases the
+//!   slot an accepted `begin` targets (woken by [`ERASE`]). The tracker task only ever
+//!   *tries* the lock: while an erase holds it (1-2 s a sector), the link is served by
+//!   [`HeldTables`] (uploads refused "busy", the table in force reported from the last
+//!   round) and frames keep running.
 //!
 //! Why a RAM copy: while a sector of bank 2 is erased (1-2 s) or programmed, reads of bank 2
 //! wait for the operation's end (RM0433, flash read-while-write is only across banks). The
 //! tracker reads its table for every calibrated pixel, so a table read in place from bank 2
 //! would stall the frame loop during an upload. Read from RAM, it never touches the flash.
-//! A newly committed table is in force in flash at once and in the tracker from the next
-//! start (a commanded reset): swapping the RAM copy under a running tracker would need a
-//! second buffer.
+//! A newly committed table is in force in flash at once (housekeeping and the table report
+//! show it) and in the tracker from the next start: the ground commits, then commands a
+//! reset. Swapping the RAM copy under a running tracker would need a second 192 KB buffer.
 
 use crate::lines::GEOMETRY;
 use embassy_stm32::flash::{Async, Error as DriverError, FLASH_BASE, Flash};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::mutex::Mutex;
+use embassy_sync::signal::Signal;
 use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
+use startrack_core::link::{FlashTables, TableInfo, TableUpload, UploadRefusal};
 use startrack_core::store::{
     EraseProgress, FlashStore, H743_BANK_B, H743_BANK2, H743_BANK2_ADDRESS, H743_PROGRAM_UNIT_B,
     H743_SECTOR_B, StoreError, TableKind,
 };
 use startrack_core::table::{CalibTable, TableError};
-use static_cell::{ConstStaticCell, StaticCell};
+use static_cell::ConstStaticCell;
 
 /// Bank 2's offset in embassy's flash offsets (from `FLASH_BASE`, 0x0800_0000).
 const BANK2_OFFSET: u32 = H743_BANK2_ADDRESS - FLASH_BASE as u32;
@@ -48,8 +60,12 @@ static TABLE_RAM: ConstStaticCell<[u8; TABLE_RAM_B]> = ConstStaticCell::new([0; 
 /// The store on this board.
 pub type Store = FlashStore<Bank2>;
 
-/// Where the mounted store is kept for its owner (the link's upload handling).
-pub static STORE: StaticCell<Store> = StaticCell::new();
+/// The mounted store, shared by the tracker task (the link's uploads, between frames) and
+/// [`erase_task`]; `None` when bank 2 could not be mounted.
+pub static SHARED: Mutex<CriticalSectionRawMutex, Option<Store>> = Mutex::new(None);
+
+/// Wakes [`erase_task`]: an upload's slot waits for its erase.
+pub static ERASE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 /// Flash bank 2 as a NOR flash device (offsets from 0x0810_0000).
 pub struct Bank2 {
@@ -256,10 +272,6 @@ fn load(store: &mut Store) -> Result<CalibTable<'static>, LoadError> {
 
 /// The calibration table's own checks for [`FlashStore::commit_checked`]: the core parses
 /// the uploaded table where it lies in bank 2 and its geometry must be this firmware's.
-#[allow(
-    dead_code,
-    reason = "called by the link's upload handling once it is bound"
-)]
 pub fn calibration_ok(_bank: &mut Bank2, offset_b: u32, len_b: u32) -> bool {
     if offset_b
         .checked_add(len_b)
@@ -279,10 +291,6 @@ pub fn calibration_ok(_bank: &mut Bank2, offset_b: u32, len_b: u32) -> bool {
 /// The erase step of an upload, for the task that owns the store: erases the next sector of
 /// the target slot with the async driver (1-2 s in which this task waits and the others,
 /// the frame loop among them, run), then has the store check it blank.
-#[allow(
-    dead_code,
-    reason = "called by the link's upload handling once it is bound"
-)]
 pub async fn erase_pending(store: &mut Store) -> Result<EraseProgress, StoreError> {
     let Some((from, len)) = store.pending_erase() else {
         return match store.upload_status() {
@@ -296,4 +304,112 @@ pub async fn erase_pending(store: &mut Store) -> Result<EraseProgress, StoreErro
     // A failed erase leaves the sector not blank: the check below refuses it and drops the
     // upload; the table in force is untouched either way.
     store.confirm_erased()
+}
+
+/// Hands the mounted store to [`SHARED`] (at start-up, before the tasks that use it run).
+pub fn share(store: Store) {
+    match SHARED.try_lock() {
+        Ok(mut slot) => *slot = Some(store),
+        Err(_) => defmt::error!("store: shared slot locked at start-up; uploads refused"),
+    }
+}
+
+/// The link's table store for a round when [`SHARED`] is held by an erase (or there is no
+/// store): every upload step is refused with `refusal`, the table in force is the one the
+/// last round saw, and an abort is kept for the next round that holds the store.
+pub struct HeldTables {
+    /// The calibration table in force at the last round that held the store.
+    pub active: Option<TableInfo>,
+    /// What upload steps get: `Busy` while erasing, `Storage` without a store.
+    pub refusal: UploadRefusal,
+    /// An abort to apply when the store is next held.
+    pub abort_pending: bool,
+}
+
+impl HeldTables {
+    /// Before the first round.
+    pub const fn new() -> Self {
+        Self {
+            active: None,
+            refusal: UploadRefusal::Storage,
+            abort_pending: false,
+        }
+    }
+}
+
+impl TableUpload for HeldTables {
+    fn begin(&mut self, _kind: u8, _total_len: u32, _crc32: u32) -> Result<(), UploadRefusal> {
+        Err(self.refusal)
+    }
+
+    fn chunk(&mut self, _offset: u32, _data: &[u8]) -> Result<(), UploadRefusal> {
+        Err(self.refusal)
+    }
+
+    fn commit(&mut self) -> Result<TableInfo, UploadRefusal> {
+        Err(self.refusal)
+    }
+
+    fn abort(&mut self) {
+        self.abort_pending = true;
+    }
+
+    fn active(&self, kind: u8) -> Option<TableInfo> {
+        self.active.filter(|i| i.kind == kind)
+    }
+}
+
+/// Runs `f` with the link's table store for one round, never waiting: the flash store
+/// through the core's [`FlashTables`] (commit runs [`calibration_ok`]) when [`SHARED`] is
+/// free, else `held` (refusing "busy" while [`erase_task`] erases). Afterwards `held` knows
+/// the table in force, and [`ERASE`] is signalled if an accepted `begin` left a slot to
+/// erase.
+pub fn with_link_tables<R>(held: &mut HeldTables, f: impl FnOnce(&mut dyn TableUpload) -> R) -> R {
+    let Ok(mut guard) = SHARED.try_lock() else {
+        held.refusal = UploadRefusal::Busy;
+        return f(held);
+    };
+    let Some(store) = guard.as_mut() else {
+        held.refusal = UploadRefusal::Storage;
+        return f(held);
+    };
+    let mut tables = FlashTables::new(store, calibration_ok as fn(&mut Bank2, u32, u32) -> bool);
+    if core::mem::take(&mut held.abort_pending) {
+        tables.abort();
+    }
+    let r = f(&mut tables);
+    held.active = tables.active(TABLE_KIND_CALIBRATION);
+    if tables.store().pending_erase().is_some() {
+        ERASE.signal(());
+    }
+    r
+}
+
+/// The erase task: when [`ERASE`] fires, erases the upload's slot sector by sector
+/// ([`erase_pending`], the async driver: the executor runs the frame loop meanwhile),
+/// holding [`SHARED`] for one sector at a time. A failed erase drops the upload (logged);
+/// the ground then sees "no upload begun" and starts again.
+#[embassy_executor::task]
+pub async fn erase_task() {
+    loop {
+        ERASE.wait().await;
+        loop {
+            let mut guard = SHARED.lock().await;
+            let Some(store) = guard.as_mut() else { break };
+            if store.pending_erase().is_none() {
+                break;
+            }
+            match erase_pending(store).await {
+                Ok(EraseProgress::Done) => {
+                    defmt::info!("store: upload slot erased");
+                    break;
+                }
+                Ok(EraseProgress::Remaining(_)) => {}
+                Err(e) => {
+                    defmt::error!("store: erase failed, upload dropped: {}", e);
+                    break;
+                }
+            }
+        }
+    }
 }

@@ -21,10 +21,7 @@ use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
-use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
-use startrack_core::link::{
-    LinkService, NoWindows, TableInfo, TableUpload, Targets, UploadRefusal,
-};
+use startrack_core::link::{LinkService, NoWindows, TableUpload, Targets};
 use startrack_core::tracker::{
     Event, FrameSummary, LineSummary, StarRecord, TelemetrySink, Tracker,
 };
@@ -126,13 +123,15 @@ pub fn standby_service(
 }
 
 /// One link round in the safe standby (no tracker): received bytes executed with
-/// [`LinkService::receive_standby`], telemetry moved into [`TX`]; a reset command resets.
-pub async fn serve_standby(link: &mut LinkService) {
+/// [`LinkService::receive_standby`] against the flash store (through `held` while an erase
+/// holds it, as between frames), telemetry moved into [`TX`]; a reset command resets.
+pub async fn serve_standby(link: &mut LinkService, held: &mut crate::flash_store::HeldTables) {
     let mut buf = [0u8; 256];
-    let mut tables = ReadOnlyTables::new(None);
     link.set_time(embassy_time::Instant::now().as_micros());
     while let Ok(n) = RX.try_read(&mut buf) {
-        link.receive_standby(buf.get(..n).unwrap_or_default(), &mut tables);
+        crate::flash_store::with_link_tables(held, |tables| {
+            link.receive_standby(buf.get(..n).unwrap_or_default(), tables);
+        });
     }
     send_queued(link, &mut buf);
     if link.reset_requested() {
@@ -152,50 +151,6 @@ fn send_queued(link: &mut LinkService, buf: &mut [u8]) {
         }
         // The room was checked; a short write cannot happen with one writer.
         let _ = TX.try_write(buf.get(..n).unwrap_or_default());
-    }
-}
-
-/// The table store until the flash slots are bound: the table checked at start-up, read
-/// only. Every upload is refused with [`UploadRefusal::Storage`].
-pub struct ReadOnlyTables {
-    /// The start-up table, if any.
-    pub active: Option<TableInfo>,
-}
-
-impl ReadOnlyTables {
-    /// The store of a start-up table of `len_bytes` bytes (CRC-32 not computed: 0).
-    pub const fn new(len_bytes: Option<u32>) -> Self {
-        Self {
-            active: match len_bytes {
-                Some(len_bytes) => Some(TableInfo {
-                    kind: TABLE_KIND_CALIBRATION,
-                    len_bytes,
-                    crc32: 0,
-                    sequence: 0,
-                }),
-                None => None,
-            },
-        }
-    }
-}
-
-impl TableUpload for ReadOnlyTables {
-    fn begin(&mut self, _kind: u8, _total_len: u32, _crc32: u32) -> Result<(), UploadRefusal> {
-        Err(UploadRefusal::Storage)
-    }
-
-    fn chunk(&mut self, _offset: u32, _data: &[u8]) -> Result<(), UploadRefusal> {
-        Err(UploadRefusal::NotStarted)
-    }
-
-    fn commit(&mut self) -> Result<TableInfo, UploadRefusal> {
-        Err(UploadRefusal::NotStarted)
-    }
-
-    fn abort(&mut self) {}
-
-    fn active(&self, kind: u8) -> Option<TableInfo> {
-        self.active.filter(|i| i.kind == kind)
     }
 }
 

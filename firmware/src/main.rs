@@ -174,10 +174,9 @@ async fn main(spawner: Spawner) {
                 h.calibration = calibration;
                 h.catalog = catalog;
             });
-            // The store is kept for its owner, the link's upload handling (which runs the
-            // erase with `flash_store::erase_pending`); until it is bound, nothing writes
-            // the flash.
-            let _store: &'static mut flash_store::Store = flash_store::STORE.init(store);
+            // Shared by the tracker task (the link's uploads) and the erase task.
+            flash_store::share(store);
+            spawn_or_log(spawner, "store erase", flash_store::erase_task());
             table.ok()
         }
         Err(e) => {

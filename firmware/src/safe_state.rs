@@ -110,12 +110,13 @@ pub async fn standby_forever(faults: SetupFaults) -> ! {
     update_health(|h| h.setup_faults |= faults);
     defmt::error!("safe standby: set-up faults {}", faults);
     let mut link = crate::link::standby_service(faults);
+    let mut held = crate::flash_store::HeldTables::new();
     let per_log = STANDBY_LOG_EVERY.as_ticks() / STANDBY_SERVE_EVERY.as_ticks().max(1);
     let mut ticks = 0u64;
     loop {
         Timer::after(STANDBY_SERVE_EVERY).await;
         if let Some(link) = link.as_deref_mut() {
-            crate::link::serve_standby(link).await;
+            crate::link::serve_standby(link, &mut held).await;
         }
         watchdog::progress();
         ticks = ticks.wrapping_add(1);

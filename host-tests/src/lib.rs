@@ -8,6 +8,7 @@ pub mod cli;
 pub mod demo;
 pub mod figures;
 pub mod fits;
+pub mod flash_home;
 pub mod flash_model;
 pub mod ground;
 pub mod home;

@@ -269,6 +269,58 @@ pub struct ServeConfig {
     pub max_frames: Option<u32>,
     /// Stop when this is set (checked between frames and in the link phase).
     pub stop: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Keep the tables in the flash store over the flash model in this file (`None`: in
+    /// memory).
+    pub flash: Option<FlashConfig>,
+}
+
+/// The SIL's flash table store ([`crate::flash_home`]).
+#[derive(Clone, Debug)]
+pub struct FlashConfig {
+    /// The file holding the flash (created erased, with the SIL's table, if absent).
+    pub path: std::path::PathBuf,
+    /// Cut the power during the N-th flash step (unit program or sector erase) after
+    /// start-up, N from 1: the server then stops, the file holding the flash as cut.
+    pub power_cut_at_write: Option<u64>,
+}
+
+/// The tables the SIL serves: in memory, or in the flash store.
+trait SilTables: TableUpload + TableStore<'static> {
+    /// The owner's erase step, between frames.
+    fn service(&mut self) -> Result<(), String> {
+        Ok(())
+    }
+    /// Keeps what the store holds (the flash file).
+    fn persist(&mut self) -> Result<(), String> {
+        Ok(())
+    }
+    /// A reset of the tracker: the store is mounted again.
+    fn reboot(&mut self) -> Result<(), String> {
+        Ok(())
+    }
+    /// Whether the power was cut.
+    fn power_cut(&self) -> bool {
+        false
+    }
+}
+
+impl SilTables for MemoryTables {}
+
+impl SilTables for crate::flash_home::FlashHome {
+    fn service(&mut self) -> Result<(), String> {
+        // An erase that fails drops the upload (the ground then sees "no upload begun").
+        let _ = crate::flash_home::FlashHome::service(self);
+        Ok(())
+    }
+    fn persist(&mut self) -> Result<(), String> {
+        crate::flash_home::FlashHome::persist(self).map_err(|e| format!("flash file: {e}"))
+    }
+    fn reboot(&mut self) -> Result<(), String> {
+        crate::flash_home::FlashHome::reboot(self)
+    }
+    fn power_cut(&self) -> bool {
+        crate::flash_home::FlashHome::power_cut(self)
+    }
 }
 
 /// Counts of a [`serve`] run.
@@ -282,6 +334,8 @@ pub struct ServeReport {
     pub rx_bytes: u64,
     /// Bytes sent.
     pub tx_bytes: u64,
+    /// The run ended with a power cut of the flash (`--power-cut-at-write`).
+    pub power_cut: bool,
 }
 
 /// One connected ground station.
@@ -322,8 +376,21 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
         ..SensorParams::default()
     };
     let base = sil::scene(sc, &params);
-    let table = sil::truth_table(sc, &params)?;
-    let mut tables = MemoryTables::new(params.geometry, Some(table));
+    let mut tables: Box<dyn SilTables> = match &config.flash {
+        None => Box::new(MemoryTables::new(
+            params.geometry,
+            Some(sil::truth_table(sc, &params)?),
+        )),
+        Some(f) => {
+            let table = crate::flash_home::flash_table(sc, &params)?;
+            let mut home =
+                crate::flash_home::FlashHome::open(&f.path, params.geometry, Some(&table))?;
+            if let Some(n) = f.power_cut_at_write {
+                home.cut_power_at(n);
+            }
+            Box::new(home)
+        }
+    };
     let mut windows = SimWindows::new(params.clone());
     let mut noise = rand_chacha::ChaCha8Rng::seed_from_u64(sc.seed ^ 0x4e4f_4953);
     let mut report = ServeReport::default();
@@ -389,10 +456,12 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                             link.set_time(start.elapsed().as_micros() as u64);
                             let mut targets = Targets {
                                 tracker: &mut tracker,
-                                tables: &mut tables,
+                                tables: &mut *tables,
                                 windows: &mut windows,
                             };
                             link.receive(bytes, &mut targets);
+                            // The erase an accepted `begin` asks for, before the next bytes.
+                            tables.service()?;
                         }
                         Err(e)
                             if matches!(
@@ -405,13 +474,21 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                 {
                     let mut targets = Targets {
                         tracker: &mut tracker,
-                        tables: &mut tables,
+                        tables: &mut *tables,
                         windows: &mut windows,
                     };
                     link.poll(&mut targets);
                 }
+                tables.service()?;
+                tables.persist()?;
+                if tables.power_cut() {
+                    // The board is off: nothing more is sent, the flash stays as cut.
+                    report.power_cut = true;
+                    return Ok(report);
+                }
                 drain(&mut link, &mut client, &mut report);
                 if link.reset_requested() {
+                    tables.reboot()?;
                     report.resets += 1;
                     frame = 0;
                     continue 'boot;
@@ -433,11 +510,11 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             let mut ports = Ports {
                 clock: &mut clock,
                 thermometer: &mut thermometer,
-                tables: &mut tables,
+                tables: &mut *tables,
                 telemetry: &mut *link,
             };
             let Ok(_) = block_on(tracker.run_frame(&mut source, &mut ports));
-            link.end_of_frame(&tables);
+            link.end_of_frame(&*tables);
             drain(&mut link, &mut client, &mut report);
             report.frames += 1;
             frame += 1;

@@ -257,6 +257,16 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
 /// The sensor's true calibration table (per pixel) as the SIL starts with it, with the
 /// pixel-phase curves `config` asks for.
 pub fn truth_table(config: &SilConfig, params: &SensorParams) -> Result<Vec<u8>, String> {
+    truth_table_tiled(config, params, 0)
+}
+
+/// [`truth_table`] with its maps averaged over square tiles of `2^tile_log2` pixels (the
+/// form that fits a flash slot).
+pub fn truth_table_tiled(
+    config: &SilConfig,
+    params: &SensorParams,
+    tile_log2: u8,
+) -> Result<Vec<u8>, String> {
     let curves = if config.pixcorr_curves {
         let spec = |background| CurveSpec {
             a_px: f64::from(config.tracker.psf_a_px),
@@ -274,7 +284,7 @@ pub fn truth_table(config: &SilConfig, params: &SensorParams) -> Result<Vec<u8>,
         Vec::new()
     };
     Simulator::new(params.clone(), Vec::new())
-        .truth_table_with_curves(TruthSections::ALL, 0, &curves)
+        .truth_table_with_curves(TruthSections::ALL, tile_log2, &curves)
         .map_err(|e| e.to_string())
 }
 

@@ -33,6 +33,7 @@ impl Server {
             link_noise,
             max_frames: Some(200),
             stop: Some(stop.clone()),
+            flash: None,
         };
         let (tx, rx) = mpsc::channel();
         let handle = std::thread::spawn(move || {

@@ -3,12 +3,21 @@
 //! answers, that a table stays in force and only changes by a committed upload, and that the
 //! counters agree. `LINK_SOAK_STEPS` sets the length (default 12; the long run:
 //! `LINK_SOAK_STEPS=2000 cargo test --release -p startrack-host --test link_soak`).
+//!
+//! The second soak keeps the tables in the flash store over the flash model in a file, and
+//! every boot arms a power cut at a random flash step: an upload it hits stops the SIL, which
+//! is restarted with the same file (a reboot); the table in force must then be the last one
+//! committed (or the one whose upload was cut, had its header been written), and the next
+//! upload succeeds. Resets remount the store. `LINK_SOAK_STEPS` sets its length too (the
+//! long run: `LINK_SOAK_STEPS=2000 LINK_SOAK_MIN_FRAMES=10000 cargo test --release -p
+//! startrack-host --test link_soak -- --nocapture flash`, which keeps going past the steps
+//! until the SIL has run 10,000 frames).
 
 use rand::{RngExt, SeedableRng};
 use startrack_core::link::protocol as p;
 use startrack_core::tracker::Mode;
 use startrack_host::ground::{Ground, GroundError};
-use startrack_host::link_home::{CRC32, ServeConfig, serve};
+use startrack_host::link_home::{CRC32, FlashConfig, ServeConfig, ServeReport, serve};
 use startrack_host::sil::SilConfig;
 use startrack_host::sim::truth::TruthSections;
 use startrack_host::sim::{SensorParams, Simulator};
@@ -32,6 +41,7 @@ fn random_commands_through_noise_keep_the_tracker_consistent() {
         link_noise: 1e-4,
         max_frames: None,
         stop: Some(stop.clone()),
+        flash: None,
     };
     let (tx, rx) = std::sync::mpsc::channel();
     let server = std::thread::spawn(move || {
@@ -108,4 +118,131 @@ fn random_commands_through_noise_keep_the_tracker_consistent() {
         "{steps} steps, {} frames, {resets} resets, {} resumed uploads",
         report.frames, g.resumes
     );
+}
+
+/// A SIL served in a thread, on a flash file with a power cut armed.
+struct Boot {
+    server: std::thread::JoinHandle<Result<ServeReport, String>>,
+    stop: Arc<AtomicBool>,
+    ground: Ground,
+}
+
+fn boot(flash: &std::path::Path, cut_at: u64) -> Boot {
+    let stop = Arc::new(AtomicBool::new(false));
+    let config = ServeConfig {
+        sil: SilConfig {
+            stars: 6,
+            ..SilConfig::default()
+        },
+        port: 0,
+        link_noise: 1e-4,
+        max_frames: None,
+        stop: Some(stop.clone()),
+        flash: Some(FlashConfig {
+            path: flash.to_path_buf(),
+            power_cut_at_write: Some(cut_at),
+        }),
+    };
+    let (tx, rx) = std::sync::mpsc::channel();
+    let server = std::thread::spawn(move || {
+        serve(&config, &mut |p| {
+            let _ = tx.send(p);
+        })
+    });
+    let port = rx.recv_timeout(Duration::from_secs(60)).expect("port");
+    let mut ground = Ground::connect(port, Duration::from_secs(10)).expect("connect");
+    ground.retries = 5;
+    Boot {
+        server,
+        stop,
+        ground,
+    }
+}
+
+#[test]
+fn flash_store_soak_with_power_cuts_keeps_a_committed_table() {
+    let steps: u32 = std::env::var("LINK_SOAK_STEPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(12);
+    let min_frames: u32 = std::env::var("LINK_SOAK_MIN_FRAMES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let dir = tempfile::tempdir().expect("tmp");
+    let flash = dir.path().join("bank2.flash");
+    let tables: Vec<Vec<u8>> = [3u8, 4]
+        .iter()
+        .map(|&tile| {
+            Simulator::new(SensorParams::default(), Vec::new())
+                .truth_table_tiled(TruthSections::ALL, tile)
+                .expect("table")
+        })
+        .collect();
+    // Flash steps of one upload of the larger table: 2 erases, its units, the header.
+    let upload_steps = 2 + tables[0].len().div_ceil(32) as u64 + 1;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+    let mut b = boot(&flash, rng.random_range(1..=2 * upload_steps));
+    let mut in_force = b
+        .ground
+        .status()
+        .expect("status")
+        .table
+        .expect("boot table");
+    let (mut cuts, mut uploads, mut resets, mut frames, mut step) = (0, 0, 0u32, 0u32, 0u32);
+    while step < steps || frames + b.ground.status().map_or(0, |h| h.frame) < min_frames {
+        step += 1;
+        match rng.random_range(0..6) {
+            0 => {
+                b.ground.reset().expect("reset");
+                resets += 1;
+            }
+            1..=3 => {
+                let t = &tables[rng.random_range(0..tables.len())];
+                match b.ground.upload_table(t, 1024, 8) {
+                    Ok(info) => {
+                        assert_eq!(info.crc32, CRC32.checksum(t));
+                        assert!(info.sequence > in_force.sequence, "step {step}");
+                        in_force = info;
+                        uploads += 1;
+                    }
+                    Err(e) => {
+                        // Only a power cut may stop an upload here.
+                        let report = b.server.join().expect("server").expect("served");
+                        assert!(report.power_cut, "step {step}: upload failed: {e}");
+                        frames += report.frames;
+                        cuts += 1;
+                        b = boot(&flash, rng.random_range(1..=2 * upload_steps));
+                        let now = b.ground.status().expect("status after reboot").table;
+                        let now = now.expect("a table in force after the cut");
+                        let cut_one = (now.len_bytes as usize, now.crc32)
+                            == (t.len(), CRC32.checksum(t))
+                            && now.sequence > in_force.sequence;
+                        assert!(now == in_force || cut_one, "step {step}: {now:?}");
+                        in_force = now;
+                    }
+                }
+            }
+            4 => {
+                let lists = b.ground.stars(1).expect("stars");
+                assert_eq!(lists.len(), 1);
+            }
+            _ => b.ground.ping().expect("ping"),
+        }
+        let h = b.ground.status().expect("status");
+        let l = h.link;
+        assert_eq!(l.accepted + l.rejected, l.packets, "step {step}: {l:?}");
+        assert_eq!(h.table, Some(in_force), "step {step}: the table in force");
+        if step % 100 == 0 {
+            // Progress of a long run (frames of the boots before this one).
+            eprintln!("flash soak: step {step}, {uploads} uploads, {cuts} cuts, {frames} frames");
+        }
+    }
+    b.stop.store(true, Ordering::Relaxed);
+    let report = b.server.join().expect("server").expect("served");
+    frames += report.frames;
+    println!(
+        "flash soak: {step} steps, {frames} frames, {uploads} uploads, {cuts} power cuts, {resets} resets"
+    );
+    assert!(cuts + uploads > 0, "no upload ran");
 }

@@ -11,7 +11,8 @@
 //!
 //! One job a module: [`protocol`] (every number, and the table `docs/protocol.md` is made
 //! from), [`framing`], [`command`] (reading a command; its rejection reasons),
-//! [`telemetry`] (the reports' layouts), [`upload`] (the table-store port), [`service`]
+//! [`telemetry`] (the reports' layouts), [`upload`] (the table-store port),
+//! [`flash_upload`] (that port over the flash table store), [`service`]
 //! (the state that ties them together, and the tracker's telemetry port).
 //!
 //! Packets are read and written with the `spacepackets` crate (no std, no alloc): the
@@ -22,6 +23,7 @@
 //! it). Cost: see [`service`].
 
 pub mod command;
+pub mod flash_upload;
 pub mod framing;
 pub mod protocol;
 pub mod service;
@@ -29,6 +31,7 @@ pub mod telemetry;
 pub mod upload;
 
 pub use command::{Command, Rejection, WindowKind, WindowRequest};
+pub use flash_upload::{FlashTables, active_info, refusal_of};
 pub use service::{LinkService, NoWindows, Targets, TrackerControl, WindowReader};
 pub use telemetry::{FrameTotals, Housekeeping, LinkCounters};
 pub use upload::{TableInfo, TableUpload, UploadRefusal};

@@ -142,6 +142,13 @@ fn main() -> ExitCode {
             Err(e) => fail("accuracy", &e),
         },
         Command::Sil(args) if args.port.is_some() => match startrack_host::cli::sil::serve(&args) {
+            Ok(r) if r.power_cut => {
+                eprintln!(
+                    "startrack sil: power cut at flash step {} (--power-cut-at-write); the flash file holds the flash as cut",
+                    args.power_cut_at_write.unwrap_or(0)
+                );
+                ExitCode::from(startrack_host::cli::sil::POWER_CUT_EXIT_CODE)
+            }
             Ok(_) => ExitCode::SUCCESS,
             Err(e) => fail("sil", &e),
         },

@@ -46,7 +46,20 @@ pub struct SilArgs {
     /// With `--port`: probability that a received byte has a bit flipped (seeded).
     #[arg(long, default_value_t = 0.0)]
     pub link_noise: f64,
+    /// With `--port`: keep the tables in the flash store over the flash model held in FILE
+    /// (created erased, with the SIL's table, if absent); restarting with the same FILE is a
+    /// reboot.
+    #[arg(long, value_name = "FILE")]
+    pub flash: Option<PathBuf>,
+    /// With `--flash`: cut the power during the N-th flash step (unit program or sector
+    /// erase) after start-up, N from 1; the SIL then exits with code
+    /// [`POWER_CUT_EXIT_CODE`], FILE holding the flash as cut.
+    #[arg(long, value_name = "N", requires = "flash")]
+    pub power_cut_at_write: Option<u64>,
 }
+
+/// Exit code of `startrack sil --power-cut-at-write N` when the cut happened.
+pub const POWER_CUT_EXIT_CODE: u8 = 4;
 
 /// The SIL configuration of `args`.
 pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
@@ -139,7 +152,19 @@ pub fn serve(args: &SilArgs) -> Result<crate::link_home::ServeReport, CliError> 
         link_noise: args.link_noise,
         max_frames: None,
         stop: None,
+        flash: args
+            .flash
+            .clone()
+            .map(|path| crate::link_home::FlashConfig {
+                path,
+                power_cut_at_write: args.power_cut_at_write,
+            }),
     };
+    if args.power_cut_at_write == Some(0) {
+        return Err(CliError::Usage(
+            "--power-cut-at-write: N counts from 1".into(),
+        ));
+    }
     crate::link_home::serve(&config, &mut |p| {
         eprintln!("startrack sil: link on 127.0.0.1:{p}");
     })
