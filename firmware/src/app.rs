@@ -7,7 +7,7 @@
 //! |---|---|
 //! | lines | [`ChannelLines`]: the request to the sequencer, the readout task's DMA'd line buffers back ([`crate::lines`]) |
 //! | clock | embassy-time's `Instant` |
-//! | temperature | [`BoardThermometer`]: the CCD board's sensor (not wired yet), else the MCU's ([`crate::mcu_temp`]) |
+//! | temperature | [`BoardThermometer`]: the CCD board's TMP117 ([`crate::board_temp`]), else the MCU's ([`crate::mcu_temp`]) |
 //! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none; uploads through the link go to the flash store ([`crate::flash_store::with_link_tables`]) and are used from the next start |
 //! | telemetry | the defmt log ([`crate::telemetry`]) |
 //!
@@ -18,8 +18,9 @@
 //! exposure go to the CCD sequencer ([`crate::sequencer`]), which compiles and plays that
 //! frame next; only the lines its plan digitises come back.
 
+use crate::board_temp::BoardSensor;
 use crate::lines::{FILLED, FREE, GEOMETRY, LineBuf, RawLine};
-use crate::mcu_temp::{McuThermometer, NoBoardSensor};
+use crate::mcu_temp::McuThermometer;
 use crate::telemetry::DefmtTelemetry;
 use crate::{safe_state, watchdog};
 use core::convert::Infallible;
@@ -31,7 +32,7 @@ use startrack_core::tracker::{
 };
 
 /// The board's sensor temperature: the CCD board's sensor, else the MCU's.
-pub type BoardThermometer = FallbackThermometer<NoBoardSensor, McuThermometer>;
+pub type BoardThermometer = FallbackThermometer<BoardSensor, McuThermometer>;
 
 /// Stars a frame the board keeps (candidates, windows, reported stars).
 pub const MAX_STARS: usize = 32;

@@ -16,6 +16,7 @@
 #![no_main]
 
 mod app;
+mod board_temp;
 mod flash_store;
 mod lines;
 mod link;
@@ -186,12 +187,15 @@ async fn main(spawner: Spawner) {
         }
     };
 
+    // The CCD board's TMP117, else the MCU's sensor (a set-up fault housekeeping reports).
+    let board_sensor = board_temp::Tmp117::new(p.I2C1, p.PB8, p.PB9);
+    if board_sensor.is_none() {
+        faults |= SetupFaults::EXTERNAL_THERMOMETER;
+    }
     let thermometer = app::BoardThermometer::new(
-        mcu_temp::NoBoardSensor,
+        board_temp::BoardSensor(board_sensor),
         mcu_temp::McuThermometer::new(p.ADC3),
     );
-    // No CCD-board sensor is wired yet: the MCU sensor stands in (housekeeping says so).
-    faults |= SetupFaults::EXTERNAL_THERMOMETER;
 
     let mut fatal = SetupFaults::empty();
     // The DMA block (clock ring, line buffers, SPI samples) in its non-cacheable MPU region,

@@ -65,13 +65,3 @@ impl Thermometer for McuThermometer {
         Some(Kelvin::from_bits(bits))
     }
 }
-
-/// The CCD board's temperature sensor: not wired on this board yet, so it never reads and
-/// the chain falls back to the MCU sensor (housekeeping says so).
-pub struct NoBoardSensor;
-
-impl Thermometer for NoBoardSensor {
-    fn sensor_temperature_k(&mut self) -> Option<Kelvin> {
-        None
-    }
-}

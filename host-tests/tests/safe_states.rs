@@ -172,3 +172,36 @@ fn housekeeping_sums_the_frames_losses() {
         Some((7, 0x1234))
     );
 }
+
+#[test]
+fn tmp117_words_convert_to_kelvin_against_an_f64_reference() {
+    use startrack_core::safe::temperature::tmp117;
+    // The datasheet's examples (TMP117, table 7-1): 0x6400 = 200 degC, 0x0080 = 1 degC,
+    // 0xFF80 = -1 degC, 0xE480 = -55 degC.
+    for (raw, celsius) in [
+        (0x6400u16, 200.0),
+        (0x0080, 1.0),
+        (0x0000, 0.0),
+        (0xFF80, -1.0),
+        (0xE480, -55.0),
+    ] {
+        let k = tmp117::kelvin(raw).expect("a reading").to_num::<f64>();
+        assert!((k - (celsius + 273.15)).abs() < 2e-5, "{raw:#06x}: {k}");
+    }
+    // Every word: within one U16F16 step of the f64 value, or the reset value (no reading).
+    for raw in 0..=u16::MAX {
+        let got = tmp117::kelvin(raw);
+        if raw == tmp117::RESET_VALUE {
+            assert_eq!(got, None);
+            continue;
+        }
+        let want = 273.15 + f64::from(raw as i16) / 128.0;
+        let k = got.expect("every other word converts").to_num::<f64>();
+        assert!(
+            (k - want).abs() <= 1.0 / 65536.0,
+            "{raw:#06x}: {k} vs {want}"
+        );
+    }
+    assert!(tmp117::is_tmp117(0x0117) && tmp117::is_tmp117(0x1117));
+    assert!(!tmp117::is_tmp117(0x0000) && !tmp117::is_tmp117(0xFFFF));
+}

@@ -17,6 +17,46 @@ use crate::units::Kelvin;
 pub const PLAUSIBLE_K: (Kelvin, Kelvin) =
     (Kelvin::const_from_int(150), Kelvin::const_from_int(400));
 
+/// The CCD board's sensor as this design specifies it: a TI TMP117 (I2C, +-0.1 degC from
+/// -20 to 50 degC, 16-bit result) bonded to the CCD's package, read over I2C once a frame.
+/// Its register formats, so the conversion is tested on the host; the bus transfer is the
+/// board's (`firmware/src/board_temp.rs`).
+pub mod tmp117 {
+    use crate::units::Kelvin;
+
+    /// The result register (signed 16-bit, 7.8125 mdegC a count).
+    pub const REG_TEMP_RESULT: u8 = 0x00;
+    /// The device-id register; [`DEVICE_ID`] in its low 12 bits.
+    pub const REG_DEVICE_ID: u8 = 0x0F;
+    /// The TMP117's device id.
+    pub const DEVICE_ID: u16 = 0x0117;
+    /// What the result register holds after reset until the first conversion ends
+    /// (-256 degC): no reading.
+    pub const RESET_VALUE: u16 = 0x8000;
+
+    /// 273.15 K as U16F16 bits (273.15 x 65536, rounded).
+    const ZERO_CELSIUS_BITS: i64 = 17_901_158;
+
+    /// The temperature of a result-register word (big-endian on the bus), or `None` for the
+    /// reset value. Every word converts without overflow: counts of 1/128 degC are 512
+    /// U16F16 bits, so -32,767 .. 32,767 counts give 1.1 M .. 34.7 M bits (8 .. 529 K), inside
+    /// the format's 0 .. 65,536 K. Range checks against the CCD's are the caller's
+    /// ([`super::PLAUSIBLE_K`]).
+    pub fn kelvin(raw: u16) -> Option<Kelvin> {
+        if raw == RESET_VALUE {
+            return None;
+        }
+        let counts = i64::from(i16::from_ne_bytes(raw.to_ne_bytes()));
+        let bits = u32::try_from(ZERO_CELSIUS_BITS + counts * 512).ok()?;
+        Some(Kelvin::from_bits(bits))
+    }
+
+    /// Whether a device-id word names a TMP117 (the top 4 bits are its revision).
+    pub fn is_tmp117(id: u16) -> bool {
+        id & 0x0FFF == DEVICE_ID
+    }
+}
+
 /// Where the last reading came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
