@@ -108,6 +108,9 @@ impl Tm {
     }
 }
 
+/// Resumptions one table upload may take before the ground tool gives up on it.
+const MAX_RESUMES_PER_UPLOAD: u32 = 64;
+
 /// A connection to the tracker.
 pub struct Ground {
     stream: TcpStream,
@@ -397,7 +400,8 @@ impl Ground {
         chunk: usize,
         window: usize,
     ) -> Result<(), GroundError> {
-        const MAX_RESUMES: u32 = 64;
+        // The limit is this upload's (`self.resumes` counts over the connection's life).
+        let limit = self.resumes.saturating_add(MAX_RESUMES_PER_UPLOAD);
         let share = self.timeout / (self.retries + 1);
         let mut in_flight: std::collections::VecDeque<(usize, u32)> = Default::default();
         let (mut next, mut done) = (0usize, 0usize);
@@ -413,7 +417,7 @@ impl Ground {
                 Ok(t) => t,
                 Err(GroundError::Timeout(_)) => {
                     // Nothing answered: resume at the first chunk not accepted.
-                    self.resume(&mut in_flight, &mut next, done, MAX_RESUMES)?;
+                    self.resume(&mut in_flight, &mut next, done, limit)?;
                     deadline = Instant::now() + share;
                     continue;
                 }
@@ -448,7 +452,7 @@ impl Ground {
             if let Some(k) = stands {
                 done = k;
             }
-            self.resume(&mut in_flight, &mut next, done, MAX_RESUMES)?;
+            self.resume(&mut in_flight, &mut next, done, limit)?;
         }
         Ok(())
     }
@@ -458,12 +462,12 @@ impl Ground {
         in_flight: &mut std::collections::VecDeque<(usize, u32)>,
         next: &mut usize,
         done: usize,
-        max: u32,
+        limit: u32,
     ) -> Result<(), GroundError> {
         self.resumes += 1;
-        if self.resumes > max {
+        if self.resumes > limit {
             return Err(GroundError::Timeout(format!(
-                "table-chunk: the upload stalled at chunk {done} after {max} resumptions"
+                "table-chunk: the upload stalled at chunk {done} after {MAX_RESUMES_PER_UPLOAD} resumptions"
             )));
         }
         in_flight.clear();
