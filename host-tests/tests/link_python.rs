@@ -8,8 +8,8 @@ use startrack_core::link::framing::{Deframer, Pushed, encoded_len_max};
 use startrack_core::link::protocol as p;
 use startrack_core::link::{LinkService, NoWindows, Targets};
 use startrack_core::tracker::{
-    Event, FrameSummary, Mode, ModeReason, StarFlags, StarRecord, TelemetrySink, TemperatureSource,
-    Tracker, TrackerBuffers, TrackerConfig,
+    Event, FrameSummary, Mode, ModeReason, StarFlags, StarRecord, TelemetrySink, Tracker,
+    TrackerBuffers, TrackerConfig,
 };
 use startrack_host::ground::{decode_tm, frame_telecommand};
 use startrack_host::link_home::MemoryTables;
@@ -32,26 +32,12 @@ fn python_ready() -> Result<(), String> {
 
 fn summary(frame: u32, stars: u16) -> FrameSummary {
     FrameSummary {
-        frame,
-        mode: Mode::Acquisition,
         next_mode: Mode::Tracking,
-        start_us: 0,
         calibrated: true,
-        temperature_k: Default::default(),
-        temperature_source: TemperatureSource::None,
-        dark_scale_e: None,
         lines: 1033,
-        lines_refused: 0,
         stars,
         centroids: stars,
-        candidates_dropped: 0,
-        windows_dropped: 0,
-        ring_lost: 0,
-        calib_failed: 0,
-        track_windows: 0,
-        track_refused: 0,
-        track_lost: 0,
-        stars_dropped: 0,
+        ..FrameSummary::empty(frame, Mode::Acquisition, 0)
     }
 }
 

@@ -123,14 +123,9 @@ fn the_thermometer_falls_back_to_the_mcu_then_to_nothing() {
 fn housekeeping_sums_the_frames_losses() {
     let mut h = Health::new(FaultRecord::FRESH, SetupFaults::NO_TABLE);
     let s = FrameSummary {
-        frame: 0,
-        mode: Mode::Acquisition,
         next_mode: Mode::Tracking,
-        start_us: 0,
-        calibrated: false,
         temperature_k: k(173),
         temperature_source: TemperatureSource::Sensor,
-        dark_scale_e: None,
         lines: 1033,
         lines_refused: 2,
         stars: 5,
@@ -139,10 +134,9 @@ fn housekeeping_sums_the_frames_losses() {
         windows_dropped: 2,
         ring_lost: 3,
         calib_failed: 4,
-        track_windows: 0,
-        track_refused: 0,
         track_lost: 6,
         stars_dropped: 5,
+        ..FrameSummary::empty(0, Mode::Acquisition, 0)
     };
     h.on_frame(&s);
     h.on_frame(&FrameSummary {

@@ -235,7 +235,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             work: FrameWork {
                 scratch: Scratch::new(),
                 stars: StarList::new(),
-                summary: empty_summary(0, Mode::Standby, 0),
+                summary: FrameSummary::empty(0, Mode::Standby, 0),
             },
         })
     }
@@ -367,7 +367,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             calibrated: table.is_some(),
             temperature_k,
             temperature_source: source,
-            ..empty_summary(frame, to, inputs.start_us)
+            ..FrameSummary::empty(frame, to, inputs.start_us)
         };
         self.estimator = DarkScaleEstimator::new();
         self.last_line = None;
@@ -543,31 +543,6 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.work.summary.next_mode = self.modes.end(centroids, &self.config);
         telemetry.frame(&self.work.summary);
         self.work.summary
-    }
-}
-
-fn empty_summary(frame: u32, mode: Mode, start_us: u64) -> FrameSummary {
-    FrameSummary {
-        frame,
-        mode,
-        next_mode: mode,
-        start_us,
-        calibrated: false,
-        temperature_k: Kelvin::ZERO,
-        temperature_source: TemperatureSource::None,
-        dark_scale_e: None,
-        lines: 0,
-        lines_refused: 0,
-        stars: 0,
-        centroids: 0,
-        candidates_dropped: 0,
-        windows_dropped: 0,
-        ring_lost: 0,
-        calib_failed: 0,
-        track_windows: 0,
-        track_refused: 0,
-        track_lost: 0,
-        stars_dropped: 0,
     }
 }
 

@@ -262,6 +262,35 @@ pub struct FrameSummary {
     pub stars_dropped: u16,
 }
 
+impl FrameSummary {
+    /// A frame `frame` in `mode` started at `start_us` (us) with nothing measured yet:
+    /// no table, no temperature, every count zero; the next mode is `mode`.
+    pub fn empty(frame: u32, mode: Mode, start_us: u64) -> Self {
+        Self {
+            frame,
+            mode,
+            next_mode: mode,
+            start_us,
+            calibrated: false,
+            temperature_k: Kelvin::ZERO,
+            temperature_source: TemperatureSource::None,
+            dark_scale_e: None,
+            lines: 0,
+            lines_refused: 0,
+            stars: 0,
+            centroids: 0,
+            candidates_dropped: 0,
+            windows_dropped: 0,
+            ring_lost: 0,
+            calib_failed: 0,
+            track_windows: 0,
+            track_refused: 0,
+            track_lost: 0,
+            stars_dropped: 0,
+        }
+    }
+}
+
 /// What was made of one line.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
