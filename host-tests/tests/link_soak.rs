@@ -1,8 +1,11 @@
 //! A SIL soak over the link: seeded random commands (pings, modes, star lists, parameters,
 //! table uploads, resets) through a noisy link, checking after each step that the tracker
 //! answers, that a table stays in force and only changes by a committed upload, and that the
-//! counters agree. `LINK_SOAK_STEPS` sets the length (default 12; the long run:
-//! `LINK_SOAK_STEPS=2000 cargo test --release -p startrack-host --test link_soak`).
+//! counters agree. Some steps send nothing for a while, so frames run between commands.
+//! `LINK_SOAK_STEPS` sets the length (default 12) and `LINK_SOAK_MIN_FRAMES` keeps it going
+//! past the steps until the SIL has run that many frames (the long run:
+//! `LINK_SOAK_STEPS=2000 LINK_SOAK_MIN_FRAMES=10000 cargo test --release -p startrack-host
+//! --test link_soak -- --nocapture random_commands`).
 //!
 //! The second soak keeps the tables in the flash store over the flash model in a file, and
 //! every boot arms a power cut at a random flash step: an upload it hits stops the SIL, which
@@ -25,12 +28,32 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-#[test]
-fn random_commands_through_noise_keep_the_tracker_consistent() {
-    let steps: u32 = std::env::var("LINK_SOAK_STEPS")
+/// `name` from the environment, or `default`.
+fn env_u32(name: &str, default: u32) -> u32 {
+    std::env::var(name)
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(12);
+        .unwrap_or(default)
+}
+
+/// A quiet spell of the ground: nothing sent for up to two seconds, so the SIL runs frames.
+fn quiet(rng: &mut rand_chacha::ChaCha8Rng) {
+    std::thread::sleep(Duration::from_millis(rng.random_range(0..2000)));
+}
+
+/// Frames run since the last call, from the frame number a status reports (reset to 0 by a
+/// reset: counts none of the frames lost between the last status and the reset, so a total
+/// of these is at most the frames run).
+fn frames_since(last: &mut u32, frame: u32) -> u32 {
+    let ran = if frame >= *last { frame - *last } else { frame };
+    *last = frame;
+    ran
+}
+
+#[test]
+fn random_commands_through_noise_keep_the_tracker_consistent() {
+    let steps = env_u32("LINK_SOAK_STEPS", 12);
+    let min_frames = env_u32("LINK_SOAK_MIN_FRAMES", 0);
     let stop = Arc::new(AtomicBool::new(false));
     let config = ServeConfig {
         sil: SilConfig {
@@ -64,8 +87,10 @@ fn random_commands_through_noise_keep_the_tracker_consistent() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(13);
     let mut in_force = g.status().expect("status").table.expect("boot table");
     let mut resets = 0;
-    for step in 0..steps {
-        match rng.random_range(0..10) {
+    let (mut step, mut frames, mut last_frame) = (0u32, 0u32, 0u32);
+    while step < steps || frames < min_frames {
+        step += 1;
+        match rng.random_range(0..12) {
             0 => {
                 g.reset().expect("reset");
                 resets += 1;
@@ -102,6 +127,7 @@ fn random_commands_through_noise_keep_the_tracker_consistent() {
                 let lists = g.stars(1).expect("stars");
                 assert_eq!(lists.len(), 1);
             }
+            10 | 11 => quiet(&mut rng),
             _ => g.ping().expect("ping"),
         }
         let h = g.status().expect("status");
@@ -109,13 +135,17 @@ fn random_commands_through_noise_keep_the_tracker_consistent() {
         assert_eq!(l.accepted + l.rejected, l.packets, "step {step}: {l:?}");
         assert_eq!(h.table, Some(in_force), "step {step}: the table in force");
         assert!(h.totals.frames <= h.frame + 1, "step {step}: {h:?}");
+        frames += frames_since(&mut last_frame, h.frame);
+        if step % 100 == 0 {
+            eprintln!("soak: step {step}, about {frames} frames, {resets} resets");
+        }
     }
     stop.store(true, Ordering::Relaxed);
     let report = server.join().expect("server").expect("served");
     // A reset whose acceptance came late is sent again: at least the commanded ones.
     assert!(report.resets >= resets, "{report:?}");
     println!(
-        "{steps} steps, {} frames, {resets} resets, {} resumed uploads",
+        "{step} steps, {} frames, {resets} resets, {} resumed uploads",
         report.frames, g.resumes
     );
 }
@@ -161,14 +191,8 @@ fn boot(flash: &std::path::Path, cut_at: u64) -> Boot {
 
 #[test]
 fn flash_store_soak_with_power_cuts_keeps_a_committed_table() {
-    let steps: u32 = std::env::var("LINK_SOAK_STEPS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(12);
-    let min_frames: u32 = std::env::var("LINK_SOAK_MIN_FRAMES")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(0);
+    let steps = env_u32("LINK_SOAK_STEPS", 12);
+    let min_frames = env_u32("LINK_SOAK_MIN_FRAMES", 0);
     let dir = tempfile::tempdir().expect("tmp");
     let flash = dir.path().join("bank2.flash");
     let tables: Vec<Vec<u8>> = [3u8, 4]
@@ -192,7 +216,7 @@ fn flash_store_soak_with_power_cuts_keeps_a_committed_table() {
     let (mut cuts, mut uploads, mut resets, mut frames, mut step) = (0, 0, 0u32, 0u32, 0u32);
     while step < steps || frames + b.ground.status().map_or(0, |h| h.frame) < min_frames {
         step += 1;
-        match rng.random_range(0..6) {
+        match rng.random_range(0..7) {
             0 => {
                 b.ground.reset().expect("reset");
                 resets += 1;
@@ -227,6 +251,7 @@ fn flash_store_soak_with_power_cuts_keeps_a_committed_table() {
                 let lists = b.ground.stars(1).expect("stars");
                 assert_eq!(lists.len(), 1);
             }
+            5 => quiet(&mut rng),
             _ => b.ground.ping().expect("ping"),
         }
         let h = b.ground.status().expect("status");
