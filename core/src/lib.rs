@@ -8,7 +8,8 @@
 //! raw readout line/window ([`geometry`]) -> per-line bias and per-frame dark scale
 //! ([`calib::levels`]) -> per-pixel electrons, applied only to the pixels read
 //! ([`calib::pixel`]) with the maps and defect lists of a calibration table ([`table`]) ->
-//! detections ([`detect`]) -> centroids ([`centroid`]).
+//! detections ([`detect`]) -> centroids ([`centroid`]) -> the frame's attitude from the
+//! identified stars ([`solver`], with [`catalog`], [`ident`] and [`attitude`]).
 //!
 //! Every fixed-point quantity has its format and range stated in [`units`].
 #![no_std]
@@ -31,6 +32,7 @@ pub mod ident;
 pub mod link;
 pub mod safe;
 pub mod sequencer;
+pub mod solver;
 pub mod store;
 pub mod table;
 pub mod tracker;

@@ -9,6 +9,12 @@
 //! freedom of the positions against the reported sigmas. `startrack sil` writes it as CSV;
 //! the host test `sil` pins it.
 //!
+//! With a sky scene ([`SilConfig::sky`]: the catalog's stars at a turning attitude,
+//! [`crate::sky::scene`]) each frame's star list also goes through the core's attitude stage
+//! ([`startrack_core::solver`]: identification, tracking from the last frame's attitude, and
+//! the q-method), and the report holds each frame's attitude error against the truth
+//! ([`SilReport::attitude_summary`]).
+//!
 //! Cost: a full frame (acquisition) renders 1.1 M samples, a tracking frame about 40 lines'
 //! over-scan and covered columns plus its windows per star; ~1 s and ~0.02 s in release
 //! (`time startrack sil --frames N` for a few N measures both).
@@ -17,8 +23,12 @@ use crate::home::{FrameClock, Recorder, SimLines, block_on};
 use crate::pixcorr::{CurveSpec, build_curves};
 use crate::sim::truth::TruthSections;
 use crate::sim::{SensorParams, Simulator, Star};
+use crate::sky::scene::{SkyScene, committed_catalog};
 use rand::{RngExt, SeedableRng};
+use startrack_core::attitude::Quat;
+use startrack_core::catalog::Catalog;
 use startrack_core::centroid::cog::CogPower;
+use startrack_core::solver::{Fix, SolveError, SolveMode, Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_core::tracker::{
@@ -28,6 +38,10 @@ use startrack_core::tracker::{
 
 /// Stars a frame the SIL's tracker keeps: the board's capacity.
 pub const SIL_CAPACITY: usize = 32;
+
+/// The centroid 1-sigma the SIL's identification settings assume, px (its tolerances add
+/// 1 px of model error to it).
+pub const SOLVER_SIGMA_PX: f64 = 0.2;
 
 /// A star is "in the field" when its true position is at least this far from the active
 /// area's edges, px (a whole tracking window fits around it).
@@ -55,6 +69,10 @@ pub struct SilConfig {
     /// width (power 1; border-median and given background: the CoG methods' and the fused
     /// CoG's), as `calib build --psf-a-px` writes them.
     pub pixcorr_curves: bool,
+    /// Stars from the sky at a turning attitude instead of the random drifting scene
+    /// (`stars` and `drift_px` are then not used); every frame is then also identified and
+    /// its attitude checked against the truth.
+    pub sky: Option<SkyScene>,
 }
 
 impl Default for SilConfig {
@@ -67,6 +85,7 @@ impl Default for SilConfig {
             tracker: TrackerConfig::FLIGHT,
             period_us: 100_000,
             pixcorr_curves: false,
+            sky: None,
         }
     }
 }
@@ -132,7 +151,58 @@ pub struct SilFrame {
     pub missed: Vec<Star>,
     /// Samples the sensor rendered for it.
     pub samples_read: u64,
+    /// The attitude stage's result and the truth (sky scenes only).
+    pub attitude: Option<AttitudeCheck>,
 }
+
+/// A frame's attitude against the truth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AttitudeCheck {
+    /// The true attitude (ICRS to camera).
+    pub truth: Quat,
+    /// What the attitude stage gave.
+    pub fix: Result<Fix, SolveError>,
+}
+
+impl AttitudeCheck {
+    /// The error rotation vector of the fix against the truth, camera frame, rad (x, y across
+    /// the boresight, z roll); `None` without a fix.
+    pub fn error_rad(&self) -> Option<[f64; 3]> {
+        self.fix
+            .as_ref()
+            .ok()
+            .map(|f| f.attitude.q.error_vector(self.truth))
+    }
+}
+
+/// A run's attitude results (sky scenes).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AttitudeSummary {
+    /// Frames.
+    pub frames: usize,
+    /// Frames with an attitude.
+    pub solved: usize,
+    /// ... of them lost in space.
+    pub lost_in_space: usize,
+    /// Solved frames whose error exceeds [`WRONG_ATTITUDE_RAD`]: a wrong identification.
+    pub wrong: usize,
+    /// RMS cross-boresight error of the solved frames (not wrong), arcsec.
+    pub rms_boresight_arcsec: f64,
+    /// RMS roll error, arcsec.
+    pub rms_roll_arcsec: f64,
+    /// RMS of the reported 1-sigma cross-boresight bound, arcsec.
+    pub bound_boresight_arcsec: f64,
+    /// RMS of the reported 1-sigma roll bound, arcsec.
+    pub bound_roll_arcsec: f64,
+    /// Mean normalised error squared (3 when the covariance is consistent).
+    pub mean_nees: f64,
+}
+
+/// A fix farther than this from the truth is a wrong identification, rad (0.1 degree: two
+/// orders above any centroid-limited error).
+pub const WRONG_ATTITUDE_RAD: f64 = 1.745e-3;
+
+const ARCSEC_PER_RAD: f64 = 206_264.806;
 
 /// What a SIL run gave.
 #[derive(Clone, Debug, PartialEq)]
@@ -175,6 +245,50 @@ impl SilReport {
         if n == 0 { 0.0 } else { s / n as f64 }
     }
 
+    /// The attitude results of a sky run (`None` for a random scene).
+    pub fn attitude_summary(&self) -> Option<AttitudeSummary> {
+        let checks: Vec<&AttitudeCheck> = self
+            .frames
+            .iter()
+            .filter_map(|f| f.attitude.as_ref())
+            .collect();
+        if checks.is_empty() {
+            return None;
+        }
+        let mut s = AttitudeSummary {
+            frames: checks.len(),
+            ..AttitudeSummary::default()
+        };
+        let (mut eb, mut er, mut bb, mut br, mut nees, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0, 0);
+        for c in checks {
+            let (Ok(fix), Some(e)) = (c.fix.as_ref(), c.error_rad()) else {
+                continue;
+            };
+            s.solved += 1;
+            s.lost_in_space += usize::from(fix.mode == SolveMode::LostInSpace);
+            if e.iter().map(|v| v * v).sum::<f64>().sqrt() > WRONG_ATTITUDE_RAD {
+                s.wrong += 1;
+                continue;
+            }
+            let a = &fix.attitude;
+            eb += e[0] * e[0] + e[1] * e[1];
+            er += e[2] * e[2];
+            bb += a.boresight_sigma_rad().powi(2);
+            br += a.roll_sigma_rad().powi(2);
+            nees += a.nees(e).unwrap_or(f64::INFINITY);
+            n += 1;
+        }
+        if n > 0 {
+            let rms = |v: f64| (v / n as f64).sqrt() * ARCSEC_PER_RAD;
+            s.rms_boresight_arcsec = rms(eb);
+            s.rms_roll_arcsec = rms(er);
+            s.bound_boresight_arcsec = rms(bb);
+            s.bound_roll_arcsec = rms(br);
+            s.mean_nees = nees / n as f64;
+        }
+        Some(s)
+    }
+
     /// RMS position error per axis over matched usable centroids, px.
     pub fn rms_error_px(&self) -> f64 {
         let (mut sum, mut n) = (0.0, 0usize);
@@ -206,6 +320,28 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         ..SensorParams::default()
     };
     let base = scene(config, &params);
+    let catalog_bytes = match config.sky {
+        Some(_) => committed_catalog()?,
+        None => Vec::new(),
+    };
+    let sky = match config.sky {
+        Some(sky) => Some((
+            sky,
+            Catalog::parse(&catalog_bytes).map_err(|e| format!("catalog: {e}"))?,
+        )),
+        None => None,
+    };
+    let a_px = f64::from(config.tracker.psf_a_px);
+    let stars_of = |frame: u32| match &sky {
+        Some((scene, cat)) => scene.stars(cat, frame, a_px),
+        None => stars_at(&base, config.drift_px, frame),
+    };
+    let mut solver = sky.as_ref().map(|(scene, cat)| {
+        Solver::new(
+            *cat,
+            SolverConfig::for_camera(scene.camera, SOLVER_SIGMA_PX),
+        )
+    });
     let table_bytes = truth_table(config, &params)?;
     let table = CalibTable::parse(&table_bytes).map_err(|e| e.to_string())?;
     let mut buffers = Box::new(TrackerBuffers::new());
@@ -215,7 +351,7 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
     );
     let mut source = SimLines::new(|frame| Simulator {
         frame,
-        ..Simulator::new(params.clone(), stars_at(&base, config.drift_px, frame))
+        ..Simulator::new(params.clone(), stars_of(frame))
     });
     let mut recorder = Recorder::default();
     let mut tables = FixedTable(Some(table));
@@ -239,14 +375,21 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
             .last()
             .map(|f| f.stars.clone())
             .unwrap_or_default();
-        let truth = stars_at(&base, config.drift_px, summary.frame);
-        frames.push(match_frame(
+        let truth = stars_of(summary.frame);
+        let mut frame = match_frame(
             summary,
             truth,
             &reported,
             &params,
             source.samples_rendered - before,
-        ));
+        );
+        if let (Some(solver), Some((scene, _))) = (solver.as_mut(), sky.as_ref()) {
+            frame.attitude = Some(AttitudeCheck {
+                truth: scene.attitude(summary.frame),
+                fix: solver.update(&reported, summary.start_us),
+            });
+        }
+        frames.push(frame);
     }
     Ok(SilReport {
         frames,
@@ -332,5 +475,6 @@ fn match_frame(
         stars,
         missed,
         samples_read,
+        attitude: None,
     }
 }

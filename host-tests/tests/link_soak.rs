@@ -4,8 +4,9 @@
 //! counters agree. Some steps send nothing for a while, so frames run between commands.
 //! `LINK_SOAK_STEPS` sets the length (default 12) and `LINK_SOAK_MIN_FRAMES` keeps it going
 //! past the steps until the SIL has run that many frames (the long run:
-//! `LINK_SOAK_STEPS=2000 LINK_SOAK_MIN_FRAMES=10000 cargo test --release -p startrack-host
-//! --test link_soak -- --nocapture random_commands`).
+//! `LINK_SOAK_STEPS=2000 LINK_SOAK_MIN_FRAMES=10000 LINK_SOAK_QUIET_MS=8000 cargo test
+//! --release -p startrack-host --test link_soak -- --nocapture random_commands`; longer
+//! quiet spells make the frames many beside the commands).
 //!
 //! The second soak keeps the tables in the flash store over the flash model in a file, and
 //! every boot arms a power cut at a random flash step: an upload it hits stops the SIL, which
@@ -36,9 +37,13 @@ fn env_u32(name: &str, default: u32) -> u32 {
         .unwrap_or(default)
 }
 
-/// A quiet spell of the ground: nothing sent for up to two seconds, so the SIL runs frames.
+/// A quiet spell of the ground: nothing sent for up to `LINK_SOAK_QUIET_MS` (default 2,000
+/// ms), so the SIL runs frames.
 fn quiet(rng: &mut rand_chacha::ChaCha8Rng) {
-    std::thread::sleep(Duration::from_millis(rng.random_range(0..2000)));
+    let max_ms = env_u32("LINK_SOAK_QUIET_MS", 2000).max(1);
+    std::thread::sleep(Duration::from_millis(
+        rng.random_range(0..u64::from(max_ms)),
+    ));
 }
 
 /// Frames run since the last call, from the frame number a status reports (reset to 0 by a

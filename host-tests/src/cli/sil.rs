@@ -5,7 +5,10 @@
 //!
 //! - `--telemetry FILE`: `frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags`
 //!   (`flags`: the `StarFlags` bits, docs/formats.md);
-//! - `--truth FILE`: `frame,x_px,y_px,signal_e,a_px`.
+//! - `--truth FILE`: `frame,x_px,y_px,signal_e,a_px`;
+//! - with `--sky`, `--attitude FILE`: one row per frame,
+//!   `frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability`
+//!   (the quaternion takes ICRS to the camera, scalar first; errors against the truth).
 
 use super::CliError;
 use crate::home::csv_row;
@@ -38,6 +41,14 @@ pub struct SilArgs {
     /// Truth CSV (one row per true star per frame).
     #[arg(long)]
     pub truth: Option<PathBuf>,
+    /// The scene from the sky: the catalog's stars at a seeded random attitude turning by
+    /// `--drift-px` a frame across the boresight, every frame identified and its attitude
+    /// checked against the truth (instead of `--stars` random stars).
+    #[arg(long)]
+    pub sky: bool,
+    /// With `--sky`: attitude CSV (one row per frame).
+    #[arg(long, requires = "sky")]
+    pub attitude: Option<PathBuf>,
     /// Serve the tracker's command and telemetry link on TCP 127.0.0.1:PORT (standing in
     /// for the UART) and run until stopped; `--frames`, `--telemetry` and `--truth` are then
     /// not used (drive it with `startrack gse --port PORT`).
@@ -78,12 +89,23 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
     tracker
         .validate(sil::SIL_CAPACITY)
         .map_err(|e| CliError::Usage(e.to_string()))?;
+    let sky = args.sky.then(|| {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed ^ 0x534b_5900);
+        let q0 = crate::sky::field::random_attitude(&mut rng);
+        let f = crate::sky::field::FieldSpec::ccd47_15deg(0.0)
+            .camera
+            .focal_length_px;
+        // A turn about +y moves the field along +x, about +x along -y.
+        crate::sky::scene::SkyScene::ccd47_15deg(q0, [-dy / f, dx / f, 0.0])
+    });
     Ok(SilConfig {
         frames: args.frames,
         seed: args.seed,
         stars: args.stars,
         drift_px: (dx, dy),
         tracker,
+        sky,
         ..SilConfig::default()
     })
 }
@@ -131,6 +153,42 @@ pub fn write_truth(out: &mut dyn Write, report: &SilReport) -> std::io::Result<(
                 "{},{:.4},{:.4},{:.1},{:.3}",
                 f.summary.frame, t.x_px, t.y_px, t.signal_e, t.a_px
             )?;
+        }
+    }
+    Ok(())
+}
+
+/// Writes the attitude CSV of `report` (sky runs; nothing for a random scene).
+pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Result<()> {
+    const ARCSEC: f64 = 206_264.806;
+    writeln!(
+        out,
+        "frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability"
+    )?;
+    for f in &report.frames {
+        let Some(c) = &f.attitude else { continue };
+        match (&c.fix, c.error_rad()) {
+            (Ok(fix), Some(e)) => {
+                let a = &fix.attitude;
+                let [w, x, y, z] = a.q.0;
+                writeln!(
+                    out,
+                    "{},1,{},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.3},{:.3},{:.2e}",
+                    f.summary.frame,
+                    match fix.mode {
+                        startrack_core::solver::SolveMode::Tracking => "tracking",
+                        startrack_core::solver::SolveMode::LostInSpace => "lost_in_space",
+                    },
+                    fix.used,
+                    fix.matched,
+                    e[0].hypot(e[1]) * ARCSEC,
+                    e[2].abs() * ARCSEC,
+                    a.boresight_sigma_rad() * ARCSEC,
+                    a.roll_sigma_rad() * ARCSEC,
+                    fix.false_probability
+                )?;
+            }
+            _ => writeln!(out, "{},0,,,,,,,,,,,,", f.summary.frame)?,
         }
     }
     Ok(())
@@ -187,6 +245,12 @@ pub fn run(args: &SilArgs) -> Result<SilReport, CliError> {
             .and_then(|()| f.flush())
             .map_err(|e| io_error(p, &e))?;
     }
+    if let Some(p) = &args.attitude {
+        let mut f = create(p)?;
+        write_attitude(&mut f, &report)
+            .and_then(|()| f.flush())
+            .map_err(|e| io_error(p, &e))?;
+    }
     for e in &report.events {
         if let Event::ModeChange {
             frame,
@@ -226,5 +290,19 @@ pub fn run(args: &SilArgs) -> Result<SilReport, CliError> {
         report.chi2_per_dof(Some(Mode::Acquisition)),
         report.chi2_per_dof(Some(Mode::Tracking)),
     );
+    if let Some(a) = report.attitude_summary() {
+        eprintln!(
+            "startrack sil: attitude in {} of {} frames ({} lost in space), {} wrong; RMS error cross-boresight {:.2} arcsec (bound {:.2}), roll {:.2} arcsec (bound {:.2}), mean NEES {:.2}",
+            a.solved,
+            a.frames,
+            a.lost_in_space,
+            a.wrong,
+            a.rms_boresight_arcsec,
+            a.bound_boresight_arcsec,
+            a.rms_roll_arcsec,
+            a.bound_roll_arcsec,
+            a.mean_nees,
+        );
+    }
     Ok(report)
 }

@@ -4,6 +4,7 @@
 
 pub mod build;
 pub mod field;
+pub mod scene;
 
 use std::path::{Path, PathBuf};
 

@@ -1,0 +1,150 @@
+//! The attitude stage of the frame loop ([`startrack_core::solver`]) on its own and in the
+//! SIL over the sky: identification, tracking from the last frame's attitude, the bad stars
+//! it must skip, and the attitude error of the whole chain against the truth.
+
+use rand::SeedableRng;
+use startrack_core::attitude::Quat;
+use startrack_core::catalog::Catalog;
+use startrack_core::solver::{SolveError, SolveMode, Solver, SolverConfig};
+use startrack_core::tracker::{StarFlags, StarRecord};
+use startrack_host::sil::{self, SilConfig};
+use startrack_host::sky::field::{FieldSpec, random_attitude, render};
+use startrack_host::sky::scene::{SkyScene, committed_catalog};
+
+fn records(q: Quat, cat: &Catalog<'_>, seed: u64) -> Vec<StarRecord> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let spec = FieldSpec::ccd47_15deg(0.1);
+    render(cat, q, &spec, &mut rng)
+        .iter()
+        .map(|s| StarRecord {
+            x_px: s.x_px as f32,
+            y_px: s.y_px as f32,
+            flux_e: s.flux_e as f32,
+            snr: 100.0,
+            sigma_x_px: 0.1,
+            sigma_y_px: 0.1,
+            flags: StarFlags::empty(),
+        })
+        .collect()
+}
+
+fn solver<'c>(cat: &Catalog<'c>) -> Solver<'c> {
+    let camera = FieldSpec::ccd47_15deg(0.1).camera;
+    Solver::new(*cat, SolverConfig::for_camera(camera, 0.1))
+}
+
+#[test]
+fn first_frame_is_lost_in_space_then_tracking_until_the_prior_ages_out() {
+    let bytes = committed_catalog().unwrap();
+    let cat = Catalog::parse(&bytes).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let q = random_attitude(&mut rng);
+    let stars = records(q, &cat, 4);
+    let mut s = solver(&cat);
+    let first = s.update(&stars, 0).unwrap();
+    assert_eq!(first.mode, SolveMode::LostInSpace);
+    let e = first.attitude.q.error_vector(q);
+    assert!(e.iter().all(|v| v.abs() < 1e-4), "{e:?}");
+    let second = s.update(&stars, 100_000).unwrap();
+    assert_eq!(second.mode, SolveMode::Tracking);
+    assert_eq!(s.prior().map(|p| p.1), Some(100_000));
+    // A prior older than the limit is not used; nor is one from the future (a clock reset).
+    let late = s.update(&stars, 100_000 + 2_000_001).unwrap();
+    assert_eq!(late.mode, SolveMode::LostInSpace);
+    let back = s.update(&stars, 5).unwrap();
+    assert_eq!(back.mode, SolveMode::LostInSpace);
+    s.forget();
+    assert_eq!(s.prior(), None);
+}
+
+#[test]
+fn saturated_flagged_and_nonsense_stars_are_not_used() {
+    let bytes = committed_catalog().unwrap();
+    let cat = Catalog::parse(&bytes).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let q = random_attitude(&mut rng);
+    let good = records(q, &cat, 6);
+    let n = good.len().min(32);
+    // The same list with every star spoiled one way or another: nothing usable.
+    let spoiled: Vec<StarRecord> = good
+        .iter()
+        .enumerate()
+        .map(|(i, s)| match i % 6 {
+            0 => StarRecord {
+                flags: StarFlags::SATURATED,
+                ..*s
+            },
+            1 => StarRecord {
+                flags: StarFlags::DEGENERATE,
+                ..*s
+            },
+            2 => StarRecord {
+                x_px: f32::NAN,
+                ..*s
+            },
+            3 => StarRecord {
+                sigma_x_px: 0.0,
+                ..*s
+            },
+            4 => StarRecord {
+                sigma_y_px: f32::INFINITY,
+                ..*s
+            },
+            _ => StarRecord {
+                flags: StarFlags::RING_LOST,
+                ..*s
+            },
+        })
+        .collect();
+    let mut s = solver(&cat);
+    assert_eq!(
+        s.update(&spoiled, 0),
+        Err(SolveError::TooFewStars { usable: 0 })
+    );
+    assert_eq!(s.prior(), None);
+    // Good stars mixed in are found among the bad, and the bad never enter the solution.
+    let mut mixed = spoiled.clone();
+    mixed.extend_from_slice(&good);
+    let fix = s.update(&mixed, 0).unwrap();
+    assert_eq!(usize::from(fix.used), n);
+    let e = fix.attitude.q.error_vector(q);
+    assert!(e.iter().all(|v| v.abs() < 1e-4), "{e:?}");
+    // No stars, and three: typed errors.
+    assert_eq!(s.update(&[], 0), Err(SolveError::TooFewStars { usable: 0 }));
+    assert_eq!(
+        s.update(&good[..3], 0),
+        Err(SolveError::TooFewStars { usable: 3 })
+    );
+}
+
+/// The whole chain on the simulated sensor over the sky: every frame gets an attitude, none
+/// wrong, each error component within 5 of its own sigmas.
+#[test]
+fn sil_over_the_sky_solves_every_frame_within_its_covariance() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let q0 = random_attitude(&mut rng);
+    let f = FieldSpec::ccd47_15deg(0.0).camera.focal_length_px;
+    let config = SilConfig {
+        frames: 6,
+        sky: Some(SkyScene::ccd47_15deg(q0, [0.2 / f, 0.3 / f, 1e-5])),
+        ..SilConfig::default()
+    };
+    let report = sil::run(&config).unwrap();
+    let a = report.attitude_summary().unwrap();
+    assert_eq!((a.frames, a.solved, a.wrong), (6, 6, 0), "{a:?}");
+    assert_eq!(a.lost_in_space, 1, "{a:?}");
+    for fr in &report.frames {
+        let c = fr.attitude.as_ref().unwrap();
+        let fix = c.fix.as_ref().unwrap();
+        let e = c.error_rad().unwrap();
+        for (i, v) in e.iter().enumerate() {
+            let sigma = fix.attitude.cov_rad2[i][i].sqrt();
+            assert!(
+                v.abs() < 5.0 * sigma,
+                "frame {}: axis {i} error {v:e} rad, sigma {sigma:e}",
+                fr.summary.frame
+            );
+        }
+        assert!(fix.matched >= 10, "frame {}: {fix:?}", fr.summary.frame);
+    }
+}
