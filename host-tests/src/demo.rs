@@ -4,7 +4,10 @@
 //! dark scale, the pre-filtered streaming detection, a centroid on a window at each star's
 //! peak) and compare with the simulator's truth: calibrated electrons (chi^2 per pixel,
 //! with full calibration and with gains and over-scan only) and centroid positions (RMS
-//! error against the reported sigmas).
+//! error against the reported sigmas). With the sky scene ([`DemoScene::Sky`], `startrack
+//! demo --sky`) the frame holds the catalog's stars at a seeded attitude, and the star list
+//! also goes through the core's attitude stage: the printout ends with the attitude's error
+//! against the truth.
 
 use crate::cli::process::{HOST_CAPACITY, process_frame};
 use crate::home::frame_levels;
@@ -93,6 +96,18 @@ pub struct DemoReport {
     pub false_detections: usize,
     /// Candidates lost because the list was full.
     pub dropped: u32,
+    /// The attitude stage's result against the truth (sky scene only).
+    pub attitude: Option<crate::sil::AttitudeCheck>,
+}
+
+/// What the demo's frame shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DemoScene {
+    /// This many seeded random stars (3.7 <= log10 e- < 5.3, a = 0.8..2.0 px).
+    Random(usize),
+    /// The on-board catalog's stars seen by the 15 degree camera at a seeded random attitude,
+    /// PSF `a` = [`PSF_A_PX`].
+    Sky,
 }
 
 impl DemoReport {
@@ -179,11 +194,35 @@ pub fn render_frame(sim: &Simulator) -> Vec<u16> {
 
 /// Runs the demo: `n_stars` stars on the default sensor with `seed`.
 pub fn run(seed: u64, n_stars: usize) -> Result<DemoReport, String> {
+    run_scene(seed, DemoScene::Random(n_stars))
+}
+
+/// Runs the demo on `scene` with `seed`.
+pub fn run_scene(seed: u64, scene: DemoScene) -> Result<DemoReport, String> {
+    use startrack_core::solver::{Solver, SolverConfig};
     let params = SensorParams {
         seed,
         ..SensorParams::default()
     };
-    let stars = star_field(seed, n_stars, &params);
+    let catalog_bytes = match scene {
+        DemoScene::Sky => crate::sky::scene::committed_catalog()?,
+        DemoScene::Random(_) => Vec::new(),
+    };
+    let sky = match scene {
+        DemoScene::Sky => {
+            let cat = startrack_core::catalog::Catalog::parse(&catalog_bytes)
+                .map_err(|e| format!("catalog: {e}"))?;
+            let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x534b_5900);
+            let q = crate::sky::field::random_attitude(&mut r);
+            Some((cat, crate::sky::scene::SkyScene::ccd47_15deg(q, [0.0; 3])))
+        }
+        DemoScene::Random(_) => None,
+    };
+    let stars = match (&sky, scene) {
+        (Some((cat, sc)), _) => sc.stars(cat, 0, f64::from(PSF_A_PX)),
+        (None, DemoScene::Random(n)) => star_field(seed, n, &params),
+        (None, DemoScene::Sky) => Vec::new(),
+    };
     let sim = Simulator::new(params.clone(), stars.clone());
     let g = params.geometry;
     let full = sim
@@ -294,6 +333,16 @@ pub fn run(seed: u64, n_stars: usize) -> Result<DemoReport, String> {
         in_blends,
         false_detections,
         dropped: result.summary.candidates_dropped,
+        attitude: sky.map(|(cat, sc)| {
+            let mut solver = Solver::new(
+                cat,
+                SolverConfig::for_camera(sc.camera, crate::sil::SOLVER_SIGMA_PX),
+            );
+            crate::sil::AttitudeCheck {
+                truth: sc.attitude(0),
+                fix: solver.update(&result.stars, 0),
+            }
+        }),
     })
 }
 
@@ -381,4 +430,24 @@ pub fn print(report: &DemoReport) {
         report.reported_sigma_rms_px(),
         if dof == 0 { 0.0 } else { chi2 / dof as f64 }
     );
+    if let Some(c) = &report.attitude {
+        const ARCSEC: f64 = 206_264.806;
+        match (&c.fix, c.error_rad()) {
+            (Ok(fix), Some(e)) => {
+                let a = &fix.attitude;
+                println!(
+                    "attitude (lost in space from {} usable stars, {} identified, false-match bound {:.1e}): error cross-boresight {:.2} arcsec (1-sigma bound {:.2}), roll {:.2} arcsec (bound {:.2})",
+                    fix.used,
+                    fix.matched,
+                    fix.false_probability,
+                    e[0].hypot(e[1]) * ARCSEC,
+                    a.boresight_sigma_rad() * ARCSEC,
+                    e[2].abs() * ARCSEC,
+                    a.roll_sigma_rad() * ARCSEC,
+                );
+            }
+            (Err(e), _) => println!("attitude: none ({e})"),
+            (Ok(_), None) => println!("attitude: none"),
+        }
+    }
 }

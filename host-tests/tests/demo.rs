@@ -71,3 +71,23 @@ fn centroid_errors_match_the_reported_sigmas() {
         "RMS error {rms:.4} px against reported sigma RMS {sigma:.4} px"
     );
 }
+
+/// `startrack demo --sky`: the frame of the catalog's stars ends in an attitude within five
+/// of its sigmas on each axis, with most stars identified.
+#[test]
+fn demo_over_the_sky_ends_in_an_attitude_within_its_covariance() {
+    let report = startrack_host::demo::run_scene(1, startrack_host::demo::DemoScene::Sky).unwrap();
+    let check = report.attitude.expect("a sky demo checks the attitude");
+    let fix = check.fix.expect("an attitude");
+    assert!(fix.matched >= 20, "{fix:?}");
+    let e = check.error_rad().unwrap();
+    for (i, v) in e.iter().enumerate() {
+        let sigma = fix.attitude.cov_rad2[i][i].sqrt();
+        assert!(
+            v.abs() < 5.0 * sigma,
+            "axis {i}: {v:e} rad, sigma {sigma:e}"
+        );
+    }
+    // The random-star demo has no attitude to check.
+    assert!(startrack_host::demo::run(1, 3).unwrap().attitude.is_none());
+}

@@ -24,6 +24,10 @@ enum Command {
         /// Number of stars.
         #[arg(long, default_value_t = 12)]
         stars: usize,
+        /// The frame shows the sky instead (the on-board catalog's stars at a seeded
+        /// attitude; `--stars` is not used), and the demo ends with the attitude's error.
+        #[arg(long)]
+        sky: bool,
     },
     /// Write the simulated sensor's true calibration as a table file (for bring-up on a board:
     /// with --slot-image, the bank-2 slot to flash, see the README).
@@ -210,7 +214,14 @@ fn main() -> ExitCode {
             }
             Err(e) => fail("readout-plan", &e),
         },
-        Command::Demo { seed, stars } => match startrack_host::demo::run(seed, stars) {
+        Command::Demo { seed, stars, sky } => match startrack_host::demo::run_scene(
+            seed,
+            if sky {
+                startrack_host::demo::DemoScene::Sky
+            } else {
+                startrack_host::demo::DemoScene::Random(stars)
+            },
+        ) {
             Ok(report) => {
                 startrack_host::demo::print(&report);
                 ExitCode::SUCCESS
