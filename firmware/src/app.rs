@@ -11,8 +11,10 @@
 //! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none; uploads through the link go to the flash store ([`crate::flash_store::with_link_tables`]) and are used from the next start |
 //! | telemetry | the defmt log ([`crate::telemetry`]) |
 //!
-//! After every frame the task marks the watchdog's progress ([`crate::watchdog`]) and adds
-//! the frame to housekeeping ([`crate::safe_state::HEALTH`]).
+//! After every frame the task gives the frame's star list to the attitude stage
+//! ([`startrack_core::solver`], with the catalog in flash, [`crate::catalog`], and the
+//! nominal 15 degree camera) and logs the attitude, marks the watchdog's progress
+//! ([`crate::watchdog`]) and adds the frame to housekeeping ([`crate::safe_state::HEALTH`]).
 //!
 //! Each frame's [`ReadoutRequest`] (full frame, or the tracking windows) and the configured
 //! exposure go to the CCD sequencer ([`crate::sequencer`]), which compiles and plays that
@@ -24,11 +26,14 @@ use crate::mcu_temp::McuThermometer;
 use crate::telemetry::DefmtTelemetry;
 use crate::{safe_state, watchdog};
 use core::convert::Infallible;
+use startrack_core::attitude::Camera;
+use startrack_core::catalog::Catalog;
 use startrack_core::safe::{FallbackThermometer, SetupFaults};
+use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Clock, FixedTable, LineSource, Ports, ReadoutRequest, SourceLine, Tracker, TrackerBuffers,
-    TrackerConfig,
+    Clock, Event, FixedTable, FrameSummary, LineSource, LineSummary, Ports, ReadoutRequest,
+    SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
 };
 
 /// The board's sensor temperature: the CCD board's sensor, else the MCU's.
@@ -45,6 +50,48 @@ const EXPOSURE_MS: u32 = TrackerConfig::FLIGHT.exposure_ms;
 /// How long a line may take beyond the exposure before the frame is ended without it (a
 /// full frame's readout is 0.55 s at 1 MHz).
 const LINE_TIMEOUT_US: u64 = 1_000_000;
+
+/// The camera the attitude stage assumes: the CCD47-20's 1024 x 1024 active area behind a
+/// 15 degree field, principal point at the centre, no distortion (the optics' own model,
+/// fitted on the ground, replaces it when the table carries one).
+fn nominal_camera() -> Camera {
+    Camera {
+        // 512 / tan(7.5 degrees).
+        focal_length_px: 3889.0261057152775,
+        principal_point_px: [511.5, 511.5],
+        k1: 0.0,
+    }
+}
+
+/// Centroid 1-sigma the identification's tolerances assume, px.
+const IDENT_SIGMA_PX: f64 = 0.2;
+
+/// A telemetry port that passes everything on and keeps the frame's stars for the attitude
+/// stage.
+struct KeepStars<'a> {
+    inner: &'a mut dyn TelemetrySink,
+    stars: &'a mut heapless::Vec<StarRecord, MAX_STARS>,
+}
+
+impl TelemetrySink for KeepStars<'_> {
+    fn line(&mut self, summary: &LineSummary) {
+        self.inner.line(summary);
+    }
+
+    fn star(&mut self, frame: u32, star: &StarRecord) {
+        // The tracker reports at most MAX_STARS a frame: a push never fails.
+        let _ = self.stars.push(*star);
+        self.inner.star(frame, star);
+    }
+
+    fn frame(&mut self, summary: &FrameSummary) {
+        self.inner.frame(summary);
+    }
+
+    fn event(&mut self, event: &Event) {
+        self.inner.event(event);
+    }
+}
 
 /// The sequencer's lines as the tracker's line source. `start_frame` sends the request
 /// (windows copied) and the exposure to the sequencer ([`crate::sequencer::REQUESTS`]),
@@ -187,6 +234,7 @@ impl Clock for BoardClock {
 #[embassy_executor::task]
 pub async fn tracker_task(
     table: Option<CalibTable<'static>>,
+    catalog: Option<Catalog<'static>>,
     buffers: &'static mut TrackerBuffers,
     mut thermometer: BoardThermometer,
 ) {
@@ -218,6 +266,13 @@ pub async fn tracker_task(
     // The faults of the set-up steps that did not stop the tracker (no table, no board
     // thermometer), for housekeeping.
     link.set_setup_faults(safe_state::setup_faults().bits());
+    let mut solver = catalog.map(|c| {
+        Solver::new(
+            c,
+            SolverConfig::for_camera(nominal_camera(), IDENT_SIGMA_PX),
+        )
+    });
+    let mut stars: heapless::Vec<StarRecord, MAX_STARS> = heapless::Vec::new();
     loop {
         crate::flash_store::with_link_tables(&mut store, |tables| {
             crate::link::serve(link, &mut tracker, tables);
@@ -227,9 +282,14 @@ pub async fn tracker_task(
             embassy_time::Timer::after_millis(50).await;
             cortex_m::peripheral::SCB::sys_reset();
         }
-        let mut telemetry = crate::link::Tee {
+        let mut tee = crate::link::Tee {
             log: &mut log,
             link: &mut *link,
+        };
+        stars.clear();
+        let mut telemetry = KeepStars {
+            inner: &mut tee,
+            stars: &mut stars,
         };
         let mut ports = Ports {
             clock: &mut clock,
@@ -240,6 +300,22 @@ pub async fn tracker_task(
         source.set_exposure_ms(tracker.config().exposure_ms);
         let Ok(summary) = tracker.run_frame(&mut source, &mut ports).await;
         link.end_of_frame(&store);
+        if let Some(solver) = solver.as_mut() {
+            match solver.update(&stars, summary.start_us) {
+                Ok(fix) => defmt::info!(
+                    "frame {}: attitude {} ({} of {} stars), q = [{}, {}, {}, {}]",
+                    summary.frame,
+                    fix.mode,
+                    fix.matched,
+                    fix.used,
+                    fix.attitude.q.0[0],
+                    fix.attitude.q.0[1],
+                    fix.attitude.q.0[2],
+                    fix.attitude.q.0[3]
+                ),
+                Err(e) => defmt::info!("frame {}: no attitude ({})", summary.frame, e),
+            }
+        }
         watchdog::progress();
         let (k, source_used) = (thermometer.last_k(), thermometer.source());
         safe_state::update_health(|h| {

@@ -17,6 +17,7 @@
 
 mod app;
 mod board_temp;
+mod catalog;
 mod flash_store;
 mod lines;
 mod link;
@@ -187,6 +188,16 @@ async fn main(spawner: Spawner) {
         }
     };
 
+    // The star catalog the programmer wrote to bank 1 (no attitude without it).
+    let catalog = match catalog::load() {
+        Ok(c) => Some(c),
+        Err(e) => {
+            defmt::warn!("catalog: none in flash at 0x0806_0000 ({}): no attitude", e);
+            faults |= SetupFaults::NO_CATALOG;
+            None
+        }
+    };
+
     // The CCD board's TMP117, else the MCU's sensor (a set-up fault housekeeping reports).
     let board_sensor = board_temp::Tmp117::new(p.I2C1, p.PB8, p.PB9);
     if board_sensor.is_none() {
@@ -294,7 +305,7 @@ async fn main(spawner: Spawner) {
             let tracker = spawn_or_log(
                 spawner,
                 "tracker",
-                app::tracker_task(table, buffers, thermometer),
+                app::tracker_task(table, catalog, buffers, thermometer),
             );
             let readout = spawn_or_log(spawner, "readout", readout::readout_task(adc, samples));
             let plans = spawn_or_log(spawner, "plan", sequencer::plan_task());

@@ -51,6 +51,8 @@ bitflags::bitflags! {
         const TASK_SPAWN = 1 << 7;
         /// The sensor readout (SPI, DMA) could not be set up.
         const READOUT = 1 << 8;
+        /// No valid star catalog in its flash region (the tracker runs without attitude).
+        const NO_CATALOG = 1 << 9;
     }
 }
 
