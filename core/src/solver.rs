@@ -89,7 +89,12 @@ pub enum SolveError {
         usable: u8,
     },
     /// Identification found no solution (after tracking, lost in space).
-    Ident(IdentError),
+    Ident {
+        /// Usable stars given to identification.
+        usable: u8,
+        /// Lost in space's reason.
+        error: IdentError,
+    },
 }
 
 impl core::fmt::Display for SolveError {
@@ -102,7 +107,7 @@ impl core::fmt::Display for SolveError {
                     ident::MIN_MATCHES
                 )
             }
-            Self::Ident(e) => write!(f, "attitude: {e}"),
+            Self::Ident { usable, error } => write!(f, "attitude from {usable} stars: {error}"),
         }
     }
 }
@@ -171,8 +176,12 @@ impl<'c> Solver<'c> {
         let (solution, mode) = match tracked {
             Some(s) => (s, SolveMode::Tracking),
             None => (
-                ident::lost_in_space(&self.catalog, &dirs, &cfg.ident)
-                    .map_err(SolveError::Ident)?,
+                ident::lost_in_space(&self.catalog, &dirs, &cfg.ident).map_err(|error| {
+                    SolveError::Ident {
+                        usable: used,
+                        error,
+                    }
+                })?,
                 SolveMode::LostInSpace,
             ),
         };

@@ -13,7 +13,7 @@
 //!
 //! After every frame the task gives the frame's star list to the attitude stage
 //! ([`startrack_core::solver`], with the catalog in flash, [`crate::catalog`], and the
-//! nominal 15 degree camera) and logs the attitude, marks the watchdog's progress
+//! nominal 15 degree camera), sends its attitude report on the link and logs it, marks the watchdog's progress
 //! ([`crate::watchdog`]) and adds the frame to housekeeping ([`crate::safe_state::HEALTH`]).
 //!
 //! Each frame's [`ReadoutRequest`] (full frame, or the tracking windows) and the configured
@@ -28,6 +28,7 @@ use crate::{safe_state, watchdog};
 use core::convert::Infallible;
 use startrack_core::attitude::Camera;
 use startrack_core::catalog::Catalog;
+use startrack_core::link::AttitudeReport;
 use startrack_core::safe::{FallbackThermometer, SetupFaults};
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
@@ -301,7 +302,9 @@ pub async fn tracker_task(
         let Ok(summary) = tracker.run_frame(&mut source, &mut ports).await;
         link.end_of_frame(&store);
         if let Some(solver) = solver.as_mut() {
-            match solver.update(&stars, summary.start_us) {
+            let result = solver.update(&stars, summary.start_us);
+            link.send_attitude(&AttitudeReport::of(summary.frame, &result));
+            match result {
                 Ok(fix) => defmt::info!(
                     "frame {}: attitude {} ({} of {} stars), q = [{}, {}, {}, {}]",
                     summary.frame,

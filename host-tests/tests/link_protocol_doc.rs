@@ -5,7 +5,9 @@
 //! link_protocol_doc` rewrites it.
 
 use startrack_core::link::protocol::{self as p, Direction};
-use startrack_core::link::telemetry::{HK_FIELDS, HK_LEN, STAR_FIELDS, event, type_len};
+use startrack_core::link::telemetry::{
+    ATTITUDE_FIELDS, ATTITUDE_LEN, HK_FIELDS, HK_LEN, STAR_FIELDS, event, type_len,
+};
 use startrack_core::link::{Rejection, UploadRefusal};
 use std::fmt::Write;
 
@@ -104,6 +106,14 @@ fn render() -> String {
     for (name, ty, meaning) in STAR_FIELDS {
         writeln!(s, "| `{name}` | {ty} | {meaning} |").unwrap();
     }
+    writeln!(
+        s,
+        "\n### Attitude report TM[134,2] ({ATTITUDE_LEN} bytes)\n\n| field | type | meaning |\n|---|---|---|"
+    )
+    .unwrap();
+    for (name, ty, meaning) in ATTITUDE_FIELDS {
+        writeln!(s, "| `{name}` | {ty} | {meaning} |").unwrap();
+    }
     s
 }
 
@@ -112,6 +122,8 @@ fn layouts_add_up() {
     let star: usize = STAR_FIELDS.iter().map(|f| type_len(f.1)).sum();
     assert_eq!(star, p::STAR_BYTES);
     assert!(HK_FIELDS.iter().all(|f| type_len(f.1) > 0));
+    let attitude: usize = ATTITUDE_FIELDS.iter().map(|f| type_len(f.1)).sum();
+    assert_eq!(attitude, ATTITUDE_LEN);
     // The busiest packet, a full star list, fits the packet and the queue.
     let list = 6 + p::MAX_LINK_STARS * p::STAR_BYTES;
     assert!(6 + 7 + p::TIMESTAMP_LEN + list + 2 <= p::MAX_TM_LEN);

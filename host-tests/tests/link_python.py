@@ -1,6 +1,6 @@
 """Decodes the tracker's telemetry with the PyPI `spacepackets` package (an independent PUS
 implementation): every packet's CRC-16, APID, service and subtype, and the star list's and the
-housekeeping's fields against what the Rust side wrote.
+housekeeping's and the attitude report's fields against what the Rust side wrote.
 
 Usage: python3 link_python.py PACKETS_FILE EXPECTED_JSON (written by the test link_python.rs).
 Exit 0 and one line "spacepackets decoded N packets" on success."""
@@ -30,6 +30,13 @@ def main() -> int:
                 for a, b in zip(fields[:6], star[:6]):
                     assert abs(a - b) <= 1e-6 * max(1.0, abs(b)), (fields, star)
                 assert fields[6] == star[6]
+        if "attitude" in want:
+            a = want["attitude"]
+            fields = struct.unpack(">IBBBB4d7fQ", data)
+            assert fields[:5] == (a["frame"], a["status"], a["used"], a["matched"], 0), fields
+            assert list(fields[5:9]) == a["q"], fields
+            assert abs(fields[14] - a["cov_zz"]) <= 1e-6 * a["cov_zz"], fields
+            assert fields[16] == a["time_us"], fields
         if "housekeeping" in want:
             sid, mode, next_mode = struct.unpack(">HBB", data[:4])
             assert (sid, mode, next_mode) == (1, want["mode"], want["next_mode"]), data[:4]

@@ -47,7 +47,8 @@ fn spacepackets_decodes_the_telemetry() {
         println!("skipped: {why}");
         return;
     }
-    // Telemetry of every kind: a star list, events, housekeeping, verification, pong.
+    // Telemetry of every kind: a star list, an attitude, events, housekeeping, verification,
+    // pong.
     let mut buffers = Box::new(TrackerBuffers::new());
     let mut tracker = Box::new(
         Tracker::<32>::new(
@@ -80,6 +81,25 @@ fn spacepackets_decodes_the_telemetry() {
         from: Mode::Acquisition,
         to: Mode::Tracking,
         reason: ModeReason::Acquired,
+    });
+    let fix = startrack_core::solver::Fix {
+        attitude: startrack_core::attitude::Attitude {
+            q: startrack_core::attitude::Quat([0.5, -0.5, 0.5, 0.5]),
+            cov_rad2: [
+                [1e-12, 2e-14, 0.0],
+                [2e-14, 1.5e-12, 0.0],
+                [0.0, 0.0, 3e-11],
+            ],
+        },
+        mode: startrack_core::solver::SolveMode::Tracking,
+        used: 30,
+        matched: 28,
+        false_probability: 1e-40,
+        time_us: 987_654,
+    };
+    link.send_attitude(&startrack_core::link::AttitudeReport {
+        frame: 7,
+        fix: Ok(fix),
     });
     let mut cmds = Vec::new();
     for (seq, kind) in [p::TC_PING, p::TC_HOUSEKEEPING].into_iter().enumerate() {
@@ -130,6 +150,12 @@ fn spacepackets_decodes_the_telemetry() {
                 })
                 .collect();
         }
+        if t.kind == p::TM_ATTITUDE {
+            e["attitude"] = serde_json::json!({
+                "frame": 7, "status": 2, "used": 30, "matched": 28,
+                "q": fix.attitude.q.0, "cov_zz": 3e-11, "time_us": fix.time_us,
+            });
+        }
         if t.kind == p::TM_HOUSEKEEPING {
             e["housekeeping"] = true.into();
             e["mode"] = 1.into();
@@ -141,7 +167,16 @@ fn spacepackets_decodes_the_telemetry() {
         .iter()
         .map(|e| (e["service"].as_u64(), e["subtype"].as_u64()))
         .collect();
-    for want in [(131, 2), (5, 1), (1, 1), (17, 2), (3, 25), (1, 2), (5, 2)] {
+    for want in [
+        (131, 2),
+        (5, 1),
+        (1, 1),
+        (17, 2),
+        (3, 25),
+        (1, 2),
+        (5, 2),
+        (134, 2),
+    ] {
         assert!(
             kinds.contains(&(Some(want.0), Some(want.1))),
             "TM[{},{}] in {kinds:?}",

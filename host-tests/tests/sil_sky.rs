@@ -148,3 +148,55 @@ fn sil_over_the_sky_solves_every_frame_within_its_covariance() {
         assert!(fix.matched >= 10, "frame {}: {fix:?}", fr.summary.frame);
     }
 }
+
+/// The attitude report the link carries reads back as written, for a fix and for each way of
+/// having none; any other length or status is refused, never misread.
+#[test]
+fn attitude_report_round_trips_and_refuses_garbage() {
+    use startrack_core::link::telemetry::ATTITUDE_LEN;
+    use startrack_core::link::{AttitudeMissing, AttitudeReport};
+    let bytes = committed_catalog().unwrap();
+    let cat = Catalog::parse(&bytes).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+    let q = random_attitude(&mut rng);
+    let stars = records(q, &cat, 9);
+    let fix = solver(&cat).update(&stars, 42).unwrap();
+    let mut buf = [0u8; 128];
+    for report in [
+        AttitudeReport::of(5, &Ok(fix)),
+        AttitudeReport::of(6, &Err(SolveError::TooFewStars { usable: 2 })),
+        AttitudeReport {
+            frame: 7,
+            fix: Err(AttitudeMissing::NotIdentified { used: 12 }),
+        },
+    ] {
+        let n = report.encode(99, &mut buf).unwrap();
+        assert_eq!(n, ATTITUDE_LEN);
+        let back = AttitudeReport::decode(&buf[..n]).unwrap();
+        match (report.fix, back.fix) {
+            (Ok(a), Ok(b)) => {
+                assert_eq!(a.attitude.q, b.attitude.q);
+                assert_eq!(
+                    (a.mode, a.used, a.matched, a.time_us),
+                    (b.mode, b.used, b.matched, b.time_us)
+                );
+                for (ra, rb) in a.attitude.cov_rad2.iter().zip(b.attitude.cov_rad2) {
+                    for (x, y) in ra.iter().zip(rb) {
+                        assert!((x - y).abs() <= 1e-6 * x.abs(), "{x} {y}");
+                    }
+                }
+            }
+            (a, b) => assert_eq!(a, b),
+        }
+        assert_eq!(back.frame, report.frame);
+        assert_eq!(AttitudeReport::decode(&buf[..n - 1]), None);
+        let mut bad = buf;
+        bad[4] = 4;
+        assert_eq!(AttitudeReport::decode(&bad[..n]), None);
+    }
+    // Too small a buffer: no report, no panic.
+    assert_eq!(
+        AttitudeReport::of(1, &Ok(fix)).encode(0, &mut buf[..20]),
+        None
+    );
+}

@@ -33,5 +33,5 @@ pub mod upload;
 pub use command::{Command, Rejection, WindowKind, WindowRequest};
 pub use flash_upload::{FlashTables, active_info, refusal_of};
 pub use service::{LinkService, NoWindows, Targets, TrackerControl, WindowReader};
-pub use telemetry::{FrameTotals, Housekeeping, LinkCounters};
+pub use telemetry::{AttitudeMissing, AttitudeReport, FrameTotals, Housekeeping, LinkCounters};
 pub use upload::{TableInfo, TableUpload, UploadRefusal};

@@ -17,12 +17,15 @@ pub const APID_HOUSEKEEPING: u16 = 0x101;
 pub const APID_STARS: u16 = 0x102;
 /// Diagnostic windows and table reports.
 pub const APID_DIAGNOSTICS: u16 = 0x103;
+/// APID of the attitude reports.
+pub const APID_ATTITUDE: u16 = 0x104;
 /// Every APID the tracker sends or takes, with its name.
-pub const APIDS: [(u16, &str); 4] = [
+pub const APIDS: [(u16, &str); 5] = [
     (APID_CONTROL, "control"),
     (APID_HOUSEKEEPING, "housekeeping"),
     (APID_STARS, "stars"),
     (APID_DIAGNOSTICS, "diagnostics"),
+    (APID_ATTITUDE, "attitude"),
 ];
 
 /// Length of the telemetry time field, bytes (the uptime in us, big-endian `u64`).
@@ -100,6 +103,8 @@ pub const TC_TABLE_ABORT: MessageType = mt(133, 4);
 pub const TC_TABLE_REPORT: MessageType = mt(133, 5);
 /// `TM[133,6]`: the table in force.
 pub const TM_TABLE_REPORT: MessageType = mt(133, 6);
+/// A frame's attitude (every frame the attitude stage runs).
+pub const TM_ATTITUDE: MessageType = mt(134, 2);
 
 /// Which way a message goes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -146,7 +151,7 @@ const fn tm(name: &'static str, apid: u16, kind: MessageType, data: &'static str
 }
 
 /// Every message, telecommands first.
-pub const MESSAGES: [MessageDef; 22] = [
+pub const MESSAGES: [MessageDef; 23] = [
     tc("ping", TC_PING, "none"),
     tc("housekeeping", TC_HOUSEKEEPING, "none"),
     tc(
@@ -236,6 +241,12 @@ pub const MESSAGES: [MessageDef; 22] = [
         APID_DIAGNOSTICS,
         TM_TABLE_REPORT,
         "kind u8, present u8, len u32, crc32 u32, sequence u32",
+    ),
+    tm(
+        "attitude",
+        APID_ATTITUDE,
+        TM_ATTITUDE,
+        "the attitude report's fields (76 bytes)",
     ),
 ];
 

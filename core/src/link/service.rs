@@ -119,7 +119,7 @@ pub struct LinkService {
     data: [u8; p::MAX_TM_LEN],
     packet: [u8; p::MAX_TM_LEN],
     framed: [u8; TX_FRAME],
-    seq: [u16; 4],
+    seq: [u16; 5],
     counters: LinkCounters,
     totals: FrameTotals,
     last: Option<FrameSummary>,
@@ -175,7 +175,7 @@ impl LinkService {
             data: [0; p::MAX_TM_LEN],
             packet: [0; p::MAX_TM_LEN],
             framed: [0; TX_FRAME],
-            seq: [0; 4],
+            seq: [0; 5],
             counters: LinkCounters {
                 rx_bytes: 0,
                 packets: 0,
@@ -377,6 +377,13 @@ impl LinkService {
         self.send(p::APID_HOUSEKEEPING, p::TM_HOUSEKEEPING, len, Queue::Bulk);
     }
 
+    /// Sends a frame's attitude report (the attitude stage's result, after the frame), on the
+    /// bulk queue: counted dropped when the queue is full, like a star list.
+    pub fn send_attitude(&mut self, report: &super::telemetry::AttitudeReport) {
+        let len = report.encode(self.now_us, &mut self.data).unwrap_or(0);
+        self.send(p::APID_ATTITUDE, p::TM_ATTITUDE, len, Queue::Bulk);
+    }
+
     /// Called by the home after each frame (after the tracker reported it to this sink):
     /// periodic housekeeping.
     pub fn end_of_frame(&mut self, tables: &dyn TableUpload) {
@@ -571,7 +578,8 @@ impl LinkService {
     /// Builds a TM packet with the first `len` bytes of `self.data`, frames it and queues
     /// it, or counts it dropped.
     fn send(&mut self, apid: u16, kind: MessageType, len: usize, queue: Queue) {
-        let slot = usize::from(apid & 3);
+        // One sequence count per APID (0x100..=0x104).
+        let slot = usize::from(apid.wrapping_sub(p::APID_CONTROL)).min(4);
         let seq = self.seq.get(slot).copied().unwrap_or(0);
         if let Some(s) = self.seq.get_mut(slot) {
             *s = s.wrapping_add(1) & 0x3FFF;

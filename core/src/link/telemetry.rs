@@ -1,7 +1,7 @@
-//! Telemetry source data: the housekeeping report, a frame's star list, the events and the
-//! verification reports, each a fixed big-endian layout written into a slice (and read back
-//! by the ground tool with the same code). The layouts are tabled in `docs/protocol.md`,
-//! generated from [`HK_FIELDS`] and [`STAR_FIELDS`].
+//! Telemetry source data: the housekeeping report, a frame's star list, a frame's attitude,
+//! the events and the verification reports, each a fixed big-endian layout written into a
+//! slice (and read back by the ground tool with the same code). The layouts are tabled in
+//! `docs/protocol.md`, generated from [`HK_FIELDS`], [`STAR_FIELDS`] and [`ATTITUDE_FIELDS`].
 //!
 //! Cost: a few stores per field; a 32-star list is 902 bytes.
 
@@ -64,6 +64,11 @@ impl<'a> Writer<'a> {
         self.u32(v.to_bits())
     }
 
+    /// Appends an `f64` (IEEE 754 bits).
+    pub fn f64(&mut self, v: f64) -> &mut Self {
+        self.u64(v.to_bits())
+    }
+
     /// Bytes written, or `None` if something did not fit.
     pub fn finish(&self) -> Option<usize> {
         self.ok.then_some(self.at)
@@ -116,6 +121,11 @@ impl<'a> Reader<'a> {
     /// An `f32`.
     pub fn f32(&mut self) -> Option<f32> {
         self.u32().map(f32::from_bits)
+    }
+
+    /// An `f64`.
+    pub fn f64(&mut self) -> Option<f64> {
+        self.u64().map(f64::from_bits)
     }
 
     /// Bytes left.
@@ -291,7 +301,7 @@ pub const fn type_len(t: &str) -> usize {
         b"u8" => 1,
         b"u16" => 2,
         b"u32" | b"f32" => 4,
-        b"u64" => 8,
+        b"u64" | b"f64" => 8,
         _ => 0,
     }
 }
@@ -500,6 +510,188 @@ pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usiz
         };
     }
     Some((frame, mode, count))
+}
+
+/// The attitude report's fields (TM[134,2]), in order: name, type, meaning.
+pub const ATTITUDE_FIELDS: [(&str, &str, &str); 17] = [
+    ("frame", "u32", "the frame"),
+    (
+        "status",
+        "u8",
+        "0 no attitude: too few usable stars, 1 no attitude: not identified, 2 tracking (from the last attitude), 3 lost in space",
+    ),
+    (
+        "used",
+        "u8",
+        "usable stars given to identification (at most 32)",
+    ),
+    (
+        "matched",
+        "u8",
+        "stars identified and in the attitude (0 without one)",
+    ),
+    ("reserved", "u8", "0"),
+    (
+        "qw",
+        "f64",
+        "attitude quaternion, ICRS to camera, Hamilton, scalar first (0 without one)",
+    ),
+    ("qx", "f64", ""),
+    ("qy", "f64", ""),
+    ("qz", "f64", ""),
+    (
+        "cov_xx",
+        "f32",
+        "covariance of the error rotation vector, camera frame, rad^2 (x, y across the boresight, z roll)",
+    ),
+    ("cov_xy", "f32", ""),
+    ("cov_xz", "f32", ""),
+    ("cov_yy", "f32", ""),
+    ("cov_yz", "f32", ""),
+    ("cov_zz", "f32", ""),
+    (
+        "false_probability",
+        "f32",
+        "upper bound on the probability that the identification is false",
+    ),
+    ("time_us", "u64", "time of the frame, us"),
+];
+
+/// Length of the attitude report, bytes.
+pub const ATTITUDE_LEN: usize = 4 + 4 + 4 * 8 + 7 * 4 + 8;
+
+/// A frame's attitude as the link carries it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AttitudeReport {
+    /// The frame.
+    pub frame: u32,
+    /// The attitude stage's result: the fix, or why there is none.
+    pub fix: Result<crate::solver::Fix, AttitudeMissing>,
+}
+
+/// Why a frame's attitude report carries no attitude.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AttitudeMissing {
+    /// Fewer usable stars than identification needs.
+    TooFewStars {
+        /// Usable stars.
+        used: u8,
+    },
+    /// Identification found no solution.
+    NotIdentified {
+        /// Usable stars.
+        used: u8,
+    },
+}
+
+impl AttitudeReport {
+    /// The report of the attitude stage's `result` for `frame`.
+    pub fn of(frame: u32, result: &Result<crate::solver::Fix, crate::solver::SolveError>) -> Self {
+        use crate::solver::SolveError;
+        Self {
+            frame,
+            fix: match *result {
+                Ok(f) => Ok(f),
+                Err(SolveError::TooFewStars { usable }) => {
+                    Err(AttitudeMissing::TooFewStars { used: usable })
+                }
+                Err(SolveError::Ident { usable, .. }) => {
+                    Err(AttitudeMissing::NotIdentified { used: usable })
+                }
+            },
+        }
+    }
+
+    /// Writes the report ([`ATTITUDE_FIELDS`]); `time_us` is used when there is no fix.
+    pub fn encode(&self, time_us: u64, out: &mut [u8]) -> Option<usize> {
+        use crate::solver::SolveMode;
+        let mut w = Writer::new(out);
+        w.u32(self.frame);
+        match &self.fix {
+            Ok(f) => {
+                let status = match f.mode {
+                    SolveMode::Tracking => 2,
+                    SolveMode::LostInSpace => 3,
+                };
+                w.u8(status).u8(f.used).u8(f.matched).u8(0);
+                for v in f.attitude.q.0 {
+                    w.f64(v);
+                }
+                let c = &f.attitude.cov_rad2;
+                for (i, j) in [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)] {
+                    let v = c.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0);
+                    w.f32(v as f32);
+                }
+                w.f32(f.false_probability as f32).u64(f.time_us);
+            }
+            Err(m) => {
+                let (status, used) = match *m {
+                    AttitudeMissing::TooFewStars { used } => (0, used),
+                    AttitudeMissing::NotIdentified { used } => (1, used),
+                };
+                w.u8(status).u8(used).u8(0).u8(0);
+                for _ in 0..4 {
+                    w.f64(0.0);
+                }
+                for _ in 0..7 {
+                    w.f32(0.0);
+                }
+                w.u64(time_us);
+            }
+        }
+        w.finish()
+    }
+
+    /// Reads a report back (`None`: wrong length or an unknown status).
+    pub fn decode(d: &[u8]) -> Option<Self> {
+        use crate::attitude::{Attitude, Quat};
+        use crate::solver::{Fix, SolveMode};
+        if d.len() != ATTITUDE_LEN {
+            return None;
+        }
+        let mut r = Reader::new(d);
+        let frame = r.u32()?;
+        let (status, used, matched, _) = (r.u8()?, r.u8()?, r.u8()?, r.u8()?);
+        let q = Quat([r.f64()?, r.f64()?, r.f64()?, r.f64()?]);
+        let mut c = [0f32; 6];
+        for v in &mut c {
+            *v = r.f32()?;
+        }
+        let false_probability = f64::from(r.f32()?);
+        let time_us = r.u64()?;
+        let [xx, xy, xz, yy, yz, zz] = c.map(f64::from);
+        let mode = match status {
+            0 => {
+                return Some(Self {
+                    frame,
+                    fix: Err(AttitudeMissing::TooFewStars { used }),
+                });
+            }
+            1 => {
+                return Some(Self {
+                    frame,
+                    fix: Err(AttitudeMissing::NotIdentified { used }),
+                });
+            }
+            2 => SolveMode::Tracking,
+            3 => SolveMode::LostInSpace,
+            _ => return None,
+        };
+        Some(Self {
+            frame,
+            fix: Ok(Fix {
+                attitude: Attitude {
+                    q,
+                    cov_rad2: [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]],
+                },
+                mode,
+                used,
+                matched,
+                false_probability,
+                time_us,
+            }),
+        })
+    }
 }
 
 /// Event numbers of `TM[5,1]` and `TM[5,2]`.
