@@ -4,8 +4,7 @@
 //! each buffer is cleaned or invalidated around each transfer. Instead all DMA buffers live
 //! in [`DmaRegion`], a 32 KB-aligned static of at most 32 KB in `.bss` (AXI SRAM, which DMA1
 //! and the MDMA reach; DMA1 does not reach DTCM), and MPU region 0 makes exactly that block
-//! normal memory,
-//! non-cacheable, non-executable. Everything else (stack, tracker state, the sequencer's
+//! normal memory, non-cacheable, non-executable. Everything else (stack, tracker state, the sequencer's
 //! tables, code) is cached. Cost: none per transfer; 32 KB of AXI SRAM (23 KB used) served
 //! uncached.
 
