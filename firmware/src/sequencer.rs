@@ -22,9 +22,10 @@
 //! 30 windows at 1 MHz, 1,681 nodes and its chain table, 0.19 M instructions on QEMU's M7
 //! (`cargo m7-bench`'s `sequencer_chain_nodes`), where the word feed it replaces copied
 //! 593,541 words for 3.57 M (`sequencer_feed_words`); compiling the frame is 0.50 M
-//! (`sequencer_compile`; docs/sequencer.md). The feeder writes half a ring of nodes at a time
-//! and sleeps for half the ticks it has queued (a few milliseconds for a tracking frame),
-//! in an interrupt-level executor (`main.rs`) that preempts the tracker. If the MDMA reaches
+//! (`sequencer_compile`; docs/sequencer.md). The feeder writes up to half a ring of nodes
+//! at a time, until [`AHEAD_US`] of ticks are linked ahead of the MDMA, and sleeps for half
+//! of what is ahead (about once a millisecond), in an interrupt-level executor (`main.rs`)
+//! that preempts the tracker. If the MDMA reaches
 //! the end of the list inside a frame (the feeder was late), the port holds its last word
 //! until the feeder restarts the list: a gap in the clocks, reported as
 //! [`SeqError::Underrun`].
@@ -89,6 +90,11 @@ pub const NODE_RING: usize = 128;
 
 /// Nodes the feeder writes at a time.
 const NODE_BATCH: usize = NODE_RING / 2;
+
+/// The feeder links nodes until this much is linked ahead of the node in play, us, and
+/// wakes after half of what it linked ahead: about once a millisecond (a full frame's row
+/// is two nodes of 576 us), so the line jobs reach the readout before their lines end.
+const AHEAD_US: u64 = 2_000;
 
 /// Words of rest state at the end of each chain table: a node of the exposure padding plays
 /// up to 256 x 4096 ticks (131 ms at 125 ns).
@@ -166,8 +172,8 @@ pub struct LineReady {
     pub job: LineJob,
 }
 
-/// Lines queued on the clock port, for the readout task. Sixteen: more than the lines of
-/// half a node ring.
+/// Lines queued on the clock port, for the readout task. Sixteen; when it is full the
+/// feeder keeps the next jobs until its next wake-up.
 pub static LINE_JOBS: Channel<CriticalSectionRawMutex, LineReady, 16> = Channel::new();
 
 /// Why the clocks stopped.
@@ -387,6 +393,7 @@ impl Sequencer {
         &mut self,
         links: &mut core::iter::Chain<Links<'_>, core::iter::Once<Link>>,
         config: &NodeConfig,
+        config_tick_ps: u32,
     ) -> (usize, bool) {
         let ch = pac::MDMA.ch(MDMA_CHANNEL);
         if ch.isr().read().teif() {
@@ -399,7 +406,12 @@ impl Sequencer {
         let first = self.written;
         let mut i = first;
         let mut slot = None;
-        while i < limit && i - first < NODE_BATCH as u64 {
+        let ahead_ticks = AHEAD_US * 1_000_000 / u64::from(config_tick_ps.max(1));
+        let played = self.played();
+        while i < limit
+            && i - first < NODE_BATCH as u64
+            && self.queued.saturating_sub(played) < ahead_ticks
+        {
             let Some(link) = links.next() else { break };
             let s = i as usize % NODE_RING;
             let next = self.slot_addr(s + 1);
@@ -489,24 +501,25 @@ impl Sequencer {
         let mut jobs = LineJobs::new(program).peekable();
         let mut first_batch = true;
         loop {
-            let (n, dry) = self.append(&mut links, &config).await;
+            let (n, dry) = self.append(&mut links, &config, tick_ps).await;
             if dry && !first_batch && n > 0 {
                 return Err(SeqError::Underrun);
             }
             first_batch = false;
             self.send_jobs(&mut jobs, frame, frame_start, tick_ps);
-            if n == 0 && links.clone().next().is_none() {
+            if n == 0 && links.clone().next().is_none() && jobs.peek().is_none() {
                 return Ok(());
             }
-            // Sleep for half the ticks linked ahead (at least 10 us).
+            // Sleep for half the ticks linked ahead (at least 10 us, at most AHEAD_US / 2).
             let ahead = self.queued.saturating_sub(self.played());
-            let us = (ahead / 2 * u64::from(tick_ps) / 1_000_000).clamp(10, 10_000);
+            let us = (ahead / 2 * u64::from(tick_ps) / 1_000_000).clamp(10, AHEAD_US / 2);
             embassy_time::Timer::after_micros(us).await;
         }
     }
 
     /// Sends every job whose ticks are all linked, with the instant of its last sample
-    /// (none for an unannounced frame: the jobs are walked past).
+    /// (none for an unannounced frame: the jobs are walked past), while the readout has
+    /// room; the rest wait for the feeder's next wake-up.
     fn send_jobs(
         &mut self,
         jobs: &mut core::iter::Peekable<LineJobs<'_, '_, '_>>,
@@ -516,12 +529,15 @@ impl Sequencer {
     ) {
         let played = self.played();
         let now = Instant::now();
-        while let Some(job) = jobs.next_if(|j| frame_start + j.end_tick <= self.queued) {
+        while let Some(job) = jobs.next_if(|j| {
+            frame_start + j.end_tick <= self.queued && (frame.is_none() || !LINE_JOBS.is_full())
+        }) {
             let ticks_left = (frame_start + job.end_tick).saturating_sub(played);
             let due =
                 now + Duration::from_micros((ticks_left * u64::from(tick_ps)).div_ceil(1_000_000));
             let Some(frame) = frame else { continue };
             let last = jobs.peek().is_none();
+            // Cannot fail: the job was taken only with room in the channel.
             if LINE_JOBS
                 .try_send(LineReady {
                     frame,
