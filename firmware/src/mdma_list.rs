@@ -116,3 +116,182 @@ impl NodeConfig {
         }
     }
 }
+
+/// What the ring needs of the MDMA channel: its state, read from its registers on the
+/// board, from a model on the host.
+pub trait MdmaChannel {
+    /// The channel is enabled (it has nodes left to play).
+    fn enabled(&self) -> bool;
+    /// `CxLAR`: the link address of the node in play (0: the list ends with it).
+    fn link_address(&self) -> u32;
+}
+
+/// The outcome of [`NodeRing::append`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Appended {
+    /// Nodes written.
+    pub nodes: usize,
+    /// The list had ended, or ends with the node in play, before the new nodes were linked
+    /// to it: once the channel is disabled it must be started at `first_slot`'s node.
+    pub restart: bool,
+    /// The ring slot of the first node written.
+    pub first_slot: usize,
+}
+
+/// The bookkeeping of a ring of `N` nodes the CPU writes ahead of the MDMA: which node the
+/// MDMA plays, where the next nodes go, and the linking of each batch to the last node
+/// written (which ends the list until then). No hardware access: the caller gives the
+/// channel's state ([`MdmaChannel`]) and the ring's memory, and starts the channel when
+/// [`Appended::restart`] says so. Cost: O(nodes written) per append, O(1) otherwise.
+#[derive(Clone, Debug)]
+pub struct NodeRing<const N: usize> {
+    /// Nodes written since the start.
+    written: u64,
+    /// Ticks linked since the start.
+    queued: u64,
+    /// The tick each slot's node starts at.
+    starts: [u64; N],
+    /// The slot of the last node written (its link address is 0).
+    last: Option<usize>,
+}
+
+impl<const N: usize> NodeRing<N> {
+    /// An empty ring.
+    pub const fn new() -> Self {
+        Self {
+            written: 0,
+            queued: 0,
+            starts: [0; N],
+            last: None,
+        }
+    }
+
+    /// Nodes written since the start.
+    pub const fn written(&self) -> u64 {
+        self.written
+    }
+
+    /// Ticks linked since the start.
+    pub const fn queued(&self) -> u64 {
+        self.queued
+    }
+
+    /// The index (since the start) of the node the MDMA plays, or [`Self::written`] when it
+    /// has played every node; `base` is the ring's address.
+    pub fn progress(&self, ch: &impl MdmaChannel, base: u32) -> u64 {
+        if !ch.enabled() {
+            return self.written;
+        }
+        let lar = ch.link_address();
+        if lar == 0 || self.written == 0 {
+            return self.written.saturating_sub(1);
+        }
+        let size = core::mem::size_of::<Node>() as u32;
+        let next = (lar.wrapping_sub(base) / size) as usize % N;
+        let cur = (next + N - 1) % N;
+        // The one index of that slot among the last N written.
+        let newest = (self.written - 1) as usize % N;
+        let back = (newest + N - cur) % N;
+        self.written.saturating_sub(1 + back as u64)
+    }
+
+    /// Ticks played: the start of the node in play (all of them when the list has ended).
+    pub fn played(&self, ch: &impl MdmaChannel, base: u32) -> u64 {
+        let cur = self.progress(ch, base);
+        if cur >= self.written {
+            return self.queued;
+        }
+        self.starts
+            .get(cur as usize % N)
+            .copied()
+            .unwrap_or(self.queued)
+    }
+
+    /// Writes up to `batch` nodes of `links` into `nodes` (the ring, at address `base`)
+    /// while fewer than `ahead_ticks` are linked ahead of the node in play, never over a
+    /// node the MDMA has not loaded; the last one written ends the list. Then links them
+    /// to the last node written before (`fence` between the writes and the link, and
+    /// after it: a `dsb` on the board). A batch that finds the list ended, or ending with
+    /// the node in play, asks for a restart.
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the ring's whole context, once a batch"
+    )]
+    pub fn append(
+        &mut self,
+        nodes: &mut [Node; N],
+        base: u32,
+        ch: &impl MdmaChannel,
+        links: &mut impl Iterator<Item = Link>,
+        config: &NodeConfig,
+        batch: usize,
+        ahead_ticks: u64,
+        fence: impl Fn(),
+    ) -> Appended {
+        let size = core::mem::size_of::<Node>() as u32;
+        let addr = |slot: usize| base.wrapping_add(((slot % N) as u32).wrapping_mul(size));
+        let cur = self.progress(ch, base);
+        let played = self.played(ch, base);
+        // A slot may be rewritten once the MDMA has loaded the node after it.
+        let limit = cur + N as u64 - 1;
+        let first = self.written;
+        let first_slot = first as usize % N;
+        let mut i = first;
+        let mut slot = None;
+        while i < limit
+            && i - first < batch as u64
+            && self.queued.saturating_sub(played) < ahead_ticks
+        {
+            let Some(link) = links.next() else { break };
+            let s = i as usize % N;
+            if let Some(n) = nodes.get_mut(s) {
+                // SAFETY: `n` is a valid, aligned node (volatile: the MDMA reads it).
+                unsafe { core::ptr::write_volatile(n, config.node(&link, addr(s + 1))) };
+            }
+            if let Some(start) = self.starts.get_mut(s) {
+                *start = self.queued;
+            }
+            self.queued += link.ticks();
+            slot = Some(s);
+            i += 1;
+        }
+        let Some(last) = slot else {
+            return Appended {
+                nodes: 0,
+                restart: false,
+                first_slot,
+            };
+        };
+        if let Some(n) = nodes.get_mut(last) {
+            // SAFETY: as above.
+            unsafe { core::ptr::write_volatile(&raw mut n.clar, 0) };
+        }
+        fence();
+        let mut restart = true;
+        if let Some(prev) = self.last
+            && ch.enabled()
+        {
+            if let Some(n) = nodes.get_mut(prev) {
+                // SAFETY: as above; one aligned 32-bit store, which the MDMA reads whole.
+                unsafe { core::ptr::write_volatile(&raw mut n.clar, addr(first_slot)) };
+            }
+            fence();
+            // Linked in time unless the MDMA had already loaded the old last node (its
+            // link address, now in CxLAR, is 0) or had finished it.
+            restart = ch.link_address() == 0 || !ch.enabled();
+        }
+        self.written = i;
+        self.last = Some(last);
+        Appended {
+            nodes: (i - first) as usize,
+            restart,
+            first_slot,
+        }
+    }
+}
+
+impl<const N: usize> Default for NodeRing<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}

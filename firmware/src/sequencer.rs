@@ -19,7 +19,7 @@
 //!
 //! # Cost
 //! One 40-byte node per program step instead of one word per tick: for a tracking frame of
-//! 30 windows at 1 MHz, 1,681 nodes and its chain table, 0.19 M instructions on QEMU's M7
+//! 30 windows at 1 MHz, 1,681 nodes and its chain table, 0.21 M instructions on QEMU's M7
 //! (`cargo m7-bench`'s `sequencer_chain_nodes`), where the word feed it replaces copied
 //! 593,541 words for 3.57 M (`sequencer_feed_words`); compiling the frame is 0.50 M
 //! (`sequencer_compile`; docs/sequencer.md). The feeder writes up to half a ring of nodes
@@ -79,7 +79,7 @@ use startrack_core::sequencer::{
 use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 
-use crate::mdma_list::{Node, NodeConfig};
+use crate::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};
 
 /// The clock port's pin map: line `l` on PE`l` (I1-I3 PE0-2, S1-S3 PE3-5, R1L-R3L PE6-8,
 /// R1R-R3R PE9-11, RG PE12, SW PE13, DG PE14, CONVST PE15).
@@ -196,14 +196,8 @@ pub struct Sequencer {
     clock: &'static mut ClockBuffers,
     _pins: [Output<'static>; 16],
     running: bool,
-    /// Nodes written since the clocks started.
-    written: u64,
-    /// Ticks linked since the clocks started.
-    queued: u64,
-    /// The tick each ring slot's node starts at.
-    starts: [u64; NODE_RING],
-    /// The ring slot of the last node written (its link address is 0).
-    last: Option<usize>,
+    /// Which node the MDMA plays, where the next go.
+    ring: NodeRing<NODE_RING>,
     /// The chain table the next frame is written to.
     table: usize,
     /// The first node of the frame in each chain table.
@@ -235,10 +229,7 @@ impl Sequencer {
             clock,
             _pins: pins,
             running: false,
-            written: 0,
-            queued: 0,
-            starts: [0; NODE_RING],
-            last: None,
+            ring: NodeRing::new(),
             table: 0,
             table_first: [0; 2],
             dropped_lines: 0,
@@ -252,7 +243,7 @@ impl Sequencer {
 
     /// Whether the MDMA has played every linked node (the port holds the rest state).
     pub fn played_out(&self) -> bool {
-        self.progress() >= self.written
+        self.progress() >= self.ring.written()
     }
 
     /// Waits `us` while the port holds its last word (the rest state between frames).
@@ -322,37 +313,15 @@ impl Sequencer {
             .map_or(0, |n| core::ptr::from_ref(n) as u32)
     }
 
-    /// The node the MDMA plays (its index since the clocks started), or [`Self::written`]
+    /// The node the MDMA plays (its index since the clocks started), or the count written
     /// when it has played them all.
     fn progress(&self) -> u64 {
-        let ch = pac::MDMA.ch(MDMA_CHANNEL);
-        if !ch.cr().read().en() {
-            return self.written;
-        }
-        let lar = ch.lar().read().lar();
-        if lar == 0 {
-            return self.written.saturating_sub(1);
-        }
-        let base = self.slot_addr(0);
-        let size = core::mem::size_of::<Node>() as u32;
-        let next = (lar.wrapping_sub(base) / size) as usize % NODE_RING;
-        let cur = (next + NODE_RING - 1) % NODE_RING;
-        // The one index of that slot among the last NODE_RING written.
-        let newest = (self.written.max(1) - 1) as usize % NODE_RING;
-        let back = (newest + NODE_RING - cur) % NODE_RING;
-        self.written.saturating_sub(1 + back as u64)
+        self.ring.progress(&Hw, self.slot_addr(0))
     }
 
     /// Ticks played (the start of the node in play).
     fn played(&self) -> u64 {
-        let cur = self.progress();
-        if cur >= self.written {
-            return self.queued;
-        }
-        self.starts
-            .get(cur as usize % NODE_RING)
-            .copied()
-            .unwrap_or(self.queued)
+        self.ring.played(&Hw, self.slot_addr(0))
     }
 
     /// Loads the MDMA channel with the node in `slot` and enables it.
@@ -385,15 +354,15 @@ impl Sequencer {
         });
     }
 
-    /// Writes up to [`NODE_BATCH`] nodes of `links` (and, when they are done, the frame's
-    /// closing rest tick) behind the last one and links them to it, restarting the MDMA if
-    /// it had reached the end of the list. Returns `(nodes written, whether the list ran
-    /// dry before they were linked)`.
+    /// Writes up to [`NODE_BATCH`] nodes of `links` (at most [`AHEAD_US`] ahead) behind
+    /// the last one and links them to it ([`NodeRing::append`]), restarting the MDMA if it
+    /// had reached the end of the list. Returns `(nodes written, whether the list ran dry
+    /// before they were linked)`.
     async fn append(
         &mut self,
         links: &mut core::iter::Chain<Links<'_>, core::iter::Once<Link>>,
         config: &NodeConfig,
-        config_tick_ps: u32,
+        tick_ps: u32,
     ) -> (usize, bool) {
         let ch = pac::MDMA.ch(MDMA_CHANNEL);
         if ch.isr().read().teif() {
@@ -401,63 +370,25 @@ impl Sequencer {
             ch.ifcr().write(|w| w.set_cteif(true));
             defmt::error!("sequencer: MDMA transfer error (ESR {=u32:#x})", esr);
         }
-        let cur = self.progress();
-        let limit = cur + NODE_RING as u64 - 1;
-        let first = self.written;
-        let mut i = first;
-        let mut slot = None;
-        let ahead_ticks = AHEAD_US * 1_000_000 / u64::from(config_tick_ps.max(1));
-        let played = self.played();
-        while i < limit
-            && i - first < NODE_BATCH as u64
-            && self.queued.saturating_sub(played) < ahead_ticks
-        {
-            let Some(link) = links.next() else { break };
-            let s = i as usize % NODE_RING;
-            let next = self.slot_addr(s + 1);
-            if let Some(n) = self.clock.nodes.get_mut(s) {
-                // SAFETY: a valid, aligned node of the ring that the MDMA has played (volatile:
-                // the MDMA reads it).
-                unsafe { core::ptr::write_volatile(n, config.node(&link, next)) };
-            }
-            if let Some(start) = self.starts.get_mut(s) {
-                *start = self.queued;
-            }
-            self.queued += link.ticks();
-            slot = Some(s);
-            i += 1;
-        }
-        let Some(last) = slot else { return (0, false) };
-        // The batch's last node ends the list until the next batch is linked to it.
-        if let Some(n) = self.clock.nodes.get_mut(last) {
-            // SAFETY: as above.
-            unsafe { core::ptr::write_volatile(&raw mut n.clar, 0) };
-        }
-        let first_slot = first as usize % NODE_RING;
-        let first_addr = self.slot_addr(first_slot);
-        cortex_m::asm::dsb();
-        let mut dry = true;
-        if let Some(prev) = self.last
-            && ch.cr().read().en()
-        {
-            if let Some(n) = self.clock.nodes.get_mut(prev) {
-                // SAFETY: as above; one aligned 32-bit store, which the MDMA reads whole.
-                unsafe { core::ptr::write_volatile(&raw mut n.clar, first_addr) };
-            }
-            cortex_m::asm::dsb();
-            // Linked in time unless the MDMA had already loaded the old last node (its
-            // link address, now in CxLAR, is 0) or had finished it.
-            dry = ch.lar().read().lar() == 0 || !ch.cr().read().en();
-        }
-        self.written = i;
-        self.last = Some(last);
-        if dry {
+        let base = self.slot_addr(0);
+        let ahead_ticks = AHEAD_US * 1_000_000 / u64::from(tick_ps.max(1));
+        let done = self.ring.append(
+            &mut self.clock.nodes,
+            base,
+            &Hw,
+            links,
+            config,
+            NODE_BATCH,
+            ahead_ticks,
+            cortex_m::asm::dsb,
+        );
+        if done.nodes > 0 && done.restart {
             while ch.cr().read().en() {
                 embassy_time::Timer::after_micros(5).await;
             }
-            self.start_mdma(first_slot);
+            self.start_mdma(done.first_slot);
         }
-        (i.saturating_sub(first) as usize, dry)
+        (done.nodes, done.restart)
     }
 
     /// Links every node of `program` after whatever is linked, starting the clocks on the
@@ -473,7 +404,7 @@ impl Sequencer {
         // The other table's frame must have started: then this table's (the frame before
         // it) is played out.
         let other = self.table_first.get(k ^ 1).copied().unwrap_or(0);
-        while self.progress() < other && self.progress() < self.written {
+        while self.progress() < other && self.progress() < self.ring.written() {
             embassy_time::Timer::after_micros(20).await;
         }
         let config = self.node_config(k);
@@ -490,14 +421,14 @@ impl Sequencer {
         };
         let mut links = chain.links().chain(core::iter::once(rest));
         if let Some(t) = self.table_first.get_mut(k) {
-            *t = self.written;
+            *t = self.ring.written();
         }
         self.table ^= 1;
         let tick_ps = program.tick_ps();
         if !self.running {
             self.start_pace(tick_ps);
         }
-        let frame_start = self.queued;
+        let frame_start = self.ring.queued();
         let mut jobs = LineJobs::new(program).peekable();
         let mut first_batch = true;
         loop {
@@ -511,7 +442,7 @@ impl Sequencer {
                 return Ok(());
             }
             // Sleep for half the ticks linked ahead (at least 10 us, at most AHEAD_US / 2).
-            let ahead = self.queued.saturating_sub(self.played());
+            let ahead = self.ring.queued().saturating_sub(self.played());
             let us = (ahead / 2 * u64::from(tick_ps) / 1_000_000).clamp(10, AHEAD_US / 2);
             embassy_time::Timer::after_micros(us).await;
         }
@@ -530,7 +461,8 @@ impl Sequencer {
         let played = self.played();
         let now = Instant::now();
         while let Some(job) = jobs.next_if(|j| {
-            frame_start + j.end_tick <= self.queued && (frame.is_none() || !LINE_JOBS.is_full())
+            frame_start + j.end_tick <= self.ring.queued()
+                && (frame.is_none() || !LINE_JOBS.is_full())
         }) {
             let ticks_left = (frame_start + job.end_tick).saturating_sub(played);
             let due =
@@ -559,10 +491,20 @@ impl Sequencer {
         pac::MDMA.ch(MDMA_CHANNEL).cr().modify(|w| w.set_en(false));
         pac::DMA1.st(PACE_STREAM).cr().modify(|w| w.set_en(false));
         self.running = false;
-        self.written = 0;
-        self.queued = 0;
-        self.last = None;
+        self.ring = NodeRing::new();
         self.table_first = [0; 2];
+    }
+}
+
+/// The MDMA channel's registers as the ring reads them.
+struct Hw;
+
+impl MdmaChannel for Hw {
+    fn enabled(&self) -> bool {
+        pac::MDMA.ch(MDMA_CHANNEL).cr().read().en()
+    }
+    fn link_address(&self) -> u32 {
+        pac::MDMA.ch(MDMA_CHANNEL).lar().read().lar()
     }
 }
 

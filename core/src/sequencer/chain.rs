@@ -24,7 +24,7 @@
 //! Cost: [`Chain::new`] copies the program's words and writes the run, O(words), ~1,300
 //! words for the board's plans; each link is O(1) to make. A tracking frame of 30 windows
 //! at 1 MHz is 1,681 links for 593,541 ticks (host test `sequencer_chain`); its table and
-//! every link made into an MDMA node take 0.19 M instructions on QEMU's M7 (`cargo m7-bench`,
+//! every link made into an MDMA node take 0.21 M instructions on QEMU's M7 (`cargo m7-bench`,
 //! `sequencer_chain_nodes`), against 3.57 M for the word feed ([`super::Cursor`]).
 
 use super::compile::{Program, SEGMENTS, SegmentId, Step};

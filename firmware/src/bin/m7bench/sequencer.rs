@@ -8,13 +8,13 @@
 //!
 //! `sequencer_chain_nodes`: the same frame played by the MDMA's linked list instead: the
 //! chain's word table written (`Chain::new`: the program's words and a 256-word rest run)
-//! and every link made into an MDMA node (the firmware's own `mdma_list.rs`) in a ring of
-//! 128 nodes, as the board's feeder writes them; the DMA's playing is not counted (it cannot
+//! and every link made into an MDMA node in a ring of 128, 64 at a time, by the firmware's
+//! own `NodeRing::append` (`mdma_list.rs`), as the board's feeder writes them; the DMA's playing is not counted (it cannot
 //! run on QEMU), and the line jobs stay `sequencer_feed_jobs`.
 
 use crate::harness::{Bench, Out};
 use crate::inputs::G;
-use crate::mdma_list::{Node, NodeConfig};
+use crate::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};
 use startrack_core::sequencer::{
     Binning, Chain, Cost, Cursor, Limits, LineJobs, PinMap, ReadoutPlan, Step, Timing, compile,
 };
@@ -121,7 +121,6 @@ fn chain_nodes(
     Ok(move |bench: &Bench| {
         let mut table = [0u32; CHAIN_WORDS];
         let mut ring = [Node::ZERO; NODE_RING];
-        let mut nodes = 0usize;
         let t = bench.measure(|| {
             let Ok(chain) = Chain::new(&program, REST_RUN, &mut table) else {
                 return;
@@ -134,18 +133,38 @@ fn chain_nodes(
                 mask_addr: 0x4002_0008,
                 mask_data: 1 << 11,
             };
-            for link in chain.links() {
-                let slot = nodes % NODE_RING;
-                let next = base + (((slot + 1) % NODE_RING) * core::mem::size_of::<Node>()) as u32;
-                if let Some(n) = ring.get_mut(slot) {
-                    // SAFETY: `n` is a valid, aligned node of the ring (volatile: the MDMA,
-                    // not the CPU, reads it on the board).
-                    unsafe { core::ptr::write_volatile(n, config.node(&link, next)) };
-                }
-                nodes += 1;
-            }
+            // The board's feeder: half a ring a batch, linked to the batch before (the MDMA,
+            // which QEMU does not have, stands for one that plays each batch at once).
+            let mut nodes = NodeRing::<NODE_RING>::new();
+            let mut links = chain.links();
+            while nodes
+                .append(
+                    &mut ring,
+                    base,
+                    &Played,
+                    &mut links,
+                    &config,
+                    NODE_RING / 2,
+                    u64::MAX,
+                    || {},
+                )
+                .nodes
+                > 0
+            {}
         });
         core::hint::black_box(&ring);
         t
     })
+}
+
+/// An MDMA that has played every node linked so far.
+struct Played;
+
+impl MdmaChannel for Played {
+    fn enabled(&self) -> bool {
+        false
+    }
+    fn link_address(&self) -> u32 {
+        0
+    }
 }
