@@ -22,6 +22,7 @@ mod flash_store;
 mod lines;
 mod link;
 mod mcu_temp;
+mod mdma_list;
 mod memory;
 mod readout;
 mod safe_state;
@@ -49,7 +50,7 @@ static TRACKER_BUFFERS: ConstStaticCell<TrackerBuffers> =
 
 /// The executor of the sequencer's feeder: interrupt-driven (UART4's vector, unused
 /// otherwise) at a priority above thread mode, so the tracker's long frames cannot delay the
-/// refill of the clock ring.
+/// refill of the clock nodes.
 static EXECUTOR_CLOCKS: embassy_executor::InterruptExecutor =
     embassy_executor::InterruptExecutor::new();
 
@@ -66,7 +67,7 @@ static SEQ_TABLES: ConstStaticCell<[sequencer::Tables; 2]> =
 
 bind_interrupts!(
     /// Interrupts the drivers need: DMA1 stream 0 carries SPI1 RX (the ADC samples), DMA1
-    /// stream 1 the clock words (TIM6 update into GPIOE BSRR), streams 2 and 3 the link's
+    /// stream 1 paces the clock (TIM6 update; the MDMA plays the words), streams 2 and 3 the link's
     /// USART3 transmit and receive; the flash interrupt ends an async erase of bank 2.
     struct Irqs {
         DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
@@ -209,7 +210,7 @@ async fn main(spawner: Spawner) {
     );
 
     let mut fatal = SetupFaults::empty();
-    // The DMA block (clock ring, line buffers, SPI samples) in its non-cacheable MPU region,
+    // The DMA block (clock nodes and tables, line buffers, SPI samples) in its non-cacheable MPU region,
     // and the caches on.
     let dma_region = match memory::init() {
         Ok(r) => Some(r),
@@ -219,9 +220,9 @@ async fn main(spawner: Spawner) {
             None
         }
     };
-    let (ring, samples, uart_bufs) = match dma_region {
+    let (clock, samples, uart_bufs) = match dma_region {
         Some(memory::DmaRegion {
-            ring,
+            clock,
             lines: line_bufs,
             samples,
             uart_rx,
@@ -231,7 +232,7 @@ async fn main(spawner: Spawner) {
                 defmt::error!("line buffers: {}", e);
                 fatal |= SetupFaults::LINE_BUFFERS;
             }
-            (Some(ring), Some(samples), Some((uart_rx, uart_tx)))
+            (Some(clock), Some(samples), Some((uart_rx, uart_tx)))
         }
         None => (None, None, None),
     };
@@ -271,8 +272,8 @@ async fn main(spawner: Spawner) {
         (_, None) => defmt::error!("link: no DMA buffers"),
     }
 
-    let started = match (fatal.is_empty(), buffers, ring, samples) {
-        (true, Some(buffers), Some(ring), Some(samples)) => {
+    let started = match (fatal.is_empty(), buffers, clock, samples) {
+        (true, Some(buffers), Some(clock), Some(samples)) => {
             let clock_pins = [
                 p.PE0.into(),
                 p.PE1.into(),
@@ -291,7 +292,7 @@ async fn main(spawner: Spawner) {
                 p.PE14.into(),
                 p.PE15.into(),
             ];
-            let seq = sequencer::Sequencer::new(p.TIM6, p.DMA1_CH1, Irqs, clock_pins, ring);
+            let seq = sequencer::Sequencer::new(p.TIM6, p.DMA1_CH1, p.MDMA_CH0, clock_pins, clock);
             let spi = Spi::new_rxonly(
                 p.SPI1,
                 p.PA5,

@@ -3,14 +3,14 @@
 //! The M7's D-cache would hide DMA writes from the CPU (and CPU writes from the DMA) unless
 //! each buffer is cleaned or invalidated around each transfer. Instead all DMA buffers live
 //! in [`DmaRegion`], a 32 KB-aligned static of at most 32 KB in `.bss` (AXI SRAM, which DMA1
-//! reaches; DTCM it does not), and MPU region 0 makes exactly that block normal memory,
-//! non-cacheable, non-executable. Everything else (stack, tracker state, the sequencer's
-//! tables, code) is cached. Cost: none per transfer; 32 KB of AXI SRAM (25 KB used) served
+//! and the MDMA reach; DMA1 does not reach DTCM), and MPU region 0 makes exactly that block
+//! normal memory, non-cacheable, non-executable. Everything else (stack, tracker state, the sequencer's
+//! tables, code) is cached. Cost: none per transfer; 32 KB of AXI SRAM (23 KB used) served
 //! uncached.
 
 use crate::lines::{BUFFERS, LINE_LEN, LineBuf};
 use crate::link::{RX_RING_BYTES, TX_DMA_BYTES};
-use crate::sequencer::RING_WORDS;
+use crate::sequencer::ClockBuffers;
 use core::cell::UnsafeCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -20,8 +20,9 @@ const REGION_LOG2: u32 = 15;
 /// Every buffer a DMA stream reads or writes.
 #[repr(C)]
 pub struct DmaRegion {
-    /// The sequencer's ring of BSRR words (DMA1 stream 1 reads).
-    pub ring: [u32; RING_WORDS],
+    /// The sequencer's MDMA node ring, chain tables and pacing word (the MDMA and DMA1
+    /// stream 1 read them).
+    pub clock: ClockBuffers,
     /// The raw line buffers (processing reads them).
     pub lines: [LineBuf; BUFFERS],
     /// One line's ADC words (SPI1 RX DMA writes), before they are unpacked into a line.
@@ -43,7 +44,7 @@ struct Aligned(UnsafeCell<DmaRegion>);
 unsafe impl Sync for Aligned {}
 
 static DMA_REGION: Aligned = Aligned(UnsafeCell::new(DmaRegion {
-    ring: [0; RING_WORDS],
+    clock: ClockBuffers::new(),
     lines: [[0; LINE_LEN]; BUFFERS],
     samples: [0; LINE_LEN],
     uart_rx: [0; RX_RING_BYTES],

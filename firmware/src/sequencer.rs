@@ -1,32 +1,43 @@
 //! The CCD clock sequencer on the board: the core's compiled program played into the clock
-//! port by timer-paced DMA.
+//! port by a DMA that repeats each segment itself.
 //!
 //! # How
 //! TIM6 (a basic timer, nothing else uses it) overflows once a tick (`Ticks::tick_ps`, 125 ns
-//! at 1 MHz pixels); each update event requests one DMA1 stream 1 transfer (routed by
-//! DMAMUX1) of a `u32` from a ring of BSRR words into GPIOE's BSRR, so each tick sets all
-//! 16 clock lines, the ADC's CONVST among them, at once (pin map: [`PINS`], docs/hardware.md).
-//! A DMA stream cannot jump between `(segment, repeat)` steps within a tick, so the task
-//! keeps the ring full: the core's [`Cursor`] writes the program's next words into the part
-//! of the ring the DMA has played (embassy-stm32's `WritableRingBuffer`, circular mode with
-//! half/complete interrupts). The ring sits in the non-cacheable DMA region
-//! ([`crate::memory`]); the tables it is fed from are CPU-only and cacheable.
+//! at 1 MHz pixels); each update event requests one transfer of DMA1 stream 1 (routed by
+//! DMAMUX1, circular, one item, no interrupt), which writes 0 into GPIOE's BSRR (a word that
+//! changes no line) and so raises the stream's transfer-complete flag once a tick. That flag
+//! is a hardware request of the MDMA (channel 0), which plays the frame as a linked list
+//! ([`crate::mdma_list`]): each request moves the next word of the frame's chain table
+//! (`startrack_core::sequencer::Chain`) into GPIOE's BSRR, setting all 16 clock lines, the
+//! ADC's CONVST among them, at once (pin map: [`PINS`], docs/hardware.md), then clears the
+//! flag (the node's mask write). Each node plays one program step: a segment's words,
+//! repeated up to 4096 times by the MDMA itself. The CPU writes nodes, one a step, into a
+//! ring of [`NODE_RING`] nodes ahead of the MDMA and links them to the node in play (the
+//! last written node ends the list until the next are linked to it). The ring, the chain
+//! tables and the pacing word sit in the non-cacheable DMA region ([`crate::memory`]); the
+//! compiled tables the chain is made from are CPU-only and cacheable.
 //!
 //! # Cost
-//! One word copy per tick played: at 1 MHz pixels 8 M words/s, 6.0 instructions a word on
-//! QEMU's M7 (`cargo m7-bench`'s `sequencer_feed_words`), and compiling a tracking frame of
-//! 30 windows 0.50 M instructions (`sequencer_compile`; docs/sequencer.md). The
-//! ring holds [`RING_WORDS`] ticks (512 us at 125 ns): the feeder must run once per half
-//! ring (256 us), or the clocks stall (an underrun, reported as [`SeqError::Underrun`]). It
-//! therefore runs in an interrupt-level executor (`main.rs`), which preempts the tracker.
+//! One 40-byte node per program step instead of one word per tick: for a tracking frame of
+//! 30 windows at 1 MHz, 1,681 nodes and its chain table, 0.21 M instructions on QEMU's M7
+//! (`cargo m7-bench`'s `sequencer_chain_nodes`), where the word feed it replaces copied
+//! 593,541 words for 3.57 M (`sequencer_feed_words`); compiling the frame is 0.50 M
+//! (`sequencer_compile`; docs/sequencer.md). The feeder writes up to half a ring of nodes
+//! at a time, until [`AHEAD_US`] of ticks are linked ahead of the MDMA, and sleeps for half
+//! of what is ahead (about once a millisecond), in an interrupt-level executor (`main.rs`)
+//! that preempts the tracker. If the MDMA reaches
+//! the end of the list inside a frame (the feeder was late), the port holds its last word
+//! until the feeder restarts the list: a gap in the clocks, reported as
+//! [`SeqError::Underrun`].
 //!
 //! # Lines to the ADC reader
-//! As the feeder queues a requested frame it walks the program's line jobs (`LineJobs`): when
-//! a job's last word is queued it goes to [`LINE_JOBS`], tagged with the tracker's frame number
-//! and whether it is the frame's last line, with the instant its last sample will be
-//! taken (from the words still ahead of it in the ring and the tick), and the readout task
-//! reads that line's words from the ADC board after that instant ([`crate::readout`]). The
-//! board must buffer the samples of at least a line and a half ring (docs/hardware.md).
+//! As the feeder links a requested frame's nodes it walks the program's line jobs
+//! (`LineJobs`): when a job's last tick is linked it goes to [`LINE_JOBS`], tagged with the
+//! tracker's frame number and whether it is the frame's last line, with the instant its last
+//! sample will be taken (from the ticks linked ahead of it and the tick), and the readout
+//! task reads that line's words from the ADC board after that instant ([`crate::readout`]).
+//! The board must buffer the samples of at least a line and what the feeder links ahead
+//! (docs/hardware.md).
 //!
 //! # What each frame plays
 //! The tracker's line source (`app.rs`'s `ChannelLines`) sends each frame's request as a
@@ -34,23 +45,26 @@
 //! [`plan_task`] (thread mode, below the feeder's priority) compiles it with the core
 //! compiler into whichever of the two [`Tables`] is not being played, with the exposure the
 //! tracker's configuration sets, and hands the result to the feeder ([`sequencer_task`]),
-//! which plays it after the frame in play; the tables travel by ownership through two
-//! channels, so a frame's tables are never written while the DMA ring is fed from them. A
-//! request the plan or the compiler refuses (too many windows, a window outside, tables too
-//! small) is compiled as a full frame instead, counted in [`FALLBACKS`] and logged. Until
-//! the next request arrives the port holds the rest state (the image keeps integrating) in
-//! [`IDLE_WORDS`] chunks; after [`MAX_WAIT_US`] without one the last program is replayed
-//! unannounced (its lines are not read), so the image is not left to saturate.
+//! which links it after the frame in play (two chain tables alternate, so a frame's table is
+//! written only once the MDMA has left the frame before); the tables travel by ownership
+//! through two channels, so a frame's tables are never written while its chain is made from
+//! them. A request the plan or the compiler refuses (too many windows, a window outside,
+//! tables too small) is compiled as a full frame instead, counted in [`FALLBACKS`] and
+//! logged. Each frame ends with one tick of the rest state, so when the next request is not
+//! ready the list ends there and the port holds the rest state (the image keeps
+//! integrating); after [`MAX_WAIT_US`] without one the last program is replayed unannounced
+//! (its lines are not read), so the image is not left to saturate.
 //!
 //! # Not yet
-//! The waveforms have not been seen on a board (docs/hardware.md has the HIL steps).
+//! The waveforms have not been seen on a board (docs/hardware.md has the HIL steps), nor
+//! whether the MDMA serves each request within a tick (at 125 ns: the HIL step counts the
+//! ticks on the analyser).
 
 use core::sync::atomic::{AtomicU32, Ordering};
 use embassy_stm32::Peri;
-use embassy_stm32::dma::{self, Priority, TransferOptions, WritableRingBuffer};
 use embassy_stm32::gpio::{AnyPin, Level, Output, Speed};
-use embassy_stm32::interrupt::typelevel::Binding;
-use embassy_stm32::peripherals::{DMA1_CH1, TIM6};
+use embassy_stm32::pac;
+use embassy_stm32::peripherals::{DMA1_CH1, MDMA_CH0, TIM6};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::UpDma;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
@@ -59,26 +73,51 @@ use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant};
 use startrack_core::sequencer::{
-    Binning, CompileError, Cost, Cursor, Limits, LineJob, LineJobs, MAX_WINDOWS, PinMap, PlanError,
-    Program, ProgramParts, ReadoutPlan, Step, Ticks, Timing, compile, rest,
+    Binning, Chain, CompileError, Cost, Limits, LineJob, LineJobs, Link, Links, MAX_WINDOWS,
+    PinMap, PlanError, Program, ProgramParts, ReadoutPlan, Step, Ticks, Timing, compile,
 };
 use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
+
+use crate::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};
 
 /// The clock port's pin map: line `l` on PE`l` (I1-I3 PE0-2, S1-S3 PE3-5, R1L-R3L PE6-8,
 /// R1R-R3R PE9-11, RG PE12, SW PE13, DG PE14, CONVST PE15).
 pub const PINS: PinMap = PinMap::IN_ORDER;
 
-/// Ticks the DMA ring holds (two halves).
-pub const RING_WORDS: usize = 4096;
+/// Nodes of the MDMA's ring (40 bytes each).
+pub const NODE_RING: usize = 128;
+
+/// Nodes the feeder writes at a time.
+const NODE_BATCH: usize = NODE_RING / 2;
+
+/// The feeder links nodes until this much is linked ahead of the node in play, us, and
+/// wakes after half of what it linked ahead: about once a millisecond (a full frame's row
+/// is two nodes of 576 us), so the line jobs reach the readout before their lines end.
+const AHEAD_US: u64 = 2_000;
+
+/// Words of rest state at the end of each chain table: a node of the exposure padding plays
+/// up to 256 x 4096 ticks (131 ms at 125 ns).
+pub const REST_RUN: u32 = 256;
 
 /// Words of the segment table (the largest plan the board makes needs 503, host test
 /// `sequencer_route`).
 pub const MAX_WORDS: usize = 1024;
 
+/// Words of a chain table: the segments and the rest run.
+pub const CHAIN_WORDS: usize = MAX_WORDS + REST_RUN as usize;
+
 /// Program steps (the largest plan the board makes, 64 windows, needs 3,572: host test
 /// `sequencer_route`).
 pub const MAX_STEPS: usize = 4096;
+
+/// The DMA stream TIM6 paces, and the DMAMUX1 channel that routes its request.
+const PACE_STREAM: usize = 1;
+
+/// The MDMA channel that plays the list; its hardware request is DMA1 stream
+/// [`PACE_STREAM`]'s transfer-complete flag (RM0433's MDMA request table: request `n` is
+/// DMA1 stream `n`'s; check against the datasheet).
+const MDMA_CHANNEL: usize = 0;
 
 /// A compiled frame's storage: CPU-only, cacheable (`.bss`, AXI SRAM), 36 KB (two: one
 /// played, one compiled), within the 64 KB `startrack_core::sequencer::TABLE_RAM_BYTES` each.
@@ -99,6 +138,28 @@ impl Tables {
     }
 }
 
+/// What the DMAs read to clock the port (in the non-cacheable DMA region): 15.4 KB.
+#[repr(C)]
+pub struct ClockBuffers {
+    /// The MDMA's node ring.
+    pub nodes: [Node; NODE_RING],
+    /// Two chain tables: the frame in play's and the next one's.
+    pub tables: [[u32; CHAIN_WORDS]; 2],
+    /// The word the pacing stream writes into BSRR each tick (0 changes no line).
+    pub zero: u32,
+}
+
+impl ClockBuffers {
+    /// Zeroed buffers.
+    pub const fn new() -> Self {
+        Self {
+            nodes: [Node::ZERO; NODE_RING],
+            tables: [[0; CHAIN_WORDS]; 2],
+            zero: 0,
+        }
+    }
+}
+
 /// A digitised line for the ADC reader.
 pub struct LineReady {
     /// The tracker's frame number of the request the frame was compiled from.
@@ -111,59 +172,66 @@ pub struct LineReady {
     pub job: LineJob,
 }
 
-/// Lines queued on the clock port, for the readout task. Sixteen: a ring's worth of the
-/// shortest (windowed) lines.
+/// Lines queued on the clock port, for the readout task. Sixteen; when it is full the
+/// feeder keeps the next jobs until its next wake-up.
 pub static LINE_JOBS: Channel<CriticalSectionRawMutex, LineReady, 16> = Channel::new();
 
 /// Why the clocks stopped.
 #[derive(Clone, Copy, Debug, defmt::Format)]
 pub enum SeqError {
-    /// The feeder fell a whole ring behind the DMA: the port replayed stale words.
+    /// The MDMA reached the end of the list inside a frame: the clocks paused until the
+    /// feeder linked more nodes.
     Underrun,
+    /// The frame's chain does not fit the chain table.
+    Chain,
 }
 
-/// The clock port driven by TIM6 and DMA1 stream 1.
+/// The clock port driven by TIM6, DMA1 stream 1 (the pace) and MDMA channel 0 (the words).
 pub struct Sequencer {
     timer: Timer<'static, TIM6>,
-    ring: WritableRingBuffer<'static, u32>,
+    _pace: Peri<'static, DMA1_CH1>,
+    _mdma: Peri<'static, MDMA_CH0>,
+    /// The DMAMUX request of TIM6's update event.
+    request: u8,
+    clock: &'static mut ClockBuffers,
     _pins: [Output<'static>; 16],
     running: bool,
-    /// Words queued since the clocks started.
-    queued: u64,
+    /// Which node the MDMA plays, where the next go.
+    ring: NodeRing<NODE_RING>,
+    /// The chain table the next frame is written to.
+    table: usize,
+    /// The first node of the frame in each chain table.
+    table_first: [u64; 2],
     /// Line jobs the readout had no room for.
     pub dropped_lines: u32,
 }
 
 impl Sequencer {
-    /// Takes the timer, the DMA stream, the 16 pins of GPIOE (PE0..PE15, in order) and the
-    /// ring (in the non-cacheable DMA region); every line starts low.
+    /// Takes the timer, the pacing DMA stream, the MDMA channel, the 16 pins of GPIOE
+    /// (PE0..PE15, in order) and the DMA buffers (in the non-cacheable DMA region); every
+    /// line starts low.
     pub fn new(
         tim: Peri<'static, TIM6>,
-        dma: Peri<'static, DMA1_CH1>,
-        irq: impl Binding<
-            <DMA1_CH1 as dma::ChannelInstance>::Interrupt,
-            dma::InterruptHandler<DMA1_CH1>,
-        > + 'static,
+        pace: Peri<'static, DMA1_CH1>,
+        mdma: Peri<'static, MDMA_CH0>,
         pins: [Peri<'static, AnyPin>; 16],
-        ring: &'static mut [u32; RING_WORDS],
+        clock: &'static mut ClockBuffers,
     ) -> Self {
         let pins = pins.map(|p| Output::new(p, Level::Low, Speed::VeryHigh));
-        let request = <DMA1_CH1 as UpDma<TIM6>>::request(&dma);
-        let mut options = TransferOptions::default();
-        options.priority = Priority::VeryHigh;
-        let bsrr = embassy_stm32::pac::GPIOE.bsrr().as_ptr() as *mut u32;
-        // SAFETY: `bsrr` is GPIOE's BSRR, a 32-bit write-only register whose every value is
-        // valid; the ring is 'static and owned by the returned driver.
-        let ring = unsafe {
-            WritableRingBuffer::new(dma::Channel::new(dma, irq), request, bsrr, ring, options)
-        };
-        let timer = Timer::new(tim);
+        let request = <DMA1_CH1 as UpDma<TIM6>>::request(&pace);
+        // The MDMA's clock (embassy-stm32 enables the DMAs' at start-up; this is idempotent).
+        pac::RCC.ahb3enr().modify(|w| w.set_mdmaen(true));
         Self {
-            timer,
-            ring,
+            timer: Timer::new(tim),
+            _pace: pace,
+            _mdma: mdma,
+            request,
+            clock,
             _pins: pins,
             running: false,
-            queued: 0,
+            ring: NodeRing::new(),
+            table: 0,
+            table_first: [0; 2],
             dropped_lines: 0,
         }
     }
@@ -173,87 +241,216 @@ impl Sequencer {
         self.running
     }
 
-    /// Queues `n` ticks of `word` (the rest state while no frame is ready); the clocks must
-    /// be running.
-    pub async fn hold(&mut self, word: u32, n: usize) -> Result<(), SeqError> {
-        let chunk = [word; IDLE_WORDS];
-        let mut left = n;
-        while left > 0 {
-            let k = left.min(IDLE_WORDS);
-            self.ring
-                .write_exact(chunk.get(..k).unwrap_or(&[]))
-                .await
-                .map_err(|_| SeqError::Underrun)?;
-            self.queued += k as u64;
-            left -= k;
-        }
-        Ok(())
+    /// Whether the MDMA has played every linked node (the port holds the rest state).
+    pub fn played_out(&self) -> bool {
+        self.progress() >= self.ring.written()
     }
 
-    /// Queues every word of `program` after whatever is queued, starting the timer and the
-    /// DMA on the first call (the ring is filled first). Returns when the last word is
-    /// queued, so the next frame's program follows without a gap. With `frame` (the
-    /// tracker's frame number) its line jobs go to [`LINE_JOBS`]; without, nothing is read.
+    /// Waits `us` while the port holds its last word (the rest state between frames).
+    pub async fn hold(&mut self, us: u64) {
+        embassy_time::Timer::after_micros(us).await;
+    }
+
+    /// GPIOE's BSRR.
+    fn bsrr() -> u32 {
+        pac::GPIOE.bsrr().as_ptr() as u32
+    }
+
+    /// Starts TIM6 at the tick of `tick_ps` and the pacing stream.
+    fn start_pace(&mut self, tick_ps: u32) {
+        let st = pac::DMA1.st(PACE_STREAM);
+        st.cr().modify(|w| w.set_en(false));
+        while st.cr().read().en() {}
+        pac::DMAMUX1
+            .ccr(PACE_STREAM)
+            .write(|w| w.set_dmareq_id(self.request));
+        st.par().write_value(Self::bsrr());
+        st.m0ar()
+            .write_value(core::ptr::from_ref(&self.clock.zero) as u32);
+        st.ndtr().write(|w| w.set_ndt(1));
+        pac::DMA1.ifcr(0).write_value(stream_flags(PACE_STREAM));
+        st.cr().write(|w| {
+            w.set_dir(pac::dma::vals::Dir::MEMORY_TO_PERIPHERAL);
+            w.set_circ(true);
+            w.set_minc(false);
+            w.set_pinc(false);
+            w.set_msize(pac::dma::vals::Size::BITS32);
+            w.set_psize(pac::dma::vals::Size::BITS32);
+            w.set_pl(pac::dma::vals::Pl::VERY_HIGH);
+            w.set_en(true);
+        });
+        let hz = 1_000_000_000_000 / u64::from(tick_ps.max(1));
+        self.timer.stop();
+        self.timer.set_frequency(Hertz(hz as u32), RoundTo::Faster);
+        self.timer.enable_update_dma(true);
+        self.timer.start();
+        self.running = true;
+    }
+
+    /// What every node of a frame shares, for the chain table `table`.
+    fn node_config(&self, table: usize) -> NodeConfig {
+        let table = self
+            .clock
+            .tables
+            .get(table)
+            .map_or(0, |t| t.as_ptr() as u32);
+        let mut clear = pac::dma::regs::Ixr(0);
+        clear.set_tcif(PACE_STREAM, true);
+        NodeConfig {
+            table,
+            bsrr: Self::bsrr(),
+            trigger: PACE_STREAM as u8,
+            mask_addr: pac::DMA1.ifcr(0).as_ptr() as u32,
+            mask_data: clear.0,
+        }
+    }
+
+    /// Address of ring slot `slot`.
+    fn slot_addr(&self, slot: usize) -> u32 {
+        self.clock
+            .nodes
+            .get(slot % NODE_RING)
+            .map_or(0, |n| core::ptr::from_ref(n) as u32)
+    }
+
+    /// The node the MDMA plays (its index since the clocks started), or the count written
+    /// when it has played them all.
+    fn progress(&self) -> u64 {
+        self.ring.progress(&Hw, self.slot_addr(0))
+    }
+
+    /// Ticks played (the start of the node in play).
+    fn played(&self) -> u64 {
+        self.ring.played(&Hw, self.slot_addr(0))
+    }
+
+    /// Loads the MDMA channel with the node in `slot` and enables it.
+    fn start_mdma(&mut self, slot: usize) {
+        let Some(n) = self.clock.nodes.get(slot) else {
+            return;
+        };
+        // SAFETY: a valid node of the ring (volatile: written for the MDMA).
+        let n = unsafe { core::ptr::read_volatile(n) };
+        let ch = pac::MDMA.ch(MDMA_CHANNEL);
+        ch.ifcr().write(|w| {
+            w.set_cteif(true);
+            w.set_cctcif(true);
+            w.set_cbrtif(true);
+            w.set_cbtif(true);
+            w.set_cltcif(true);
+        });
+        ch.tcr().write_value(pac::mdma::regs::Tcr(n.ctcr));
+        ch.bndtr().write_value(pac::mdma::regs::Bndtr(n.cbndtr));
+        ch.sar().write_value(pac::mdma::regs::Sar(n.csar));
+        ch.dar().write_value(pac::mdma::regs::Dar(n.cdar));
+        ch.brur().write_value(pac::mdma::regs::Brur(n.cbrur));
+        ch.lar().write_value(pac::mdma::regs::Lar(n.clar));
+        ch.tbr().write_value(pac::mdma::regs::Tbr(n.ctbr));
+        ch.mar().write_value(pac::mdma::regs::Mar(n.cmar));
+        ch.mdr().write_value(pac::mdma::regs::Mdr(n.cmdr));
+        ch.cr().write(|w| {
+            w.set_pl(pac::mdma::vals::Pl::VERY_HIGH);
+            w.set_en(true);
+        });
+    }
+
+    /// Writes up to [`NODE_BATCH`] nodes of `links` (at most [`AHEAD_US`] ahead) behind
+    /// the last one and links them to it ([`NodeRing::append`]), restarting the MDMA if it
+    /// had reached the end of the list. Returns `(nodes written, whether the list ran dry
+    /// before they were linked)`.
+    async fn append(
+        &mut self,
+        links: &mut core::iter::Chain<Links<'_>, core::iter::Once<Link>>,
+        config: &NodeConfig,
+        tick_ps: u32,
+    ) -> (usize, bool) {
+        let ch = pac::MDMA.ch(MDMA_CHANNEL);
+        if ch.isr().read().teif() {
+            let esr = ch.esr().read().0;
+            ch.ifcr().write(|w| w.set_cteif(true));
+            defmt::error!("sequencer: MDMA transfer error (ESR {=u32:#x})", esr);
+        }
+        let base = self.slot_addr(0);
+        let ahead_ticks = AHEAD_US * 1_000_000 / u64::from(tick_ps.max(1));
+        let done = self.ring.append(
+            &mut self.clock.nodes,
+            base,
+            &Hw,
+            links,
+            config,
+            NODE_BATCH,
+            ahead_ticks,
+            cortex_m::asm::dsb,
+        );
+        if done.nodes > 0 && done.restart {
+            while ch.cr().read().en() {
+                embassy_time::Timer::after_micros(5).await;
+            }
+            self.start_mdma(done.first_slot);
+        }
+        (done.nodes, done.restart)
+    }
+
+    /// Links every node of `program` after whatever is linked, starting the clocks on the
+    /// first call. Returns when the last node is written, so the next frame's program
+    /// follows without a gap. With `frame` (the tracker's frame number) its line jobs go to
+    /// [`LINE_JOBS`]; without, nothing is read.
     pub async fn play(
         &mut self,
         program: &Program<'_, '_>,
         frame: Option<u32>,
     ) -> Result<(), SeqError> {
-        let mut cursor = Cursor::START;
-        let mut chunk = [0u32; 256];
-        let frame_start = self.queued;
-        let mut jobs = LineJobs::new(program).peekable();
-        if !self.running {
-            let hz = 1_000_000_000_000 / u64::from(program.tick_ps().max(1));
-            self.timer.stop();
-            self.timer.set_frequency(Hertz(hz as u32), RoundTo::Faster);
-            self.timer.enable_update_dma(true);
-            // Prime the ring so the first update events find words; what does not fit is
-            // queued once the DMA runs.
-            self.ring.clear();
-            let mut pending = 0..0;
-            loop {
-                let n = cursor.fill(program, &mut chunk);
-                let (written, _) = self
-                    .ring
-                    .write_immediate(chunk.get(..n).unwrap_or(&[]))
-                    .map_err(|_| SeqError::Underrun)?;
-                self.queued += written as u64;
-                if written < n {
-                    pending = written..n;
-                    break;
-                }
-                if n < chunk.len() {
-                    break;
-                }
-            }
-            self.ring.start();
-            self.timer.start();
-            self.running = true;
-            let rest = chunk.get(pending).unwrap_or(&[]);
-            self.ring
-                .write_exact(rest)
-                .await
-                .map_err(|_| SeqError::Underrun)?;
-            self.queued += rest.len() as u64;
-            self.send_jobs(&mut jobs, frame, frame_start, program.tick_ps());
+        let k = self.table;
+        // The other table's frame must have started: then this table's (the frame before
+        // it) is played out.
+        let other = self.table_first.get(k ^ 1).copied().unwrap_or(0);
+        while self.progress() < other && self.progress() < self.ring.written() {
+            embassy_time::Timer::after_micros(20).await;
         }
+        let config = self.node_config(k);
+        let Some(table) = self.clock.tables.get_mut(k) else {
+            return Err(SeqError::Chain);
+        };
+        let chain = Chain::new(program, REST_RUN, table).map_err(|_| SeqError::Chain)?;
+        // The frame ends on one tick of the rest state (the first word of the rest run), so
+        // the port rests if the next frame is late.
+        let rest = Link {
+            first_word: (chain.words().len() - REST_RUN as usize) as u32,
+            len_words: 1,
+            blocks: 1,
+        };
+        let mut links = chain.links().chain(core::iter::once(rest));
+        if let Some(t) = self.table_first.get_mut(k) {
+            *t = self.ring.written();
+        }
+        self.table ^= 1;
+        let tick_ps = program.tick_ps();
+        if !self.running {
+            self.start_pace(tick_ps);
+        }
+        let frame_start = self.ring.queued();
+        let mut jobs = LineJobs::new(program).peekable();
+        let mut first_batch = true;
         loop {
-            let n = cursor.fill(program, &mut chunk);
-            if n == 0 {
+            let (n, dry) = self.append(&mut links, &config, tick_ps).await;
+            if dry && !first_batch && n > 0 {
+                return Err(SeqError::Underrun);
+            }
+            first_batch = false;
+            self.send_jobs(&mut jobs, frame, frame_start, tick_ps);
+            if n == 0 && links.clone().next().is_none() && jobs.peek().is_none() {
                 return Ok(());
             }
-            self.ring
-                .write_exact(chunk.get(..n).unwrap_or(&[]))
-                .await
-                .map_err(|_| SeqError::Underrun)?;
-            self.queued += n as u64;
-            self.send_jobs(&mut jobs, frame, frame_start, program.tick_ps());
+            // Sleep for half the ticks linked ahead (at least 10 us, at most AHEAD_US / 2).
+            let ahead = self.ring.queued().saturating_sub(self.played());
+            let us = (ahead / 2 * u64::from(tick_ps) / 1_000_000).clamp(10, AHEAD_US / 2);
+            embassy_time::Timer::after_micros(us).await;
         }
     }
 
-    /// Sends every job whose words are all queued, with the instant of its last sample
-    /// (none for an unannounced frame: the jobs are walked past).
+    /// Sends every job whose ticks are all linked, with the instant of its last sample
+    /// (none for an unannounced frame: the jobs are walked past), while the readout has
+    /// room; the rest wait for the feeder's next wake-up.
     fn send_jobs(
         &mut self,
         jobs: &mut core::iter::Peekable<LineJobs<'_, '_, '_>>,
@@ -261,16 +458,18 @@ impl Sequencer {
         frame_start: u64,
         tick_ps: u32,
     ) {
-        // Words queued but not yet played.
-        let ahead = self.ring.len().unwrap_or(0) as u64;
-        let played = self.queued.saturating_sub(ahead);
+        let played = self.played();
         let now = Instant::now();
-        while let Some(job) = jobs.next_if(|j| frame_start + j.end_tick <= self.queued) {
+        while let Some(job) = jobs.next_if(|j| {
+            frame_start + j.end_tick <= self.ring.queued()
+                && (frame.is_none() || !LINE_JOBS.is_full())
+        }) {
             let ticks_left = (frame_start + job.end_tick).saturating_sub(played);
             let due =
                 now + Duration::from_micros((ticks_left * u64::from(tick_ps)).div_ceil(1_000_000));
             let Some(frame) = frame else { continue };
             let last = jobs.peek().is_none();
+            // Cannot fail: the job was taken only with room in the channel.
             if LINE_JOBS
                 .try_send(LineReady {
                     frame,
@@ -285,21 +484,46 @@ impl Sequencer {
         }
     }
 
-    /// Stops the clocks (timer first, then the DMA); the port keeps its last word.
+    /// Stops the clocks (timer, MDMA, pacing stream); the port keeps its last word.
     pub fn stop(&mut self) {
         self.timer.stop();
         self.timer.enable_update_dma(false);
-        self.ring.request_reset();
+        pac::MDMA.ch(MDMA_CHANNEL).cr().modify(|w| w.set_en(false));
+        pac::DMA1.st(PACE_STREAM).cr().modify(|w| w.set_en(false));
         self.running = false;
-        self.queued = 0;
+        self.ring = NodeRing::new();
+        self.table_first = [0; 2];
     }
+}
+
+/// The MDMA channel's registers as the ring reads them.
+struct Hw;
+
+impl MdmaChannel for Hw {
+    fn enabled(&self) -> bool {
+        pac::MDMA.ch(MDMA_CHANNEL).cr().read().en()
+    }
+    fn link_address(&self) -> u32 {
+        pac::MDMA.ch(MDMA_CHANNEL).lar().read().lar()
+    }
+}
+
+/// Every flag of DMA1 stream `n` (for its clear register).
+fn stream_flags(n: usize) -> pac::dma::regs::Ixr {
+    let mut f = pac::dma::regs::Ixr(0);
+    f.set_feif(n, true);
+    f.set_dmeif(n, true);
+    f.set_teif(n, true);
+    f.set_htif(n, true);
+    f.set_tcif(n, true);
+    f
 }
 
 /// The pixel rate the frames are compiled for.
 pub const PIXEL_RATE_HZ: u32 = 1_000_000;
 
-/// Ticks of rest state queued at a time while no frame is ready (32 us at 125 ns).
-pub const IDLE_WORDS: usize = 256;
+/// How long the feeder waits at a time for the next frame while the port rests, us.
+pub const IDLE_US: u64 = 32;
 
 /// Longest wait for the next request before the last program is replayed unannounced, us.
 pub const MAX_WAIT_US: u64 = 200_000;
@@ -455,9 +679,9 @@ pub async fn sequencer_task(mut seq: Sequencer, tables: [&'static mut Tables; 2]
             defmt::error!("sequencer: free tables channel full");
         }
     }
-    let rest_word = PINS.bsrr(rest(crate::lines::GEOMETRY.outputs));
     let mut current: Option<Compiled> = None;
-    let mut waited_ticks: u64 = 0;
+    // Time the port has rested (the list played out) waiting for the next frame, us.
+    let mut waited_us: u64 = 0;
     let mut logged = false;
     loop {
         let next = if seq.running() {
@@ -472,24 +696,20 @@ pub async fn sequencer_task(mut seq: Sequencer, tables: [&'static mut Tables; 2]
                 {
                     defmt::error!("sequencer: free tables channel full");
                 }
-                waited_ticks = 0;
+                waited_us = 0;
                 current.as_ref().map(|c| c.frame)
             }
             None => {
-                let tick_ps = current.as_ref().map_or(1, |c| {
-                    c.parts
-                        .view(&c.tables.words, &c.tables.steps)
-                        .map_or(1, |p| p.tick_ps())
-                });
-                if waited_ticks * u64::from(tick_ps) < MAX_WAIT_US * 1_000_000 {
-                    if let Err(e) = seq.hold(rest_word, IDLE_WORDS).await {
-                        defmt::warn!("sequencer: {}, clocks stopped", e);
-                        seq.stop();
+                if waited_us < MAX_WAIT_US {
+                    // Only the rest after the linked nodes are played counts as waiting.
+                    let resting = seq.played_out();
+                    seq.hold(IDLE_US).await;
+                    if resting {
+                        waited_us += IDLE_US;
                     }
-                    waited_ticks += IDLE_WORDS as u64;
                     continue;
                 }
-                waited_ticks = 0;
+                waited_us = 0;
                 None
             }
         };

@@ -150,6 +150,12 @@ impl<'w, 's> Program<'w, 's> {
         self.steps
     }
 
+    /// Where each segment lies in [`Self::words`]: (first word, words), indexed by
+    /// `SegmentId as usize`.
+    pub const fn spans(&self) -> [(u32, u32); SEGMENTS] {
+        self.spans
+    }
+
     /// The tick, ps.
     pub const fn tick_ps(&self) -> u32 {
         self.tick_ps

@@ -14,6 +14,7 @@
 //! program --Cost::of--> rows clocked, pixels digitised, frame time, rate       (cost.rs)
 //! program --check_program--> overlaps, phase counts, samples out of reset     (check.rs)
 //! program --Cursor::fill--> the words in play order, chunk by chunk (DMA ring) (expand.rs)
+//! program --Chain::new, links--> (block, repeats) descriptors for a linked-list DMA (chain.rs)
 //! program --LineJobs--> per line: rows, read runs, ADC words, last tick   (lines_out.rs)
 //! ADC words --LineJob::unpack--> the raw line in the core's layout         (lines_out.rs)
 //! ```
@@ -33,6 +34,7 @@
 /// they fit.
 pub const TABLE_RAM_BYTES: usize = 64 * 1024;
 
+pub mod chain;
 pub mod check;
 pub mod compile;
 pub mod cost;
@@ -42,6 +44,7 @@ pub mod lines_out;
 pub mod plan;
 pub mod timing;
 
+pub use chain::{Chain, ChainError, Link, Links, MAX_BLOCK_WORDS, MAX_BLOCKS};
 pub use check::{SequenceError, check_program};
 pub use compile::{
     CompileError, Program, ProgramParts, REST, SEGMENTS, SegmentId, Step, compile, rest,

@@ -26,6 +26,10 @@ mod harness;
 mod ident;
 mod inputs;
 mod line_path;
+// The firmware's MDMA node builder, timed as the board runs it.
+#[path = "../../mdma_list.rs"]
+#[allow(dead_code, reason = "the bench uses the node builder, not every item")]
+mod mdma_list;
 mod scan;
 mod sequencer;
 mod track;

@@ -5,11 +5,18 @@
 //! the feeder's work for the frame, every word copied out in 256-word chunks
 //! (`Cursor::fill`, as into the DMA ring) and the line jobs walked (`LineJobs`, with the
 //! look-ahead that marks the last line). The DMA ring's own waits are not counted.
+//!
+//! `sequencer_chain_nodes`: the same frame played by the MDMA's linked list instead: the
+//! chain's word table written (`Chain::new`: the program's words and a 256-word rest run)
+//! and every link made into an MDMA node in a ring of 128, 64 at a time, by the firmware's
+//! own `NodeRing::append` (`mdma_list.rs`), as the board's feeder writes them; the DMA's playing is not counted (it cannot
+//! run on QEMU), and the line jobs stay `sequencer_feed_jobs`.
 
 use crate::harness::{Bench, Out};
 use crate::inputs::G;
+use crate::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};
 use startrack_core::sequencer::{
-    Binning, Cost, Cursor, Limits, LineJobs, PinMap, ReadoutPlan, Step, Timing, compile,
+    Binning, Chain, Cost, Cursor, Limits, LineJobs, PinMap, ReadoutPlan, Step, Timing, compile,
 };
 use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
@@ -76,8 +83,88 @@ pub fn run(out: &mut Out, bench: &Bench) -> Result<(), &'static str> {
     if copied as u64 != total {
         return Err("sequencer: not every word of the frame");
     }
+    let t_chain = chain_nodes(&program, total)?;
     bench.row(out, "sequencer_compile", "frame_30_windows", t_compile, 1);
     bench.row(out, "sequencer_feed_words", "frame_30_windows", t_words, 1);
     bench.row(out, "sequencer_feed_jobs", "frame_30_windows", t_jobs, 1);
+    bench.row(
+        out,
+        "sequencer_chain_nodes",
+        "frame_30_windows",
+        t_chain(bench),
+        1,
+    );
     Ok(())
+}
+
+/// The board's chain table: the largest program's words and the rest run.
+const CHAIN_WORDS: usize = 1024 + REST_RUN as usize;
+/// The rest run's words.
+const REST_RUN: u32 = 256;
+/// Nodes in the board's ring.
+const NODE_RING: usize = 128;
+
+/// Times the chain table and every node of `program` (whose ticks are `total`) written into
+/// a node ring; checks that the links play every tick.
+fn chain_nodes(
+    program: &startrack_core::sequencer::Program<'_, '_>,
+    total: u64,
+) -> Result<impl Fn(&Bench) -> u64, &'static str> {
+    // Only the timing runs in the closure; the check is done once here.
+    let mut table = [0u32; CHAIN_WORDS];
+    let chain = Chain::new(program, REST_RUN, &mut table).map_err(|_| "chain: table too small")?;
+    let linked: u64 = chain.links().map(|l| l.ticks()).sum();
+    if linked != total {
+        return Err("chain: the links do not play every tick");
+    }
+    let program = *program;
+    Ok(move |bench: &Bench| {
+        let mut table = [0u32; CHAIN_WORDS];
+        let mut ring = [Node::ZERO; NODE_RING];
+        let t = bench.measure(|| {
+            let Ok(chain) = Chain::new(&program, REST_RUN, &mut table) else {
+                return;
+            };
+            let base = ring.as_ptr() as u32;
+            let config = NodeConfig {
+                table: chain.words().as_ptr() as u32,
+                bsrr: 0x5802_1018,
+                trigger: 1,
+                mask_addr: 0x4002_0008,
+                mask_data: 1 << 11,
+            };
+            // The board's feeder: half a ring a batch, linked to the batch before (the MDMA,
+            // which QEMU does not have, stands for one that plays each batch at once).
+            let mut nodes = NodeRing::<NODE_RING>::new();
+            let mut links = chain.links();
+            while nodes
+                .append(
+                    &mut ring,
+                    base,
+                    &Played,
+                    &mut links,
+                    &config,
+                    NODE_RING / 2,
+                    u64::MAX,
+                    || {},
+                )
+                .nodes
+                > 0
+            {}
+        });
+        core::hint::black_box(&ring);
+        t
+    })
+}
+
+/// An MDMA that has played every node linked so far.
+struct Played;
+
+impl MdmaChannel for Played {
+    fn enabled(&self) -> bool {
+        false
+    }
+    fn link_address(&self) -> u32 {
+        0
+    }
 }

@@ -1,5 +1,5 @@
-//! Stages `tracker_standby_frame`, `tracker_acquisition_frame` and `tracker_tracking_frame`,
-//! per frame: the tracker application as the board runs it (`core/src/tracker`, the flight
+//! Stages `tracker_standby_frame`, `tracker_acquisition_frame`, `tracker_tracking_frame` and
+//! `tracker_tracking_frame_windowed`, per frame: the tracker application as the board runs it (`core/src/tracker`, the flight
 //! configuration: the Gauss fit in both modes), fed every line of a 1033-line CCD47-20 frame
 //! with [`STARS`] stars, as the board's free-running readout delivers them. The standby frame
 //! (commanded, as `startrack process` does) is the floor every frame pays: bias levels and
@@ -9,6 +9,13 @@
 //! every line), cuts each star's window from the ring and fits it; the tracking frame reads
 //! the windows' rows, calibrates and tests each window and fits the star.
 //!
+//! `tracker_tracking_frame_windowed` is the next tracking frame as the board's windowed
+//! readout delivers it: only the lines the tracker's own `readout_request()` reads
+//! (`ReadoutRequest::reads_line`, what the sequencer's plan digitises and `ChannelLines`
+//! hands over), in order, through the same `begin_frame` / `push_line` / `end_frame` that
+//! `Tracker::run_frame` calls; 30 windows of 11 rows, 330 lines. The full-line stage stays
+//! beside it as the cost of a free-running readout.
+//!
 //! Timed: `begin_frame`, every `push_line` and `end_frame`; not timed: making the lines. Both
 //! frames must report every star (the second ones flagged tracked), else the bench fails.
 //! Cost of the bench itself: two frames of raw lines, four LCG draws a sample.
@@ -17,8 +24,8 @@ use crate::harness::{Bench, Out};
 use crate::inputs::{G, Lcg, PSF_SIGMA_PX, RAW_COLS, raw_line_noisy};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Event, FrameInputs, FrameSummary, LineSummary, Mode, StarFlags, StarRecord, TelemetrySink,
-    Tracker, TrackerBuffers, TrackerConfig,
+    Event, FrameInputs, FrameSummary, LineSummary, Mode, ReadoutRequest, StarFlags, StarRecord,
+    TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
 };
 
 /// Stars in the frame (the tracking frame's design load).
@@ -104,5 +111,71 @@ pub fn run(
         }
         bench.row(out, stage, "frame_30_stars", ticks, 1);
     }
+    windowed(out, bench, table, &mut tracker, &stars, rng)
+}
+
+/// The windowed tracking frame: the lines `tracker.readout_request()` reads, and no others.
+fn windowed<'t>(
+    out: &mut Out,
+    bench: &Bench,
+    table: &CalibTable<'t>,
+    tracker: &mut Tracker<'t, '_, 32>,
+    stars: &[(usize, usize); STARS],
+    rng: &mut Lcg,
+) -> Result<(), &'static str> {
+    let mut sink = Count {
+        stars: 0,
+        tracked: 0,
+    };
+    let inputs = FrameInputs {
+        table: Some(*table),
+        temperature_k: None,
+        start_us: 0,
+    };
+    let mut ticks = bench.measure(|| {
+        tracker.begin_frame(inputs, &mut sink);
+    });
+    if tracker.mode() != Mode::Tracking {
+        return Err("tracker: windowed frame not tracking");
+    }
+    // What the sequencer reads for this request (a copy: the request borrows the tracker).
+    let mut reads = [false; G.lines as usize];
+    let mut window_rows = 0usize;
+    match tracker.readout_request() {
+        ReadoutRequest::Windows(rects) => {
+            for (y, r) in (0..G.lines).zip(reads.iter_mut()) {
+                *r = tracker.readout_request().reads_line(&G, y);
+            }
+            window_rows = rects.iter().map(|r| usize::from(r.height)).sum();
+        }
+        ReadoutRequest::FullFrame => {}
+    }
+    let mut line = [0u16; RAW_COLS];
+    let mut delivered = 0usize;
+    for (y, _) in (0..G.lines).zip(reads).filter(|(_, r)| *r) {
+        raw_line_noisy(usize::from(y), stars, rng, &mut line);
+        delivered += 1;
+        ticks += bench.measure(|| {
+            tracker.push_line(y, &line, &mut sink);
+        });
+    }
+    ticks += bench.measure(|| {
+        tracker.end_frame(&mut sink);
+    });
+    // 30 windows that share no row (11 x 11 in the flight configuration): 330 lines.
+    let side = usize::from(tracker.config().track_window_px());
+    if delivered != STARS * side || delivered != window_rows {
+        return Err("tracker: windowed frame does not read the windows' rows");
+    }
+    if sink.stars != STARS || sink.tracked != STARS {
+        return Err("tracker: windowed frame lost a star");
+    }
+    bench.row(
+        out,
+        "tracker_tracking_frame_windowed",
+        "frame_30_stars",
+        ticks,
+        1,
+    );
     Ok(())
 }
