@@ -106,6 +106,8 @@ fn level_table(
         hot_ref_k: Kelvin::from_num(293),
         hot: &[],
         telegraph: &[],
+        cti: None,
+        psf_model: None,
     };
     encode(&spec, &[]).map_err(|e| FramesError::Missing(e.to_string()))
 }
@@ -435,6 +437,8 @@ impl Products {
             hot_ref_k: Kelvin::from_num(293),
             hot: &hot,
             telegraph: &telegraph,
+            cti: None,
+            psf_model: None,
         };
         encode(&spec, &[])
     }
