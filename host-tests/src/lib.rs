@@ -5,6 +5,7 @@ pub mod accuracy;
 pub mod calib_frames;
 pub mod ccd_model;
 pub mod cli;
+pub mod cti;
 pub mod demo;
 pub mod figures;
 pub mod fits;

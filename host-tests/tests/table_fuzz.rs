@@ -180,6 +180,7 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
                     }
                     CtiCoeffs {
                         reference_flux_e: 1 + (next() as u32 >> 1),
+                        flux_offset_e: next() as u32,
                         alpha: U0F16::from_bits(next() as u16),
                         outputs,
                     }

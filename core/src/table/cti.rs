@@ -3,22 +3,24 @@
 //! centroid is corrected with it is told in [`crate::calib::cti`]; this module holds the byte
 //! format and its checks.
 //!
-//! # Format (read once into [`CtiCoeffs`], 8 + 8 x outputs bytes)
+//! # Format (read once into [`CtiCoeffs`], 12 + 8 x outputs bytes)
 //! ```text
-//! 0  u32  reference flux F_ref, e- (integer, > 0): the coefficients hold for a star of it
-//! 4  u16  signal exponent alpha, U0F16 (0 <= alpha < 1): the shift scales as (F / F_ref)^-alpha
-//! 6  u16  reserved, 0
-//! 8  per output (left first): u32 parallel shift per transfer, u32 serial shift per transfer,
-//!    both U0F32 px at F_ref (0 <= s < 1 px; resolution 2.3e-10 px)
+//! 0  u32  reference flux F_ref, e- (integer, > 0)
+//! 4  u32  flux offset F_0, e- (integer): the background's share of the trap filling
+//! 8  u16  signal exponent alpha, U0F16 (0 <= alpha < 1): the shift scales as
+//!         ((F + F_0) / F_ref)^-alpha
+//! 10 u16  reserved, 0
+//! 12 per output (left first): u32 parallel shift per transfer, u32 serial shift per transfer,
+//!    both U0F32 px at F + F_0 = F_ref (0 <= s < 1 px; resolution 2.3e-10 px)
 //! ```
-//! Cost: read once per frame ([`super::CalibTable::cti`]), 8 + 8 x outputs bytes.
+//! Cost: read once per frame ([`super::CalibTable::cti`]), 12 + 8 x outputs bytes.
 
 use super::parse::{u16_at, u32_at};
 use crate::geometry::MAX_OUTPUTS;
 use fixed::types::{U0F16, U0F32};
 
-/// Size of the CTI section's own header (reference flux, exponent, reserved).
-pub const CTI_HEADER_LEN: usize = 8;
+/// Size of the CTI section's own header (reference flux, flux offset, exponent, reserved).
+pub const CTI_HEADER_LEN: usize = 12;
 /// Size of one output's coefficients (parallel, serial).
 pub const CTI_OUTPUT_LEN: usize = 8;
 
@@ -39,7 +41,11 @@ pub struct CtiOutput {
 pub struct CtiCoeffs {
     /// Flux at which the per-transfer shifts hold, e- (> 0).
     pub reference_flux_e: u32,
-    /// Signal exponent: the shift scales as `(F / F_ref)^-alpha` (U0F16, `0 <= alpha < 1`).
+    /// Flux offset `F_0`, e-: the background fills traps too, so a faint star's shift levels
+    /// off instead of growing as `F^-alpha`.
+    pub flux_offset_e: u32,
+    /// Signal exponent: the shift scales as `((F + F_0) / F_ref)^-alpha` (U0F16,
+    /// `0 <= alpha < 1`).
     pub alpha: U0F16,
     /// Coefficients per output (left first); entries past the geometry's outputs are 0.
     pub outputs: [CtiOutput; MAX_OUTPUTS],
@@ -63,8 +69,9 @@ impl CtiCoeffs {
         if reference_flux_e == 0 {
             return Err(CtiFormatError::Range);
         }
-        let alpha = U0F16::from_bits(u16_at(b, 4).ok_or(CtiFormatError::Length)?);
-        if u16_at(b, 6) != Some(0) {
+        let flux_offset_e = u32_at(b, 4).ok_or(CtiFormatError::Length)?;
+        let alpha = U0F16::from_bits(u16_at(b, 8).ok_or(CtiFormatError::Length)?);
+        if u16_at(b, 10) != Some(0) {
             return Err(CtiFormatError::Reserved);
         }
         let mut out = [CtiOutput::default(); MAX_OUTPUTS];
@@ -77,6 +84,7 @@ impl CtiCoeffs {
         }
         Ok(Self {
             reference_flux_e,
+            flux_offset_e,
             alpha,
             outputs: out,
         })
@@ -85,6 +93,7 @@ impl CtiCoeffs {
     /// Appends the section's bytes for `outputs` outputs to `put`.
     pub(crate) fn write(&self, outputs: u8, mut put: impl FnMut(&[u8])) {
         put(&self.reference_flux_e.to_le_bytes());
+        put(&self.flux_offset_e.to_le_bytes());
         put(&self.alpha.to_bits().to_le_bytes());
         put(&0u16.to_le_bytes());
         for o in self

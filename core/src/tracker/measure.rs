@@ -100,7 +100,7 @@ impl<'t> Policy<'t> {
             sigma_px: config.psf_sigma_px(),
             curve,
             fused_curve,
-            cti: crate::calib::cti::CtiCorrection::from_table(table),
+            cti: crate::calib::cti::CtiCorrection::from_table(table, config.psf_sigma_px()),
         }
     }
 

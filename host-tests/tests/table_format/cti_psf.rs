@@ -20,7 +20,7 @@ fn cti_section_errors() {
         for f in [
             (|d: &mut Vec<u8>| d.truncate(d.len() - 1)) as fn(&mut Vec<u8>),
             |d| d.push(0),
-            |d| d.truncate(7),
+            |d| d.truncate(11),
             |d| d.extend([0; 8]),
         ] {
             let b = with_section(&t, k, f);
@@ -34,10 +34,10 @@ fn cti_section_errors() {
                 index: 0
             })
         );
-        let b = with_section(&t, k, |d| wr16(d, 6, 1));
+        let b = with_section(&t, k, |d| wr16(d, 10, 1));
         assert_eq!(parse_unit(&b), Err(TableError::Reserved));
         // Every coefficient value is valid: the largest reads back.
-        let b = with_section(&t, k, |d| wr32(d, 8, u32::MAX));
+        let b = with_section(&t, k, |d| wr32(d, 12, u32::MAX));
         let p = CalibTable::parse(&b).expect("parses");
         assert_eq!(
             p.cti().expect("present").outputs[0].parallel_px.to_bits(),

@@ -108,7 +108,7 @@ pub fn exercise(t: &CalibTable<'_>) -> usize {
     }
     // The CTI correction is finite (and bounded by a pixel per transfer) everywhere, for
     // any flux; the PSF model is positive and finite over the field.
-    if let Some(cti) = startrack_core::calib::cti::CtiCorrection::from_table(t) {
+    if let Some(cti) = startrack_core::calib::cti::CtiCorrection::from_table(t, 0.7) {
         for (x, y) in [
             (0.0, 0.0),
             (f32::from(g.active_cols), f32::from(g.active_rows)),

@@ -98,10 +98,11 @@ pub fn enc_pixcorr(curves: &[Vec<u8>]) -> Vec<u8> {
     v
 }
 
-/// The CTI section: reference flux u32, exponent u16, reserved u16, then per output of the
-/// geometry the parallel and serial shifts (u32 each).
+/// The CTI section: reference flux u32, flux offset u32, exponent u16, reserved u16, then
+/// per output of the geometry the parallel and serial shifts (u32 each).
 pub fn enc_cti(outputs: u8, c: &CtiCoeffs) -> Vec<u8> {
     let mut v = c.reference_flux_e.to_le_bytes().to_vec();
+    v.extend(c.flux_offset_e.to_le_bytes());
     v.extend(c.alpha.to_bits().to_le_bytes());
     v.extend([0, 0]);
     for o in &c.outputs[..usize::from(outputs)] {

@@ -232,6 +232,7 @@ pub fn cti_coeffs(g: &ReadoutGeometry) -> CtiCoeffs {
     }
     CtiCoeffs {
         reference_flux_e: 10_000,
+        flux_offset_e: 345,
         alpha: U0F16::from_bits(0x8123),
         outputs,
     }
