@@ -531,3 +531,78 @@ pub fn mc_csv(cells: &[McCell]) -> String {
     }
     s
 }
+
+/// The CTI coefficients as `calib cti` and `calib frames` write them and `calib build --cti`
+/// reads them (JSON): the table's values in plain units.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CtiCoeffsJson {
+    /// Reference flux, e-.
+    pub reference_flux_e: u32,
+    /// Flux offset `F_0`, e-.
+    pub flux_offset_e: u32,
+    /// Signal exponent.
+    pub alpha: f64,
+    /// Per output (left first): centroid shift per transfer at the reference flux, px.
+    pub outputs: Vec<CtiOutputJson>,
+}
+
+/// One output's coefficients in [`CtiCoeffsJson`].
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CtiOutputJson {
+    /// Shift per parallel transfer, px.
+    pub parallel_px_per_transfer: f64,
+    /// Shift per serial transfer, px.
+    pub serial_px_per_transfer: f64,
+}
+
+impl CtiCoeffsJson {
+    /// The JSON form of `c` for a readout of `outputs` outputs.
+    pub fn from_coeffs(c: &CtiCoeffs, outputs: u8) -> Self {
+        Self {
+            reference_flux_e: c.reference_flux_e,
+            flux_offset_e: c.flux_offset_e,
+            alpha: c.alpha.to_num(),
+            outputs: c
+                .outputs
+                .iter()
+                .take(usize::from(outputs))
+                .map(|o| CtiOutputJson {
+                    parallel_px_per_transfer: o.parallel_px.to_num(),
+                    serial_px_per_transfer: o.serial_px.to_num(),
+                })
+                .collect(),
+        }
+    }
+
+    /// The table's value for a readout of `outputs` outputs, or what is out of range.
+    pub fn to_coeffs(&self, outputs: u8) -> Result<CtiCoeffs, String> {
+        if self.outputs.len() != usize::from(outputs) {
+            return Err(format!(
+                "{} outputs' coefficients for a readout of {outputs}",
+                self.outputs.len()
+            ));
+        }
+        if self.reference_flux_e == 0 {
+            return Err("reference_flux_e must be above 0".into());
+        }
+        let alpha = U0F16::checked_from_num(self.alpha)
+            .ok_or_else(|| format!("alpha {}: must be 0 to below 1", self.alpha))?;
+        let shift = |v: f64| {
+            U0F32::checked_from_num(v)
+                .ok_or_else(|| format!("shift per transfer {v} px: must be 0 to below 1"))
+        };
+        let mut out = [CtiOutput::default(); MAX_OUTPUTS];
+        for (o, j) in out.iter_mut().zip(&self.outputs) {
+            *o = CtiOutput {
+                parallel_px: shift(j.parallel_px_per_transfer)?,
+                serial_px: shift(j.serial_px_per_transfer)?,
+            };
+        }
+        Ok(CtiCoeffs {
+            reference_flux_e: self.reference_flux_e,
+            flux_offset_e: self.flux_offset_e,
+            alpha,
+            outputs: out,
+        })
+    }
+}

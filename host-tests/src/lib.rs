@@ -15,6 +15,7 @@ pub mod ground;
 pub mod home;
 pub mod link_home;
 pub mod pixcorr;
+pub mod psf_model;
 pub mod sil;
 pub mod sim;
 pub mod sky;

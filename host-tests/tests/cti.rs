@@ -6,14 +6,10 @@
 //! from its own pairs; the bound on the residual is checked with 3 of those added (RMS over
 //! the cells), so a correction just at the target fails rather than passes by luck.
 
+use startrack_host::cli::calib_models::{CTI_SNRS, CalibCtiArgs, cti_trials, measure_cti};
 use startrack_host::cti::{CtiExperiment, DEFAULT_TRAPS, McCell, summarize};
 use startrack_host::sim::effects::ChargeTraps;
 use startrack_host::sim::{Effects, SensorParams, Simulator, Star};
-
-const SNRS: [f64; 5] = [10.0, 20.0, 50.0, 100.0, 200.0];
-const FIT_FLUXES_E: [f64; 8] = [
-    300.0, 600.0, 1200.0, 2500.0, 5000.0, 10_000.0, 20_000.0, 45_000.0,
-];
 
 fn sim(traps: Option<ChargeTraps>, star: Star) -> Simulator {
     Simulator::new(
@@ -104,14 +100,8 @@ fn bias_grows_with_transfers_and_falls_with_signal() {
     assert!(r_far.bias_x_px < r_near.bias_x_px && r_near.bias_x_px < 0.0);
 }
 
-/// Pairs per cell: the paired residual's scatter falls as 1 / SNR, so the faint cells get
-/// more (400 at SNR 10, 40 from SNR 32 up).
-fn trials(snr: f64) -> usize {
-    ((40_000.0 / (snr * snr)) as usize).max(40)
-}
-
 fn check_removed(cells: &[McCell], what: &str) {
-    for snr in SNRS {
+    for snr in CTI_SNRS {
         let v: Vec<McCell> = cells.iter().filter(|c| c.snr == snr).copied().collect();
         let (bias, res, se) = summarize(&v);
         println!(
@@ -131,20 +121,22 @@ fn check_removed(cells: &[McCell], what: &str) {
     assert!(res + 3.0 * se <= 0.10 * bias);
 }
 
+/// `startrack calib cti`'s measurement: the coefficients fitted on a 4 x 4 grid of positions
+/// and 8 fluxes, checked by the paired Monte Carlo on a 5 x 5 grid (off the fitting one) at
+/// SNR 10, 20, 50, 100 and 200.
 #[test]
 fn correction_removes_at_least_90_percent_of_the_bias() {
-    let e = CtiExperiment::flight(DEFAULT_TRAPS);
-    // Fit on one grid of positions, check on another (a 5 x 5 grid off the fitting one).
-    let coeffs = e
-        .fit(&e.bias_grid(&FIT_FLUXES_E, &e.positions(4)))
-        .expect("fit");
-    println!("fitted: {coeffs:?}");
-    let cells: Vec<McCell> = SNRS
-        .iter()
-        .flat_map(|&snr| e.monte_carlo(&coeffs, &[snr], &e.positions(5), trials(snr), 7))
-        .collect();
-    assert_eq!(cells.len(), SNRS.len() * 25);
-    assert!(cells.iter().all(|c| c.used + 2 >= trials(c.snr)));
+    let (run, _) = measure_cti(&CalibCtiArgs {
+        out_dir: std::path::PathBuf::new(),
+        traps: None,
+        seed: 7,
+    })
+    .expect("measures");
+    println!("fitted: {:?}", run.coeffs);
+    println!("{}", run.summary);
+    let cells = run.cells;
+    assert_eq!(cells.len(), CTI_SNRS.len() * 25);
+    assert!(cells.iter().all(|c| c.used + 2 >= cti_trials(c.snr)));
     check_removed(&cells, "flight Gauss fit 7x7");
     // The bias is worth correcting: at SNR 10 on the far rows it is several times the
     // residual target.

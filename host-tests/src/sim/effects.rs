@@ -241,7 +241,7 @@ impl Cti {
 /// except for what trails past the last line or the end of the half line.
 ///
 /// Cost: `(1 + trail_px)^2` evaluations of the trap-free expected charge per sample.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ChargeTraps {
     /// Fraction deferred per parallel transfer at `reference_e`.
     pub parallel_per_transfer: f64,
