@@ -6,6 +6,12 @@
 //! from its own pairs; the bound on the residual is checked with 3 of those added (RMS over
 //! the cells), so a correction just at the target fails rather than passes by luck.
 
+#[path = "common/table_fixtures/mod.rs"]
+mod table_fixtures;
+
+#[path = "common/field.rs"]
+mod common_field;
+
 use startrack_host::cli::calib_models::{CTI_SNRS, CalibCtiArgs, cti_trials, measure_cti};
 use startrack_host::cti::{CtiExperiment, DEFAULT_TRAPS, McCell, summarize};
 use startrack_host::sim::effects::ChargeTraps;
@@ -146,4 +152,56 @@ fn correction_removes_at_least_90_percent_of_the_bias() {
         .map(|c| c.bias_px.1)
         .fold(0.0, f64::max);
     assert!(far > 0.02, "{far}");
+}
+
+/// The tracker applies the table's CTI section to every star it reports: the same frame
+/// processed with and without the section gives the same stars, each moved by exactly the
+/// core's shift for its flux and position (the acquisition frame, `startrack process`'s path).
+#[test]
+fn the_tracker_applies_the_table_coefficients() {
+    use startrack_core::calib::cti::CtiCorrection;
+    use startrack_core::table::{CalibTable, SectionKind};
+    use startrack_core::tracker::TrackerConfig;
+    use startrack_host::cli::process::{HOST_CAPACITY, process_frame};
+    use startrack_host::demo::render_frame;
+    use table_fixtures::{RawSection, RawTable, cti_coeffs, enc_cti};
+
+    let (sim, plain) = common_field::field(5, 30);
+    let g = sim.params.geometry;
+    let coeffs = cti_coeffs(&g);
+    let mut raw_table = RawTable::decompose(&plain);
+    raw_table.sections.push(RawSection::new(
+        SectionKind::Cti,
+        enc_cti(g.outputs, &coeffs),
+    ));
+    let with = raw_table.build();
+    let config = TrackerConfig {
+        max_stars: HOST_CAPACITY as u16,
+        ..TrackerConfig::FLIGHT
+    };
+    let frame = render_frame(&sim);
+    let run = |bytes: &[u8]| {
+        process_frame(
+            CalibTable::parse(bytes).expect("parses"),
+            &frame,
+            config,
+            None,
+        )
+        .expect("processes")
+        .stars
+    };
+    let (a, b) = (run(&plain), run(&with));
+    assert_eq!(a.len(), b.len());
+    assert!(a.len() >= 20, "{}", a.len());
+    let corr = CtiCorrection::new(coeffs, g, config.psf_sigma_px());
+    let mut moved = 0usize;
+    for (s, t) in a.iter().zip(&b) {
+        let (dx, dy) = corr.shift_px(s.flux_e, s.x_px, s.y_px);
+        assert_eq!((s.flux_e, s.flags), (t.flux_e, t.flags));
+        assert!((t.x_px - (s.x_px - dx)).abs() < 1e-4, "{s:?} {t:?} {dx}");
+        assert!((t.y_px - (s.y_px - dy)).abs() < 1e-4, "{s:?} {t:?} {dy}");
+        moved += usize::from(dy.abs() > 1e-3);
+    }
+    // The fixture's coefficients move most stars measurably.
+    assert!(moved * 2 > a.len(), "{moved} of {}", a.len());
 }
