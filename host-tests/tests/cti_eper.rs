@@ -66,7 +66,29 @@ fn eper_recovers_the_trap_law() {
         }
     }
     let gains = [set.sensor().params.gain_e_per_adu[0]];
-    let e = fit(&responses, &gains, &g).expect("fits");
+    let read = [set.sensor().params.read_noise_e];
+    let e = fit(&responses, &gains, &read, &g).expect("fits");
+    // The same flats without traps: no edge response above the noise, no law.
+    let clean = LabSet {
+        traps: None,
+        ..labset()
+    };
+    let mut none = Vec::new();
+    for (i, &t) in clean.flat_exposures_s.iter().enumerate() {
+        let s = clean.frame_sensor(10 + 2 * i as u32, t, clean.flat_temperature_k, true);
+        let (lines, len) = (usize::from(g.lines), g.line_len());
+        let mut data_adu = vec![0u16; lines * len];
+        for (l, line) in data_adu.chunks_exact_mut(len).enumerate() {
+            s.render_line(l, line);
+        }
+        let f = RawFrame {
+            lines,
+            cols: len,
+            data_adu,
+        };
+        none.extend(edge_response(&f, &g, &cb).expect("9 extra lines"));
+    }
+    assert_eq!(fit(&none, &gains, &read, &g), None);
     println!("rendered and measured 10 flats in {:?}", t0.elapsed());
     for p in &e.points {
         println!(

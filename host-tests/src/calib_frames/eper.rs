@@ -172,10 +172,19 @@ pub fn edge_response(
     Some(out)
 }
 
-/// Fits the trap law to the edge responses of the flats, with `gains` (e-/ADU per output).
-/// Flats whose first edge element is not above 0 are left out; `None` with fewer than 2
-/// usable flats or signal levels spanning less than a factor 2.
-pub fn fit(responses: &[EdgeResponse], gains: &[f64], g: &ReadoutGeometry) -> Option<EperResult> {
+/// Fits the trap law to the edge responses of the flats, with `gains` (e-/ADU per output)
+/// and `read_noise_e` (per output). A flat counts only when its first edge element is above
+/// 3 standard errors of its median: `1.25 sqrt(r^2 + E_0) / sqrt(columns)` (the median of
+/// that many Gaussian values), so a sensor without measurable CTI gives no law rather than
+/// one fitted to noise. `None` with fewer than 2 such flats or signal levels spanning less
+/// than a factor 2.
+pub fn fit(
+    responses: &[EdgeResponse],
+    gains: &[f64],
+    read_noise_e: &[f64],
+    g: &ReadoutGeometry,
+) -> Option<EperResult> {
+    let columns = f64::from(g.active_cols) / f64::from(g.outputs.max(1));
     let n_par = f64::from(g.active_rows);
     // The right end of the active area is read after this many serial transfers.
     let n_ser = (g.first_active_col() + usize::from(g.active_cols)) as f64;
@@ -185,7 +194,12 @@ pub fn fit(responses: &[EdgeResponse], gains: &[f64], g: &ReadoutGeometry) -> Op
         let gain = gains.get(usize::from(r.output)).copied()?;
         let q = r.signal_adu * gain;
         let e0 = r.parallel_adu.first().copied()? * gain;
-        if !(q > 0.0 && e0 > 0.0) {
+        let read = read_noise_e
+            .get(usize::from(r.output))
+            .copied()
+            .unwrap_or(0.0);
+        let se = 1.25 * (read * read + e0.max(0.0)).sqrt() / columns.sqrt();
+        if !(q > 0.0 && e0 > 3.0 * se) {
             continue;
         }
         let fs = r

@@ -318,7 +318,7 @@ pub fn calibrate(
         }
     };
     let flat_map = flat.flat(&gains, &dark_rel, &hot);
-    let eper = eper::fit(&edges, &gains, g);
+    let eper = eper::fit(&edges, &gains, &read_noise_e, g);
     notes.push(match &eper {
         Some(e) => format!(
             "CTI by EPER from {} flats: parallel {:.3e} per transfer at {} e- (alpha {:.2}, trail {} px, mean delay {:.2} px); {}",
@@ -335,7 +335,7 @@ pub fn calibrate(
             }
         ),
         None => format!(
-            "no CTI: EPER needs {} extra lines after the active rows and flats at signal levels a factor 2 apart",
+            "no CTI: EPER found no edge response above 3 standard errors in flats at signal levels a factor 2 apart (or the readout has fewer than {} extra lines)",
             eper::TAIL
         ),
     });
