@@ -37,9 +37,10 @@ use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 use std::fmt::Write as _;
 
-/// The trap law the docs and tests use: a few 1e-5 per transfer at 1000 e-, alpha 0.5, a
-/// 3-pixel trail decaying by half (mean delay 1.57 px): about 0.1 px of bias for an SNR-10
-/// star at the far rows of the CCD47-20, a few millipixels at SNR 200.
+/// The trap law the docs and tests use: 5e-5 (parallel) and 3e-5 (serial) per transfer at
+/// 1000 e-, alpha 0.5, a 3-pixel trail decaying by half (mean delay 1.57 px): for the flight
+/// method about 0.038 px of bias for a 300 e- star on the far rows of the CCD47-20, 0.015 px
+/// at 45,000 e- (`startrack calib cti`'s `cti_bias.csv`).
 pub const DEFAULT_TRAPS: ChargeTraps = ChargeTraps {
     parallel_per_transfer: 5.0e-5,
     serial_per_transfer: 3.0e-5,

@@ -13,7 +13,7 @@
 //! - `calib psf-model STARS.csv... --out FILE [--degree D]`: the field PSF model fitted to the
 //!   stars' measured widths ([`crate::psf_model`]).
 //!
-//! Cost: `calib cti` about a second in release (256 noise-free windows for the fit, 125 cells
+//! Cost: `calib cti` under a second (0.3 s in the test profile) (256 noise-free windows for the fit, 125 cells
 //! of 40-400 pairs for the Monte Carlo); `calib psf-model` one small SVD per clipping round.
 
 use super::{CliError, read_file, write_file};
