@@ -411,6 +411,8 @@ mod random_tables {
             hot_ref_k: Kelvin::from_num(263),
             hot: &hot,
             telegraph: &telegraph,
+            cti: None,
+            psf_model: None,
         };
         let mut buf = vec![0u8; spec.encoded_len()];
         write_table(&spec, &mut buf).unwrap();

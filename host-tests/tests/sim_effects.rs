@@ -46,6 +46,7 @@ fn all_effects() -> Effects {
             trail_lines: 4,
             decay: 0.5,
         }),
+        traps: None,
     }
 }
 

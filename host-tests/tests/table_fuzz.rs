@@ -5,13 +5,14 @@
 #[path = "common/table_fixtures/mod.rs"]
 mod table_fixtures;
 
-use fixed::types::U8F8;
+use fixed::types::{I16F16, U0F16, U0F32, U8F8};
 use proptest::prelude::*;
 use startrack_core::centroid::cog::CogPower;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_core::table::{
-    CalibTable, DIR_ENTRY_LEN, HEADER_LEN, HotPixel, HotPolicy, SectionKind, TableError,
+    CalibTable, CtiCoeffs, CtiOutput, DIR_ENTRY_LEN, HEADER_LEN, HotPixel, HotPolicy, PsfModel,
+    SectionKind, TableError,
 };
 use startrack_core::units::{ColumnBiasAdu, DarkRel, ERatePerS, FlatInv, GainEPerAdu, Kelvin};
 use table_fixtures::*;
@@ -77,7 +78,7 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
             outputs: o,
         },
     );
-    (geom, any::<u64>(), 0u8..=10, 0u8..=10, any::<[bool; 6]>()).prop_map(
+    (geom, any::<u64>(), 0u8..=10, 0u8..=10, any::<[bool; 8]>()).prop_map(
         |(g, seed, dl, fl, present)| {
             // A small deterministic generator keeps the strategy simple and the values varied.
             let mut s = seed | 1;
@@ -169,6 +170,38 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
                 hot: if present[3] { hot } else { Vec::new() },
                 telegraph: if present[4] { tg } else { Vec::new() },
                 pixcorr: if present[5] { curves } else { Vec::new() },
+                cti: present[6].then(|| {
+                    let mut outputs = [CtiOutput::default(); 2];
+                    for o in outputs.iter_mut().take(usize::from(g.outputs)) {
+                        *o = CtiOutput {
+                            parallel_px: U0F32::from_bits(next() as u32),
+                            serial_px: U0F32::from_bits(next() as u32),
+                        };
+                    }
+                    CtiCoeffs {
+                        reference_flux_e: 1 + (next() as u32 >> 1),
+                        flux_offset_e: next() as u32,
+                        alpha: U0F16::from_bits(next() as u16),
+                        outputs,
+                    }
+                }),
+                // A constant-width model of random degree whose higher terms are small enough
+                // to keep the width positive over the field.
+                psf_model: present[7].then(|| {
+                    let degree = (next() % 4) as u8;
+                    let mut coeffs = [I16F16::ZERO; 10];
+                    coeffs[0] = I16F16::from_num(0.5 + (next() % 1000) as f64 / 100.0);
+                    let terms = (usize::from(degree) + 1) * (usize::from(degree) + 2) / 2;
+                    for c in coeffs.iter_mut().take(terms).skip(1) {
+                        *c = I16F16::from_num(((next() % 200) as f64 - 100.0) / 2500.0);
+                    }
+                    PsfModel {
+                        degree,
+                        scatter_px: U8F8::from_bits(next() as u16),
+                        stars: 1 + (next() % 0xFFFF) as u16,
+                        coeffs,
+                    }
+                }),
             }
         },
     )
@@ -178,6 +211,8 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
 fn check_round_trip(s: &OwnedSpec) -> Result<(), TestCaseError> {
     let bytes = s.write();
     let t = CalibTable::parse(&bytes).map_err(|e| TestCaseError::fail(format!("rejected: {e}")))?;
+    prop_assert_eq!(t.cti(), s.cti);
+    prop_assert_eq!(t.psf_model(), s.psf_model);
     prop_assert_eq!(t.pixcorr().len(), s.pixcorr.len());
     for (c, want) in t.pixcorr().iter().zip(&s.pixcorr) {
         let mut got = c.header().to_bytes().to_vec();
@@ -399,9 +434,15 @@ fn resealed_section_corruption_of_each_kind_is_caught_or_harmless() {
                         {
                             rejected += 1;
                         }
+                        Err(TableError::Reserved)
+                            if matches!(kind, SectionKind::Cti | SectionKind::PsfModel) =>
+                        {
+                            rejected += 1;
+                        }
                         Err(
                             TableError::SectionLength(k)
                             | TableError::MapFormat(k)
+                            | TableError::SectionFormat(k)
                             | TableError::OutOfRange { section: k, .. },
                         ) => {
                             assert_eq!(

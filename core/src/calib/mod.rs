@@ -1,5 +1,7 @@
 //! Raw ADC words to electrons, the way the founding paper prescribes.
 //!
+//! - [`cti`]: the charge-transfer (trap) shift of a star's centroid, removed from the table's
+//!   coefficients.
 //! - [`formula`]: the calibration formula on fixed-point bits and why it cannot overflow,
 //!   shared by everything that calibrates.
 //! - [`levels`]: per-line bias from the over-scan (per output) and the frame's dark scale from
@@ -8,6 +10,7 @@
 //! - [`pixel`]: the per-pixel formula, applied only to the pixels the pipeline reads
 //!   (a line span or a star window), with the flags it raises.
 
+pub mod cti;
 pub mod formula;
 pub mod hot;
 pub mod levels;

@@ -19,11 +19,15 @@ pub enum SectionKind {
     Telegraph = 6,
     /// Pixel-phase correction curves of the centre of gravity.
     PixCorr = 7,
+    /// Charge-transfer (CTI) centroid-shift coefficients.
+    Cti = 8,
+    /// Field PSF model (width against position).
+    PsfModel = 9,
 }
 
 impl SectionKind {
     /// Every kind, in directory order.
-    pub const ALL: [SectionKind; 7] = [
+    pub const ALL: [SectionKind; 9] = [
         Self::Gains,
         Self::ColumnBias,
         Self::DarkRel,
@@ -31,6 +35,8 @@ impl SectionKind {
         Self::HotPixels,
         Self::Telegraph,
         Self::PixCorr,
+        Self::Cti,
+        Self::PsfModel,
     ];
 
     /// The kind with this code, if any.
@@ -48,6 +54,8 @@ impl SectionKind {
             Self::HotPixels => "hot pixels",
             Self::Telegraph => "telegraph pixels",
             Self::PixCorr => "pixel-phase correction",
+            Self::Cti => "CTI coefficients",
+            Self::PsfModel => "field PSF model",
         }
     }
 }
@@ -111,6 +119,8 @@ pub enum TableError {
         /// The entry's index within the section.
         index: u32,
     },
+    /// A section's own format field (the PSF model's degree) is not one this version reads.
+    SectionFormat(SectionKind),
     /// A pixel-phase correction curve is malformed: `index` is the curve's position in the
     /// section (the curve count when the curves do not fill the section exactly).
     PixCorrCurve {
@@ -140,7 +150,7 @@ impl core::fmt::Display for TableError {
             }
             Self::HeaderCrc => f.write_str("calibration table header CRC mismatch"),
             Self::Reserved => f.write_str("calibration table: reserved field not zero"),
-            Self::TooManySections(n) => write!(f, "calibration table: {n} sections, at most 8"),
+            Self::TooManySections(n) => write!(f, "calibration table: {n} sections, at most 16"),
             Self::Geometry(e) => write!(f, "calibration table {e}"),
             Self::UnknownSection(k) => write!(f, "calibration table: unknown section kind {k}"),
             Self::DuplicateSection(k) => write!(f, "calibration table: {} twice", k.name()),
@@ -165,6 +175,9 @@ impl core::fmt::Display for TableError {
                 "calibration table: {} entry {index} out of range",
                 section.name()
             ),
+            Self::SectionFormat(k) => {
+                write!(f, "calibration table: {} format not supported", k.name())
+            }
             Self::PixCorrCurve { index, error } => {
                 write!(f, "calibration table: curve {index}: {error}")
             }

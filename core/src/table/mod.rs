@@ -7,7 +7,7 @@
 //! offset size  field
 //!  0     4     magic  b"STCT"
 //!  4     2     version = 1
-//!  6     2     section count n (at most 8)
+//!  6     2     section count n (at most 16)
 //!  8     4     total length of the table in bytes (header + directory + sections)
 //! 12     2     geometry.overscan_px
 //! 14     2     geometry.covered_px
@@ -35,10 +35,13 @@
 //! | 5 | hot pixels | u32 reference temperature U16F16 K, u32 count, entries | see [`HotPixel`] |
 //! | 6 | telegraph pixels | u32 count, entries x u16, y u16 | active coordinates |
 //! | 7 | pixel-phase correction | u16 count (1..=16), u16 reserved 0, curves back to back | see [`pixcorr`] |
+//! | 8 | CTI coefficients | reference flux, exponent, per output parallel and serial shift per transfer | see [`cti`] |
+//! | 9 | field PSF model | degree, scatter, star count, polynomial coefficients of `a(x, y)` | see [`psfmodel`] |
 //!
 //! Gains are required; every other section is optional and its absence means "no
 //! correction": column bias 0, relative dark 1 (the covered columns' dark subtracted
-//! uniformly), flat 1, no hot or telegraph pixels, an uncorrected centre of gravity.
+//! uniformly), flat 1, no hot or telegraph pixels, an uncorrected centre of gravity, no CTI
+//! correction, no field PSF model.
 //!
 //! A pixel-phase correction curve (section 7) is an 8-byte header (power, box side,
 //! background, knot count, PSF width `a` U8F8 px, largest measured phase U0F16 px) and its
@@ -58,13 +61,17 @@
 //! every this many kelvin, the pixel's own law), `policy u8` (0 correct, 1 exclude),
 //! `reserved u8`. Hot and telegraph entries are sorted by (y, x) with no repeats.
 
+pub mod cti;
 mod error;
 mod parse;
 pub mod pixcorr;
+pub mod psfmodel;
 mod write;
 
+pub use cti::{CtiCoeffs, CtiOutput};
 pub use error::{SectionKind, TableError, WriteError};
 pub use parse::{CalibTable, DefectList, HotList, MapView};
+pub use psfmodel::PsfModel;
 pub use write::{MapSpec, TableSpec, write_table, write_table_with_pixcorr};
 
 use crate::units::{ERatePerS, Kelvin};

@@ -1,7 +1,9 @@
 //! Reading and checking a calibration table in place.
 
+use super::cti::{CtiCoeffs, CtiFormatError};
 use super::error::{SectionKind, TableError};
 use super::pixcorr::PixCorrSet;
+use super::psfmodel::{PsfFormatError, PsfModel};
 use super::{
     CRC, DIR_ENTRY_LEN, HEADER_LEN, HOT_ENTRY_LEN, HotPixel, HotPolicy, MAGIC, MAP_HEADER_LEN,
     MAX_PIXCORR_CURVES, MAX_TILE_LOG2, MapHeader, PIXCORR_HEADER_LEN, RefTemperature,
@@ -12,7 +14,7 @@ use crate::units::{ColumnBiasAdu, DarkRel, ERatePerS, FlatInv, GainEPerAdu};
 use fixed::types::U8F8;
 
 /// Most sections a table may list.
-pub const MAX_SECTIONS: usize = 8;
+pub const MAX_SECTIONS: usize = 16;
 
 pub(crate) fn u16_at(b: &[u8], off: usize) -> Option<u16> {
     let s = b.get(off..off.checked_add(2)?)?;
@@ -41,6 +43,8 @@ pub struct CalibTable<'a> {
     hot: HotList<'a>,
     telegraph: DefectList<'a>,
     pixcorr: PixCorrSet<'a>,
+    cti: Option<CtiCoeffs>,
+    psf_model: Option<PsfModel>,
 }
 
 /// A tiled map over the active area, read in place.
@@ -246,7 +250,7 @@ impl<'a> CalibTable<'a> {
         geometry.validate().map_err(TableError::Geometry)?;
         let saturation_adu = rd16(24)?;
 
-        let mut found: [Option<&'a [u8]>; 7] = [None; 7];
+        let mut found: [Option<&'a [u8]>; 9] = [None; 9];
         // (offset, length, kind) of each section, to prove they cover the table exactly.
         let mut extents = [(0usize, 0usize, SectionKind::Gains); MAX_SECTIONS];
         for i in 0..usize::from(n_sections) {
@@ -262,7 +266,17 @@ impl<'a> CalibTable<'a> {
             }
             *slot = Some(s.bytes);
         }
-        let [gains, column_bias, dark, flat, hot, telegraph, pixcorr] = found;
+        let [
+            gains,
+            column_bias,
+            dark,
+            flat,
+            hot,
+            telegraph,
+            pixcorr,
+            cti,
+            psf_model,
+        ] = found;
         if gains.is_none() {
             return Err(TableError::MissingSection(SectionKind::Gains));
         }
@@ -306,6 +320,8 @@ impl<'a> CalibTable<'a> {
             .transpose()?
             .unwrap_or_default();
         let pixcorr = pixcorr.map(parse_pixcorr).transpose()?.unwrap_or_default();
+        let cti = cti.map(|b| parse_cti(b, &geometry)).transpose()?;
+        let psf_model = psf_model.map(parse_psf_model).transpose()?;
 
         Ok(Self {
             len: bytes.len(),
@@ -318,6 +334,8 @@ impl<'a> CalibTable<'a> {
             hot,
             telegraph,
             pixcorr,
+            cti,
+            psf_model,
         })
     }
 
@@ -413,6 +431,16 @@ impl<'a> CalibTable<'a> {
     /// The pixel-phase correction curves of the centre of gravity (empty when absent).
     pub fn pixcorr(&self) -> PixCorrSet<'a> {
         self.pixcorr
+    }
+
+    /// The CTI coefficients (section 8), if present.
+    pub fn cti(&self) -> Option<CtiCoeffs> {
+        self.cti
+    }
+
+    /// The field PSF model (section 9), if present.
+    pub fn psf_model(&self) -> Option<PsfModel> {
+        self.psf_model
     }
 }
 
@@ -590,5 +618,27 @@ fn parse_pixcorr(b: &[u8]) -> Result<PixCorrSet<'_>, TableError> {
     PixCorrSet::parse(usize::from(count), curves).map_err(|(i, error)| TableError::PixCorrCurve {
         index: i as u32,
         error,
+    })
+}
+
+fn parse_cti(b: &[u8], g: &ReadoutGeometry) -> Result<CtiCoeffs, TableError> {
+    let k = SectionKind::Cti;
+    CtiCoeffs::parse(b, g.outputs).map_err(|e| match e {
+        CtiFormatError::Length => TableError::SectionLength(k),
+        CtiFormatError::Reserved => TableError::Reserved,
+        CtiFormatError::Range => TableError::OutOfRange {
+            section: k,
+            index: 0,
+        },
+    })
+}
+
+fn parse_psf_model(b: &[u8]) -> Result<PsfModel, TableError> {
+    let k = SectionKind::PsfModel;
+    PsfModel::parse(b).map_err(|e| match e {
+        PsfFormatError::Degree => TableError::SectionFormat(k),
+        PsfFormatError::Length => TableError::SectionLength(k),
+        PsfFormatError::Reserved => TableError::Reserved,
+        PsfFormatError::Range(index) => TableError::OutOfRange { section: k, index },
     })
 }

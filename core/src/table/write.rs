@@ -1,13 +1,15 @@
 //! Writing a calibration table into a caller's buffer (no allocation), so that host tools and
 //! an in-flight recalibration produce exactly the bytes [`CalibTable::parse`] reads.
 
+use super::cti::CtiCoeffs;
 use super::error::{SectionKind, WriteError};
 use super::pixcorr::PixCorr;
+use super::psfmodel::{MAX_PSF_DEGREE, PsfModel};
 use super::{
     CRC, DIR_ENTRY_LEN, HEADER_LEN, HOT_ENTRY_LEN, HotPixel, HotPolicy, MAGIC, MAP_HEADER_LEN,
     MapHeader, PIXCORR_HEADER_LEN, RefTemperature, TELEGRAPH_ENTRY_LEN, VERSION,
 };
-use crate::geometry::ReadoutGeometry;
+use crate::geometry::{MAX_OUTPUTS, ReadoutGeometry};
 use crate::table::CalibTable;
 use crate::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu};
 
@@ -42,6 +44,10 @@ pub struct TableSpec<'a> {
     pub hot: &'a [HotPixel],
     /// Telegraph pixels (x, y) sorted by (y, x); written only when not empty.
     pub telegraph: &'a [(u16, u16)],
+    /// CTI coefficients (section 8), or none.
+    pub cti: Option<CtiCoeffs>,
+    /// Field PSF model (section 9), or none.
+    pub psf_model: Option<PsfModel>,
 }
 
 impl TableSpec<'_> {
@@ -84,6 +90,18 @@ fn sections<'s>(
                         .iter()
                         .map(|c| c.header().encoded_len())
                         .sum::<usize>(),
+            )
+        }),
+        spec.cti.map(|_| {
+            (
+                SectionKind::Cti,
+                CtiCoeffs::encoded_len(usize::from(spec.geometry.outputs).min(MAX_OUTPUTS)),
+            )
+        }),
+        spec.psf_model.map(|m| {
+            (
+                SectionKind::PsfModel,
+                PsfModel::encoded_len(m.degree.min(MAX_PSF_DEGREE)),
             )
         }),
     ]
@@ -135,7 +153,7 @@ pub fn write_table_with_pixcorr(
 
     // Sections first, then the directory that names them, then the header over both.
     let mut o = Out { buf, pos: dir_end };
-    let mut entries = [(SectionKind::Gains, 0usize, 0usize); 7];
+    let mut entries = [(SectionKind::Gains, 0usize, 0usize); SectionKind::ALL.len()];
     for (slot, (kind, slen)) in entries.iter_mut().zip(sections(spec, curves)) {
         *slot = (kind, o.pos, slen);
         write_section(&mut o, spec, curves, kind);
@@ -233,6 +251,16 @@ fn write_section(o: &mut Out<'_>, spec: &TableSpec<'_>, curves: &[PixCorr<'_>], 
             for c in curves {
                 o.put(&c.header().to_bytes());
                 o.put(c.knot_bytes());
+            }
+        }
+        SectionKind::Cti => {
+            if let Some(c) = spec.cti {
+                c.write(g.outputs, |b| o.put(b));
+            }
+        }
+        SectionKind::PsfModel => {
+            if let Some(m) = spec.psf_model {
+                m.write(|b| o.put(b));
             }
         }
     }

@@ -68,6 +68,8 @@ pub(crate) struct Policy<'t> {
     pub(crate) curve: Option<PixCorr<'t>>,
     /// The curve of the fused CoG (given background).
     pub(crate) fused_curve: Option<PixCorr<'t>>,
+    /// The table's CTI correction (section 8), applied to every centroid.
+    pub(crate) cti: Option<crate::calib::cti::CtiCorrection>,
 }
 
 impl<'t> Policy<'t> {
@@ -98,6 +100,7 @@ impl<'t> Policy<'t> {
             sigma_px: config.psf_sigma_px(),
             curve,
             fused_curve,
+            cti: crate::calib::cti::CtiCorrection::from_table(table, config.psf_sigma_px()),
         }
     }
 
@@ -249,6 +252,7 @@ pub(crate) fn measure(
     want_background: bool,
 ) -> Measured {
     let (c, uncorrected) = policy.centroid(input);
+    let c = policy.cti.map_or(c, |k| k.corrected(c));
     let pixel_flags = input
         .pixel_flags
         .iter()

@@ -350,7 +350,9 @@ fn fused<const N: usize>(
         }
         Err(PlanError::BadInput) => return None,
     };
-    let c = res.centroid;
+    let c = policy
+        .cti
+        .map_or(res.centroid, |k| k.corrected(res.centroid));
     if res.general_path || c.flags.intersects(FULL_PATH) {
         return None;
     }

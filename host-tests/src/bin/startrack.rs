@@ -82,6 +82,8 @@ enum CatalogCommand {
     Case(startrack_host::cli::catalog::CatalogCaseArgs),
 }
 
+// Parsed once per run: the size of the largest variant does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum CalibCommand {
     /// Build a table from bias, dark and flat FITS maps, gains and a hot-pixel CSV.
@@ -90,6 +92,10 @@ enum CalibCommand {
     Frames(startrack_host::cli::calib_frames::CalibFramesArgs),
     /// Write a simulated lab set of raw frames (to try `calib frames` on).
     LabSet(startrack_host::cli::calib_frames::LabSetArgs),
+    /// CTI centroid bias vs signal and transfer distance, fitted coefficients, residual.
+    Cti(startrack_host::cli::calib_models::CalibCtiArgs),
+    /// Fit the field PSF model to the stars' measured widths (stars.csv).
+    PsfModel(startrack_host::cli::calib_models::PsfModelArgs),
 }
 
 /// Prints `startrack NAME: error` on one line and fails.
@@ -115,6 +121,18 @@ fn main() -> ExitCode {
             match startrack_host::cli::calib_frames::run(&args) {
                 Ok(_) => ExitCode::SUCCESS,
                 Err(e) => fail("calib frames", &e),
+            }
+        }
+        Command::Calib(CalibCommand::Cti(args)) => {
+            match startrack_host::cli::calib_models::run_cti(&args) {
+                Ok(_) => ExitCode::SUCCESS,
+                Err(e) => fail("calib cti", &e),
+            }
+        }
+        Command::Calib(CalibCommand::PsfModel(args)) => {
+            match startrack_host::cli::calib_models::run_psf_model(&args) {
+                Ok(_) => ExitCode::SUCCESS,
+                Err(e) => fail("calib psf-model", &e),
             }
         }
         Command::Calib(CalibCommand::LabSet(args)) => {

@@ -18,7 +18,7 @@
 //! 22 880 samples, the CCD47-20 set ([`LabSet::ccd47_20`]) 78 frames of 1.1 M.
 
 use crate::fits::{FitsError, RawFrame, write_raw_frame};
-use crate::sim::effects::{DarkLaw, HotPixels, TelegraphPixels};
+use crate::sim::effects::{ChargeTraps, DarkLaw, HotPixels, TelegraphPixels};
 use crate::sim::{SensorParams, Simulator};
 use startrack_core::geometry::ReadoutGeometry;
 use std::path::{Path, PathBuf};
@@ -58,6 +58,8 @@ pub struct LabSet {
     pub series_exposure_s: f64,
     /// Temperature of the series, K.
     pub series_temperature_k: f64,
+    /// Charge traps of the sensor (none in the standard sets).
+    pub traps: Option<ChargeTraps>,
 }
 
 /// Hot-pixel reference temperature of the lab set, K (the `hot.csv` rates hold there).
@@ -103,6 +105,7 @@ impl LabSet {
             series_frames: 30,
             series_exposure_s: 10.0,
             series_temperature_k: 263.0,
+            traps: None,
         }
     }
 
@@ -128,6 +131,7 @@ impl LabSet {
                 }),
                 hot: Some(self.hot),
                 telegraph: Some(self.telegraph),
+                traps: self.traps,
                 ..Default::default()
             },
             ..SensorParams::default()

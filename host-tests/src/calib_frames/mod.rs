@@ -10,6 +10,8 @@
 //!   hot pixels with their own rate and doubling temperature;
 //! - [`flat`]: the flat field per output;
 //! - [`rts`]: telegraph pixels from the longest time-ordered dark series;
+//! - [`eper`]: charge-transfer inefficiency by the extended pixel edge response of the flats
+//!   (the trap law, and from it the table's CTI coefficients);
 //! - [`report`]: `report.json`, `hot.csv`, `rts.csv`, the maps as FITS and the PNG figures;
 //! - [`labset`]: a simulated lab set with the simulator's truth, for the tests and the docs.
 //!
@@ -22,6 +24,7 @@
 
 pub mod bias;
 pub mod dark;
+pub mod eper;
 pub mod flat;
 pub mod labset;
 pub mod ptc;
@@ -84,6 +87,9 @@ pub struct Products {
     pub rts_series: Option<(f64, f64, u32)>,
     /// Frames read: bias, flats, darks.
     pub frames: (usize, usize, usize),
+    /// The trap law measured by EPER on the flats (`None` without enough extra lines or
+    /// signal levels).
+    pub eper: Option<eper::EperResult>,
     /// What was done with what, one line each.
     pub notes: Vec<String>,
 }
@@ -106,6 +112,8 @@ fn level_table(
         hot_ref_k: Kelvin::from_num(293),
         hot: &[],
         telegraph: &[],
+        cti: None,
+        psf_model: None,
     };
     encode(&spec, &[]).map_err(|e| FramesError::Missing(e.to_string()))
 }
@@ -179,6 +187,7 @@ pub fn calibrate(
     let t1 = CalibTable::parse(&lt).map_err(table_err)?;
     let mut flat = flat::FlatAccum::new(g);
     let mut points = Vec::new();
+    let mut edges = Vec::new();
     let range_adu: Vec<f64> = (0..outputs)
         .map(|o| {
             let (s, e) = g.overscan_cols(Output(o as u8));
@@ -199,6 +208,7 @@ pub fn calibrate(
         tick();
         for (f, info) in [(&a, a_info), (&b, b_info)] {
             check_saturation(f, g, info)?;
+            edges.extend(eper::edge_response(f, g, &cb_adu).unwrap_or_default());
             flat.add(f, &t1, info.exptime_s, info.ccdtemp_k)
                 .ok_or_else(|| {
                     FramesError::Missing(format!(
@@ -308,6 +318,27 @@ pub fn calibrate(
         }
     };
     let flat_map = flat.flat(&gains, &dark_rel, &hot);
+    let eper = eper::fit(&edges, &gains, &read_noise_e, g);
+    notes.push(match &eper {
+        Some(e) => format!(
+            "CTI by EPER from {} flats: parallel {:.3e} per transfer at {} e- (alpha {:.2}, trail {} px, mean delay {:.2} px); {}",
+            e.points.len(),
+            e.traps.parallel_per_transfer,
+            e.traps.reference_e,
+            e.traps.alpha,
+            e.traps.trail_px,
+            e.mean_delay,
+            if e.serial_measured {
+                format!("serial {:.3e} per transfer", e.traps.serial_per_transfer)
+            } else {
+                "serial not measurable with two outputs (no element after the far edge): read a flat set through one output".to_string()
+            }
+        ),
+        None => format!(
+            "no CTI: EPER found no edge response above 3 standard errors in flats at signal levels a factor 2 apart (or the readout has fewer than {} extra lines)",
+            eper::TAIL
+        ),
+    });
     Ok(Products {
         geometry: *g,
         nonlinearity: fits.iter().map(|f| f.nonlinearity).collect(),
@@ -325,6 +356,7 @@ pub fn calibrate(
         rts,
         rts_series,
         frames: (inv.bias.len(), 2 * inv.flat_pairs.len(), inv.darks.len()),
+        eper,
         notes,
     })
 }
@@ -398,6 +430,18 @@ impl Products {
         v
     }
 
+    /// The table's CTI coefficients from the EPER trap law: the flight method's bias fitted
+    /// on the simulator with that law ([`crate::cti::CtiExperiment::fit`]); `None` without
+    /// EPER.
+    pub fn cti_coeffs(&self) -> Option<startrack_core::table::CtiCoeffs> {
+        let e = self.eper.as_ref()?;
+        let x = crate::cti::CtiExperiment {
+            geometry: self.geometry,
+            ..crate::cti::CtiExperiment::flight(e.traps)
+        };
+        x.fit(&x.bias_grid(&crate::cli::calib_models::CTI_FIT_FLUXES_E, &x.positions(4)))
+    }
+
     /// The calibration table (maps in tiles of 2^`tile_log2` pixels, 0: per pixel).
     pub fn table(&self, tile_log2: u8) -> Result<Vec<u8>, CliError> {
         let g = self.geometry;
@@ -435,6 +479,8 @@ impl Products {
             hot_ref_k: Kelvin::from_num(293),
             hot: &hot,
             telegraph: &telegraph,
+            cti: self.cti_coeffs(),
+            psf_model: None,
         };
         encode(&spec, &[])
     }

@@ -5,6 +5,7 @@
 //! | `report.json` | `gain_e_per_adu`, `read_noise_e`, `nonlinearity` (one per output), photon transfer points, covered dark rate per temperature, counts, notes |
 //! | `hot.csv` | `col,row,rate_e_per_s_at_293k,doubling_k` (raw readout coordinates) |
 //! | `rts.csv` | `col,row` (raw readout coordinates) |
+//! | `cti_traps.json`, `cti.json` | the trap law measured by EPER, and the table's CTI coefficients from it (`calib build --cti`, `calib cti --traps`); written when EPER measured one |
 //! | `master_bias.fits`, `dark_rel.fits`, `flat.fits` | the maps for DS9 (full readout, full readout, active area) |
 //! | `ptc.png`, `dark_temperature.png` | photon transfer per output; dark rate against temperature (covered pixels and hot pixels) |
 //!
@@ -39,6 +40,9 @@ pub fn json(p: &Products) -> serde_json::Value {
         "telegraph_pixels": p.rts.len(),
         "telegraph_series": p.rts_series.map(|(t, k, n)| serde_json::json!({
             "exptime_s": t, "ccdtemp_k": k, "frames": n })),
+        "cti_eper": p.eper.as_ref().map(|e| serde_json::json!({
+            "traps": e.traps, "serial_measured": e.serial_measured, "mean_delay_px": e.mean_delay,
+        })),
         "notes": p.notes,
     })
 }
@@ -74,6 +78,16 @@ pub fn write(p: &Products, dir: &Path) -> Result<Written, CliError> {
         let _ = writeln!(rts, "{c},{r}");
     }
     put("rts.csv", rts.as_bytes(), &mut w)?;
+    if let Some(e) = &p.eper {
+        let t =
+            serde_json::to_string_pretty(&e.traps).map_err(|e| CliError::Usage(e.to_string()))?;
+        put("cti_traps.json", t.as_bytes(), &mut w)?;
+        if let Some(c) = p.cti_coeffs() {
+            let j = crate::cti::CtiCoeffsJson::from_coeffs(&c, p.geometry.outputs);
+            let t = serde_json::to_string_pretty(&j).map_err(|e| CliError::Usage(e.to_string()))?;
+            put("cti.json", t.as_bytes(), &mut w)?;
+        }
+    }
     for (name, map) in [
         ("master_bias.fits", &p.master_bias),
         ("dark_rel.fits", &p.dark_rel),

@@ -5,6 +5,7 @@
 pub mod accuracy;
 pub mod calib_build;
 pub mod calib_frames;
+pub mod calib_models;
 pub mod catalog;
 pub mod figures;
 pub mod gse;

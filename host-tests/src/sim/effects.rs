@@ -11,6 +11,9 @@
 //! - [`CosmicRays`]: hits that deposit charge in a pixel and its four neighbours.
 //! - [`Cti`]: a simple parallel charge-transfer-inefficiency trail: a fraction of each
 //!   pixel's expected charge is released over the next lines read.
+//! - [`ChargeTraps`]: charge traps along both transfer directions, parallel (lines) and serial
+//!   (the register, away from each output), each deferring a fraction that grows with the
+//!   number of transfers and shrinks with the pixel's charge.
 //!
 //! This module describes the effects; [`super::render`] draws them per pixel when it renders
 //! (the `Simulator` methods `hot_rate_e_per_s`, `telegraph_e`, `cosmic_e` and the like).
@@ -45,6 +48,8 @@ pub struct Effects {
     pub cosmics: Option<CosmicRays>,
     /// Parallel CTI trails.
     pub cti: Option<Cti>,
+    /// Parallel and serial charge traps (applied after [`Cti`] when both are on).
+    pub traps: Option<ChargeTraps>,
 }
 
 /// A star image's shape; the star's `a_px` sets the width of each Gaussian part.
@@ -222,5 +227,62 @@ impl Cti {
         raw.iter()
             .map(|w| if sum > 0.0 { w / sum } else { 0.0 })
             .collect()
+    }
+}
+
+/// Charge traps, parallel then serial. A pixel holding `q` e- (its expected charge) that
+/// makes `n` transfers defers the fraction
+/// `f = min(1, n eps (q / reference_e)^-alpha)` of it (the volume-driven trap law: a faint
+/// pixel loses a larger fraction), released into the next [`Self::trail_px`] elements read,
+/// with the weights of [`Cti::weights`]. Parallel: `n = line + 1`, trail into later lines.
+/// Serial, after the parallel step and on its result: `n = c + 1` for the left output (raw
+/// column `c`, trail into higher columns), `n = line_len - c` for the right one (trail into
+/// lower columns), the trail never crossing into the other output's half. Charge is conserved
+/// except for what trails past the last line or the end of the half line.
+///
+/// Cost: `(1 + trail_px)^2` evaluations of the trap-free expected charge per sample.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ChargeTraps {
+    /// Fraction deferred per parallel transfer at `reference_e`.
+    pub parallel_per_transfer: f64,
+    /// Fraction deferred per serial transfer at `reference_e`.
+    pub serial_per_transfer: f64,
+    /// Charge at which the per-transfer fractions hold, e-.
+    pub reference_e: f64,
+    /// Signal exponent of the deferred fraction (0 <= alpha < 1).
+    pub alpha: f64,
+    /// Elements over which deferred charge is released.
+    pub trail_px: usize,
+    /// Ratio of successive release weights (0..1).
+    pub decay: f64,
+}
+
+impl ChargeTraps {
+    /// The fraction of a pixel's `q_e` deferred over `transfers` transfers at `eps` per
+    /// transfer (0 for no charge).
+    pub fn deferred_fraction(&self, eps: f64, transfers: f64, q_e: f64) -> f64 {
+        if q_e <= 0.0 || eps <= 0.0 {
+            return 0.0;
+        }
+        (transfers * eps * (q_e / self.reference_e).powf(-self.alpha)).clamp(0.0, 1.0)
+    }
+
+    /// Release weights of elements 1..=trail_px after the pixel, summing to 1.
+    pub fn weights(&self) -> Vec<f64> {
+        Cti {
+            fraction: 0.0,
+            trail_lines: self.trail_px,
+            decay: self.decay,
+        }
+        .weights()
+    }
+
+    /// Mean release delay, elements: `sum k w_k`.
+    pub fn mean_delay(&self) -> f64 {
+        self.weights()
+            .iter()
+            .enumerate()
+            .map(|(k, w)| (k + 1) as f64 * w)
+            .sum()
     }
 }

@@ -140,9 +140,72 @@ impl Simulator {
         }
     }
 
-    /// Expected (light, dark) electrons of raw element (`col`, `line`) after CTI, before
-    /// shot noise; cosmic-ray charge ([`Self::cosmic_e`]) comes on top.
+    /// Expected (light, dark) electrons of raw element (`col`, `line`) after CTI and charge
+    /// traps, before shot noise; cosmic-ray charge ([`Self::cosmic_e`]) comes on top.
     pub fn expected_e(&self, col: usize, line: usize) -> (f64, f64) {
+        let Some(traps) = self.params.effects.traps else {
+            return self.expected_cti_e(col, line);
+        };
+        let g = &self.params.geometry;
+        let w = traps.weights();
+        let eps = traps.serial_per_transfer;
+        // The serial step on the parallel step's output, along this output's half line.
+        let left = g.output_of_col(col).0 == 0;
+        let transfers = |c: usize| {
+            if left {
+                (c + 1) as f64
+            } else {
+                g.line_len().saturating_sub(c) as f64
+            }
+        };
+        let (l0, d0) = self.expected_parallel_e(&traps, &w, col, line);
+        let keep = 1.0 - traps.deferred_fraction(eps, transfers(col), l0 + d0);
+        let (mut light, mut dark) = (keep * l0, keep * d0);
+        for (k, wk) in w.iter().enumerate() {
+            let src = if left {
+                col.checked_sub(k + 1)
+            } else {
+                Some(col + k + 1).filter(|&c| c < g.line_len())
+            };
+            let Some(src) = src.filter(|&c| g.output_of_col(c) == g.output_of_col(col)) else {
+                break;
+            };
+            let (l, d) = self.expected_parallel_e(&traps, &w, src, line);
+            let f = traps.deferred_fraction(eps, transfers(src), l + d);
+            light += f * wk * l;
+            dark += f * wk * d;
+        }
+        (light, dark)
+    }
+
+    /// The parallel trap step: (light, dark) of raw element (`col`, `line`) after the parallel
+    /// transfers, from [`Self::expected_cti_e`] of this and the previous lines.
+    fn expected_parallel_e(
+        &self,
+        traps: &super::effects::ChargeTraps,
+        w: &[f64],
+        col: usize,
+        line: usize,
+    ) -> (f64, f64) {
+        let eps = traps.parallel_per_transfer;
+        let (l0, d0) = self.expected_cti_e(col, line);
+        let keep = 1.0 - traps.deferred_fraction(eps, (line + 1) as f64, l0 + d0);
+        let (mut light, mut dark) = (keep * l0, keep * d0);
+        for (k, wk) in w.iter().enumerate() {
+            let Some(src) = line.checked_sub(k + 1) else {
+                break;
+            };
+            let (l, d) = self.expected_cti_e(col, src);
+            let f = traps.deferred_fraction(eps, (src + 1) as f64, l + d);
+            light += f * wk * l;
+            dark += f * wk * d;
+        }
+        (light, dark)
+    }
+
+    /// Expected (light, dark) electrons of raw element (`col`, `line`) after the simple
+    /// parallel CTI trail ([`super::effects::Cti`]), before the charge traps.
+    pub fn expected_cti_e(&self, col: usize, line: usize) -> (f64, f64) {
         let Some(cti) = self.params.effects.cti else {
             return self.expected_parts_e(col, line);
         };

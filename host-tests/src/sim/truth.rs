@@ -165,6 +165,8 @@ impl Simulator {
             hot_ref_k: self.hot_reference_k(),
             hot: &hot,
             telegraph: &telegraph,
+            cti: None,
+            psf_model: None,
         };
         if curves.is_empty() {
             encode(&spec)
@@ -253,6 +255,8 @@ impl Simulator {
             hot_ref_k: Kelvin::from_num(293),
             hot: &[],
             telegraph: &[],
+            cti: None,
+            psf_model: None,
         };
         encode(&spec)
     }

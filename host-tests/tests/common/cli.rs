@@ -40,5 +40,7 @@ pub fn build_args(f: &SimFiles, out: PathBuf) -> CalibBuildArgs {
         psf_a_px: None,
         pixcorr_boxes: "5,7".into(),
         pixcorr_powers: "1,2".into(),
+        cti: None,
+        psf_model: None,
     }
 }

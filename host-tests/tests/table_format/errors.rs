@@ -156,6 +156,8 @@ fn write_table_buffer_too_small() {
         hot_ref_k: Kelvin::ZERO,
         hot: &[],
         telegraph: &[],
+        cti: None,
+        psf_model: None,
     };
     assert_eq!(
         spec.encoded_len(),
@@ -180,7 +182,7 @@ fn every_error_displays_as_one_non_empty_line() {
         },
         TableError::HeaderCrc,
         TableError::Reserved,
-        TableError::TooManySections(9),
+        TableError::TooManySections(17),
         TableError::UnknownSection(42),
         TableError::PixCorrCurve {
             index: 3,
@@ -205,6 +207,7 @@ fn every_error_displays_as_one_non_empty_line() {
             TableError::SectionLayout(k),
             TableError::SectionLength(k),
             TableError::MapFormat(k),
+            TableError::SectionFormat(k),
             TableError::OutOfRange {
                 section: k,
                 index: 17,

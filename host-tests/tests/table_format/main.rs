@@ -7,7 +7,8 @@
 //! - [`sections`]: corruptions of the sections' contents;
 //! - [`errors`]: `write_table` refuses what the parser refuses; every error's display;
 //! - [`layout`]: every byte under a CRC; tables at the start of a larger region;
-//! - [`pixcorr`]: the pixel-phase correction section.
+//! - [`pixcorr`]: the pixel-phase correction section;
+//! - [`cti_psf`]: the CTI coefficients and the field PSF model.
 //!
 //! The fixtures (owned specs, an independent encoder, CRC re-sealing) are shared with
 //! `table_fuzz` in `tests/common/table_fixtures/`.
@@ -15,6 +16,7 @@
 #[path = "../common/table_fixtures/mod.rs"]
 mod table_fixtures;
 
+mod cti_psf;
 mod errors;
 mod header;
 mod layout;

@@ -97,6 +97,8 @@ fn assert_matches_spec(t: &CalibTable<'_>, s: &OwnedSpec) {
         assert_eq!(tg.lower_bound(x, y), i);
     }
     assert_eq!(tg.get(s.telegraph.len()), None);
+    assert_eq!(t.cti(), s.cti, "CTI coefficients");
+    assert_eq!(t.psf_model(), s.psf_model, "field PSF model");
     let set = t.pixcorr();
     assert_eq!(set.len(), s.pixcorr.len());
     for (c, want) in set.iter().zip(&s.pixcorr) {
@@ -337,6 +339,14 @@ fn each_optional_section_alone() {
         },
         OwnedSpec {
             pixcorr: full.pixcorr.clone(),
+            ..base.clone()
+        },
+        OwnedSpec {
+            cti: full.cti,
+            ..base.clone()
+        },
+        OwnedSpec {
+            psf_model: full.psf_model,
             ..base.clone()
         },
     ];

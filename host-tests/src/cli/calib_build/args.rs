@@ -57,6 +57,12 @@ pub struct CalibBuildArgs {
     /// CoG powers the curves are built for, "1,2".
     #[arg(long, default_value = "1,2")]
     pub pixcorr_powers: String,
+    /// CTI coefficients (JSON from `startrack calib cti` or `calib frames`): adds section 8.
+    #[arg(long)]
+    pub cti: Option<PathBuf>,
+    /// Field PSF model (JSON from `startrack calib psf-model`): adds section 9.
+    #[arg(long)]
+    pub psf_model: Option<PathBuf>,
 }
 
 /// A comma-separated list of numbers of option `name`.

@@ -38,6 +38,10 @@
 //!   per width and box up to 9 for a *given* background: the firmware's tracking path
 //!   (`centroid::raw_cog`, background carried from the star's last measurement) uses it.
 //!
+//! - CTI coefficients (`--cti FILE`, JSON from `startrack calib cti` or `calib frames`) ->
+//!   **CTI** section 8; field PSF model (`--psf-model FILE`, JSON from `startrack calib
+//!   psf-model`) -> **field PSF model** section 9 ([`models`]).
+//!
 //! A missing map gives no section and is reported ("no dark map: no dark correction").
 //! Geometry: the CCD47-20 read through both outputs.
 //!
@@ -57,6 +61,7 @@ pub mod args;
 pub mod curves;
 pub mod hot;
 pub mod maps;
+pub mod models;
 
 pub use args::CalibBuildArgs;
 pub use curves::{MAX_CURVES, PIXCORR_KNOTS, curves_from_args};
@@ -111,6 +116,29 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
         hot_ref_k,
         hot: &hot,
         telegraph: &[],
+        cti: None,
+        psf_model: None,
+    };
+    let spec = TableSpec {
+        cti: args
+            .cti
+            .as_deref()
+            .map(|p| models::cti_from_json(&g, p))
+            .transpose()?
+            .map(|(c, note)| {
+                notes.push(note);
+                c
+            }),
+        psf_model: args
+            .psf_model
+            .as_deref()
+            .map(|p| models::psf_model_from_json(&g, p))
+            .transpose()?
+            .map(|(m, note)| {
+                notes.push(note);
+                m
+            }),
+        ..spec
     };
     let (curves, curve_notes) = curves_from_args(args)?;
     notes.extend(curve_notes);

@@ -106,5 +106,27 @@ pub fn exercise(t: &CalibTable<'_>) -> usize {
             assert!(v.is_finite() && s.is_finite());
         }
     }
+    // The CTI correction is finite (and bounded by a pixel per transfer) everywhere, for
+    // any flux; the PSF model is positive and finite over the field.
+    if let Some(cti) = startrack_core::calib::cti::CtiCorrection::from_table(t, 0.7) {
+        for (x, y) in [
+            (0.0, 0.0),
+            (f32::from(g.active_cols), f32::from(g.active_rows)),
+        ] {
+            for f in [f32::NAN, -1.0, 0.0, 1e-9, 1.0, 1e4, 1e12, f32::INFINITY] {
+                let (dx, dy) = cti.shift_px(f, x, y);
+                assert!(dx.is_finite() && dy.is_finite(), "CTI shift at {f} e-");
+            }
+        }
+    }
+    if let Some(m) = t.psf_model() {
+        for (x, y) in [
+            (0.0, 0.0),
+            (f32::from(g.active_cols - 1), f32::from(g.active_rows - 1)),
+        ] {
+            let a = m.a_px(x, y, g.active_cols, g.active_rows);
+            assert!(a > 0.0 && a < 256.0, "PSF model a = {a} at ({x}, {y})");
+        }
+    }
     visited
 }

@@ -7,7 +7,8 @@ use super::bytes::{crc32, rd16, rd32, reseal_header, wr16, wr32};
 use super::specs::{OwnedSpec, tiles_of};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::{
-    DIR_ENTRY_LEN, HEADER_LEN, HotPixel, HotPolicy, MAP_HEADER_LEN, SectionKind,
+    CtiCoeffs, DIR_ENTRY_LEN, HEADER_LEN, HotPixel, HotPolicy, MAP_HEADER_LEN, PsfModel,
+    SectionKind,
 };
 use startrack_core::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu, Kelvin};
 
@@ -97,6 +98,34 @@ pub fn enc_pixcorr(curves: &[Vec<u8>]) -> Vec<u8> {
     v
 }
 
+/// The CTI section: reference flux u32, flux offset u32, exponent u16, reserved u16, then
+/// per output of the geometry the parallel and serial shifts (u32 each).
+pub fn enc_cti(outputs: u8, c: &CtiCoeffs) -> Vec<u8> {
+    let mut v = c.reference_flux_e.to_le_bytes().to_vec();
+    v.extend(c.flux_offset_e.to_le_bytes());
+    v.extend(c.alpha.to_bits().to_le_bytes());
+    v.extend([0, 0]);
+    for o in &c.outputs[..usize::from(outputs)] {
+        v.extend(o.parallel_px.to_bits().to_le_bytes());
+        v.extend(o.serial_px.to_bits().to_le_bytes());
+    }
+    v
+}
+
+/// The PSF model section: degree u8, reserved u8, scatter u16, stars u16, reserved u16, then
+/// (d + 1)(d + 2) / 2 coefficients (i32 each).
+pub fn enc_psf_model(m: &PsfModel) -> Vec<u8> {
+    let mut v = vec![m.degree, 0];
+    v.extend(m.scatter_px.to_bits().to_le_bytes());
+    v.extend(m.stars.to_le_bytes());
+    v.extend([0, 0]);
+    let d = usize::from(m.degree);
+    for c in &m.coeffs[..(d + 1) * (d + 2) / 2] {
+        v.extend(c.to_bits().to_le_bytes());
+    }
+    v
+}
+
 // ---------------------------------------------------------------------------------------------
 // A table as a header plus a list of sections, rebuilt with fresh lengths and CRCs.
 
@@ -179,6 +208,14 @@ impl RawTable {
                 SectionKind::PixCorr,
                 enc_pixcorr(&s.pixcorr),
             ));
+        }
+        if let Some(c) = &s.cti {
+            t.sections
+                .push(RawSection::new(SectionKind::Cti, enc_cti(g.outputs, c)));
+        }
+        if let Some(m) = &s.psf_model {
+            t.sections
+                .push(RawSection::new(SectionKind::PsfModel, enc_psf_model(m)));
         }
         t
     }

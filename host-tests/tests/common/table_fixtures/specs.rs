@@ -7,11 +7,12 @@ use startrack_core::centroid::cog::CogPower;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::table::{
-    HotPixel, HotPolicy, MapSpec, TableSpec, write_table, write_table_with_pixcorr,
+    CtiCoeffs, CtiOutput, HotPixel, HotPolicy, MapSpec, PsfModel, TableSpec, write_table,
+    write_table_with_pixcorr,
 };
 use startrack_core::units::{ColumnBiasAdu, DarkRel, ERatePerS, FlatInv, GainEPerAdu, Kelvin};
 
-use fixed::types::U8F8;
+use fixed::types::{I16F16, U0F16, U0F32, U8F8};
 
 // ---------------------------------------------------------------------------------------------
 // Geometries.
@@ -53,6 +54,10 @@ pub struct OwnedSpec {
     pub telegraph: Vec<(u16, u16)>,
     /// Pixel-phase correction curves, each encoded by [`enc_curve`] (none: no section).
     pub pixcorr: Vec<Vec<u8>>,
+    /// CTI coefficients (none: no section).
+    pub cti: Option<CtiCoeffs>,
+    /// Field PSF model (none: no section).
+    pub psf_model: Option<PsfModel>,
 }
 
 impl OwnedSpec {
@@ -86,6 +91,8 @@ impl OwnedSpec {
             hot_ref_k: self.hot_ref_k,
             hot: &self.hot,
             telegraph: &self.telegraph,
+            cti: self.cti,
+            psf_model: self.psf_model,
         }
     }
 
@@ -209,6 +216,40 @@ pub fn full_spec(g: ReadoutGeometry, dark_log2: u8, flat_log2: u8) -> OwnedSpec 
         hot: hot_pixels(&g),
         telegraph: telegraph(&g),
         pixcorr: pixcorr_curves(),
+        cti: Some(cti_coeffs(&g)),
+        psf_model: Some(psf_model()),
+    }
+}
+
+/// CTI coefficients with distinct bit patterns per output (outputs past the geometry's 0).
+pub fn cti_coeffs(g: &ReadoutGeometry) -> CtiCoeffs {
+    let mut outputs = [CtiOutput::default(); 2];
+    for (i, o) in outputs.iter_mut().enumerate().take(usize::from(g.outputs)) {
+        *o = CtiOutput {
+            parallel_px: U0F32::from_bits(0x0001_2345 + 0x1111 * i as u32),
+            serial_px: U0F32::from_bits(0x0000_6789 + 0x2222 * i as u32),
+        };
+    }
+    CtiCoeffs {
+        reference_flux_e: 10_000,
+        flux_offset_e: 345,
+        alpha: U0F16::from_bits(0x8123),
+        outputs,
+    }
+}
+
+/// A degree-2 PSF model, a = 1.2 + 0.1 u - 0.05 v + 0.2 u^2 + 0.03 u v + 0.15 v^2 px
+/// (positive over the field).
+pub fn psf_model() -> PsfModel {
+    let mut coeffs = [I16F16::ZERO; 10];
+    for (c, v) in coeffs.iter_mut().zip([1.2, 0.1, -0.05, 0.2, 0.03, 0.15]) {
+        *c = I16F16::from_num(v);
+    }
+    PsfModel {
+        degree: 2,
+        scatter_px: U8F8::from_bits(0x0013),
+        stars: 321,
+        coeffs,
     }
 }
 
@@ -265,5 +306,7 @@ pub fn gains_only(g: ReadoutGeometry) -> OwnedSpec {
         hot: Vec::new(),
         telegraph: Vec::new(),
         pixcorr: Vec::new(),
+        cti: None,
+        psf_model: None,
     }
 }
