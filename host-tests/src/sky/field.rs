@@ -37,11 +37,7 @@ impl FieldSpec {
     pub fn ccd47_15deg(sigma_px: f64) -> Self {
         let f = 512.0 / 7.5f64.to_radians().tan();
         Self {
-            camera: Camera {
-                focal_length_px: f,
-                principal_point_px: [511.5, 511.5],
-                k1: 0.0,
-            },
+            camera: Camera::pinhole(f, [511.5, 511.5]),
             cols: 1024,
             rows: 1024,
             sigma_px,
