@@ -110,6 +110,7 @@ fn encode(m: &Maps, sat: u16) -> Vec<u8> {
         hot_ref_k: Kelvin::from_num(T_REF),
         hot: &m.hot,
         telegraph: &m.telegraph,
+        camera_model: None,
     };
     let mut buf = vec![0u8; spec.encoded_len()];
     let n = write_table(&spec, &mut buf).expect("valid spec");

@@ -295,6 +295,7 @@ fn a_table_with_curves_from_the_host_builder() {
         hot_ref_k: startrack_core::units::Kelvin::ZERO,
         hot: &[],
         telegraph: &[],
+        camera_model: None,
     };
     let bytes = write_table_with_curves(&spec, &curves).unwrap();
     let t = CalibTable::parse(&bytes).unwrap();

@@ -105,6 +105,7 @@ impl Maps {
             hot_ref_k: fixed::types::U16F16::from_num(263),
             hot: &self.hot,
             telegraph: &self.telegraph,
+            camera_model: None,
         };
         let mut buf = vec![0u8; spec.encoded_len()];
         let n = write_table(&spec, &mut buf).expect("table writes");

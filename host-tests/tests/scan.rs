@@ -411,6 +411,7 @@ mod random_tables {
             hot_ref_k: Kelvin::from_num(263),
             hot: &hot,
             telegraph: &telegraph,
+            camera_model: None,
         };
         let mut buf = vec![0u8; spec.encoded_len()];
         write_table(&spec, &mut buf).unwrap();

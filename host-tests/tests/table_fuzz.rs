@@ -169,6 +169,7 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
                 hot: if present[3] { hot } else { Vec::new() },
                 telegraph: if present[4] { tg } else { Vec::new() },
                 pixcorr: if present[5] { curves } else { Vec::new() },
+                camera_model: None,
             }
         },
     )
@@ -396,6 +397,11 @@ fn resealed_section_corruption_of_each_kind_is_caught_or_harmless() {
                         }
                         Err(TableError::PixCorrCurve { .. } | TableError::Reserved)
                             if kind == SectionKind::PixCorr =>
+                        {
+                            rejected += 1;
+                        }
+                        Err(TableError::CameraModel(_) | TableError::Reserved)
+                            if kind == SectionKind::CameraModel =>
                         {
                             rejected += 1;
                         }

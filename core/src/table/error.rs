@@ -19,11 +19,13 @@ pub enum SectionKind {
     Telegraph = 6,
     /// Pixel-phase correction curves of the centre of gravity.
     PixCorr = 7,
+    /// The camera model: focal length, principal point, distortion, lateral colour.
+    CameraModel = 10,
 }
 
 impl SectionKind {
     /// Every kind, in directory order.
-    pub const ALL: [SectionKind; 7] = [
+    pub const ALL: [SectionKind; 8] = [
         Self::Gains,
         Self::ColumnBias,
         Self::DarkRel,
@@ -31,6 +33,7 @@ impl SectionKind {
         Self::HotPixels,
         Self::Telegraph,
         Self::PixCorr,
+        Self::CameraModel,
     ];
 
     /// The kind with this code, if any.
@@ -48,6 +51,7 @@ impl SectionKind {
             Self::HotPixels => "hot pixels",
             Self::Telegraph => "telegraph pixels",
             Self::PixCorr => "pixel-phase correction",
+            Self::CameraModel => "camera model",
         }
     }
 }
@@ -119,6 +123,9 @@ pub enum TableError {
         /// What is wrong with it.
         error: super::pixcorr::PixCorrError,
     },
+    /// The camera model (section 10) is not usable: a value out of its range, or a
+    /// distortion that has no inverse over the active area.
+    CameraModel(crate::attitude::CameraError),
 }
 
 impl core::fmt::Display for TableError {
@@ -140,7 +147,7 @@ impl core::fmt::Display for TableError {
             }
             Self::HeaderCrc => f.write_str("calibration table header CRC mismatch"),
             Self::Reserved => f.write_str("calibration table: reserved field not zero"),
-            Self::TooManySections(n) => write!(f, "calibration table: {n} sections, at most 8"),
+            Self::TooManySections(n) => write!(f, "calibration table: {n} sections, at most 16"),
             Self::Geometry(e) => write!(f, "calibration table {e}"),
             Self::UnknownSection(k) => write!(f, "calibration table: unknown section kind {k}"),
             Self::DuplicateSection(k) => write!(f, "calibration table: {} twice", k.name()),
@@ -168,6 +175,7 @@ impl core::fmt::Display for TableError {
             Self::PixCorrCurve { index, error } => {
                 write!(f, "calibration table: curve {index}: {error}")
             }
+            Self::CameraModel(e) => write!(f, "calibration table: {e}"),
         }
     }
 }

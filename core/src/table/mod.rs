@@ -7,7 +7,7 @@
 //! offset size  field
 //!  0     4     magic  b"STCT"
 //!  4     2     version = 1
-//!  6     2     section count n (at most 8)
+//!  6     2     section count n (at most 16)
 //!  8     4     total length of the table in bytes (header + directory + sections)
 //! 12     2     geometry.overscan_px
 //! 14     2     geometry.covered_px
@@ -35,6 +35,7 @@
 //! | 5 | hot pixels | u32 reference temperature U16F16 K, u32 count, entries | see [`HotPixel`] |
 //! | 6 | telegraph pixels | u32 count, entries x u16, y u16 | active coordinates |
 //! | 7 | pixel-phase correction | u16 count (1..=16), u16 reserved 0, curves back to back | see [`pixcorr`] |
+//! | 10 | camera model | 36 bytes, below | see [`camera`] |
 //!
 //! Gains are required; every other section is optional and its absence means "no
 //! correction": column bias 0, relative dark 1 (the covered columns' dark subtracted
@@ -53,11 +54,17 @@
 //! `tile_log2 u8` (0..=10), `element format u8` (1 = U2F6 u8, 2 = U2F14 u16),
 //! `reserved u16`, `tiles_x u16`, `tiles_y u16` (= active size divided by the tile, rounded up).
 //!
+//! The camera model (section 10, optional; absent means the caller's nominal camera) is
+//! [`camera::CAMERA_SECTION_LEN`] bytes of fixed-point values, laid out in [`camera`]; the
+//! parser checks that its distortion is invertible over the active area for every colour
+//! in [`camera::COLOUR_RANGE_BV_MAG`] and reports [`TableError::CameraModel`] otherwise.
+//!
 //! Hot-pixel entries (12 bytes): `x u16, y u16` (active coordinates), `dark rate u32`
 //! (U16F16 e-/s at the reference temperature), `doubling u16` (U8F8 K: the rate doubles
 //! every this many kelvin, the pixel's own law), `policy u8` (0 correct, 1 exclude),
 //! `reserved u8`. Hot and telegraph entries are sorted by (y, x) with no repeats.
 
+pub mod camera;
 mod error;
 mod parse;
 pub mod pixcorr;

@@ -12,7 +12,7 @@ use crate::units::{ColumnBiasAdu, DarkRel, ERatePerS, FlatInv, GainEPerAdu};
 use fixed::types::U8F8;
 
 /// Most sections a table may list.
-pub const MAX_SECTIONS: usize = 8;
+pub const MAX_SECTIONS: usize = 16;
 
 pub(crate) fn u16_at(b: &[u8], off: usize) -> Option<u16> {
     let s = b.get(off..off.checked_add(2)?)?;
@@ -41,6 +41,7 @@ pub struct CalibTable<'a> {
     hot: HotList<'a>,
     telegraph: DefectList<'a>,
     pixcorr: PixCorrSet<'a>,
+    camera_model: Option<&'a [u8]>,
 }
 
 /// A tiled map over the active area, read in place.
@@ -247,12 +248,19 @@ impl<'a> CalibTable<'a> {
         let saturation_adu = rd16(24)?;
 
         let mut found: [Option<&'a [u8]>; 7] = [None; 7];
+        let mut camera_model: Option<&'a [u8]> = None;
         // (offset, length, kind) of each section, to prove they cover the table exactly.
         let mut extents = [(0usize, 0usize, SectionKind::Gains); MAX_SECTIONS];
         for i in 0..usize::from(n_sections) {
             let s = section(bytes, dir, i, dir_end)?;
             if let Some(e) = extents.get_mut(i) {
                 *e = (s.offset, s.bytes.len(), s.kind);
+            }
+            if s.kind == SectionKind::CameraModel {
+                if camera_model.replace(s.bytes).is_some() {
+                    return Err(TableError::DuplicateSection(s.kind));
+                }
+                continue;
             }
             let slot = found
                 .get_mut(s.kind as usize - 1)
@@ -306,6 +314,9 @@ impl<'a> CalibTable<'a> {
             .transpose()?
             .unwrap_or_default();
         let pixcorr = pixcorr.map(parse_pixcorr).transpose()?.unwrap_or_default();
+        if let Some(c) = camera_model {
+            super::camera::parse(c, geometry.active_cols, geometry.active_rows)?;
+        }
 
         Ok(Self {
             len: bytes.len(),
@@ -318,6 +329,7 @@ impl<'a> CalibTable<'a> {
             hot,
             telegraph,
             pixcorr,
+            camera_model,
         })
     }
 
@@ -413,6 +425,13 @@ impl<'a> CalibTable<'a> {
     /// The pixel-phase correction curves of the centre of gravity (empty when absent).
     pub fn pixcorr(&self) -> PixCorrSet<'a> {
         self.pixcorr
+    }
+
+    /// The fitted camera model (section 10), or `None` when the table has none (the caller
+    /// uses its nominal camera). Decoded from the table's bytes at each call (nine loads).
+    pub fn camera_model(&self) -> Option<crate::attitude::Camera> {
+        self.camera_model
+            .and_then(|b| super::camera::decode(b).ok())
     }
 }
 

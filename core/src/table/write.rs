@@ -42,6 +42,8 @@ pub struct TableSpec<'a> {
     pub hot: &'a [HotPixel],
     /// Telegraph pixels (x, y) sorted by (y, x); written only when not empty.
     pub telegraph: &'a [(u16, u16)],
+    /// The fitted camera model (section 10), or none.
+    pub camera_model: Option<crate::attitude::Camera>,
 }
 
 impl TableSpec<'_> {
@@ -86,6 +88,8 @@ fn sections<'s>(
                         .sum::<usize>(),
             )
         }),
+        spec.camera_model
+            .map(|_| (SectionKind::CameraModel, super::camera::CAMERA_SECTION_LEN)),
     ]
     .into_iter()
     .flatten()
@@ -127,6 +131,10 @@ pub fn write_table_with_pixcorr(
     out: &mut [u8],
 ) -> Result<usize, WriteError> {
     let len = encoded_len(spec, curves);
+    if let Some(cam) = &spec.camera_model {
+        super::camera::encode(cam)
+            .map_err(|e| WriteError::Invalid(super::TableError::CameraModel(e)))?;
+    }
     let buf = out
         .get_mut(..len)
         .ok_or(WriteError::BufferTooSmall { needed: len })?;
@@ -135,7 +143,7 @@ pub fn write_table_with_pixcorr(
 
     // Sections first, then the directory that names them, then the header over both.
     let mut o = Out { buf, pos: dir_end };
-    let mut entries = [(SectionKind::Gains, 0usize, 0usize); 7];
+    let mut entries = [(SectionKind::Gains, 0usize, 0usize); super::parse::MAX_SECTIONS];
     for (slot, (kind, slen)) in entries.iter_mut().zip(sections(spec, curves)) {
         *slot = (kind, o.pos, slen);
         write_section(&mut o, spec, curves, kind);
@@ -220,6 +228,15 @@ fn write_section(o: &mut Out<'_>, spec: &TableSpec<'_>, curves: &[PixCorr<'_>], 
             for (x, y) in spec.telegraph {
                 o.put(&x.to_le_bytes());
                 o.put(&y.to_le_bytes());
+            }
+        }
+        SectionKind::CameraModel => {
+            // Encodable: checked before any byte was written.
+            if let Some(b) = spec
+                .camera_model
+                .and_then(|c| super::camera::encode(&c).ok())
+            {
+                o.put(&b);
             }
         }
         SectionKind::PixCorr => {

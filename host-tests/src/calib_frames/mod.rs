@@ -106,6 +106,7 @@ fn level_table(
         hot_ref_k: Kelvin::from_num(293),
         hot: &[],
         telegraph: &[],
+        camera_model: None,
     };
     encode(&spec, &[]).map_err(|e| FramesError::Missing(e.to_string()))
 }
@@ -435,6 +436,7 @@ impl Products {
             hot_ref_k: Kelvin::from_num(293),
             hot: &hot,
             telegraph: &telegraph,
+            camera_model: None,
         };
         encode(&spec, &[])
     }

@@ -165,6 +165,7 @@ impl Simulator {
             hot_ref_k: self.hot_reference_k(),
             hot: &hot,
             telegraph: &telegraph,
+            camera_model: None,
         };
         if curves.is_empty() {
             encode(&spec)
@@ -253,6 +254,7 @@ impl Simulator {
             hot_ref_k: Kelvin::from_num(293),
             hot: &[],
             telegraph: &[],
+            camera_model: None,
         };
         encode(&spec)
     }

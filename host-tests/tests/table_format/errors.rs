@@ -156,6 +156,7 @@ fn write_table_buffer_too_small() {
         hot_ref_k: Kelvin::ZERO,
         hot: &[],
         telegraph: &[],
+        camera_model: None,
     };
     assert_eq!(
         spec.encoded_len(),

@@ -144,16 +144,16 @@ fn reserved_fields() {
 #[test]
 fn too_many_sections() {
     let t = small_table();
-    let b = patched(&t, |b| wr16(b, 6, 9));
-    assert_eq!(parse_unit(&b), Err(TableError::TooManySections(9)));
+    let b = patched(&t, |b| wr16(b, 6, 17));
+    assert_eq!(parse_unit(&b), Err(TableError::TooManySections(17)));
     let b = patched(&t, |b| wr16(b, 6, u16::MAX));
     assert!(matches!(
         CalibTable::parse(&b),
         Err(TableError::TooManySections(_))
     ));
-    // Nine real directory entries, length consistent.
+    // Seventeen real directory entries, length consistent.
     let mut raw = RawTable::decompose(&t);
-    while raw.sections.len() < 9 {
+    while raw.sections.len() < 17 {
         raw.sections.push(RawSection::new(
             SectionKind::Gains,
             enc_gains(&gains(&SMALL_DUAL)),
@@ -161,7 +161,7 @@ fn too_many_sections() {
     }
     assert_eq!(
         parse_unit(&raw.build()),
-        Err(TableError::TooManySections(9))
+        Err(TableError::TooManySections(17))
     );
 }
 

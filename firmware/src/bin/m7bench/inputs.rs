@@ -74,6 +74,7 @@ pub fn write_bench_table(rng: &mut Lcg, buf: &mut [u8]) -> Result<usize, &'stati
         hot_ref_k: U16F16::from_num(263),
         hot: &hot,
         telegraph: &telegraph,
+        camera_model: None,
     };
     write_table(&spec, buf).map_err(|_| "write_table failed")
 }

@@ -111,6 +111,7 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
         hot_ref_k,
         hot: &hot,
         telegraph: &[],
+        camera_model: None,
     };
     let (curves, curve_notes) = curves_from_args(args)?;
     notes.extend(curve_notes);

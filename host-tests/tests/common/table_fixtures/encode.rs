@@ -180,6 +180,14 @@ impl RawTable {
                 enc_pixcorr(&s.pixcorr),
             ));
         }
+        if let Some(c) = &s.camera_model {
+            t.sections.push(RawSection::new(
+                SectionKind::CameraModel,
+                startrack_core::table::camera::encode(c)
+                    .expect("fixture camera encodes")
+                    .to_vec(),
+            ));
+        }
         t
     }
 

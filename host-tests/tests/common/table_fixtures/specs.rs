@@ -53,6 +53,8 @@ pub struct OwnedSpec {
     pub telegraph: Vec<(u16, u16)>,
     /// Pixel-phase correction curves, each encoded by [`enc_curve`] (none: no section).
     pub pixcorr: Vec<Vec<u8>>,
+    /// The camera model (none: no section).
+    pub camera_model: Option<startrack_core::attitude::Camera>,
 }
 
 impl OwnedSpec {
@@ -86,6 +88,7 @@ impl OwnedSpec {
             hot_ref_k: self.hot_ref_k,
             hot: &self.hot,
             telegraph: &self.telegraph,
+            camera_model: self.camera_model,
         }
     }
 
@@ -209,6 +212,25 @@ pub fn full_spec(g: ReadoutGeometry, dark_log2: u8, flat_log2: u8) -> OwnedSpec 
         hot: hot_pixels(&g),
         telegraph: telegraph(&g),
         pixcorr: pixcorr_curves(),
+        camera_model: Some(camera_model(&g)),
+    }
+}
+
+/// A distorted camera with lateral colour whose field is the active area (focal length four
+/// times the width, principal point off centre).
+pub fn camera_model(g: &ReadoutGeometry) -> startrack_core::attitude::Camera {
+    let w = f64::from(g.active_cols);
+    startrack_core::attitude::Camera {
+        k1: -0.0625,
+        k2: 0.25,
+        p1: 1.5e-4,
+        p2: -2.5e-4,
+        colour_scale_per_mag: 3e-4,
+        colour_ref_bv_mag: 0.625,
+        ..startrack_core::attitude::Camera::pinhole(
+            4.0 * w,
+            [0.5 * w + 0.25, 0.5 * f64::from(g.active_rows) - 0.75],
+        )
     }
 }
 
@@ -265,5 +287,6 @@ pub fn gains_only(g: ReadoutGeometry) -> OwnedSpec {
         hot: Vec::new(),
         telegraph: Vec::new(),
         pixcorr: Vec::new(),
+        camera_model: None,
     }
 }
