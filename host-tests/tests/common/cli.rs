@@ -40,5 +40,6 @@ pub fn build_args(f: &SimFiles, out: PathBuf) -> CalibBuildArgs {
         psf_a_px: None,
         pixcorr_boxes: "5,7".into(),
         pixcorr_powers: "1,2".into(),
+        camera_model: None,
     }
 }

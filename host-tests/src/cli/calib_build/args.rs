@@ -57,6 +57,9 @@ pub struct CalibBuildArgs {
     /// CoG powers the curves are built for, "1,2".
     #[arg(long, default_value = "1,2")]
     pub pixcorr_powers: String,
+    /// Camera model (JSON from `startrack optics fit`): adds the camera-model section.
+    #[arg(long)]
+    pub camera_model: Option<PathBuf>,
 }
 
 /// A comma-separated list of numbers of option `name`.
