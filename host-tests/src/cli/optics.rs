@@ -363,11 +363,15 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
         let _ = write!(text, "{name:>22} {:>15.8e} +- {:.2e}", got[k], fit.sigma[k]);
         if let Some(t) = &truth {
             let tv = optics::params_of(t)[k];
-            let _ = write!(
-                text,
-                "   truth {tv:>15.8e}, error {:+.2} sigma",
-                (got[k] - tv) / fit.sigma[k]
-            );
+            if fit.sigma[k] > 0.0 {
+                let _ = write!(
+                    text,
+                    "   truth {tv:>15.8e}, error {:+.2} sigma",
+                    (got[k] - tv) / fit.sigma[k]
+                );
+            } else {
+                let _ = write!(text, "   truth {tv:>15.8e}, held");
+            }
         }
         text.push('\n');
     }
