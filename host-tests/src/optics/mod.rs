@@ -9,8 +9,10 @@
 //! minimises their sum of squares over the 8 camera parameters and 3 small rotations a frame
 //! (the attitude starts from the identification's). The normal equations are accumulated
 //! star by star (each star touches 11 unknowns) and solved by Cholesky (`nalgebra`);
-//! the Jacobian is by central differences. Cost per iteration: about 45 projections a star
-//! and one dense `(8 + 3 N)`-square solve (`N` frames; 100 frames: 308 unknowns, a few ms).
+//! the Jacobian is by central differences. Cost per iteration: 45 projections a star and one
+//! dense `(8 + 3 N)`-square Cholesky solve (`N` frames; 120 frames: 368 unknowns, 17 M
+//! flops); a fit converges in 7 or 8 iterations, and `optics fit` of 120 frames, both
+//! identification passes included, takes about 6 s on a shared two-core machine.
 //! Identification and fit run twice: the first pass identifies through the nominal pinhole
 //! (wider match radius, since the distortion is not yet known), the second through the
 //! first fit, which brings in the stars at the field's edge.
