@@ -146,7 +146,8 @@ impl<'c> Solver<'c> {
         let mut measured: heapless::Vec<(f32, Measured), { ident::MAX_STARS }> =
             heapless::Vec::new();
         for s in stars.iter().filter(|s| usable(s)) {
-            let m = self.measure(s);
+            // A position the camera model cannot invert (a fold) is not used.
+            let Some(m) = self.measure(s) else { continue };
             if measured.len() < ident::MAX_STARS {
                 let _ = measured.push((s.flux_e, m));
             } else if let Some(dimmest) = measured
@@ -196,16 +197,20 @@ impl<'c> Solver<'c> {
         })
     }
 
-    /// The direction of a star and its isotropic angular sigma.
-    fn measure(&self, s: &StarRecord) -> Measured {
+    /// The direction of a star (at the camera's reference colour: colours are known only
+    /// once identified) and its isotropic angular sigma; `None` where the camera model has
+    /// no inverse.
+    fn measure(&self, s: &StarRecord) -> Option<Measured> {
         let cam = &self.config.camera;
-        let dir = cam.direction(f64::from(s.x_px), f64::from(s.y_px));
+        let dir = cam
+            .direction_of(f64::from(s.x_px), f64::from(s.y_px), cam.colour_ref_bv_mag)
+            .ok()?;
         let z = dir[2].clamp(0.0, 1.0);
         let sigma_px = f64::from(s.sigma_x_px.max(s.sigma_y_px));
-        Measured {
+        Some(Measured {
             dir,
             sigma_rad: sigma_px * z * libm::sqrt(z) / cam.focal_length_px,
-        }
+        })
     }
 }
 

@@ -13,8 +13,8 @@
 //!
 //! After every frame the task gives the frame's star list to the attitude stage
 //! ([`startrack_core::solver`], with the catalog in flash, [`crate::catalog`], and the
-//! nominal 15 degree camera), sends its attitude report on the link and logs it, marks the watchdog's progress
-//! ([`crate::watchdog`]) and adds the frame to housekeeping ([`crate::safe_state::HEALTH`]).
+//! table's camera model or the nominal 15 degree camera), sends its attitude report on the
+//! link and logs it, marks the watchdog's progress ([`crate::watchdog`]) and adds the frame to housekeeping ([`crate::safe_state::HEALTH`]).
 //!
 //! Each frame's [`ReadoutRequest`] (full frame, or the tracking windows) and the configured
 //! exposure go to the CCD sequencer ([`crate::sequencer`]), which compiles and plays that
@@ -52,16 +52,11 @@ const EXPOSURE_MS: u32 = TrackerConfig::FLIGHT.exposure_ms;
 /// full frame's readout is 0.55 s at 1 MHz).
 const LINE_TIMEOUT_US: u64 = 1_000_000;
 
-/// The camera the attitude stage assumes: the CCD47-20's 1024 x 1024 active area behind a
-/// 15 degree field, principal point at the centre, no distortion (the optics' own model,
-/// fitted on the ground, replaces it when the table carries one).
+/// The camera the attitude stage assumes without a fitted one in the table: the CCD47-20's
+/// 1024 x 1024 active area behind a 15 degree field, principal point at the centre, no
+/// distortion (focal length 512 / tan(7.5 degrees) px).
 fn nominal_camera() -> Camera {
-    Camera {
-        // 512 / tan(7.5 degrees).
-        focal_length_px: 3889.0261057152775,
-        principal_point_px: [511.5, 511.5],
-        k1: 0.0,
-    }
+    Camera::pinhole(3889.0261057152775, [511.5, 511.5])
 }
 
 /// Centroid 1-sigma the identification's tolerances assume, px.
@@ -255,6 +250,11 @@ pub async fn tracker_task(
     let mut source = ChannelLines::new(EXPOSURE_MS);
     let mut clock = BoardClock;
     let mut store = crate::flash_store::HeldTables::new();
+    // The table's fitted camera model (distortion, lateral colour), else the nominal one.
+    let camera = table
+        .as_ref()
+        .and_then(|t| t.camera_model())
+        .unwrap_or_else(nominal_camera);
     let mut tables = FixedTable(table);
     let mut log = DefmtTelemetry;
     let Some(link) = crate::link::SERVICE
@@ -267,12 +267,8 @@ pub async fn tracker_task(
     // The faults of the set-up steps that did not stop the tracker (no table, no board
     // thermometer), for housekeeping.
     link.set_setup_faults(safe_state::setup_faults().bits());
-    let mut solver = catalog.map(|c| {
-        Solver::new(
-            c,
-            SolverConfig::for_camera(nominal_camera(), IDENT_SIGMA_PX),
-        )
-    });
+    let mut solver =
+        catalog.map(|c| Solver::new(c, SolverConfig::for_camera(camera, IDENT_SIGMA_PX)));
     let mut stars: heapless::Vec<StarRecord, MAX_STARS> = heapless::Vec::new();
     loop {
         crate::flash_store::with_link_tables(&mut store, |tables| {

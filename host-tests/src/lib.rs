@@ -14,6 +14,7 @@ pub mod flash_model;
 pub mod ground;
 pub mod home;
 pub mod link_home;
+pub mod optics;
 pub mod pixcorr;
 pub mod psf_model;
 pub mod sil;

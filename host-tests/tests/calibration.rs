@@ -112,6 +112,7 @@ fn encode(m: &Maps, sat: u16) -> Vec<u8> {
         telegraph: &m.telegraph,
         cti: None,
         psf_model: None,
+        camera_model: None,
     };
     let mut buf = vec![0u8; spec.encoded_len()];
     let n = write_table(&spec, &mut buf).expect("valid spec");

@@ -237,5 +237,6 @@ fn base_args(dir: &std::path::Path) -> CalibBuildArgs {
         pixcorr_powers: "1,2".into(),
         cti: None,
         psf_model: None,
+        camera_model: None,
     }
 }

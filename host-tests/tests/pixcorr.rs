@@ -297,6 +297,7 @@ fn a_table_with_curves_from_the_host_builder() {
         telegraph: &[],
         cti: None,
         psf_model: None,
+        camera_model: None,
     };
     let bytes = write_table_with_curves(&spec, &curves).unwrap();
     let t = CalibTable::parse(&bytes).unwrap();

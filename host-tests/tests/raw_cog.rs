@@ -107,6 +107,7 @@ impl Maps {
             telegraph: &self.telegraph,
             cti: None,
             psf_model: None,
+            camera_model: None,
         };
         let mut buf = vec![0u8; spec.encoded_len()];
         let n = write_table(&spec, &mut buf).expect("table writes");

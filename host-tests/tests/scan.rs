@@ -413,6 +413,7 @@ mod random_tables {
             telegraph: &telegraph,
             cti: None,
             psf_model: None,
+            camera_model: None,
         };
         let mut buf = vec![0u8; spec.encoded_len()];
         write_table(&spec, &mut buf).unwrap();

@@ -202,6 +202,7 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
                         coeffs,
                     }
                 }),
+                camera_model: None,
             }
         },
     )
@@ -436,6 +437,11 @@ fn resealed_section_corruption_of_each_kind_is_caught_or_harmless() {
                         }
                         Err(TableError::Reserved)
                             if matches!(kind, SectionKind::Cti | SectionKind::PsfModel) =>
+                        {
+                            rejected += 1;
+                        }
+                        Err(TableError::CameraModel(_) | TableError::Reserved)
+                            if kind == SectionKind::CameraModel =>
                         {
                             rejected += 1;
                         }

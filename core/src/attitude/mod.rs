@@ -27,7 +27,7 @@
 mod camera;
 mod quat;
 
-pub use camera::{Camera, UNDISTORT_ITERATIONS};
+pub use camera::{Camera, CameraError, UNDISTORT_ITERATIONS, UNDISTORT_TOLERANCE};
 
 pub use quat::{Quat, angle_between, cross, dot, mat_t_vec, mat_vec, norm};
 

@@ -574,3 +574,42 @@ fn fit(cat: &Catalog<'_>, stars: &[Measured], matches: &[Match]) -> Option<Attit
     }
     attitude::solve(obs.get(..matches.len())?).ok()
 }
+
+/// The attitude of an identification refit from directions corrected for each matched
+/// star's colour: the star at `stars_px[m.star]` (column, row) is turned into a direction
+/// through `camera` in its catalog B-V ([`Camera::direction_of`](attitude::Camera::direction_of)),
+/// so the lateral colour the camera model holds is removed before Wahba's problem is solved.
+/// Identification itself runs on uncorrected directions (the colours are not known before
+/// it); the colour shifts are a fraction of a pixel, well inside its match radius. A star
+/// whose direction the model cannot invert is left out. Cost: one undistortion and one
+/// catalog read a match, then the q-method (a few thousand flops).
+pub fn colour_corrected(
+    cat: &Catalog<'_>,
+    camera: &attitude::Camera,
+    stars_px: &[[f64; 2]],
+    sigma_px: f64,
+    sol: &Solution,
+) -> Result<Attitude, attitude::AttitudeError> {
+    let mut obs: heapless::Vec<Observation, MAX_STARS> = heapless::Vec::new();
+    for m in &sol.matches {
+        let (Some(p), Some(s)) = (
+            stars_px.get(usize::from(m.star)),
+            cat.star(usize::from(m.catalog)),
+        ) else {
+            continue;
+        };
+        let bv_mag = f64::from(s.bv_mmag) / 1000.0;
+        let Ok(dir) = camera.direction_of(p[0], p[1], bv_mag) else {
+            continue;
+        };
+        let o = Observation {
+            camera: dir,
+            icrs: s.dir,
+            sigma_rad: sigma_px / camera.focal_length_px * libm::pow(dir[2], 1.5),
+        };
+        if obs.push(o).is_err() {
+            break;
+        }
+    }
+    attitude::solve(&obs)
+}

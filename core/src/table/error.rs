@@ -23,11 +23,13 @@ pub enum SectionKind {
     Cti = 8,
     /// Field PSF model (width against position).
     PsfModel = 9,
+    /// The camera model: focal length, principal point, distortion, lateral colour.
+    CameraModel = 10,
 }
 
 impl SectionKind {
     /// Every kind, in directory order.
-    pub const ALL: [SectionKind; 9] = [
+    pub const ALL: [SectionKind; 10] = [
         Self::Gains,
         Self::ColumnBias,
         Self::DarkRel,
@@ -37,6 +39,7 @@ impl SectionKind {
         Self::PixCorr,
         Self::Cti,
         Self::PsfModel,
+        Self::CameraModel,
     ];
 
     /// The kind with this code, if any.
@@ -56,6 +59,7 @@ impl SectionKind {
             Self::PixCorr => "pixel-phase correction",
             Self::Cti => "CTI coefficients",
             Self::PsfModel => "field PSF model",
+            Self::CameraModel => "camera model",
         }
     }
 }
@@ -129,6 +133,9 @@ pub enum TableError {
         /// What is wrong with it.
         error: super::pixcorr::PixCorrError,
     },
+    /// The camera model (section 10) is not usable: a value out of its range, or a
+    /// distortion that has no inverse over the active area.
+    CameraModel(crate::attitude::CameraError),
 }
 
 impl core::fmt::Display for TableError {
@@ -181,6 +188,7 @@ impl core::fmt::Display for TableError {
             Self::PixCorrCurve { index, error } => {
                 write!(f, "calibration table: curve {index}: {error}")
             }
+            Self::CameraModel(e) => write!(f, "calibration table: {e}"),
         }
     }
 }

@@ -37,6 +37,7 @@
 //! | 7 | pixel-phase correction | u16 count (1..=16), u16 reserved 0, curves back to back | see [`pixcorr`] |
 //! | 8 | CTI coefficients | reference flux, exponent, per output parallel and serial shift per transfer | see [`cti`] |
 //! | 9 | field PSF model | degree, scatter, star count, polynomial coefficients of `a(x, y)` | see [`psfmodel`] |
+//! | 10 | camera model | 36 bytes, below | see [`camera`] |
 //!
 //! Gains are required; every other section is optional and its absence means "no
 //! correction": column bias 0, relative dark 1 (the covered columns' dark subtracted
@@ -56,11 +57,17 @@
 //! `tile_log2 u8` (0..=10), `element format u8` (1 = U2F6 u8, 2 = U2F14 u16),
 //! `reserved u16`, `tiles_x u16`, `tiles_y u16` (= active size divided by the tile, rounded up).
 //!
+//! The camera model (section 10, optional; absent means the caller's nominal camera) is
+//! [`camera::CAMERA_SECTION_LEN`] bytes of fixed-point values, laid out in [`camera`]; the
+//! parser checks that its distortion is invertible over the active area for every colour
+//! in [`camera::COLOUR_RANGE_BV_MAG`] and reports [`TableError::CameraModel`] otherwise.
+//!
 //! Hot-pixel entries (12 bytes): `x u16, y u16` (active coordinates), `dark rate u32`
 //! (U16F16 e-/s at the reference temperature), `doubling u16` (U8F8 K: the rate doubles
 //! every this many kelvin, the pixel's own law), `policy u8` (0 correct, 1 exclude),
 //! `reserved u8`. Hot and telegraph entries are sorted by (y, x) with no repeats.
 
+pub mod camera;
 pub mod cti;
 mod error;
 mod parse;

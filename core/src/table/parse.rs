@@ -45,6 +45,7 @@ pub struct CalibTable<'a> {
     pixcorr: PixCorrSet<'a>,
     cti: Option<CtiCoeffs>,
     psf_model: Option<PsfModel>,
+    camera_model: Option<&'a [u8]>,
 }
 
 /// A tiled map over the active area, read in place.
@@ -251,12 +252,19 @@ impl<'a> CalibTable<'a> {
         let saturation_adu = rd16(24)?;
 
         let mut found: [Option<&'a [u8]>; 9] = [None; 9];
+        let mut camera_model: Option<&'a [u8]> = None;
         // (offset, length, kind) of each section, to prove they cover the table exactly.
         let mut extents = [(0usize, 0usize, SectionKind::Gains); MAX_SECTIONS];
         for i in 0..usize::from(n_sections) {
             let s = section(bytes, dir, i, dir_end)?;
             if let Some(e) = extents.get_mut(i) {
                 *e = (s.offset, s.bytes.len(), s.kind);
+            }
+            if s.kind == SectionKind::CameraModel {
+                if camera_model.replace(s.bytes).is_some() {
+                    return Err(TableError::DuplicateSection(s.kind));
+                }
+                continue;
             }
             let slot = found
                 .get_mut(s.kind as usize - 1)
@@ -322,6 +330,9 @@ impl<'a> CalibTable<'a> {
         let pixcorr = pixcorr.map(parse_pixcorr).transpose()?.unwrap_or_default();
         let cti = cti.map(|b| parse_cti(b, &geometry)).transpose()?;
         let psf_model = psf_model.map(parse_psf_model).transpose()?;
+        if let Some(c) = camera_model {
+            super::camera::parse(c, geometry.active_cols, geometry.active_rows)?;
+        }
 
         Ok(Self {
             len: bytes.len(),
@@ -336,6 +347,7 @@ impl<'a> CalibTable<'a> {
             pixcorr,
             cti,
             psf_model,
+            camera_model,
         })
     }
 
@@ -441,6 +453,13 @@ impl<'a> CalibTable<'a> {
     /// The field PSF model (section 9), if present.
     pub fn psf_model(&self) -> Option<PsfModel> {
         self.psf_model
+    }
+
+    /// The fitted camera model (section 10), or `None` when the table has none (the caller
+    /// uses its nominal camera). Decoded from the table's bytes at each call (nine loads).
+    pub fn camera_model(&self) -> Option<crate::attitude::Camera> {
+        self.camera_model
+            .and_then(|b| super::camera::decode(b).ok())
     }
 }
 

@@ -48,6 +48,8 @@ pub struct TableSpec<'a> {
     pub cti: Option<CtiCoeffs>,
     /// Field PSF model (section 9), or none.
     pub psf_model: Option<PsfModel>,
+    /// The fitted camera model (section 10), or none.
+    pub camera_model: Option<crate::attitude::Camera>,
 }
 
 impl TableSpec<'_> {
@@ -104,6 +106,8 @@ fn sections<'s>(
                 PsfModel::encoded_len(m.degree.min(MAX_PSF_DEGREE)),
             )
         }),
+        spec.camera_model
+            .map(|_| (SectionKind::CameraModel, super::camera::CAMERA_SECTION_LEN)),
     ]
     .into_iter()
     .flatten()
@@ -145,6 +149,10 @@ pub fn write_table_with_pixcorr(
     out: &mut [u8],
 ) -> Result<usize, WriteError> {
     let len = encoded_len(spec, curves);
+    if let Some(cam) = &spec.camera_model {
+        super::camera::encode(cam)
+            .map_err(|e| WriteError::Invalid(super::TableError::CameraModel(e)))?;
+    }
     let buf = out
         .get_mut(..len)
         .ok_or(WriteError::BufferTooSmall { needed: len })?;
@@ -238,6 +246,15 @@ fn write_section(o: &mut Out<'_>, spec: &TableSpec<'_>, curves: &[PixCorr<'_>], 
             for (x, y) in spec.telegraph {
                 o.put(&x.to_le_bytes());
                 o.put(&y.to_le_bytes());
+            }
+        }
+        SectionKind::CameraModel => {
+            // Encodable: checked before any byte was written.
+            if let Some(b) = spec
+                .camera_model
+                .and_then(|c| super::camera::encode(&c).ok())
+            {
+                o.put(&b);
             }
         }
         SectionKind::PixCorr => {

@@ -72,6 +72,18 @@ enum Command {
     Catalog(CatalogCommand),
     /// Identify the stars of every field of a case and write each attitude with its covariance.
     Solve(startrack_host::cli::solve::SolveArgs),
+    /// The camera model (focal length, principal point, distortion, lateral colour) fitted
+    /// from identified stars over many frames.
+    #[command(subcommand)]
+    Optics(OpticsCommand),
+}
+
+#[derive(Subcommand)]
+enum OpticsCommand {
+    /// Write simulated frames through distorted optics with lateral colour, and the truth.
+    Case(startrack_host::cli::optics::OpticsCaseArgs),
+    /// Fit the camera model to a case's identified stars and write it as JSON.
+    Fit(startrack_host::cli::optics::OpticsFitArgs),
 }
 
 #[derive(Subcommand)]
@@ -223,6 +235,25 @@ fn main() -> ExitCode {
             }
             Err(e) => fail("solve", &e),
         },
+        Command::Optics(OpticsCommand::Case(args)) => {
+            match startrack_host::cli::optics::run_case(&args) {
+                Ok(()) => {
+                    println!("wrote {} frames to {}", args.frames, args.out.display());
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail("optics case", &e),
+            }
+        }
+        Command::Optics(OpticsCommand::Fit(args)) => {
+            match startrack_host::cli::optics::run_fit(&args) {
+                Ok(r) => {
+                    print!("{}", r.text);
+                    println!("wrote {}", args.out.display());
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail("optics fit", &e),
+            }
+        }
         Command::Figures(args) => startrack_host::cli::figures::run(&args),
         Command::Tradeoff(args) => startrack_host::cli::tradeoff::run(&args),
         Command::ReadoutPlan(args) => match startrack_host::cli::readout_plan::run(&args) {

@@ -114,6 +114,7 @@ fn level_table(
         telegraph: &[],
         cti: None,
         psf_model: None,
+        camera_model: None,
     };
     encode(&spec, &[]).map_err(|e| FramesError::Missing(e.to_string()))
 }
@@ -481,6 +482,7 @@ impl Products {
             telegraph: &telegraph,
             cti: self.cti_coeffs(),
             psf_model: None,
+            camera_model: None,
         };
         encode(&spec, &[])
     }

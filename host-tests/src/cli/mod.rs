@@ -9,6 +9,7 @@ pub mod calib_models;
 pub mod catalog;
 pub mod figures;
 pub mod gse;
+pub mod optics;
 pub mod process;
 pub mod readout_plan;
 pub mod sil;

@@ -151,9 +151,8 @@ pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
     };
     let cat = Catalog::parse(&bytes).map_err(|e| CliError::Usage(format!("catalog: {e}")))?;
     let camera = Camera {
-        focal_length_px: case.focal_length_px,
-        principal_point_px: case.principal_point_px,
         k1: case.k1,
+        ..Camera::pinhole(case.focal_length_px, case.principal_point_px)
     };
     let cfg = IdentConfig::for_camera(case.focal_length_px, case.centroid_sigma_px);
     let priors = args.prior.as_deref().map(read_priors).transpose()?;

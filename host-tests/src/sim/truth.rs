@@ -167,6 +167,7 @@ impl Simulator {
             telegraph: &telegraph,
             cti: None,
             psf_model: None,
+            camera_model: None,
         };
         if curves.is_empty() {
             encode(&spec)
@@ -257,6 +258,7 @@ impl Simulator {
             telegraph: &[],
             cti: None,
             psf_model: None,
+            camera_model: None,
         };
         encode(&spec)
     }

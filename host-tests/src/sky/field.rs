@@ -1,5 +1,6 @@
 //! Star fields rendered from the catalog at a known attitude: each catalog star in the
-//! field projected through the camera model, moved by Gaussian centroid noise, some dropped,
+//! field projected through the camera model in its own colour (distortion and lateral
+//! colour, [`Camera::project_of`]), moved by Gaussian centroid noise, some dropped,
 //! some false stars added, and the list sorted by observed brightness (brightest first), the
 //! way the tracker reports its stars.
 
@@ -37,11 +38,7 @@ impl FieldSpec {
     pub fn ccd47_15deg(sigma_px: f64) -> Self {
         let f = 512.0 / 7.5f64.to_radians().tan();
         Self {
-            camera: Camera {
-                focal_length_px: f,
-                principal_point_px: [511.5, 511.5],
-                k1: 0.0,
-            },
+            camera: Camera::pinhole(f, [511.5, 511.5]),
             cols: 1024,
             rows: 1024,
             sigma_px,
@@ -94,7 +91,10 @@ pub fn render<R: rand::Rng>(
     };
     let mut out: Vec<(f64, FieldStar)> = Vec::new();
     for (idx, dir) in cat.cone(boresight, cat.field_radius_rad() + 0.01) {
-        let Some(p) = spec.camera.project(q.rotate(dir)) else {
+        // Each star imaged in its own colour: the camera's lateral colour moves it along the
+        // radius by `c (B-V - ref)` times its distance from the principal point.
+        let bv_mag = f64::from(cat.star(idx).map_or(0, |s| s.bv_mmag)) / 1000.0;
+        let Ok(p) = spec.camera.project_of(q.rotate(dir), bv_mag) else {
             continue;
         };
         if !inside(p) || rng.random::<f64>() < spec.dropout {

@@ -42,5 +42,6 @@ pub fn build_args(f: &SimFiles, out: PathBuf) -> CalibBuildArgs {
         pixcorr_powers: "1,2".into(),
         cti: None,
         psf_model: None,
+        camera_model: None,
     }
 }

@@ -158,6 +158,7 @@ fn write_table_buffer_too_small() {
         telegraph: &[],
         cti: None,
         psf_model: None,
+        camera_model: None,
     };
     assert_eq!(
         spec.encoded_len(),

@@ -142,11 +142,7 @@ fn stack_of(mut f: impl FnMut()) -> usize {
 /// Measures and prints the stages.
 pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static str> {
     let cat = Catalog::parse(CATALOG).map_err(|_| "catalog does not parse")?;
-    let cam = Camera {
-        focal_length_px: FOCAL_PX,
-        principal_point_px: [511.5, 511.5],
-        k1: 0.0,
-    };
+    let cam = Camera::pinhole(FOCAL_PX, [511.5, 511.5]);
     let cfg = IdentConfig::for_camera(FOCAL_PX, SIGMA_PX);
     let mut lis = [0u64; FIELDS];
     let mut trk = [0u64; FIELDS];

@@ -76,6 +76,7 @@ pub fn write_bench_table(rng: &mut Lcg, buf: &mut [u8]) -> Result<usize, &'stati
         telegraph: &telegraph,
         cti: None,
         psf_model: None,
+        camera_model: None,
     };
     write_table(&spec, buf).map_err(|_| "write_table failed")
 }

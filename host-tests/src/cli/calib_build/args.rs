@@ -63,6 +63,9 @@ pub struct CalibBuildArgs {
     /// Field PSF model (JSON from `startrack calib psf-model`): adds section 9.
     #[arg(long)]
     pub psf_model: Option<PathBuf>,
+    /// Camera model (JSON from `startrack optics fit`): adds the camera-model section.
+    #[arg(long)]
+    pub camera_model: Option<PathBuf>,
 }
 
 /// A comma-separated list of numbers of option `name`.

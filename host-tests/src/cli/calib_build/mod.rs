@@ -116,6 +116,11 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
         hot_ref_k,
         hot: &hot,
         telegraph: &[],
+        camera_model: args
+            .camera_model
+            .as_deref()
+            .map(super::optics::read_camera_model)
+            .transpose()?,
         cti: None,
         psf_model: None,
     };
@@ -140,6 +145,9 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
             }),
         ..spec
     };
+    if let Some(p) = &args.camera_model {
+        notes.push(format!("camera model from {}", p.display()));
+    }
     let (curves, curve_notes) = curves_from_args(args)?;
     notes.extend(curve_notes);
     let buf = encode(&spec, &curves)?;

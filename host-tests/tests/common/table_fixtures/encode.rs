@@ -217,6 +217,14 @@ impl RawTable {
             t.sections
                 .push(RawSection::new(SectionKind::PsfModel, enc_psf_model(m)));
         }
+        if let Some(c) = &s.camera_model {
+            t.sections.push(RawSection::new(
+                SectionKind::CameraModel,
+                startrack_core::table::camera::encode(c)
+                    .expect("fixture camera encodes")
+                    .to_vec(),
+            ));
+        }
         t
     }
 

@@ -58,6 +58,8 @@ pub struct OwnedSpec {
     pub cti: Option<CtiCoeffs>,
     /// Field PSF model (none: no section).
     pub psf_model: Option<PsfModel>,
+    /// The camera model (none: no section).
+    pub camera_model: Option<startrack_core::attitude::Camera>,
 }
 
 impl OwnedSpec {
@@ -93,6 +95,7 @@ impl OwnedSpec {
             telegraph: &self.telegraph,
             cti: self.cti,
             psf_model: self.psf_model,
+            camera_model: self.camera_model,
         }
     }
 
@@ -218,6 +221,7 @@ pub fn full_spec(g: ReadoutGeometry, dark_log2: u8, flat_log2: u8) -> OwnedSpec 
         pixcorr: pixcorr_curves(),
         cti: Some(cti_coeffs(&g)),
         psf_model: Some(psf_model()),
+        camera_model: Some(camera_model(&g)),
     }
 }
 
@@ -250,6 +254,24 @@ pub fn psf_model() -> PsfModel {
         scatter_px: U8F8::from_bits(0x0013),
         stars: 321,
         coeffs,
+    }
+}
+
+/// A distorted camera with lateral colour whose field is the active area (focal length four
+/// times the width, principal point off centre).
+pub fn camera_model(g: &ReadoutGeometry) -> startrack_core::attitude::Camera {
+    let w = f64::from(g.active_cols);
+    startrack_core::attitude::Camera {
+        k1: -0.0625,
+        k2: 0.25,
+        p1: 1.5e-4,
+        p2: -2.5e-4,
+        colour_scale_per_mag: 3e-4,
+        colour_ref_bv_mag: 0.625,
+        ..startrack_core::attitude::Camera::pinhole(
+            4.0 * w,
+            [0.5 * w + 0.25, 0.5 * f64::from(g.active_rows) - 0.75],
+        )
     }
 }
 
@@ -308,5 +330,6 @@ pub fn gains_only(g: ReadoutGeometry) -> OwnedSpec {
         pixcorr: Vec::new(),
         cti: None,
         psf_model: None,
+        camera_model: None,
     }
 }

@@ -1,0 +1,394 @@
+//! `startrack optics case|fit`: the camera model measured from identified stars over many
+//! frames ([`crate::optics`]), written as JSON for `startrack calib build --camera-model`.
+//!
+//! `optics case --out DIR` writes simulated frames through distorted optics with lateral
+//! colour (seeded): `DIR/fields/*.csv` (`x_px,y_px,flux_e`, brightest first), `case.json`
+//! (the nominal camera the fit starts from and the centroid sigma, as `catalog case`
+//! writes), `truth.csv` (`field,qw,qx,qy,qz`) and `camera_truth.json` (the true model).
+//!
+//! `optics fit --case DIR --out FILE` identifies the stars of every field, fits focal
+//! length, principal point, k1, k2, p1, p2, the colour scale and each frame's attitude, and
+//! writes the model with each parameter's formal 1-sigma (`FILE`, JSON). When the case holds
+//! `camera_truth.json` and `truth.csv`, the report also gives each parameter's error against
+//! the truth, the model's image error and the colour residual after correction.
+
+use super::{CliError, read_file, write_file};
+use crate::optics::{self, FitOptions, PARAM_NAMES};
+use serde::{Deserialize, Serialize};
+use startrack_core::attitude::{Camera, Quat};
+use startrack_core::catalog::Catalog;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Options of `startrack optics case`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct OpticsCaseArgs {
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Frames.
+    #[arg(long, default_value_t = 120)]
+    pub frames: usize,
+    /// Seed of the attitudes, noise, dropouts and false stars.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Centroid 1-sigma per axis, px.
+    #[arg(long, default_value_t = 0.1)]
+    pub sigma_px: f64,
+}
+
+/// Options of `startrack optics fit`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct OpticsFitArgs {
+    /// Case folder: `case.json` and `fields/*.csv` (and optionally the truth).
+    #[arg(long)]
+    pub case: PathBuf,
+    /// Output camera model (JSON).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Catalog file from `startrack catalog build` (default: built from the repo's list for
+    /// a 15 degree field).
+    #[arg(long)]
+    pub catalog: Option<PathBuf>,
+    /// Hold the lateral colour scale at 0 (to see what the colour term removes).
+    #[arg(long)]
+    pub no_colour: bool,
+}
+
+/// The camera-model file: the model and, from a fit, how well it is known.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CameraModelJson {
+    /// Focal length, px.
+    pub focal_length_px: f64,
+    /// Principal point (column, row), px.
+    pub principal_point_px: [f64; 2],
+    /// Radial distortion, `r^2` term.
+    #[serde(default)]
+    pub k1: f64,
+    /// Radial distortion, `r^4` term.
+    #[serde(default)]
+    pub k2: f64,
+    /// Tangential distortion.
+    #[serde(default)]
+    pub p1: f64,
+    /// Tangential distortion.
+    #[serde(default)]
+    pub p2: f64,
+    /// Lateral colour, relative scale per mag of B-V.
+    #[serde(default)]
+    pub colour_scale_per_mag: f64,
+    /// Reference B-V of the colour scale, mag.
+    #[serde(default = "default_ref_bv")]
+    pub colour_ref_bv_mag: f64,
+    /// Formal 1-sigma of the fitted parameters, in the order of `sigma_names`.
+    #[serde(default)]
+    pub sigma: Vec<f64>,
+    /// Names of `sigma`'s entries.
+    #[serde(default)]
+    pub sigma_names: Vec<String>,
+    /// RMS of the fit's residuals per axis, px.
+    #[serde(default)]
+    pub residual_rms_px: Option<f64>,
+    /// Identified stars the fit used.
+    #[serde(default)]
+    pub stars: Option<usize>,
+    /// Frames the fit used.
+    #[serde(default)]
+    pub frames: Option<usize>,
+}
+
+fn default_ref_bv() -> f64 {
+    Camera::pinhole(1.0, [0.0, 0.0]).colour_ref_bv_mag
+}
+
+impl CameraModelJson {
+    /// The file of a bare model.
+    pub fn of(c: &Camera) -> Self {
+        Self {
+            focal_length_px: c.focal_length_px,
+            principal_point_px: c.principal_point_px,
+            k1: c.k1,
+            k2: c.k2,
+            p1: c.p1,
+            p2: c.p2,
+            colour_scale_per_mag: c.colour_scale_per_mag,
+            colour_ref_bv_mag: c.colour_ref_bv_mag,
+            sigma: Vec::new(),
+            sigma_names: Vec::new(),
+            residual_rms_px: None,
+            stars: None,
+            frames: None,
+        }
+    }
+
+    /// The model.
+    pub fn camera(&self) -> Camera {
+        Camera {
+            focal_length_px: self.focal_length_px,
+            principal_point_px: self.principal_point_px,
+            k1: self.k1,
+            k2: self.k2,
+            p1: self.p1,
+            p2: self.p2,
+            colour_scale_per_mag: self.colour_scale_per_mag,
+            colour_ref_bv_mag: self.colour_ref_bv_mag,
+        }
+    }
+}
+
+/// Reads a camera-model file (as `optics fit` writes) and checks that the model is usable over
+/// the CCD47-20's frame.
+pub fn read_camera_model(path: &Path) -> Result<Camera, CliError> {
+    let bytes = read_file(path)?;
+    let m: CameraModelJson = serde_json::from_slice(&bytes)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
+    let cam = m.camera();
+    cam.check_over(
+        1024,
+        1024,
+        startrack_core::table::camera::COLOUR_RANGE_BV_MAG,
+    )
+    .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
+    Ok(cam)
+}
+
+fn catalog_bytes(path: Option<&Path>) -> Result<Vec<u8>, CliError> {
+    match path {
+        Some(p) => read_file(p),
+        None => Ok(crate::sky::build::default_catalog()
+            .map_err(|e| CliError::Usage(e.to_string()))?
+            .bytes),
+    }
+}
+
+fn io(path: &Path) -> impl Fn(std::io::Error) -> CliError + '_ {
+    move |e| CliError::Io {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    }
+}
+
+/// Writes a simulated case.
+pub fn run_case(args: &OpticsCaseArgs) -> Result<(), CliError> {
+    if !(args.sigma_px >= 0.0 && args.sigma_px.is_finite()) || args.frames == 0 {
+        return Err(CliError::Usage(
+            "--sigma-px must be >= 0 and --frames > 0".into(),
+        ));
+    }
+    let bytes = catalog_bytes(None)?;
+    let cat = Catalog::parse(&bytes).map_err(|e| CliError::Usage(format!("catalog: {e}")))?;
+    let truth = optics::simulated_truth();
+    let (qs, fields) = optics::simulate(&cat, &truth, args.frames, args.seed, args.sigma_px);
+    let fields_dir = args.out.join("fields");
+    std::fs::create_dir_all(&fields_dir).map_err(io(&fields_dir))?;
+    let nominal = optics::nominal();
+    let json = format!(
+        "{{\"focal_length_px\": {}, \"principal_point_px\": [{}, {}], \"k1\": {}, \"centroid_sigma_px\": {}}}\n",
+        nominal.focal_length_px,
+        nominal.principal_point_px[0],
+        nominal.principal_point_px[1],
+        nominal.k1,
+        args.sigma_px
+    );
+    write_file(&args.out.join("case.json"), json.as_bytes())?;
+    let mut truth_csv = String::from("field,qw,qx,qy,qz\n");
+    for (i, (q, stars)) in qs.iter().zip(&fields).enumerate() {
+        let mut csv = String::from("x_px,y_px,flux_e\n");
+        for s in stars {
+            let _ = writeln!(csv, "{:.5},{:.5},{:.1}", s.x_px, s.y_px, s.flux_e);
+        }
+        let name = format!("{i:06}");
+        write_file(&fields_dir.join(format!("{name}.csv")), csv.as_bytes())?;
+        let [w, x, y, z] = q.0;
+        let _ = writeln!(truth_csv, "{name},{w:.15},{x:.15},{y:.15},{z:.15}");
+    }
+    write_file(&args.out.join("truth.csv"), truth_csv.as_bytes())?;
+    let t = serde_json::to_string_pretty(&CameraModelJson::of(&truth))
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    write_file(&args.out.join("camera_truth.json"), t.as_bytes())
+}
+
+/// `case.json` (the fields `optics fit` reads).
+#[derive(Clone, Debug, Deserialize)]
+struct CaseJson {
+    focal_length_px: f64,
+    principal_point_px: [f64; 2],
+    #[serde(default)]
+    k1: f64,
+    #[serde(default = "default_sigma")]
+    centroid_sigma_px: f64,
+}
+
+fn default_sigma() -> f64 {
+    0.3
+}
+
+/// One field's pixel positions, brightest first (`x_px,y_px,flux_e`).
+fn read_field(path: &Path) -> Result<Vec<[f64; 2]>, CliError> {
+    let text = String::from_utf8(read_file(path)?).map_err(|e| CliError::Csv {
+        path: path.to_path_buf(),
+        line: 0,
+        msg: e.to_string(),
+    })?;
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') || line.starts_with("x_px") {
+            continue;
+        }
+        let v: Vec<f64> = line
+            .split(',')
+            .map(|s| s.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| CliError::Csv {
+                path: path.to_path_buf(),
+                line: n + 1,
+                msg: e.to_string(),
+            })?;
+        match v.as_slice() {
+            [x, y, ..] if x.is_finite() && y.is_finite() => out.push([*x, *y]),
+            _ => {
+                return Err(CliError::Csv {
+                    path: path.to_path_buf(),
+                    line: n + 1,
+                    msg: "expected x_px,y_px,flux_e".into(),
+                });
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// `field,qw,qx,qy,qz` rows in field order.
+fn read_truth(path: &Path) -> Result<Vec<Quat>, CliError> {
+    let text = String::from_utf8(read_file(path)?).map_err(|e| CliError::Csv {
+        path: path.to_path_buf(),
+        line: 0,
+        msg: e.to_string(),
+    })?;
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate().skip(1) {
+        let v: Vec<f64> = line
+            .split(',')
+            .skip(1)
+            .map(|s| s.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| CliError::Csv {
+                path: path.to_path_buf(),
+                line: n + 1,
+                msg: e.to_string(),
+            })?;
+        let [w, x, y, z] = v[..] else {
+            return Err(CliError::Csv {
+                path: path.to_path_buf(),
+                line: n + 1,
+                msg: "expected field,qw,qx,qy,qz".into(),
+            });
+        };
+        out.push(Quat([w, x, y, z]));
+    }
+    Ok(out)
+}
+
+/// What `optics fit` found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitReport {
+    /// The fitted model and its formal sigmas.
+    pub model: CameraModelJson,
+    /// The report's lines.
+    pub text: String,
+}
+
+/// Fits the camera model to a case and writes it.
+pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
+    let json_path = args.case.join("case.json");
+    let case: CaseJson = serde_json::from_slice(&read_file(&json_path)?)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", json_path.display())))?;
+    if !(case.focal_length_px > 0.0 && case.centroid_sigma_px > 0.0) {
+        return Err(CliError::Usage(format!(
+            "{}: focal_length_px and centroid_sigma_px must be positive",
+            json_path.display()
+        )));
+    }
+    let start = Camera {
+        k1: case.k1,
+        ..Camera::pinhole(case.focal_length_px, case.principal_point_px)
+    };
+    let bytes = catalog_bytes(args.catalog.as_deref())?;
+    let cat = Catalog::parse(&bytes).map_err(|e| CliError::Usage(format!("catalog: {e}")))?;
+    let fields_dir = args.case.join("fields");
+    let mut names: Vec<PathBuf> = std::fs::read_dir(&fields_dir)
+        .map_err(io(&fields_dir))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    names.sort();
+    let fields = names
+        .iter()
+        .map(|p| read_field(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let opts = FitOptions {
+        colour: !args.no_colour,
+        ..FitOptions::default()
+    };
+    let (frames, fit) =
+        optics::identify_and_fit(&cat, &fields, &start, case.centroid_sigma_px, opts)
+            .map_err(|e| CliError::Usage(e.to_string()))?;
+    let mut model = CameraModelJson::of(&fit.camera);
+    model.sigma = fit.sigma.to_vec();
+    model.sigma_names = PARAM_NAMES.iter().map(|s| (*s).to_string()).collect();
+    model.residual_rms_px = Some(fit.residual_rms_px);
+    model.stars = Some(fit.stars);
+    model.frames = Some(frames.len());
+    let out = serde_json::to_string_pretty(&model).map_err(|e| CliError::Usage(e.to_string()))?;
+    write_file(&args.out, out.as_bytes())?;
+
+    let mut text = format!(
+        "{} of {} fields identified, {} stars, {} iterations: residual RMS {:.4} px per axis (centroid sigma {} px)\n",
+        frames.len(),
+        fields.len(),
+        fit.stars,
+        fit.iterations,
+        fit.residual_rms_px,
+        case.centroid_sigma_px
+    );
+    let got = optics::params_of(&fit.camera);
+    let truth_path = args.case.join("camera_truth.json");
+    let truth = if truth_path.exists() {
+        Some(read_camera_model(&truth_path)?)
+    } else {
+        None
+    };
+    for (k, name) in PARAM_NAMES.iter().enumerate() {
+        let _ = write!(text, "{name:>22} {:>15.8e} +- {:.2e}", got[k], fit.sigma[k]);
+        if let Some(t) = &truth {
+            let tv = optics::params_of(t)[k];
+            if fit.sigma[k] > 0.0 {
+                let _ = write!(
+                    text,
+                    "   truth {tv:>15.8e}, error {:+.2} sigma",
+                    (got[k] - tv) / fit.sigma[k]
+                );
+            } else {
+                let _ = write!(text, "   truth {tv:>15.8e}, held");
+            }
+        }
+        text.push('\n');
+    }
+    if let Some(t) = &truth {
+        let m = optics::model_error(&fit.camera, t, 1024, 1024);
+        let _ = writeln!(
+            text,
+            "model image error against the truth (best rotation removed): RMS {:.4} px, max {:.4} px",
+            m.rms_px, m.max_px
+        );
+        let truth_q = read_truth(&args.case.join("truth.csv"))?;
+        let c = optics::colour_error(&frames, &truth_q, &fit.camera, t);
+        let _ = writeln!(
+            text,
+            "lateral colour of the identified stars: {:.4} px RMS ({:.4} max) uncorrected, {:.4} px RMS ({:.4} max) after correction",
+            c.uncorrected_rms_px, c.uncorrected_max_px, c.residual_rms_px, c.residual_max_px
+        );
+    }
+    Ok(FitReport { model, text })
+}
