@@ -10,14 +10,14 @@
 //!   sub-window of a tracking window), ~2.8 KB.
 //!
 //! Cost per star: the window's calibration (~95 M7 instructions a pixel, `cargo m7-bench`
-//! stage `window_calibrate`), then the method (the Gauss fit 7x7 ~7,000, the CoG a few
-//! hundred plus ~140 for the curve).
+//! stage `window_calibrate`), then the method (the width-free Gauss fit 7x7 ~13,300, the
+//! Gauss fit of a given width ~7,000, the CoG a few hundred plus ~140 for the curve).
 
 use super::config::{CentroidMethod, TrackerConfig};
 use super::record::{StarFlags, StarRecord};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::centroid::cog::{CogParams, CogPower, cog};
-use crate::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use crate::centroid::gauss_fit::{GaussFitParams, WidthFitParams, gauss_fit, gauss_fit_width};
 use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
 use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
 use crate::table::CalibTable;
@@ -103,14 +103,33 @@ impl<'t> Policy<'t> {
 
     /// True for a CoG method (whose position needs the pixel-phase correction).
     fn is_cog(&self) -> bool {
-        self.method != CentroidMethod::GaussFit
+        self.method.cog_power().is_some()
     }
 
-    /// The centroid of `input` by the method (the fused CoG's general path is the CoG),
-    /// corrected with the curve; the flag says when a CoG had none.
+    /// The star's record from `input` by the method (the fused CoG's general path is the
+    /// CoG), a CoG corrected with the curve (flagged [`StarFlags::UNCORRECTED`] without
+    /// one), `flags` added.
+    pub(crate) fn record(&self, input: &CentroidInput<'_>, flags: StarFlags) -> StarRecord {
+        if self.method == CentroidMethod::GaussFitWidth {
+            let f = gauss_fit_width(
+                input,
+                &WidthFitParams {
+                    start_box: self.box_px,
+                    background: Background::PerimeterMedian,
+                    ..WidthFitParams::new()
+                },
+            );
+            return StarRecord::from_psf_fit(&f, flags);
+        }
+        let (c, uncorrected) = self.centroid(input);
+        StarRecord::from_centroid(&c, flags | uncorrected)
+    }
+
+    /// The centroid of `input` by a method of a given width (the fused CoG's general path
+    /// is the CoG), corrected with the curve; the flag says when a CoG had none.
     pub(crate) fn centroid(&self, input: &CentroidInput<'_>) -> (Centroid, StarFlags) {
         let c = match self.method {
-            CentroidMethod::GaussFit => gauss_fit(
+            CentroidMethod::GaussFit | CentroidMethod::GaussFitWidth => gauss_fit(
                 input,
                 &GaussFitParams {
                     start_box: self.box_px,
@@ -248,7 +267,6 @@ pub(crate) fn measure(
     flags: StarFlags,
     want_background: bool,
 ) -> Measured {
-    let (c, uncorrected) = policy.centroid(input);
     let pixel_flags = input
         .pixel_flags
         .iter()
@@ -261,10 +279,7 @@ pub(crate) fn measure(
             variance_e2: b.variance_e2,
         });
     Measured {
-        record: StarRecord::from_centroid(
-            &c,
-            flags | uncorrected | StarFlags::from_pixels(pixel_flags),
-        ),
+        record: policy.record(input, flags | StarFlags::from_pixels(pixel_flags)),
         background,
     }
 }
