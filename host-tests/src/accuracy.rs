@@ -33,7 +33,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson};
 use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
-use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use startrack_core::centroid::gauss_fit::{
+    GaussFitParams, WidthFitParams, gauss_fit, gauss_fit_width,
+};
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::units::Electrons;
@@ -54,6 +56,20 @@ pub enum Method {
     },
     /// Pixel-integrated Gaussian fit, PSF sigma known, on an `n x n` window.
     GaussFit {
+        /// Window side.
+        window: u8,
+    },
+    /// Pixel-integrated Gaussian fit of an assumed PSF width `a_px` whatever the star's
+    /// (what a fixed-width configuration does on a field of mixed widths), `n x n` window.
+    GaussFitAssumed {
+        /// Window side.
+        window: u8,
+        /// The assumed 80 %-energy radius, px.
+        a_px: f64,
+    },
+    /// The width-free Gaussian fit as the tracker's flight configuration runs it (PSF width
+    /// not told, background the window border's median, held; start box `min(n - 2, 5)`).
+    GaussFitWidth {
         /// Window side.
         window: u8,
     },
@@ -93,6 +109,10 @@ impl Method {
                 if *corrected { " corrected" } else { "" }
             ),
             Method::GaussFit { window } => format!("gauss fit {window}x{window}"),
+            Method::GaussFitAssumed { window, a_px } => {
+                format!("gauss fit {window}x{window}, a {a_px} assumed")
+            }
+            Method::GaussFitWidth { window } => format!("gauss fit width-free {window}x{window}"),
         }
     }
 
@@ -100,7 +120,9 @@ impl Method {
     pub fn window_side(&self) -> u16 {
         match self {
             Method::Cog { box_side, .. } => u16::from(*box_side) + 2,
-            Method::GaussFit { window } => u16::from(*window),
+            Method::GaussFit { window }
+            | Method::GaussFitAssumed { window, .. }
+            | Method::GaussFitWidth { window } => u16::from(*window),
         }
     }
 }
@@ -143,10 +165,16 @@ pub struct Cell {
     pub rms_px: f64,
     /// RMS Cramer-Rao bound over the same stars, px.
     pub crlb_px: f64,
+    /// RMS over the same stars of the bound when the width is also unknown
+    /// ([`crlb_x_width_free_px`]), px.
+    pub crlb_width_free_px: f64,
     /// RMS of the noise part of the error, px.
     pub scatter_px: f64,
     /// RMS of the method's own error estimate, px.
     pub sigma_est_px: f64,
+    /// RMS of the error over the method's own sigma, per axis (the pull: 1 when the
+    /// reported sigmas mean what they say).
+    pub pull_rms: f64,
     /// Results flagged degenerate or not converged (left out).
     pub failures: usize,
     /// Stars used.
@@ -206,6 +234,88 @@ pub fn crlb_x_px(
         }
     }
     1.0 / fisher.sqrt()
+}
+
+/// The Cramer-Rao bound on x (px) when the PSF width is not known: the `(x, y, N, s)`
+/// Fisher matrix of the same star and noise as [`crlb_x_px`], inverted, `sqrt([F^-1]_xx)`.
+/// What any unbiased estimator that fits the width must pay; at least [`crlb_x_px`].
+#[allow(clippy::too_many_arguments)]
+pub fn crlb_x_width_free_px(
+    width: u16,
+    height: u16,
+    x: f64,
+    y: f64,
+    sigma_px: f64,
+    flux_e: f64,
+    background_e: f64,
+    read_noise_e: f64,
+) -> f64 {
+    let phi = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    // Fraction, d/dcentre, d/dsigma of pixel i for centre c.
+    let prof = |i: f64, c: f64| {
+        let (ul, uh) = ((i - 0.5 - c) / sigma_px, (i + 0.5 - c) / sigma_px);
+        (
+            pixel_fraction(i, c, sigma_px),
+            (phi(ul) - phi(uh)) / sigma_px,
+            (phi(ul) * ul - phi(uh) * uh) / sigma_px,
+        )
+    };
+    let mut f = [[0.0f64; 4]; 4];
+    for r in 0..height {
+        let (fy, dy, wy) = prof(f64::from(r), y);
+        for c in 0..width {
+            let (fx, dx, wx) = prof(f64::from(c), x);
+            let mu = flux_e * fx * fy + background_e;
+            let v = mu + read_noise_e * read_noise_e;
+            if v <= 0.0 {
+                continue;
+            }
+            let j = [
+                flux_e * dx * fy,
+                flux_e * fx * dy,
+                fx * fy,
+                flux_e * (wx * fy + fx * wy),
+            ];
+            for (fi, ji) in f.iter_mut().zip(j) {
+                for (fik, jk) in fi.iter_mut().zip(j) {
+                    *fik += ji * jk / v;
+                }
+            }
+        }
+    }
+    invert4(f).map_or(f64::INFINITY, |inv| inv[0][0].max(0.0).sqrt())
+}
+
+/// Inverse of a symmetric positive-definite 4x4 matrix by Gauss-Jordan elimination with
+/// partial pivoting; `None` when singular.
+fn invert4(mut a: [[f64; 4]; 4]) -> Option<[[f64; 4]; 4]> {
+    let mut inv = [[0.0; 4]; 4];
+    for (i, row) in inv.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    for col in 0..4 {
+        let p = (col..4).max_by(|&i, &k| a[i][col].abs().total_cmp(&a[k][col].abs()))?;
+        a.swap(col, p);
+        inv.swap(col, p);
+        let d = a[col][col];
+        if d.abs() < 1e-300 {
+            return None;
+        }
+        for k in 0..4 {
+            a[col][k] /= d;
+            inv[col][k] /= d;
+        }
+        for r in 0..4 {
+            if r != col {
+                let m = a[r][col];
+                for k in 0..4 {
+                    a[r][k] -= m * a[col][k];
+                    inv[r][k] -= m * inv[col][k];
+                }
+            }
+        }
+    }
+    Some(inv)
 }
 
 /// Noise-free means (row-major) of a star at window coordinates (`x`, `y`), e-.
@@ -296,6 +406,26 @@ impl Prepared {
                     ..GaussFitParams::new(s)
                 },
             ),
+            Method::GaussFitAssumed { window, a_px } => gauss_fit(
+                input,
+                &GaussFitParams {
+                    fit_background: false,
+                    background: self.background,
+                    start_box: window.min(5),
+                    ..GaussFitParams::new(sigma_of_a(a_px) as f32)
+                },
+            ),
+            Method::GaussFitWidth { window } => {
+                gauss_fit_width(
+                    input,
+                    &WidthFitParams {
+                        background: Background::PerimeterMedian,
+                        start_box: window.saturating_sub(2).min(5),
+                        ..WidthFitParams::new()
+                    },
+                )
+                .centroid
+            }
         }
     }
 }
@@ -321,7 +451,9 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
         width: side,
         height: side,
     };
-    let (mut err2, mut crlb2, mut scat2, mut est2) = (0.0, 0.0, 0.0, 0.0);
+    let (mut err2, mut crlb2, mut scat2, mut est2, mut pull2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut crlb_free2 = 0.0;
+    let width_free = matches!(method, Method::GaussFitWidth { .. });
     let (mut used, mut failures) = (0usize, 0usize);
     let bad = CentroidFlags::DEGENERATE | CentroidFlags::NOT_CONVERGED;
     let u = rand_distr::Uniform::new(-0.5, 0.5).ok()?;
@@ -347,6 +479,14 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
         err2 += (cx - x).powi(2) + (cy - y).powi(2);
         scat2 += (cx - f64::from(c0.x_px)).powi(2) + (cy - f64::from(c0.y_px)).powi(2);
         est2 += f64::from(c.sigma_x_px).powi(2) + f64::from(c.sigma_y_px).powi(2);
+        let pull = |e: f64, s: f32| {
+            if s > 0.0 {
+                e / f64::from(s)
+            } else {
+                f64::INFINITY
+            }
+        };
+        pull2 += pull(cx - x, c.sigma_x_px).powi(2) + pull(cy - y, c.sigma_y_px).powi(2);
         // The bound on a 9x9 window around the star's pixel (symmetric in x and y).
         let bx = crlb_x_px(
             9,
@@ -369,6 +509,29 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
             noise.read_noise_e,
         );
         crlb2 += bx * bx + by * by;
+        if width_free {
+            let fx = crlb_x_width_free_px(
+                9,
+                9,
+                x - centre + 4.0,
+                y - centre + 4.0,
+                sigma,
+                flux,
+                noise.background_e,
+                noise.read_noise_e,
+            );
+            let fy = crlb_x_width_free_px(
+                9,
+                9,
+                y - centre + 4.0,
+                x - centre + 4.0,
+                sigma,
+                flux,
+                noise.background_e,
+                noise.read_noise_e,
+            );
+            crlb_free2 += fx * fx + fy * fy;
+        }
         used += 1;
     }
     let n = (2 * used.max(1)) as f64;
@@ -378,8 +541,14 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
         snr,
         rms_px: (err2 / n).sqrt(),
         crlb_px: (crlb2 / n).sqrt(),
+        crlb_width_free_px: if width_free {
+            (crlb_free2 / n).sqrt()
+        } else {
+            f64::NAN
+        },
         scatter_px: (scat2 / n).sqrt(),
         sigma_est_px: (est2 / n).sqrt(),
+        pull_rms: (pull2 / n).sqrt(),
         failures,
         trials: noise.trials,
     })

@@ -89,6 +89,10 @@ fn estimate_should_hold(c: &Cell) -> bool {
                 && !(power == CogPower::Two && c.a_px < 1.0 && c.snr < 30.0)
         }
         Method::GaussFit { .. } => true,
+        // Not in the table: the width-free fit's pulls are in `accuracy_width`; a wrong
+        // assumed width makes the estimate a model's, not the scatter's.
+        Method::GaussFitWidth { .. } => true,
+        Method::GaussFitAssumed { .. } => false,
     }
 }
 
