@@ -32,7 +32,9 @@ use crate::sim::psf::{pixel_fraction, sigma_of_a};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson};
-use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{
+    Anchor, CogParams, CogPower, cog, sigma_unreliable as cog_sigma_unreliable,
+};
 use startrack_core::centroid::gauss_fit::{
     GaussFitParams, WidthFitParams, gauss_fit, gauss_fit_width,
 };
@@ -110,7 +112,7 @@ impl Method {
             ),
             Method::GaussFit { window } => format!("gauss fit {window}x{window}"),
             Method::GaussFitAssumed { window, a_px } => {
-                format!("gauss fit {window}x{window}, a {a_px} assumed")
+                format!("gauss fit {window}x{window} a {a_px} assumed")
             }
             Method::GaussFitWidth { window } => format!("gauss fit width-free {window}x{window}"),
         }
@@ -175,6 +177,11 @@ pub struct Cell {
     /// RMS of the error over the method's own sigma, per axis (the pull: 1 when the
     /// reported sigmas mean what they say).
     pub pull_rms: f64,
+    /// The pull over the stars without [`CentroidFlags::SIGMA_UNRELIABLE`] (the CoGs':
+    /// [`startrack_core::centroid::cog::sigma_unreliable`]); NaN when all are flagged.
+    pub pull_rms_clean: f64,
+    /// Stars flagged `SIGMA_UNRELIABLE`.
+    pub sigma_flagged: usize,
     /// Results flagged degenerate or not converged (left out).
     pub failures: usize,
     /// Stars used.
@@ -430,6 +437,20 @@ impl Prepared {
     }
 }
 
+/// True when `c`'s sigmas are flagged unreliable: the width-free fit's own flag, the CoGs'
+/// rule for their power, box, correction and the star's width (the tracker applies it with
+/// the configured width).
+fn sigma_flag(method: Method, a_px: f64, c: &Centroid) -> bool {
+    match method {
+        Method::Cog {
+            power,
+            box_side,
+            corrected,
+        } => cog_sigma_unreliable(power, box_side, a_px as f32, corrected, c.snr),
+        _ => c.flags.contains(CentroidFlags::SIGMA_UNRELIABLE),
+    }
+}
+
 /// A seed for one `(a, SNR)` cell: the same stars for every method.
 fn cell_seed(seed: u64, a_px: f64, snr: f64) -> u64 {
     seed ^ a_px.to_bits().rotate_left(17) ^ snr.to_bits().rotate_left(41)
@@ -453,6 +474,7 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
     };
     let (mut err2, mut crlb2, mut scat2, mut est2, mut pull2) = (0.0, 0.0, 0.0, 0.0, 0.0);
     let mut crlb_free2 = 0.0;
+    let (mut pull_clean2, mut flagged) = (0.0, 0usize);
     let width_free = matches!(method, Method::GaussFitWidth { .. });
     let (mut used, mut failures) = (0usize, 0usize);
     let bad = CentroidFlags::DEGENERATE | CentroidFlags::NOT_CONVERGED;
@@ -486,7 +508,13 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
                 f64::INFINITY
             }
         };
-        pull2 += pull(cx - x, c.sigma_x_px).powi(2) + pull(cy - y, c.sigma_y_px).powi(2);
+        let p2 = pull(cx - x, c.sigma_x_px).powi(2) + pull(cy - y, c.sigma_y_px).powi(2);
+        pull2 += p2;
+        if sigma_flag(method, a_px, &c) {
+            flagged += 1;
+        } else {
+            pull_clean2 += p2;
+        }
         // The bound on a 9x9 window around the star's pixel (symmetric in x and y).
         let bx = crlb_x_px(
             9,
@@ -549,6 +577,8 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
         scatter_px: (scat2 / n).sqrt(),
         sigma_est_px: (est2 / n).sqrt(),
         pull_rms: (pull2 / n).sqrt(),
+        pull_rms_clean: (pull_clean2 / (2 * (used - flagged.min(used))) as f64).sqrt(),
+        sigma_flagged: flagged,
         failures,
         trials: noise.trials,
     })
@@ -649,7 +679,146 @@ pub fn markdown(
         }
         s.push('\n');
     }
+    let _ = writeln!(
+        s,
+        "\nPull: RMS of error / own sigma per axis (sigma_x, sigma_y against the whole error, bias included; 1 when the reported sigmas mean what they say); `flagged` where the stars carry SIGMA_UNRELIABLE (then the pull of the unflagged rest, if any, in brackets):\n"
+    );
+    header(&mut s, "method");
+    for m in methods {
+        let _ = write!(s, "| {} |", m.name());
+        for &(a, snr) in &cols {
+            match find(m, a, snr) {
+                Some(c) => {
+                    let _ = write!(s, " {} |", pull_cell(c));
+                }
+                None => s.push_str(" - |"),
+            }
+        }
+        s.push('\n');
+    }
     s
+}
+
+/// The methods of the "width unknown" table: the width-free fit as the flight configuration
+/// runs it, and the fit of the flight configuration's former fixed width, a = 1.2 px, on
+/// stars of every width, both on 7x7 windows.
+pub fn width_unknown_methods() -> [Method; 2] {
+    [
+        Method::GaussFitWidth { window: 7 },
+        Method::GaussFitAssumed {
+            window: 7,
+            a_px: 1.2,
+        },
+    ]
+}
+
+/// The "width unknown" cells as CSV: `method,a_px,snr,rms_over_crlb,
+/// rms_over_crlb_width_free,pull_rms,pull_rms_unflagged,sigma_flagged,failures,trials`
+/// (the width-free bound only for the
+/// width-free fit; empty otherwise).
+pub fn width_unknown_csv(cells: &[Cell]) -> String {
+    let mut s = String::from(
+        "method,a_px,snr,rms_over_crlb,rms_over_crlb_width_free,pull_rms,pull_rms_unflagged,sigma_flagged,failures,trials\n",
+    );
+    for c in cells {
+        let free = if c.crlb_width_free_px.is_finite() {
+            format!("{:.3}", c.rms_px / c.crlb_width_free_px)
+        } else {
+            String::new()
+        };
+        let _ = writeln!(
+            s,
+            "{},{},{},{:.3},{free},{:.3},{:.3},{},{},{}",
+            c.method.name(),
+            c.a_px,
+            c.snr,
+            c.efficiency_ratio(),
+            c.pull_rms,
+            c.pull_rms_clean,
+            c.sigma_flagged,
+            c.failures,
+            c.trials
+        );
+    }
+    s
+}
+
+/// The "width unknown" table: one row per width and method, columns per SNR, each cell
+/// `RMS / CRLB` (the known-width bound), then for the width-free fit `/ CRLB` with the width
+/// unknown and the pull.
+pub fn width_unknown_markdown(cells: &[Cell], snrs: &[f64], noise: &Noise) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Width unknown ({} stars per cell, uniform pixel phase, background {} e-/px, read noise {} e-, seed {}; SNR by eq. 8 in 5x5; each cell: RMS / CRLB of a star whose width is known, then for the width-free fit RMS / CRLB with the width unknown and the pull):\n",
+        noise.trials, noise.background_e, noise.read_noise_e, noise.seed
+    );
+    let _ = write!(s, "| method | a |");
+    for snr in snrs {
+        let _ = write!(s, " SNR {snr} |");
+    }
+    s.push_str("\n|---|---|");
+    for _ in snrs {
+        s.push_str("---|");
+    }
+    s.push('\n');
+    let mut rows: Vec<(String, f64)> = Vec::new();
+    for c in cells {
+        let key = (c.method.name(), c.a_px);
+        if !rows.contains(&key) {
+            rows.push(key);
+        }
+    }
+    for (name, a) in rows {
+        let _ = write!(s, "| {name} | {a} |");
+        for &snr in snrs {
+            match cells
+                .iter()
+                .find(|c| c.method.name() == name && c.a_px == a && c.snr == snr)
+            {
+                Some(c) if c.crlb_width_free_px.is_finite() => {
+                    let _ = write!(
+                        s,
+                        " {:.2} / {:.2} / pull {}{} |",
+                        c.efficiency_ratio(),
+                        c.rms_px / c.crlb_width_free_px,
+                        pull_cell(c),
+                        failed(c.failures)
+                    );
+                }
+                Some(c) => {
+                    let _ = write!(s, " {:.2}{} |", c.efficiency_ratio(), failed(c.failures));
+                }
+                None => s.push_str(" - |"),
+            }
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// A pull-table cell: the pull, and the flagged share with the unflagged stars' pull.
+fn pull_cell(c: &Cell) -> String {
+    let used = c.trials - c.failures;
+    match c.sigma_flagged {
+        0 => format!("{:.2}", c.pull_rms),
+        f if f >= used => format!("{:.2} flagged", c.pull_rms),
+        f => format!(
+            "{:.2}, {:.0} % flagged ({:.2})",
+            c.pull_rms,
+            100.0 * f as f64 / used.max(1) as f64,
+            c.pull_rms_clean
+        ),
+    }
+}
+
+/// ` (N failed)` when any.
+fn failed(n: usize) -> String {
+    if n > 0 {
+        format!(" ({n} failed)")
+    } else {
+        String::new()
+    }
 }
 
 /// A method made ready once for a PSF width and a given background, to run on windows other

@@ -157,13 +157,15 @@ fn the_command_prints_every_method_and_rejects_bad_options() {
         snr: vec![30.0],
         background_e: 100.0,
         read_noise_e: 5.0,
+        width_unknown: false,
+        csv: None,
     };
     let out = command(&args).unwrap();
     for m in Method::all() {
-        // Each method has a row in the RMS table and in the estimate table.
+        // Each method has a row in the RMS table, the estimate table and the pull table.
         assert_eq!(
             out.matches(&format!("| {} |", m.name())).count(),
-            2,
+            3,
             "{}",
             m.name()
         );

@@ -92,3 +92,71 @@ fn an_assumed_width_is_far_from_the_bound_on_other_widths() {
     );
     assert!(c.efficiency_ratio() > 1.5 * w.efficiency_ratio());
 }
+
+#[test]
+fn sigmas_hold_or_are_flagged() {
+    // The width-free fit's pull (error / own sigma) is 0.9-1.1 in a cell, or its stars carry
+    // SIGMA_UNRELIABLE (at least 95 % of them). 600 stars: the pull's relative SE is 2 %,
+    // so "holds" is 0.9-1.1 widened by 3 SE.
+    let noise = Noise {
+        trials: 600,
+        seed: 13,
+        ..Noise::default()
+    };
+    let se = rms_relative_se(2 * noise.trials);
+    let (lo, hi) = (0.9 * (1.0 - 3.0 * se), 1.1 * (1.0 + 3.0 * se));
+    let fit = Method::GaussFitWidth { window: 7 };
+    let mut flagged_cells = 0;
+    for a in WIDTHS {
+        for snr in SNRS {
+            let c = run_cell(fit, a, snr, &noise).unwrap();
+            let used = c.trials - c.failures;
+            let share = c.sigma_flagged as f64 / used as f64;
+            eprintln!(
+                "a {a} SNR {snr}: pull {:.3}, flagged {:.1} %",
+                c.pull_rms,
+                100.0 * share
+            );
+            if !(lo..=hi).contains(&c.pull_rms) {
+                assert!(
+                    share >= 0.95,
+                    "a {a} SNR {snr}: pull {} with {share} flagged",
+                    c.pull_rms
+                );
+                flagged_cells += 1;
+            }
+            if a >= 1.0 && snr >= 30.0 && a <= 1.5 {
+                assert_eq!(
+                    c.sigma_flagged, 0,
+                    "a {a} SNR {snr}: flagged where the sigma holds"
+                );
+            }
+        }
+    }
+    assert!(
+        flagged_cells >= 1,
+        "the table has cells where the sigma fails"
+    );
+    // The CoG rule: the plain 3x3 CoG of power 1 (pulls up to 18) is always flagged, the
+    // corrected 7x7 one on an a = 1 star never.
+    let plain = Method::Cog {
+        power: startrack_core::centroid::cog::CogPower::One,
+        box_side: 3,
+        corrected: false,
+    };
+    let c = run_cell(plain, 2.0, 100.0, &noise).unwrap();
+    eprintln!(
+        "cog1 3x3 a 2 SNR 100: pull {:.2}, flagged {}",
+        c.pull_rms, c.sigma_flagged
+    );
+    assert!(c.pull_rms > 5.0);
+    assert_eq!(c.sigma_flagged, c.trials - c.failures);
+    let corrected = Method::Cog {
+        power: startrack_core::centroid::cog::CogPower::One,
+        box_side: 7,
+        corrected: true,
+    };
+    let c = run_cell(corrected, 1.0, 30.0, &noise).unwrap();
+    assert!((lo..=hi).contains(&c.pull_rms), "{}", c.pull_rms);
+    assert_eq!(c.sigma_flagged, 0);
+}

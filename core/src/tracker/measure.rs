@@ -16,7 +16,7 @@
 use super::config::{CentroidMethod, TrackerConfig};
 use super::record::{StarFlags, StarRecord};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
-use crate::centroid::cog::{CogParams, CogPower, cog};
+use crate::centroid::cog::{CogParams, CogPower, cog, sigma_unreliable as cog_sigma_unreliable};
 use crate::centroid::gauss_fit::{GaussFitParams, WidthFitParams, gauss_fit, gauss_fit_width};
 use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
 use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
@@ -64,6 +64,8 @@ pub(crate) struct Policy<'t> {
     pub(crate) method: CentroidMethod,
     pub(crate) box_px: u8,
     pub(crate) sigma_px: f32,
+    /// The configured PSF 80 % radius, px (where a CoG's sigma holds).
+    pub(crate) psf_a_px: f32,
     /// The curve of the general path (perimeter-median CoG).
     pub(crate) curve: Option<PixCorr<'t>>,
     /// The curve of the fused CoG (given background).
@@ -96,6 +98,7 @@ impl<'t> Policy<'t> {
             method,
             box_px,
             sigma_px: config.psf_sigma_px(),
+            psf_a_px: config.psf_a_px,
             curve,
             fused_curve,
         }
@@ -143,9 +146,20 @@ impl<'t> Policy<'t> {
                 cog(input, &CogParams::new(CogPower::One, self.box_px))
             }
         };
+        let unreliable = |corrected: bool, c: &Centroid| {
+            let power = self.method.cog_power().unwrap_or(CogPower::One);
+            if cog_sigma_unreliable(power, self.box_px, self.psf_a_px, corrected, c.snr) {
+                StarFlags::SIGMA_UNRELIABLE
+            } else {
+                StarFlags::empty()
+            }
+        };
         match (self.curve, self.is_cog()) {
-            (Some(k), true) => (k.apply(c), StarFlags::empty()),
-            (None, true) => (c, StarFlags::UNCORRECTED),
+            (Some(k), true) => {
+                let c = k.apply(c);
+                (c, unreliable(true, &c))
+            }
+            (None, true) => (c, StarFlags::UNCORRECTED | unreliable(false, &c)),
             _ => (c, StarFlags::empty()),
         }
     }

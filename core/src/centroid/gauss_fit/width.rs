@@ -162,6 +162,18 @@ impl PsfFit {
     }
 }
 
+/// True where the fit's `sigma_x`, `sigma_y` are known to miss its error by more than 10 %
+/// (the pull table of docs/accuracy.md, `startrack accuracy --width-unknown`): below SNR 20
+/// (the width's noise makes the fit non-linear: pulls 1.08-1.33); a star narrower than
+/// a = 0.7 px below SNR 60 (the width and position couple: pulls up to 1.34); a star whose
+/// 3-sigma radius reaches the window's border above SNR 50 (the border, the background's
+/// source, holds its wings: sigmas up to 30 % too large). `s` px, `side` the window's
+/// smaller side, px.
+pub fn sigma_unreliable(s: f32, snr: f32, side: u16) -> bool {
+    let border_px = 0.5 * f32::from(side.saturating_sub(1));
+    snr < 20.0 || (s < 0.7 * SQRT_031 && snr < 60.0) || (3.0 * s > border_px && snr > 50.0)
+}
+
 /// The largest `chi2 / dof` a window of `dof` degrees of freedom passes: the chi-square
 /// distribution's point `z` sigmas into its upper tail by the Wilson-Hilferty cube
 /// (`(1 - c + z sqrt(c))^3`, `c = 2 / (9 dof)`; 0.6 % above the exact quantile at 10
@@ -581,11 +593,15 @@ fn fit<const CLEAN: bool>(p: &Prepared<'_>, params: &WidthFitParams) -> PsfFit {
         extra |= CentroidFlags::POOR_FIT;
     }
     let (x, y, flux, s) = theta;
+    let snr = flux / math::sqrt(vn).max(f32::MIN_POSITIVE);
+    if sigma_unreliable(s, snr, p.width.min(p.height)) {
+        extra |= CentroidFlags::SIGMA_UNRELIABLE;
+    }
     let m = Measured {
         col: x,
         row: y,
         flux_e: flux,
-        snr: flux / math::sqrt(vn).max(f32::MIN_POSITIVE),
+        snr,
         sigma_col: math::sqrt(vx),
         sigma_row: math::sqrt(vy),
     };
