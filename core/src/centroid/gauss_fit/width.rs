@@ -40,6 +40,9 @@
 //! `z`-sigma point, `z` = [`CHI2_FLAG_Z`]: a false-flag rate of 1e-3 per star) the
 //! centroid gets [`CentroidFlags::POOR_FIT`]: a blend, a cosmic ray, coma or defocus the
 //! Gaussian cannot follow. The position is still reported, flagged, never as a clean number.
+//! Where the linearised sigmas are known to miss the error by more than 10 % (faint,
+//! undersampled, or wings on the border: [`sigma_unreliable`]) the centroid gets
+//! [`CentroidFlags::SIGMA_UNRELIABLE`].
 //!
 //! # Cost
 //! Per step `w + h + 2` edge `erfc`s, densities and width terms, ~35 instructions a pixel
