@@ -32,8 +32,12 @@ use crate::sim::psf::{pixel_fraction, sigma_of_a};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson};
-use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
-use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use startrack_core::centroid::cog::{
+    Anchor, CogParams, CogPower, cog, sigma_unreliable as cog_sigma_unreliable,
+};
+use startrack_core::centroid::gauss_fit::{
+    GaussFitParams, WidthFitParams, gauss_fit, gauss_fit_width,
+};
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::units::Electrons;
@@ -54,6 +58,20 @@ pub enum Method {
     },
     /// Pixel-integrated Gaussian fit, PSF sigma known, on an `n x n` window.
     GaussFit {
+        /// Window side.
+        window: u8,
+    },
+    /// Pixel-integrated Gaussian fit of an assumed PSF width `a_px` whatever the star's
+    /// (what a fixed-width configuration does on a field of mixed widths), `n x n` window.
+    GaussFitAssumed {
+        /// Window side.
+        window: u8,
+        /// The assumed 80 %-energy radius, px.
+        a_px: f64,
+    },
+    /// The width-free Gaussian fit as the tracker's flight configuration runs it (PSF width
+    /// not told, background the window border's median, held; start box `min(n - 2, 5)`).
+    GaussFitWidth {
         /// Window side.
         window: u8,
     },
@@ -93,6 +111,10 @@ impl Method {
                 if *corrected { " corrected" } else { "" }
             ),
             Method::GaussFit { window } => format!("gauss fit {window}x{window}"),
+            Method::GaussFitAssumed { window, a_px } => {
+                format!("gauss fit {window}x{window} a {a_px} assumed")
+            }
+            Method::GaussFitWidth { window } => format!("gauss fit width-free {window}x{window}"),
         }
     }
 
@@ -100,7 +122,9 @@ impl Method {
     pub fn window_side(&self) -> u16 {
         match self {
             Method::Cog { box_side, .. } => u16::from(*box_side) + 2,
-            Method::GaussFit { window } => u16::from(*window),
+            Method::GaussFit { window }
+            | Method::GaussFitAssumed { window, .. }
+            | Method::GaussFitWidth { window } => u16::from(*window),
         }
     }
 }
@@ -143,10 +167,21 @@ pub struct Cell {
     pub rms_px: f64,
     /// RMS Cramer-Rao bound over the same stars, px.
     pub crlb_px: f64,
+    /// RMS over the same stars of the bound when the width is also unknown
+    /// ([`crlb_x_width_free_px`]), px.
+    pub crlb_width_free_px: f64,
     /// RMS of the noise part of the error, px.
     pub scatter_px: f64,
     /// RMS of the method's own error estimate, px.
     pub sigma_est_px: f64,
+    /// RMS of the error over the method's own sigma, per axis (the pull: 1 when the
+    /// reported sigmas mean what they say).
+    pub pull_rms: f64,
+    /// The pull over the stars without [`CentroidFlags::SIGMA_UNRELIABLE`] (the CoGs':
+    /// [`startrack_core::centroid::cog::sigma_unreliable`]); NaN when all are flagged.
+    pub pull_rms_clean: f64,
+    /// Stars flagged `SIGMA_UNRELIABLE`.
+    pub sigma_flagged: usize,
     /// Results flagged degenerate or not converged (left out).
     pub failures: usize,
     /// Stars used.
@@ -206,6 +241,88 @@ pub fn crlb_x_px(
         }
     }
     1.0 / fisher.sqrt()
+}
+
+/// The Cramer-Rao bound on x (px) when the PSF width is not known: the `(x, y, N, s)`
+/// Fisher matrix of the same star and noise as [`crlb_x_px`], inverted, `sqrt([F^-1]_xx)`.
+/// What any unbiased estimator that fits the width must pay; at least [`crlb_x_px`].
+#[allow(clippy::too_many_arguments)]
+pub fn crlb_x_width_free_px(
+    width: u16,
+    height: u16,
+    x: f64,
+    y: f64,
+    sigma_px: f64,
+    flux_e: f64,
+    background_e: f64,
+    read_noise_e: f64,
+) -> f64 {
+    let phi = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    // Fraction, d/dcentre, d/dsigma of pixel i for centre c.
+    let prof = |i: f64, c: f64| {
+        let (ul, uh) = ((i - 0.5 - c) / sigma_px, (i + 0.5 - c) / sigma_px);
+        (
+            pixel_fraction(i, c, sigma_px),
+            (phi(ul) - phi(uh)) / sigma_px,
+            (phi(ul) * ul - phi(uh) * uh) / sigma_px,
+        )
+    };
+    let mut f = [[0.0f64; 4]; 4];
+    for r in 0..height {
+        let (fy, dy, wy) = prof(f64::from(r), y);
+        for c in 0..width {
+            let (fx, dx, wx) = prof(f64::from(c), x);
+            let mu = flux_e * fx * fy + background_e;
+            let v = mu + read_noise_e * read_noise_e;
+            if v <= 0.0 {
+                continue;
+            }
+            let j = [
+                flux_e * dx * fy,
+                flux_e * fx * dy,
+                fx * fy,
+                flux_e * (wx * fy + fx * wy),
+            ];
+            for (fi, ji) in f.iter_mut().zip(j) {
+                for (fik, jk) in fi.iter_mut().zip(j) {
+                    *fik += ji * jk / v;
+                }
+            }
+        }
+    }
+    invert4(f).map_or(f64::INFINITY, |inv| inv[0][0].max(0.0).sqrt())
+}
+
+/// Inverse of a symmetric positive-definite 4x4 matrix by Gauss-Jordan elimination with
+/// partial pivoting; `None` when singular.
+fn invert4(mut a: [[f64; 4]; 4]) -> Option<[[f64; 4]; 4]> {
+    let mut inv = [[0.0; 4]; 4];
+    for (i, row) in inv.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    for col in 0..4 {
+        let p = (col..4).max_by(|&i, &k| a[i][col].abs().total_cmp(&a[k][col].abs()))?;
+        a.swap(col, p);
+        inv.swap(col, p);
+        let d = a[col][col];
+        if d.abs() < 1e-300 {
+            return None;
+        }
+        for k in 0..4 {
+            a[col][k] /= d;
+            inv[col][k] /= d;
+        }
+        for r in 0..4 {
+            if r != col {
+                let m = a[r][col];
+                for k in 0..4 {
+                    a[r][k] -= m * a[col][k];
+                    inv[r][k] -= m * inv[col][k];
+                }
+            }
+        }
+    }
+    Some(inv)
 }
 
 /// Noise-free means (row-major) of a star at window coordinates (`x`, `y`), e-.
@@ -296,7 +413,41 @@ impl Prepared {
                     ..GaussFitParams::new(s)
                 },
             ),
+            Method::GaussFitAssumed { window, a_px } => gauss_fit(
+                input,
+                &GaussFitParams {
+                    fit_background: false,
+                    background: self.background,
+                    start_box: window.min(5),
+                    ..GaussFitParams::new(sigma_of_a(a_px) as f32)
+                },
+            ),
+            Method::GaussFitWidth { window } => {
+                gauss_fit_width(
+                    input,
+                    &WidthFitParams {
+                        background: Background::PerimeterMedian,
+                        start_box: window.saturating_sub(2).min(5),
+                        ..WidthFitParams::new()
+                    },
+                )
+                .centroid
+            }
         }
+    }
+}
+
+/// True when `c`'s sigmas are flagged unreliable: the width-free fit's own flag, the CoGs'
+/// rule for their power, box, correction and the star's width (the tracker applies it with
+/// the configured width).
+fn sigma_flag(method: Method, a_px: f64, c: &Centroid) -> bool {
+    match method {
+        Method::Cog {
+            power,
+            box_side,
+            corrected,
+        } => cog_sigma_unreliable(power, box_side, a_px as f32, corrected, c.snr),
+        _ => c.flags.contains(CentroidFlags::SIGMA_UNRELIABLE),
     }
 }
 
@@ -321,7 +472,10 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
         width: side,
         height: side,
     };
-    let (mut err2, mut crlb2, mut scat2, mut est2) = (0.0, 0.0, 0.0, 0.0);
+    let (mut err2, mut crlb2, mut scat2, mut est2, mut pull2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut crlb_free2 = 0.0;
+    let (mut pull_clean2, mut flagged) = (0.0, 0usize);
+    let width_free = matches!(method, Method::GaussFitWidth { .. });
     let (mut used, mut failures) = (0usize, 0usize);
     let bad = CentroidFlags::DEGENERATE | CentroidFlags::NOT_CONVERGED;
     let u = rand_distr::Uniform::new(-0.5, 0.5).ok()?;
@@ -347,6 +501,20 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
         err2 += (cx - x).powi(2) + (cy - y).powi(2);
         scat2 += (cx - f64::from(c0.x_px)).powi(2) + (cy - f64::from(c0.y_px)).powi(2);
         est2 += f64::from(c.sigma_x_px).powi(2) + f64::from(c.sigma_y_px).powi(2);
+        let pull = |e: f64, s: f32| {
+            if s > 0.0 {
+                e / f64::from(s)
+            } else {
+                f64::INFINITY
+            }
+        };
+        let p2 = pull(cx - x, c.sigma_x_px).powi(2) + pull(cy - y, c.sigma_y_px).powi(2);
+        pull2 += p2;
+        if sigma_flag(method, a_px, &c) {
+            flagged += 1;
+        } else {
+            pull_clean2 += p2;
+        }
         // The bound on a 9x9 window around the star's pixel (symmetric in x and y).
         let bx = crlb_x_px(
             9,
@@ -369,6 +537,29 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
             noise.read_noise_e,
         );
         crlb2 += bx * bx + by * by;
+        if width_free {
+            let fx = crlb_x_width_free_px(
+                9,
+                9,
+                x - centre + 4.0,
+                y - centre + 4.0,
+                sigma,
+                flux,
+                noise.background_e,
+                noise.read_noise_e,
+            );
+            let fy = crlb_x_width_free_px(
+                9,
+                9,
+                y - centre + 4.0,
+                x - centre + 4.0,
+                sigma,
+                flux,
+                noise.background_e,
+                noise.read_noise_e,
+            );
+            crlb_free2 += fx * fx + fy * fy;
+        }
         used += 1;
     }
     let n = (2 * used.max(1)) as f64;
@@ -378,8 +569,16 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
         snr,
         rms_px: (err2 / n).sqrt(),
         crlb_px: (crlb2 / n).sqrt(),
+        crlb_width_free_px: if width_free {
+            (crlb_free2 / n).sqrt()
+        } else {
+            f64::NAN
+        },
         scatter_px: (scat2 / n).sqrt(),
         sigma_est_px: (est2 / n).sqrt(),
+        pull_rms: (pull2 / n).sqrt(),
+        pull_rms_clean: (pull_clean2 / (2 * (used - flagged.min(used))) as f64).sqrt(),
+        sigma_flagged: flagged,
         failures,
         trials: noise.trials,
     })
@@ -480,7 +679,146 @@ pub fn markdown(
         }
         s.push('\n');
     }
+    let _ = writeln!(
+        s,
+        "\nPull: RMS of error / own sigma per axis (sigma_x, sigma_y against the whole error, bias included; 1 when the reported sigmas mean what they say); `flagged` where the stars carry SIGMA_UNRELIABLE (then the pull of the unflagged rest, if any, in brackets):\n"
+    );
+    header(&mut s, "method");
+    for m in methods {
+        let _ = write!(s, "| {} |", m.name());
+        for &(a, snr) in &cols {
+            match find(m, a, snr) {
+                Some(c) => {
+                    let _ = write!(s, " {} |", pull_cell(c));
+                }
+                None => s.push_str(" - |"),
+            }
+        }
+        s.push('\n');
+    }
     s
+}
+
+/// The methods of the "width unknown" table: the width-free fit as the flight configuration
+/// runs it, and the fit of the flight configuration's former fixed width, a = 1.2 px, on
+/// stars of every width, both on 7x7 windows.
+pub fn width_unknown_methods() -> [Method; 2] {
+    [
+        Method::GaussFitWidth { window: 7 },
+        Method::GaussFitAssumed {
+            window: 7,
+            a_px: 1.2,
+        },
+    ]
+}
+
+/// The "width unknown" cells as CSV: `method,a_px,snr,rms_over_crlb,
+/// rms_over_crlb_width_free,pull_rms,pull_rms_unflagged,sigma_flagged,failures,trials`
+/// (the width-free bound only for the
+/// width-free fit; empty otherwise).
+pub fn width_unknown_csv(cells: &[Cell]) -> String {
+    let mut s = String::from(
+        "method,a_px,snr,rms_over_crlb,rms_over_crlb_width_free,pull_rms,pull_rms_unflagged,sigma_flagged,failures,trials\n",
+    );
+    for c in cells {
+        let free = if c.crlb_width_free_px.is_finite() {
+            format!("{:.3}", c.rms_px / c.crlb_width_free_px)
+        } else {
+            String::new()
+        };
+        let _ = writeln!(
+            s,
+            "{},{},{},{:.3},{free},{:.3},{:.3},{},{},{}",
+            c.method.name(),
+            c.a_px,
+            c.snr,
+            c.efficiency_ratio(),
+            c.pull_rms,
+            c.pull_rms_clean,
+            c.sigma_flagged,
+            c.failures,
+            c.trials
+        );
+    }
+    s
+}
+
+/// The "width unknown" table: one row per width and method, columns per SNR, each cell
+/// `RMS / CRLB` (the known-width bound), then for the width-free fit `/ CRLB` with the width
+/// unknown and the pull.
+pub fn width_unknown_markdown(cells: &[Cell], snrs: &[f64], noise: &Noise) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Width unknown ({} stars per cell, uniform pixel phase, background {} e-/px, read noise {} e-, seed {}; SNR by eq. 8 in 5x5; each cell: RMS / CRLB of a star whose width is known, then for the width-free fit RMS / CRLB with the width unknown and the pull):\n",
+        noise.trials, noise.background_e, noise.read_noise_e, noise.seed
+    );
+    let _ = write!(s, "| method | a |");
+    for snr in snrs {
+        let _ = write!(s, " SNR {snr} |");
+    }
+    s.push_str("\n|---|---|");
+    for _ in snrs {
+        s.push_str("---|");
+    }
+    s.push('\n');
+    let mut rows: Vec<(String, f64)> = Vec::new();
+    for c in cells {
+        let key = (c.method.name(), c.a_px);
+        if !rows.contains(&key) {
+            rows.push(key);
+        }
+    }
+    for (name, a) in rows {
+        let _ = write!(s, "| {name} | {a} |");
+        for &snr in snrs {
+            match cells
+                .iter()
+                .find(|c| c.method.name() == name && c.a_px == a && c.snr == snr)
+            {
+                Some(c) if c.crlb_width_free_px.is_finite() => {
+                    let _ = write!(
+                        s,
+                        " {:.2} / {:.2} / pull {}{} |",
+                        c.efficiency_ratio(),
+                        c.rms_px / c.crlb_width_free_px,
+                        pull_cell(c),
+                        failed(c.failures)
+                    );
+                }
+                Some(c) => {
+                    let _ = write!(s, " {:.2}{} |", c.efficiency_ratio(), failed(c.failures));
+                }
+                None => s.push_str(" - |"),
+            }
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// A pull-table cell: the pull, and the flagged share with the unflagged stars' pull.
+fn pull_cell(c: &Cell) -> String {
+    let used = c.trials - c.failures;
+    match c.sigma_flagged {
+        0 => format!("{:.2}", c.pull_rms),
+        f if f >= used => format!("{:.2} flagged", c.pull_rms),
+        f => format!(
+            "{:.2}, {:.0} % flagged ({:.2})",
+            c.pull_rms,
+            100.0 * f as f64 / used.max(1) as f64,
+            c.pull_rms_clean
+        ),
+    }
+}
+
+/// ` (N failed)` when any.
+fn failed(n: usize) -> String {
+    if n > 0 {
+        format!(" ({n} failed)")
+    } else {
+        String::new()
+    }
 }
 
 /// A method made ready once for a PSF width and a given background, to run on windows other

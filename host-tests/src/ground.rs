@@ -496,6 +496,8 @@ impl Ground {
                     sigma_x_px: 0.0,
                     sigma_y_px: 0.0,
                     flags: Default::default(),
+                    psf_a_px: 0.0,
+                    chi2_dof: 0.0,
                 };
                 p::MAX_LINK_STARS
             ];

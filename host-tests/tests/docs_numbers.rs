@@ -176,7 +176,7 @@ fn table(page: &str, name: &str) -> (Vec<String>, Vec<Vec<String>>) {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 13] = [
+const CHECKED: [&str; 14] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -190,6 +190,7 @@ const CHECKED: [&str; 13] = [
     "tracker-config",
     "tracker-memory",
     "readout-plan",
+    "accuracy-width-unknown",
 ];
 
 #[test]
@@ -1008,4 +1009,74 @@ fn readout_plan_table_is_the_compiled_programs() {
         // A full-frame row prints 0 windows whatever --windows says.
         assert_eq!(row, got, "docs/sequencer.md: readout-plan row");
     }
+}
+
+/// `host-tests/figures/accuracy-width.csv` (`startrack accuracy --width-unknown --csv`)
+/// as (method, a, SNR) -> row.
+fn accuracy_width_csv() -> HashMap<(String, String, String), HashMap<String, String>> {
+    let text = read("host-tests/figures/accuracy-width.csv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    lines
+        .map(|l| {
+            let v: Vec<&str> = l.split(',').collect();
+            let row: HashMap<String, String> = header
+                .iter()
+                .zip(&v)
+                .map(|(h, x)| (h.to_string(), x.to_string()))
+                .collect();
+            (
+                (
+                    row["method"].clone(),
+                    row["a_px"].clone(),
+                    row["snr"].clone(),
+                ),
+                row,
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn width_unknown_table_is_its_csv() {
+    let csv = accuracy_width_csv();
+    let (header, body) = table("docs/accuracy.md", "accuracy-width-unknown");
+    assert_eq!(header[..2], ["method", "a"]);
+    let snrs: Vec<String> = header[2..]
+        .iter()
+        .map(|h| h.strip_prefix("SNR ").expect("SNR column").to_string())
+        .collect();
+    let mut seen = 0;
+    for r in &body {
+        for (cell, snr) in r[2..].iter().zip(&snrs) {
+            let key = (r[0].clone(), r[1].clone(), snr.clone());
+            let row = csv
+                .get(&key)
+                .unwrap_or_else(|| panic!("docs/accuracy.md: {key:?} is not in the CSV"));
+            let what = format!("docs/accuracy.md width unknown {key:?}");
+            // "R / R_free / pull P[, S % flagged (P_clean)][ (N failed)]" or "R[ (N failed)]".
+            let parts: Vec<&str> = cell.split(" / ").collect();
+            let first = |s: &str| s.split_whitespace().next().unwrap_or("").to_string();
+            assert!(
+                matches(&first(parts[0]), &row["rms_over_crlb"]),
+                "{what}: {cell}"
+            );
+            if parts.len() == 3 {
+                assert!(
+                    matches(&first(parts[1]), &row["rms_over_crlb_width_free"]),
+                    "{what}: {cell}"
+                );
+                let pull = parts[2].trim_start_matches("pull ");
+                let pull = pull.split([',', ' ']).next().unwrap_or("");
+                assert!(matches(pull, &row["pull_rms"]), "{what}: {cell}");
+            }
+            let failed = cell
+                .rsplit_once(" (")
+                .and_then(|(_, t)| t.strip_suffix(" failed)"))
+                .unwrap_or("0");
+            assert_eq!(failed, row["failures"], "{what}: failures");
+            seen += 1;
+        }
+    }
+    assert_eq!(seen, csv.len(), "every CSV row in the table");
 }

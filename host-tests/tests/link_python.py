@@ -26,10 +26,13 @@ def main() -> int:
             frame, mode, count = struct.unpack(">IBB", data[:6])
             assert (frame, mode, count) == (want["frame"], want["mode"], len(want["stars"]))
             for k, star in enumerate(want["stars"]):
-                fields = struct.unpack(">6fI", data[6 + 28 * k : 6 + 28 * (k + 1)])
+                fields = struct.unpack(">6fIHH", data[6 + 32 * k : 6 + 32 * (k + 1)])
                 for a, b in zip(fields[:6], star[:6]):
                     assert abs(a - b) <= 1e-6 * max(1.0, abs(b)), (fields, star)
                 assert fields[6] == star[6]
+                # psf_a in 0.001 px, chi2_dof in 0.01, rounded.
+                assert fields[7] == round(star[7] * 1000), (fields, star)
+                assert fields[8] == round(star[8] * 100), (fields, star)
         if "attitude" in want:
             a = want["attitude"]
             fields = struct.unpack(">IBBBB4d7fQ", data)

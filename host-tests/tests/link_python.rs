@@ -70,6 +70,8 @@ fn spacepackets_decodes_the_telemetry() {
             sigma_x_px: 0.01,
             sigma_y_px: 0.02,
             flags: StarFlags::from_bits_retain(1 << k),
+            psf_a_px: 1.25 + k as f32 * 0.1,
+            chi2_dof: 0.97 + k as f32 * 0.01,
         })
         .collect();
     for s in &stars {
@@ -145,7 +147,9 @@ fn spacepackets_decodes_the_telemetry() {
                         s.snr,
                         s.sigma_x_px,
                         s.sigma_y_px,
-                        s.flags.bits()
+                        s.flags.bits(),
+                        s.psf_a_px,
+                        s.chi2_dof
                     ])
                 })
                 .collect();

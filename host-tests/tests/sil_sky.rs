@@ -24,6 +24,8 @@ fn records(q: Quat, cat: &Catalog<'_>, seed: u64) -> Vec<StarRecord> {
             sigma_x_px: 0.1,
             sigma_y_px: 0.1,
             flags: StarFlags::empty(),
+            psf_a_px: 1.0,
+            chi2_dof: 1.0,
         })
         .collect()
 }

@@ -17,7 +17,7 @@ mod common_field;
 
 use common_field::field;
 use startrack_core::calib::{FrameCalibration, FrameConditions, PixelFlags};
-use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use startrack_core::centroid::gauss_fit::{WidthFitParams, gauss_fit_width};
 use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::detect::LineDetector;
 use startrack_core::table::CalibTable;
@@ -201,6 +201,8 @@ fn same_bits(a: &[StarRecord], b: &[StarRecord]) -> bool {
             s.sigma_x_px.to_bits(),
             s.sigma_y_px.to_bits(),
             s.flags.bits(),
+            s.psf_a_px.to_bits(),
+            s.chi2_dof.to_bits(),
         ]
     };
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| key(x) == key(y))
@@ -274,17 +276,17 @@ fn acquisition_equals_the_whole_frame_reference() {
             let input = CentroidInput::new(Window::new(rect, &we).unwrap())
                 .with_pixel_flags(&wf)
                 .with_clipped(clipped);
-            let c = gauss_fit(
+            // The flight method: the width-free fit, background the border median.
+            let fit = gauss_fit_width(
                 &input,
-                &GaussFitParams {
+                &WidthFitParams {
                     start_box: config.box_px(),
-                    fit_background: false,
                     background: Background::PerimeterMedian,
-                    ..GaussFitParams::new(config.psf_sigma_px())
+                    ..WidthFitParams::new()
                 },
             );
-            StarRecord::from_centroid(
-                &c,
+            StarRecord::from_psf_fit(
+                &fit,
                 StarFlags::from_detection(d.flags) | StarFlags::from_pixels(pf),
             )
         })

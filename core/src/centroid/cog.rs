@@ -167,6 +167,25 @@ impl AxisSums {
 }
 
 /// A caller's PSF or weight sigma made usable: at least 0.1 px, 1 px when not finite.
+/// True where a CoG's `sigma_x`, `sigma_y` are known to miss its error by more than 10 %
+/// (the pull table of docs/accuracy.md, `startrack accuracy`), for a star of 80 % radius
+/// `psf_a_px` in a `box_px` box: every CoG without its pixel-phase correction (the
+/// pixelisation bias is not in the noise model: pulls up to 18 for power 1 in 3x3, 25 for
+/// power 2 at a = 0.7 px); a corrected one whose box is under 3 a (truncation: pulls up to
+/// 1.6); a corrected power-2 CoG in a box of 7 or more below SNR 15 (sigmas 15-20 % too
+/// large).
+pub fn sigma_unreliable(
+    power: CogPower,
+    box_px: u8,
+    psf_a_px: f32,
+    corrected: bool,
+    snr: f32,
+) -> bool {
+    !corrected
+        || f32::from(box_px) < 3.0 * psf_a_px
+        || (power == CogPower::Two && box_px >= 7 && snr < 15.0)
+}
+
 pub(crate) fn usable_sigma_px(sigma_px: f32) -> f32 {
     if sigma_px.is_finite() {
         sigma_px.max(0.1)

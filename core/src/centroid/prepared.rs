@@ -128,6 +128,11 @@ impl<'a> Prepared<'a> {
         self.pixels.get(i).map(|e| i64::from(e.to_bits()))
     }
 
+    /// True unless pixel `i` (row-major index) is flagged excluded.
+    pub(crate) fn usable(&self, i: usize) -> bool {
+        !self.pixel_flags.get(i).is_some_and(|f| f.is_excluded())
+    }
+
     /// Background-subtracted signal of usable pixel (col, row), e-.
     pub(crate) fn signal(&self, col: u16, row: u16) -> Option<f32> {
         self.bits(col, row)

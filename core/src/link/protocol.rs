@@ -39,7 +39,7 @@ pub const MAX_TM_LEN: usize = 1100;
 /// Most stars in one star-list packet (the board's capacity; more are counted as not sent).
 pub const MAX_LINK_STARS: usize = 32;
 /// Bytes of one star in a star list.
-pub const STAR_BYTES: usize = 28;
+pub const STAR_BYTES: usize = 32;
 /// Side of the largest diagnostic window, px.
 pub const MAX_WINDOW_PX: u16 = 64;
 /// Table kind of the calibration table (the only kind so far).
@@ -228,7 +228,7 @@ pub const MESSAGES: [MessageDef; 23] = [
         "stars",
         APID_STARS,
         TM_STARS,
-        "frame u32, mode u8, count u8, count x star (28 bytes)",
+        "frame u32, mode u8, count u8, count x star (32 bytes)",
     ),
     tm(
         "window-row",

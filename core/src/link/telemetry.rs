@@ -3,7 +3,7 @@
 //! slice (and read back by the ground tool with the same code). The layouts are tabled in
 //! `docs/protocol.md`, generated from [`HK_FIELDS`], [`STAR_FIELDS`] and [`ATTITUDE_FIELDS`].
 //!
-//! Cost: a few stores per field; a 32-star list is 902 bytes.
+//! Cost: a few stores per field; a 32-star list is 1,030 bytes.
 
 use super::command::mode_number;
 use super::protocol::{MAX_LINK_STARS, STAR_BYTES};
@@ -322,7 +322,7 @@ pub const HK_LEN: usize = {
 };
 
 /// Every field of one star in a star list: name, type, meaning.
-pub const STAR_FIELDS: [(&str, &str, &str); 7] = [
+pub const STAR_FIELDS: [(&str, &str, &str); 9] = [
     ("x_px", "f32", "column, px"),
     ("y_px", "f32", "row, px"),
     ("flux_e", "f32", "background-subtracted signal, e-"),
@@ -330,7 +330,34 @@ pub const STAR_FIELDS: [(&str, &str, &str); 7] = [
     ("sigma_x_px", "f32", "1-sigma error of x_px, px"),
     ("sigma_y_px", "f32", "1-sigma error of y_px, px"),
     ("flags", "u32", "StarFlags bits (docs/formats.md)"),
+    (
+        "psf_a_mpx",
+        "u16",
+        "the star's fitted PSF 80 % radius, 0.001 px (0 to 65.535 px, saturating; 0: not measured)",
+    ),
+    (
+        "chi2_dof_centi",
+        "u16",
+        "the fit's chi2 per degree of freedom, 0.01 (0 to 655.35, saturating; 0: not measured)",
+    ),
 ];
+
+/// `v / unit` rounded to a `u16`, saturating (0 for NaN or negative): the star list's
+/// fixed-point fields.
+fn to_u16(v: f32, unit: f32) -> u16 {
+    let q = v / unit + 0.5;
+    if q.is_nan() || q < 0.0 {
+        0
+    } else if q >= 65_535.0 {
+        u16::MAX
+    } else {
+        q as u16
+    }
+}
+
+/// Units of the star list's fixed-point fields.
+const PSF_A_UNIT_PX: f32 = 0.001;
+const CHI2_DOF_UNIT: f32 = 0.01;
 
 const fn source_number(s: TemperatureSource) -> u8 {
     match s {
@@ -484,7 +511,9 @@ pub fn encode_stars(frame: u32, mode: Mode, stars: &[StarRecord], out: &mut [u8]
             .f32(s.snr)
             .f32(s.sigma_x_px)
             .f32(s.sigma_y_px)
-            .u32(s.flags.bits());
+            .u32(s.flags.bits())
+            .u16(to_u16(s.psf_a_px, PSF_A_UNIT_PX))
+            .u16(to_u16(s.chi2_dof, CHI2_DOF_UNIT));
     }
     w.finish()
 }
@@ -507,6 +536,8 @@ pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usiz
             sigma_x_px: r.f32()?,
             sigma_y_px: r.f32()?,
             flags: StarFlags::from_bits_retain(r.u32()?),
+            psf_a_px: f32::from(r.u16()?) * PSF_A_UNIT_PX,
+            chi2_dof: f32::from(r.u16()?) * CHI2_DOF_UNIT,
         };
     }
     Some((frame, mode, count))

@@ -212,6 +212,8 @@ fn measure_pending<const N: usize>(
             sigma_x_px: half,
             sigma_y_px: half,
             flags: detected | lost,
+            psf_a_px: 0.0,
+            chi2_dof: 0.0,
         },
         Carry::default(),
     );

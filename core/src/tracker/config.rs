@@ -21,6 +21,13 @@ pub enum CentroidMethod {
     /// scene of the trade-off chart (docs/accuracy.md), ~7,000 M7 instructions for a 7x7
     /// window (`cargo m7-bench`, `centroid_gauss_fit_given_bg_7x7`).
     GaussFit,
+    /// Fit of the pixel-integrated Gaussian with the PSF width free (each star's own: the
+    /// width changes across the field and from star to star), background held at the
+    /// border median; reports `psf_a_px` and `chi2_dof` and flags a window the Gaussian
+    /// cannot describe ([`super::StarFlags::POOR_FIT`]). ~13,300 M7 instructions for a 7x7
+    /// window (`cargo m7-bench`, `centroid_gauss_fit_width_7x7`); the configured `psf_a_px`
+    /// is not used.
+    GaussFitWidth,
     /// Centre of gravity, power 1, in the box, corrected with the table's pixel-phase curve
     /// for this box and the PSF width (flagged [`super::StarFlags::UNCORRECTED`] without
     /// one). The cheapest method; 1.05-1.6 x the bound for a 3x3 box.
@@ -40,6 +47,7 @@ impl CentroidMethod {
     pub const fn name(self) -> &'static str {
         match self {
             Self::GaussFit => "gauss-fit",
+            Self::GaussFitWidth => "gauss-fit-width",
             Self::Cog1 => "cog1",
             Self::Cog2 => "cog2",
             Self::FusedCog1 => "fused-cog1",
@@ -52,7 +60,7 @@ impl CentroidMethod {
         match self {
             Self::Cog1 | Self::FusedCog1 => Some(CogPower::One),
             Self::Cog2 => Some(CogPower::Two),
-            Self::GaussFit => None,
+            Self::GaussFit | Self::GaussFitWidth => None,
         }
     }
 }
@@ -111,14 +119,17 @@ pub struct TrackerConfig {
 }
 
 impl TrackerConfig {
-    /// The flight configuration. The Gauss fit in both modes: the measured frontier
-    /// (docs/speed.md) puts it within 1.04 x the Cramer-Rao bound, at ~7,000 M7 instructions
-    /// a 7x7 star against ~2,600 for the fused CoG, a small part of a 30-star tracking frame
-    /// (`cargo m7-bench`, `tracker_tracking_frame`: 9.1 M, two thirds of it the bias and dark
-    /// scale of every line); the CoG methods stay for budgets that need them.
+    /// The flight configuration. The width-free Gauss fit in both modes: a real field does
+    /// not give one PSF width (defocus, field curvature, coma), and the fit of a given width
+    /// loses up to 2.5x the Cramer-Rao bound on stars of another width (docs/accuracy.md,
+    /// "width unknown"); fitting each star's own costs ~13,300 M7 instructions a 7x7 star
+    /// against ~7,000 for the given width and ~2,600 for the fused CoG, a small part of a
+    /// 30-star tracking frame (`cargo m7-bench`, `tracker_tracking_frame`, two thirds of it
+    /// the bias and dark scale of every line); the other methods stay for budgets that need
+    /// them and for a field whose width is known.
     pub const FLIGHT: Self = Self {
-        acquisition_method: CentroidMethod::GaussFit,
-        tracking_method: CentroidMethod::GaussFit,
+        acquisition_method: CentroidMethod::GaussFitWidth,
+        tracking_method: CentroidMethod::GaussFitWidth,
         window_px: 7,
         track_margin_px: 2,
         psf_a_px: 1.2,

@@ -10,14 +10,16 @@
 //!   sub-window of a tracking window), ~2.8 KB.
 //!
 //! Cost per star: the window's calibration (~95 M7 instructions a pixel, `cargo m7-bench`
-//! stage `window_calibrate`), then the method (the Gauss fit 7x7 ~7,000, the CoG a few
-//! hundred plus ~140 for the curve).
+//! stage `window_calibrate`), then the method (the width-free Gauss fit 7x7 ~13,300, the
+//! Gauss fit of a given width ~7,000, the CoG a few hundred plus ~140 for the curve).
 
 use super::config::{CentroidMethod, TrackerConfig};
 use super::record::{StarFlags, StarRecord};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
-use crate::centroid::cog::{CogParams, CogPower, cog};
-use crate::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use crate::centroid::cog::{CogParams, CogPower, cog, sigma_unreliable as cog_sigma_unreliable};
+use crate::centroid::gauss_fit::{
+    GaussFitParams, PsfFit, WidthFitParams, gauss_fit, gauss_fit_width,
+};
 use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
 use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
 use crate::table::CalibTable;
@@ -64,11 +66,14 @@ pub(crate) struct Policy<'t> {
     pub(crate) method: CentroidMethod,
     pub(crate) box_px: u8,
     pub(crate) sigma_px: f32,
+    /// The configured PSF 80 % radius, px (where a CoG's sigma holds).
+    pub(crate) psf_a_px: f32,
     /// The curve of the general path (perimeter-median CoG).
     pub(crate) curve: Option<PixCorr<'t>>,
     /// The curve of the fused CoG (given background).
     pub(crate) fused_curve: Option<PixCorr<'t>>,
-    /// The table's CTI correction (section 8), applied to every centroid.
+    /// The table's CTI correction (section 8), applied to every centroid [`Self::record`]
+    /// makes.
     pub(crate) cti: Option<crate::calib::cti::CtiCorrection>,
 }
 
@@ -98,6 +103,7 @@ impl<'t> Policy<'t> {
             method,
             box_px,
             sigma_px: config.psf_sigma_px(),
+            psf_a_px: config.psf_a_px,
             curve,
             fused_curve,
             cti: crate::calib::cti::CtiCorrection::from_table(table, config.psf_sigma_px()),
@@ -106,14 +112,38 @@ impl<'t> Policy<'t> {
 
     /// True for a CoG method (whose position needs the pixel-phase correction).
     fn is_cog(&self) -> bool {
-        self.method != CentroidMethod::GaussFit
+        self.method.cog_power().is_some()
     }
 
-    /// The centroid of `input` by the method (the fused CoG's general path is the CoG),
-    /// corrected with the curve; the flag says when a CoG had none.
+    /// The star's record from `input` by the method (the fused CoG's general path is the
+    /// CoG), a CoG corrected with the curve (flagged [`StarFlags::UNCORRECTED`] without
+    /// one), `flags` added.
+    pub(crate) fn record(&self, input: &CentroidInput<'_>, flags: StarFlags) -> StarRecord {
+        if self.method == CentroidMethod::GaussFitWidth {
+            let f = gauss_fit_width(
+                input,
+                &WidthFitParams {
+                    start_box: self.box_px,
+                    background: Background::PerimeterMedian,
+                    ..WidthFitParams::new()
+                },
+            );
+            let f = PsfFit {
+                centroid: self.cti.map_or(f.centroid, |k| k.corrected(f.centroid)),
+                ..f
+            };
+            return StarRecord::from_psf_fit(&f, flags);
+        }
+        let (c, uncorrected) = self.centroid(input);
+        let c = self.cti.map_or(c, |k| k.corrected(c));
+        StarRecord::from_centroid(&c, flags | uncorrected)
+    }
+
+    /// The centroid of `input` by a method of a given width (the fused CoG's general path
+    /// is the CoG), corrected with the curve; the flag says when a CoG had none.
     pub(crate) fn centroid(&self, input: &CentroidInput<'_>) -> (Centroid, StarFlags) {
         let c = match self.method {
-            CentroidMethod::GaussFit => gauss_fit(
+            CentroidMethod::GaussFit | CentroidMethod::GaussFitWidth => gauss_fit(
                 input,
                 &GaussFitParams {
                     start_box: self.box_px,
@@ -127,9 +157,20 @@ impl<'t> Policy<'t> {
                 cog(input, &CogParams::new(CogPower::One, self.box_px))
             }
         };
+        let unreliable = |corrected: bool, c: &Centroid| {
+            let power = self.method.cog_power().unwrap_or(CogPower::One);
+            if cog_sigma_unreliable(power, self.box_px, self.psf_a_px, corrected, c.snr) {
+                StarFlags::SIGMA_UNRELIABLE
+            } else {
+                StarFlags::empty()
+            }
+        };
         match (self.curve, self.is_cog()) {
-            (Some(k), true) => (k.apply(c), StarFlags::empty()),
-            (None, true) => (c, StarFlags::UNCORRECTED),
+            (Some(k), true) => {
+                let c = k.apply(c);
+                (c, unreliable(true, &c))
+            }
+            (None, true) => (c, StarFlags::UNCORRECTED | unreliable(false, &c)),
             _ => (c, StarFlags::empty()),
         }
     }
@@ -251,8 +292,6 @@ pub(crate) fn measure(
     flags: StarFlags,
     want_background: bool,
 ) -> Measured {
-    let (c, uncorrected) = policy.centroid(input);
-    let c = policy.cti.map_or(c, |k| k.corrected(c));
     let pixel_flags = input
         .pixel_flags
         .iter()
@@ -265,10 +304,7 @@ pub(crate) fn measure(
             variance_e2: b.variance_e2,
         });
     Measured {
-        record: StarRecord::from_centroid(
-            &c,
-            flags | uncorrected | StarFlags::from_pixels(pixel_flags),
-        ),
+        record: policy.record(input, flags | StarFlags::from_pixels(pixel_flags)),
         background,
     }
 }

@@ -4,9 +4,10 @@
 //! table changes). These are the telemetry records of every home: the firmware's log (and
 //! later its link), `stars.csv` of `startrack process`, and the software-in-the-loop's CSV.
 //!
-//! Cost: a record is 28 bytes, a summary under 100; nothing here allocates.
+//! Cost: a record is 36 bytes, a summary under 100; nothing here allocates.
 
 use crate::calib::PixelFlags;
+use crate::centroid::gauss_fit::PsfFit;
 use crate::centroid::{Centroid, CentroidFlags};
 use crate::detect::{DetectionFlags, TrackFlags};
 use crate::units::{BiasAdu, Electrons, Kelvin};
@@ -39,8 +40,8 @@ bitflags::bitflags! {
     /// telemetry, `stars.csv` and the SIL's CSV carry them as a `u32`.
     ///
     /// Bits 0-5 come from the detector that found the star (the line detector in
-    /// acquisition, the window test in tracking), 8-15 from the centroid method, 16 from
-    /// calibration, 17-21 from the tracker itself.
+    /// acquisition, the window test in tracking), 8-15 and 22-23 from the centroid method,
+    /// 16 from calibration, 17-21 from the tracker itself.
     #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
     pub struct StarFlags: u32 {
         /// Detection: a saturated pixel in the blob (acquisition) or the window's interior
@@ -86,6 +87,13 @@ bitflags::bitflags! {
         const RING_LOST = 1 << 20;
         /// The window could not be calibrated: position and flux are the detector's.
         const CALIB_FAILED = 1 << 21;
+        /// Centroid: the fitted PSF does not describe the window (`chi2_dof` above the
+        /// chi-square limit: a blend, a cosmic ray, a PSF the Gaussian cannot follow). The
+        /// position is reported but is not a clean measurement.
+        const POOR_FIT = 1 << 22;
+        /// Centroid: the method's `sigma_x_px`, `sigma_y_px` are known to be wrong by more
+        /// than 10 % in this configuration (docs/accuracy.md, the pull table).
+        const SIGMA_UNRELIABLE = 1 << 23;
     }
 }
 
@@ -112,7 +120,7 @@ const TRACK_BITS: [(TrackFlags, StarFlags); 5] = [
     (TrackFlags::EXCLUDED_PIXEL, StarFlags::DETECT_EXCLUDED),
 ];
 
-const CENTROID_BITS: [(CentroidFlags, StarFlags); 7] = [
+const CENTROID_BITS: [(CentroidFlags, StarFlags); 9] = [
     (CentroidFlags::SATURATED, StarFlags::SATURATED),
     (CentroidFlags::EDGE_CLIPPED, StarFlags::EDGE_CLIPPED),
     (CentroidFlags::EXCLUDED_PIXEL, StarFlags::EXCLUDED_PIXEL),
@@ -120,6 +128,8 @@ const CENTROID_BITS: [(CentroidFlags, StarFlags); 7] = [
     (CentroidFlags::DEGENERATE, StarFlags::DEGENERATE),
     (CentroidFlags::NOT_CONVERGED, StarFlags::NOT_CONVERGED),
     (CentroidFlags::CLAMPED, StarFlags::CLAMPED),
+    (CentroidFlags::POOR_FIT, StarFlags::POOR_FIT),
+    (CentroidFlags::SIGMA_UNRELIABLE, StarFlags::SIGMA_UNRELIABLE),
 ];
 
 impl StarFlags {
@@ -175,10 +185,17 @@ pub struct StarRecord {
     pub sigma_y_px: f32,
     /// What is known about the star.
     pub flags: StarFlags,
+    /// The star's own PSF 80 %-energy radius from the width-free fit, px; 0 when the
+    /// method does not measure it (the CoG, the fit of a given width) or the fit failed.
+    pub psf_a_px: f32,
+    /// The width-free fit's `chi2 / (n - 4)` (about 1 when the Gaussian describes the
+    /// window; [`StarFlags::POOR_FIT`] above the chi-square limit); 0 when not measured.
+    pub chi2_dof: f32,
 }
 
 impl StarRecord {
-    /// A centroid as a record, with `flags` added to the centroid's own.
+    /// A centroid as a record, with `flags` added to the centroid's own (no PSF measured:
+    /// `psf_a_px` and `chi2_dof` 0).
     pub fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {
         Self {
             x_px: c.x_px,
@@ -188,6 +205,17 @@ impl StarRecord {
             sigma_x_px: c.sigma_x_px,
             sigma_y_px: c.sigma_y_px,
             flags: flags | StarFlags::from_centroid(c.flags),
+            psf_a_px: 0.0,
+            chi2_dof: 0.0,
+        }
+    }
+
+    /// A width-free fit as a record, with `flags` added to the centroid's own.
+    pub fn from_psf_fit(f: &PsfFit, flags: StarFlags) -> Self {
+        Self {
+            psf_a_px: f.psf_a_px,
+            chi2_dof: f.chi2_dof,
+            ..Self::from_centroid(&f.centroid, flags)
         }
     }
 

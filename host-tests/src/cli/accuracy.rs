@@ -2,7 +2,10 @@
 //! bound, and of its error estimate over its measured scatter, from the seeded Monte Carlo of
 //! [`crate::accuracy`], printed as markdown.
 
-use crate::accuracy::{Method, Noise, markdown, run as run_table};
+use crate::accuracy::{
+    Method, Noise, markdown, run as run_table, width_unknown_csv, width_unknown_markdown,
+    width_unknown_methods,
+};
 use clap::Args;
 
 /// Options of `startrack accuracy`.
@@ -26,6 +29,14 @@ pub struct AccuracyArgs {
     /// Read noise, e- RMS.
     #[arg(long, default_value_t = 5.0)]
     pub read_noise_e: f64,
+    /// Instead: the "width unknown" table, the width-free fit (the flight method) and a fit
+    /// of an assumed a = 1.2 px on stars of the widths `--a` (default here 0.6, 0.8, 1,
+    /// 1.5, 2 when `--a` is not given).
+    #[arg(long)]
+    pub width_unknown: bool,
+    /// With `--width-unknown`: also write its cells as CSV to this file.
+    #[arg(long, requires = "width_unknown")]
+    pub csv: Option<std::path::PathBuf>,
 }
 
 /// Why the table cannot be made.
@@ -66,6 +77,20 @@ pub fn run(args: &AccuracyArgs) -> Result<String, AccuracyError> {
         trials: args.trials,
         seed: args.seed,
     };
+    if args.width_unknown {
+        let default_a = [0.7, 1.0, 1.5, 2.0];
+        let widths = if args.a == default_a {
+            vec![0.6, 0.8, 1.0, 1.5, 2.0]
+        } else {
+            args.a.clone()
+        };
+        let cells = run_table(&width_unknown_methods(), &widths, &args.snr, &noise);
+        if let Some(p) = &args.csv {
+            std::fs::write(p, width_unknown_csv(&cells))
+                .map_err(|e| AccuracyError(format!("{}: {e}", p.display())))?;
+        }
+        return Ok(width_unknown_markdown(&cells, &args.snr, &noise));
+    }
     let methods = Method::all();
     let cells = run_table(&methods, &args.a, &args.snr, &noise);
     Ok(markdown(&cells, &methods, &args.a, &args.snr, &noise))

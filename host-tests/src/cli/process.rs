@@ -10,10 +10,12 @@
 //! The frame's shape must be the table's geometry (lines x line length, 1033 x 1072 for the
 //! CCD47-20). Exposure and temperature (for hot pixels' own dark law) come from the options,
 //! else from the frame's `EXPTIME` (s) and `CCDTEMP` (K) keywords, else 1 s and the table's
-//! hot-pixel reference temperature. The PSF width (the Gauss fit's, and which pixel-phase
-//! curve a CoG uses) comes from `--psf-a-px` (80 %-energy radius) or `--psf-sigma`, else
-//! the frame's `PSFA` keyword (px, written by `startrack simulate`), else the flight
-//! configuration's.
+//! hot-pixel reference temperature. The default method fits each star's own PSF width
+//! (`gauss-fit-width`, the flight configuration's) and writes it (`psf_a_px`) and the fit's
+//! `chi2_dof` to `stars.csv`. A width given by `--psf-a-px` (80 %-energy radius) or
+//! `--psf-sigma` makes the fit of that width the default; the width (the `gauss-fit`'s,
+//! and which pixel-phase curve a CoG uses) comes from those options, else the frame's
+//! `PSFA` keyword (px, written by `startrack simulate`), else the flight configuration's.
 
 use super::{CliError, read_file};
 use crate::fits::{read_keys, read_raw_frame};
@@ -30,10 +32,11 @@ use std::path::PathBuf;
 pub use crate::home::HOST_CAPACITY;
 
 /// The acquisition methods `process` offers, by their names.
-const METHODS: [CentroidMethod; 3] = [
+const METHODS: [CentroidMethod; 4] = [
     CentroidMethod::Cog1,
     CentroidMethod::Cog2,
     CentroidMethod::GaussFit,
+    CentroidMethod::GaussFitWidth,
 ];
 
 /// The `--method` parser: one of [`METHODS`] by name (clap lists them on a bad value).
@@ -42,7 +45,7 @@ fn method_parser() -> impl clap::builder::TypedValueParser<Value = CentroidMetho
         METHODS
             .into_iter()
             .find(|m| m.name() == s)
-            .unwrap_or(CentroidMethod::GaussFit)
+            .unwrap_or(CentroidMethod::GaussFitWidth)
     })
 }
 
@@ -54,7 +57,9 @@ pub struct ProcessArgs {
     /// Calibration table (from `startrack calib build` or `startrack table`).
     #[arg(long)]
     pub calib: PathBuf,
-    /// Centroid method: gauss-fit (the flight configuration's), cog1 or cog2 (centre of
+    /// Centroid method: gauss-fit-width (the flight configuration's: each star's own PSF
+    /// width fitted; the default unless the width is given), gauss-fit (the width given by
+    /// --psf-a-px or --psf-sigma: the default when one of them is), cog1 or cog2 (centre of
     /// gravity, power 1 or 2, pixel-phase corrected).
     #[arg(long, value_parser = method_parser())]
     pub method: Option<CentroidMethod>,
@@ -108,8 +113,12 @@ pub fn config_of(
         max_stars: HOST_CAPACITY as u16,
         ..TrackerConfig::FLIGHT
     };
-    if let Some(m) = args.method {
-        config.acquisition_method = m;
+    // Told the width, the fit of that width; else each star's own (the flight default).
+    let told_width = args.psf_sigma.is_some() || args.psf_a_px.is_some();
+    match (args.method, told_width) {
+        (Some(m), _) => config.acquisition_method = m,
+        (None, true) => config.acquisition_method = CentroidMethod::GaussFit,
+        (None, false) => {}
     }
     if let Some(w) = args.window {
         config.window_px = w;
@@ -221,6 +230,7 @@ pub fn run(args: &ProcessArgs) -> Result<(), CliError> {
     let method = c.acquisition_method;
     let pixcorr = match (&result.curve, method) {
         (_, CentroidMethod::GaussFit) => String::new(),
+        (_, CentroidMethod::GaussFitWidth) => ", width fitted per star".into(),
         (Some(h), _) => format!(
             ", pixel-phase curve a {:.3} px box {}",
             h.a_px.to_num::<f64>(),

@@ -3,7 +3,7 @@
 //! frame) and the truth (one row per true star per frame) as CSV, the mode changes and a
 //! closing summary on standard error.
 //!
-//! - `--telemetry FILE`: `frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags`
+//! - `--telemetry FILE`: `frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags,psf_a_px,chi2_dof`
 //!   (`flags`: the `StarFlags` bits, docs/formats.md);
 //! - `--truth FILE`: `frame,x_px,y_px,signal_e,a_px`;
 //! - with `--sky`, `--attitude FILE`: one row per frame,
@@ -125,10 +125,7 @@ fn io_error(path: &Path, e: &std::io::Error) -> CliError {
 
 /// Writes the telemetry CSV of `report`.
 pub fn write_telemetry(out: &mut dyn Write, report: &SilReport) -> std::io::Result<()> {
-    writeln!(
-        out,
-        "frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags"
-    )?;
+    writeln!(out, "frame,mode,{}", crate::home::CSV_HEADER)?;
     for f in &report.frames {
         for m in &f.stars {
             writeln!(

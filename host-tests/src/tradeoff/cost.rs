@@ -148,7 +148,11 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
                 (f, g) => f.or(g),
             }
         }
-        Method::GaussFit { window } => {
+        Method::GaussFitWidth { window } => {
+            let (c, ex) = t.by_side("centroid_gauss_fit_width", u16::from(window))?;
+            Some((c, basis(ex, "measured, background given")))
+        }
+        Method::GaussFit { window } | Method::GaussFitAssumed { window, .. } => {
             // The given-background stage runs the Monte Carlo's configuration (background
             // given and held, start box min(window, 5)); older bench CSVs only have the
             // perimeter-median stage that also fits the background, an upper bound.

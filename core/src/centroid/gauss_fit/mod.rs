@@ -83,6 +83,12 @@
 
 mod general;
 mod held;
+mod width;
+
+pub use width::{
+    CHI2_FLAG_Z, MAX_WIDTH_FIT_SIDE, MIN_SIGMA_PX, PsfFit, WidthFitParams, chi2_dof_limit,
+    gauss_fit_width, sigma_unreliable,
+};
 
 use super::math;
 use super::prepared::Prepared;

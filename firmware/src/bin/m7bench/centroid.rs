@@ -3,7 +3,7 @@
 //! pixel-phase curve; the fused CoG replaces it in tracking) and each of [`METHOD_NAMES`] on
 //! the 7x7 window and on its central 5x5, the box filling the window
 //! (`centroid_<method>_<n>x<n>`). The windows come from [`crate::window`]'s
-//! `calibrate_window`. Cost: eleven centroids a window.
+//! `calibrate_window`. Cost: thirteen centroids a window.
 
 use crate::harness::{Bench, Out};
 use crate::inputs::PSF_SIGMA_PX;
@@ -11,13 +11,15 @@ use core::fmt::Write;
 use core::hint::black_box;
 use startrack_core::calib::PixelFlags;
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
-use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
+use startrack_core::centroid::gauss_fit::{
+    GaussFitParams, WidthFitParams, gauss_fit, gauss_fit_width,
+};
 use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::table::pixcorr::PixCorr;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 
-const METHODS: usize = 5;
+const METHODS: usize = 6;
 /// The methods timed on both window sizes, as they appear in the stage names.
 pub const METHOD_NAMES: [&str; METHODS] = [
     "cog1",
@@ -25,6 +27,7 @@ pub const METHOD_NAMES: [&str; METHODS] = [
     "cog1_given_bg",
     "gauss_fit",
     "gauss_fit_given_bg",
+    "gauss_fit_width",
 ];
 
 /// Ticks summed over the windows: the corrected CoG, and every method on 5x5 and 7x7.
@@ -131,6 +134,19 @@ fn run_method(m: usize, side: u8, input: &CentroidInput<'_>) -> f32 {
             },
         ),
         3 => gauss_fit(input, &GaussFitParams::new(PSF_SIGMA_PX)),
+        // The width-free fit, background given and held like the stage before, start
+        // box the window's side capped at 5: the near-CRLB method when the width is unknown.
+        5 => {
+            gauss_fit_width(
+                input,
+                &WidthFitParams {
+                    background: given,
+                    start_box: side.min(5),
+                    ..WidthFitParams::new()
+                },
+            )
+            .centroid
+        }
         // The near-CRLB method as `startrack accuracy` runs it: background given and held
         // (not fitted), start box the window's side capped at 5.
         _ => gauss_fit(

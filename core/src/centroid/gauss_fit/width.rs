@@ -1,0 +1,618 @@
+//! The pixel-integrated Gaussian fit with the PSF width free: `(x, y, N, s)`, for stars whose
+//! width is not known (defocus, field curvature and coma change it across the field and from
+//! star to star). Reports each star's width `psf_a_px` with its error and a goodness of fit
+//! `chi2_dof`, and flags a window the model cannot describe.
+//!
+//! # Model and fit
+//! ```text
+//! m_k = N P(c_k; x, s) P(r_k; y, s),   P(i; x, s) = Phi((i + 1/2 - x)/s) - Phi((i - 1/2 - x)/s)
+//! minimise chi2 = sum((F_k - m_k)^2 / v_k),  v_k = max(m_k, 0) + var_bg + 1 e-^2
+//! ```
+//! over the usable pixels of the window, `F_k` background-subtracted with the background
+//! held (the perimeter's median or mean, or given; not fitted): the held path of [`super`]
+//! with `s` a fourth parameter. Weights from the model, refreshed each Gauss-Newton step.
+//! The Jacobian separates, `J = (N fy dx, N fx dy, fx fy, N (wx fy + fx wy))` with
+//! `f, d, w` the pixel fraction and its derivatives by the centre and by `s`
+//! ([`crate::centroid::math::EdgeGrid::pixels_with_width`]), so per pixel only the weight
+//! (one divide), the residual and ten row sums; per row the 4x4 normal matrix's ten terms
+//! and four right-hand sides. The 4x4 system by `LDL^T` (no square root; a pivot below
+//! `1e-12` of its diagonal is "not positive definite").
+//!
+//! Start: the peak, then in the `start_box` around it the power-1 CoG (position), the box's
+//! flux (`N`) and its second moments, `s^2 = (var_x + var_y) / 2 - 1/12` (the pixel's own
+//! variance removed), clamped to `MIN_SIGMA_PX ..= side / 2`. Steps: position capped at one
+//! pixel, `s` at half its value. Stop when the position and `s` steps are all below
+//! `tolerance_px`. Failure (a step leaving the window, `N <= 0`, `s` leaving
+//! `MIN_SIGMA_PX ..= side / 2`, a matrix that is not positive definite) returns the starting
+//! CoG with [`CentroidFlags::NOT_CONVERGED`]; running out of steps returns the last estimate
+//! with the same flag. Windows over 16 px a side are not fitted (the profile buffers are sized
+//! for star windows): the starting CoG with `NOT_CONVERGED`.
+//!
+//! # Error estimate and goodness of fit
+//! `sigma_x`, `sigma_y`, `sigma_N`, `sigma_s` from the diagonal of `(J^T W J)^-1` at the
+//! solution (the last step's start, less than `tolerance_px` away): the information with the
+//! width a free parameter, so a star's position error includes what not knowing its width
+//! costs. `v_k` counts the star's shot noise and the perimeter's measured variance (sky and
+//! dark shot noise, read noise, the dark and flat maps' residual non-uniformity together).
+//! `psf_a_px = s / sqrt(0.31)` with `sigma_psf_a_px = sigma_s / sqrt(0.31)`.
+//! `chi2_dof = chi2 / (n - 4)` over the `n` usable pixels; for a star the model describes it
+//! follows `chi2(n - 4) / (n - 4)`, and above [`chi2_dof_limit`] (the distribution's upper
+//! `z`-sigma point, `z` = [`CHI2_FLAG_Z`]: a false-flag rate of 1e-3 per star) the
+//! centroid gets [`CentroidFlags::POOR_FIT`]: a blend, a cosmic ray, coma or defocus the
+//! Gaussian cannot follow. The position is still reported, flagged, never as a clean number.
+//! Where the linearised sigmas are known to miss the error by more than 10 % (faint,
+//! undersampled, or wings on the border: [`sigma_unreliable`]) the centroid gets
+//! [`CentroidFlags::SIGMA_UNRELIABLE`].
+//!
+//! # Cost
+//! Per step `w + h + 2` edge `erfc`s, densities and width terms, ~35 instructions a pixel
+//! for the normal equations (the ten row sums), a 4x4 `LDL^T`; from the moment start the
+//! bench's bright star converges in 2 steps on 5x5, 3 on 7x7. Measured on the Cortex-M7
+//! (`cargo m7-bench`, background given; the exact counts in docs/speed.md): ~7,000
+//! instructions for a 5x5 window (`centroid_gauss_fit_width_5x5`, ~2,700 a step, ~1,700 for
+//! validation, start and output) and ~13,300 for 7x7 (`centroid_gauss_fit_width_7x7`,
+//! ~3,700 a step): 1.5x and 1.9x the fit with the width given.
+//!
+//! # Where it fails
+//! - Faint stars (SNR below ~10 in 5x5): the width is poorly determined and the position
+//!   error grows towards the fixed-width fit's at a wrong width; `NOT_CONVERGED` is more
+//!   frequent.
+//! - Non-Gaussian PSFs: the fitted `s` is the Gaussian closest to the PSF; the position is
+//!   the model's centre, not the PSF's centroid; `chi2_dof` flags a strong mismatch.
+//! - A perimeter that holds the star's wings (a window too small for the star) biases the
+//!   held background high and `s` low.
+
+use super::Grid;
+use super::step_usable;
+use crate::centroid::cog::{CogPower, cog_in_box};
+use crate::centroid::math;
+use crate::centroid::prepared::{Measured, Prepared};
+use crate::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
+
+/// Largest window side fitted (the profile buffers' length).
+pub const MAX_WIDTH_FIT_SIDE: u16 = 16;
+const M: usize = MAX_WIDTH_FIT_SIDE as usize;
+
+/// The smallest PSF sigma the fit reports, px (a = 0.45 px): a star narrower than that
+/// (or one whose noise says so) is fitted with `s` held at this floor, the position and flux
+/// free: below it the pixel's own width hides the star's, the width derivative vanishes and
+/// the position's with it when the star sits inside one pixel.
+pub const MIN_SIGMA_PX: f32 = 0.25;
+
+/// The width's step threshold over the position's: `s` is worth less to the position than
+/// its own step suggests (its error is several times the position's), so it stops at 10x the
+/// position tolerance.
+const S_TOLERANCE_FACTOR: f32 = 10.0;
+
+/// The smallest starting sigma, px (a = 0.72 px): a noisy box's moments can put a star
+/// inside one pixel, where the model's position derivatives are steep and the first steps
+/// wild; from 0.4 px the fit finds narrower stars in a step or two.
+const MIN_START_SIGMA_PX: f32 = 0.4;
+
+/// `sqrt(0.31)`: the 80 %-energy radius `a` of a 2-D Gaussian is `s / sqrt(0.31)`.
+const SQRT_031: f32 = 0.556_776_4;
+
+/// The upper-tail point of the standard normal for the `POOR_FIT` flag: 3.09 sigma, a
+/// one-sided false-flag rate of 1e-3 per star whose PSF the model describes.
+pub const CHI2_FLAG_Z: f32 = 3.09;
+
+/// Parameters of [`gauss_fit_width`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WidthFitParams {
+    /// Largest number of Gauss-Newton steps (0 returns the starting CoG, `NOT_CONVERGED`).
+    pub max_iterations: u8,
+    /// Convergence threshold on the position steps, px (the width's is 10 times this).
+    pub tolerance_px: f32,
+    /// The fit also stops when the position and width steps are all below this fraction of
+    /// their own 1-sigma errors (0.02; 0 turns the rule off): a faint star's fit converges
+    /// only linearly, and a step of 2 % of the error changes nothing a user can see.
+    pub tolerance_sigmas: f32,
+    /// Side of the starting CoG's and moments' box, px.
+    pub start_box: u8,
+    /// Background source (held, not fitted).
+    pub background: Background,
+    /// The normal upper-tail point of [`chi2_dof_limit`] (the false-flag rate of
+    /// [`CentroidFlags::POOR_FIT`]); [`CHI2_FLAG_Z`] by default.
+    pub chi2_flag_z: f32,
+}
+
+impl WidthFitParams {
+    /// Ten steps to 1e-4 px from a 5x5 box's CoG and moments, background the perimeter's
+    /// median, the flag at [`CHI2_FLAG_Z`].
+    pub const fn new() -> Self {
+        Self {
+            max_iterations: 10,
+            tolerance_px: 1e-4,
+            tolerance_sigmas: 0.02,
+            start_box: 5,
+            background: Background::PerimeterMedian,
+            chi2_flag_z: CHI2_FLAG_Z,
+        }
+    }
+}
+
+impl Default for WidthFitParams {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// A star's position with its own PSF width and goodness of fit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PsfFit {
+    /// Position, flux (the whole PSF's `N`), SNR (`N / sigma_N`), errors and flags.
+    pub centroid: Centroid,
+    /// The fitted PSF's 80 %-energy radius `a = s / sqrt(0.31)`, px; 0 when not fitted
+    /// (degenerate or `NOT_CONVERGED` on a failure: the starting CoG).
+    pub psf_a_px: f32,
+    /// 1-sigma error of `psf_a_px`, px; 0 when not fitted.
+    pub sigma_psf_a_px: f32,
+    /// `chi2 / (n - 4)` at the solution; 0 when not fitted.
+    pub chi2_dof: f32,
+}
+
+impl PsfFit {
+    /// A centroid without a fitted width (a failure or a degenerate window).
+    fn unfitted(centroid: Centroid) -> Self {
+        Self {
+            centroid,
+            psf_a_px: 0.0,
+            sigma_psf_a_px: 0.0,
+            chi2_dof: 0.0,
+        }
+    }
+}
+
+/// True where the fit's `sigma_x`, `sigma_y` are known to miss its error by more than 10 %
+/// (the pull table of docs/accuracy.md, `startrack accuracy --width-unknown`): below SNR 20
+/// (the width's noise makes the fit non-linear: pulls 1.08-1.33); a star narrower than
+/// a = 0.7 px below SNR 60 (the width and position couple: pulls up to 1.34); a star whose
+/// 3-sigma radius reaches the window's border above SNR 50 (the border, the background's
+/// source, holds its wings: sigmas up to 30 % too large). `s` px, `side` the window's
+/// smaller side, px.
+pub fn sigma_unreliable(s: f32, snr: f32, side: u16) -> bool {
+    let border_px = 0.5 * f32::from(side.saturating_sub(1));
+    snr < 20.0 || (s < 0.7 * SQRT_031 && snr < 60.0) || (3.0 * s > border_px && snr > 50.0)
+}
+
+/// The largest `chi2 / dof` a window of `dof` degrees of freedom passes: the chi-square
+/// distribution's point `z` sigmas into its upper tail by the Wilson-Hilferty cube
+/// (`(1 - c + z sqrt(c))^3`, `c = 2 / (9 dof)`; 0.6 % above the exact quantile at 10
+/// dof, within 0.3 % from 20 on, at `z = 3.09`, host test `centroid_gauss_fit_width`). `f32::MAX` for 0 dof
+/// (nothing to test).
+pub fn chi2_dof_limit(dof: u16, z: f32) -> f32 {
+    if dof == 0 {
+        return f32::MAX;
+    }
+    let c = 2.0 / (9.0 * f32::from(dof));
+    let t = 1.0 - c + z * math::sqrt(c);
+    t * t * t
+}
+
+/// The width-free Gaussian fit of `input` (see the module docs).
+pub fn gauss_fit_width(input: &CentroidInput<'_>, params: &WidthFitParams) -> PsfFit {
+    let p = match Prepared::new(input, params.background) {
+        Ok(p) => p,
+        Err(c) => return PsfFit::unfitted(c),
+    };
+    if p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
+        fit::<false>(&p, params)
+    } else {
+        fit::<true>(&p, params)
+    }
+}
+
+/// The normal equations' sums at one parameter point.
+struct Normal {
+    /// Upper triangle `a00 a01 a02 a03 a11 a12 a13 a22 a23 a33` (order `x, y, N, s`).
+    a: [f32; 10],
+    b: [f32; 4],
+    /// `sum w r^2`.
+    chi2: f32,
+    /// Usable pixels.
+    n: u16,
+}
+
+impl Normal {
+    /// Holds `s`: its row and column decoupled, a unit pivot and a zero right-hand side
+    /// (its step is then 0 and the other parameters' covariance that of the 3-parameter
+    /// fit).
+    fn pin_width(&mut self) {
+        let [a00, a01, a02, _, a11, a12, _, a22, _, _] = self.a;
+        self.a = [a00, a01, a02, 0.0, a11, a12, 0.0, a22, 0.0, 1.0];
+        self.b[3] = 0.0;
+    }
+}
+
+/// The six profiles along the two axes: fraction, centre and width derivatives.
+type Profiles = [[f32; M]; 6];
+
+/// The normal equations at `(x, y, n, s)` (`CLEAN`: no excluded pixel; else excluded pixels
+/// get weight 0).
+fn normal<const CLEAN: bool>(
+    p: &Prepared<'_>,
+    level_e: f32,
+    var1: f32,
+    (x, y, n, s): (f32, f32, f32, f32),
+    prof: &mut Profiles,
+) -> Normal {
+    let grid = Grid::new(s);
+    let wscale = core::f32::consts::SQRT_2 * grid.dscale;
+    let [px, dpx, wpx, py, dpy, wpy] = prof;
+    let (w, h) = (usize::from(p.width), usize::from(p.height));
+    if let (Some(f), Some(d), Some(ws)) = (px.get_mut(..w), dpx.get_mut(..w), wpx.get_mut(..w)) {
+        grid.edges
+            .pixels_with_width(-0.5 - x, grid.dscale, wscale, f, d, ws);
+    }
+    if let (Some(f), Some(d), Some(ws)) = (py.get_mut(..h), dpy.get_mut(..h), wpy.get_mut(..h)) {
+        grid.edges
+            .pixels_with_width(-0.5 - y, grid.dscale, wscale, f, d, ws);
+    }
+    let mut a = [0.0f32; 10];
+    let (mut b0, mut b1, mut b2, mut b3, mut chi2) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let mut used = 0u16;
+    let rows = p
+        .pixels
+        .chunks_exact(w.max(1))
+        .zip(py.iter().zip(dpy.iter().zip(wpy.iter())));
+    let mut first = 0usize;
+    for (line, (&fy, (&dy, &wy))) in rows {
+        let nfy = n * fy;
+        let (mut sdd, mut sdf, mut sff, mut sdw, mut sfw) =
+            (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let (mut sww, mut sdr, mut sfr, mut swr, mut srr) =
+            (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let cols = px.iter().zip(dpx.iter().zip(wpx.iter()));
+        for (i, (e, (&fx, (&dx, &wx)))) in line.iter().zip(cols).enumerate() {
+            let f = e.to_bits() as f32 * (1.0 / 64.0) - level_e;
+            let star = nfy * fx;
+            let wt = if CLEAN {
+                1.0 / (math::pos(star) + var1)
+            } else if p.usable(first + i) {
+                used += 1;
+                1.0 / (math::pos(star) + var1)
+            } else {
+                0.0
+            };
+            let res = f - star;
+            let (wd, wf, ww) = (wt * dx, wt * fx, wt * wx);
+            sdd += wd * dx;
+            sdf += wd * fx;
+            sff += wf * fx;
+            sdw += wd * wx;
+            sfw += wf * wx;
+            sww += ww * wx;
+            sdr += wd * res;
+            sfr += wf * res;
+            swr += ww * res;
+            srr += wt * res * res;
+        }
+        first += w;
+        let (fy2, fdy, fwy) = (fy * fy, fy * dy, fy * wy);
+        let [a00, a01, a02, a03, a11, a12, a13, a22, a23, a33] = &mut a;
+        *a00 += fy2 * sdd;
+        *a01 += fdy * sdf;
+        *a02 += fy2 * sdf;
+        *a03 += fy2 * sdw + fwy * sdf;
+        *a11 += dy * dy * sff;
+        *a12 += fdy * sff;
+        *a13 += fdy * sfw + dy * wy * sff;
+        *a22 += fy2 * sff;
+        *a23 += fy2 * sfw + fwy * sff;
+        *a33 += fy2 * sww + 2.0 * fwy * sfw + wy * wy * sff;
+        b0 += fy * sdr;
+        b1 += dy * sfr;
+        b2 += fy * sfr;
+        b3 += fy * swr + wy * sfr;
+        chi2 += srr;
+    }
+    if CLEAN {
+        used = p.width.saturating_mul(p.height);
+    }
+    let n2 = n * n;
+    let [a00, a01, a02, a03, a11, a12, a13, a22, a23, a33] = a;
+    Normal {
+        a: [
+            a00 * n2,
+            a01 * n2,
+            a02 * n,
+            a03 * n2,
+            a11 * n2,
+            a12 * n,
+            a13 * n2,
+            a22,
+            a23 * n,
+            a33 * n2,
+        ],
+        b: [b0 * n, b1 * n, b2, b3 * n],
+        chi2,
+        n: used,
+    }
+}
+
+/// The `LDL^T` factor of the 4x4 normal matrix: the unit lower triangle and the reciprocal
+/// pivots.
+struct Ldl4 {
+    l: [f32; 6],
+    id: [f32; 4],
+}
+
+impl Ldl4 {
+    /// Factors `a` (upper triangle, [`Normal::a`]'s order); `None` unless every pivot is
+    /// above `1e-12` of its diagonal element and finite.
+    fn new(a: [f32; 10]) -> Option<Self> {
+        let [a00, a01, a02, a03, a11, a12, a13, a22, a23, a33] = a;
+        let ok = |d: f32, aii: f32| d > 1e-12 * aii && d.is_finite() && aii.is_finite();
+        if !ok(a00, a00) || a00 <= 0.0 {
+            return None;
+        }
+        let d0 = a00;
+        let id0 = 1.0 / d0;
+        let (l10, l20, l30) = (a01 * id0, a02 * id0, a03 * id0);
+        let d1 = a11 - l10 * a01;
+        if !ok(d1, a11) {
+            return None;
+        }
+        let id1 = 1.0 / d1;
+        let l21 = (a12 - l20 * a01) * id1;
+        let l31 = (a13 - l30 * a01) * id1;
+        let d2 = a22 - l20 * a02 - l21 * l21 * d1;
+        if !ok(d2, a22) {
+            return None;
+        }
+        let id2 = 1.0 / d2;
+        let l32 = (a23 - l30 * a02 - l31 * l21 * d1) * id2;
+        let d3 = a33 - l30 * a03 - l31 * l31 * d1 - l32 * l32 * d2;
+        if !ok(d3, a33) {
+            return None;
+        }
+        Some(Self {
+            l: [l10, l20, l21, l30, l31, l32],
+            id: [id0, id1, id2, 1.0 / d3],
+        })
+    }
+
+    /// Solves `A x = b`.
+    fn solve(&self, b: [f32; 4]) -> [f32; 4] {
+        let [l10, l20, l21, l30, l31, l32] = self.l;
+        let [id0, id1, id2, id3] = self.id;
+        let [b0, b1, b2, b3] = b;
+        let y1 = b1 - l10 * b0;
+        let y2 = b2 - l20 * b0 - l21 * y1;
+        let y3 = b3 - l30 * b0 - l31 * y1 - l32 * y2;
+        let x3 = y3 * id3;
+        let x2 = y2 * id2 - l32 * x3;
+        let x1 = y1 * id1 - l21 * x2 - l31 * x3;
+        let x0 = b0 * id0 - l10 * x1 - l20 * x2 - l30 * x3;
+        [x0, x1, x2, x3]
+    }
+
+    /// The diagonal of `A^-1`: `sum_k (L^-1)_ki^2 / d_k`.
+    fn inverse_diagonal(&self) -> [f32; 4] {
+        let [l10, l20, l21, l30, l31, l32] = self.l;
+        let [id0, id1, id2, id3] = self.id;
+        // L^-1 (unit lower): m_ij = -sum_{k=j}^{i-1} l_ik m_kj.
+        let m10 = -l10;
+        let m20 = -(l20 + l21 * m10);
+        let m21 = -l21;
+        let m30 = -(l30 + l31 * m10 + l32 * m20);
+        let m31 = -(l31 + l32 * m21);
+        let m32 = -l32;
+        [
+            id0 + m10 * m10 * id1 + m20 * m20 * id2 + m30 * m30 * id3,
+            id1 + m21 * m21 * id2 + m31 * m31 * id3,
+            id2 + m32 * m32 * id3,
+            id3,
+        ]
+    }
+}
+
+/// The start: the peak, the power-1 CoG, flux and second moments of the `start_box` around
+/// it. `None`: no usable peak or no positive flux in the box. `CLEAN` (no excluded pixel):
+/// the peak by one walk of the pixel bits and the box by row slices, as the held path's
+/// start; else [`Prepared::peak`] and the box's usable pixels.
+fn start<const CLEAN: bool>(p: &Prepared<'_>, level_e: f32, start_box: u8) -> Option<Start> {
+    let peak = if CLEAN { peak_clean(p)? } else { p.peak()? };
+    let (bx, clipped) = p.box_around(peak.0, peak.1, start_box);
+    // Moments about the peak pixel, so the sums keep their precision.
+    let (pc, pr) = (f32::from(peak.0), f32::from(peak.1));
+    let (mut s0, mut sc, mut sr, mut scc, mut srr) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    if CLEAN {
+        let w = usize::from(p.width).max(1);
+        let mut dr = f32::from(bx.row0) - pr;
+        for row in bx.row0..=bx.row1 {
+            let first = usize::from(row) * w;
+            let line = p
+                .pixels
+                .get(first + usize::from(bx.col0)..=first + usize::from(bx.col1))?;
+            let (mut rs, mut rc, mut rcc, mut dc) =
+                (0.0f32, 0.0f32, 0.0f32, f32::from(bx.col0) - pc);
+            for e in line {
+                let f = e.to_bits() as f32 * (1.0 / 64.0) - level_e;
+                let fc = f * dc;
+                rs += f;
+                rc += fc;
+                rcc += fc * dc;
+                dc += 1.0;
+            }
+            s0 += rs;
+            sc += rc;
+            scc += rcc;
+            let fr = rs * dr;
+            sr += fr;
+            srr += fr * dr;
+            dr += 1.0;
+        }
+    } else {
+        for (c, r, f) in p.box_pixels(bx) {
+            let (dc, dr) = (f32::from(c) - pc, f32::from(r) - pr);
+            let (fc, fr) = (f * dc, f * dr);
+            s0 += f;
+            sc += fc;
+            sr += fr;
+            scc += fc * dc;
+            srr += fr * dr;
+        }
+    }
+    if s0.is_nan() || s0 <= 0.0 {
+        return None;
+    }
+    let inv = 1.0 / s0;
+    let (mx, my) = (sc * inv, sr * inv);
+    let var = 0.5 * (scc * inv - mx * mx + srr * inv - my * my) - 1.0 / 12.0;
+    Some(Start {
+        peak,
+        theta: (pc + mx, pr + my, s0, math::sqrt(var)),
+        clipped,
+    })
+}
+
+/// The brightest pixel of a window without excluded pixels (ties to the one nearest the
+/// window's centre pixel, as [`Prepared::peak`]), by one walk of the pixel bits.
+fn peak_clean(p: &Prepared<'_>) -> Option<(u16, u16)> {
+    let w = usize::from(p.width).max(1);
+    let (cc, cr) = p.centre();
+    let at = |i: usize| ((i % w) as u16, (i / w) as u16);
+    let dist2 = |i: usize| {
+        let (c, r) = at(i);
+        let (dc, dr) = (u32::from(c.abs_diff(cc)), u32::from(r.abs_diff(cr)));
+        dc * dc + dr * dr
+    };
+    let (mut best_v, mut best_i) = (i32::MIN, None);
+    for (i, e) in p.pixels.iter().enumerate() {
+        let b = e.to_bits();
+        if b > best_v {
+            (best_v, best_i) = (b, Some(i));
+        } else if b == best_v && best_i.is_none_or(|j| dist2(i) < dist2(j)) {
+            best_i = Some(i);
+        }
+    }
+    best_i.map(at)
+}
+
+/// [`start`]'s result: the peak pixel, `(x, y, N, s)` (`s` 0 when the moments gave no
+/// positive variance) and whether the box was clipped.
+struct Start {
+    peak: (u16, u16),
+    theta: (f32, f32, f32, f32),
+    clipped: bool,
+}
+
+/// The width-free fit of a prepared window (see the module docs).
+fn fit<const CLEAN: bool>(p: &Prepared<'_>, params: &WidthFitParams) -> PsfFit {
+    let give_up = |peak: Option<(u16, u16)>, extra: CentroidFlags| {
+        let c = peak.and_then(|(pc, pr)| {
+            let (bx, _) = p.box_around(pc, pr, params.start_box);
+            cog_in_box(p, bx, (pc, pr), CogPower::One)
+        });
+        PsfFit::unfitted(match c {
+            Some(m) => p.finish(m, extra | CentroidFlags::NOT_CONVERGED),
+            None => p.degenerate(extra),
+        })
+    };
+    let Some(Start {
+        peak,
+        theta: (x0, y0, flux0, s0),
+        clipped,
+    }) = start::<CLEAN>(p, p.bg.level_e(), params.start_box)
+    else {
+        return give_up(p.peak(), CentroidFlags::empty());
+    };
+    let mut extra = if clipped {
+        CentroidFlags::EDGE_CLIPPED
+    } else {
+        CentroidFlags::empty()
+    };
+    if p.width > MAX_WIDTH_FIT_SIDE || p.height > MAX_WIDTH_FIT_SIDE {
+        return give_up(Some(peak), extra);
+    }
+    let max_s = 0.5 * f32::from(p.width.max(p.height));
+    let level_e = p.bg.level_e();
+    let var1 = p.bg.variance_e2 + 1.0;
+    let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
+    let mut theta = (x0, y0, flux0, s0.clamp(MIN_START_SIGMA_PX, max_s));
+    let mut prof = [[0.0f32; M]; 6];
+    let mut converged = false;
+    let mut last = None;
+    let tol = params.tolerance_px;
+    for _ in 0..params.max_iterations {
+        let mut nrm = normal::<CLEAN>(p, level_e, var1, theta, &mut prof);
+        // A star narrower than the floor: `s` held there while chi2 wants it lower.
+        if theta.3 <= MIN_SIGMA_PX && nrm.b[3] <= 0.0 {
+            nrm.pin_width();
+        }
+        let Some(f) = Ldl4::new(nrm.a) else {
+            return give_up(Some(peak), extra);
+        };
+        let [dx, dy, dn, ds] = f.solve(nrm.b);
+        let (sx, sy) = (dx.clamp(-1.0, 1.0), dy.clamp(-1.0, 1.0));
+        let half = 0.5 * theta.3;
+        let s_new = (theta.3 + ds.clamp(-half, half)).clamp(MIN_SIGMA_PX, max_s);
+        let ss = s_new - theta.3;
+        theta = (theta.0 + sx, theta.1 + sy, theta.2 + dn, s_new);
+        let (x, y, flux, s) = theta;
+        if !step_usable(x, y, flux, wmax, hmax) || !s.is_finite() {
+            return give_up(Some(peak), extra);
+        }
+        let done = if sx.abs() < tol && sy.abs() < tol && ss.abs() < S_TOLERANCE_FACTOR * tol {
+            true
+        } else if params.tolerance_sigmas > 0.0 {
+            // Faint stars: Gauss-Newton converges only linearly (the noise's curvature term
+            // it leaves out), so stop once every step is a small fraction of its own error.
+            let [vx, vy, _, vs] = f.inverse_diagonal();
+            let t2 = params.tolerance_sigmas * params.tolerance_sigmas;
+            sx * sx < t2 * vx && sy * sy < t2 * vy && ss * ss < t2 * vs
+        } else {
+            false
+        };
+        if done {
+            converged = true;
+            last = Some((f, nrm.chi2, nrm.n));
+            break;
+        }
+    }
+    if !converged {
+        extra |= CentroidFlags::NOT_CONVERGED;
+    }
+    let last = match last {
+        Some(l) => Some(l),
+        None => {
+            let mut nrm = normal::<CLEAN>(p, level_e, var1, theta, &mut prof);
+            if theta.3 <= MIN_SIGMA_PX && nrm.b[3] <= 0.0 {
+                nrm.pin_width();
+            }
+            Ldl4::new(nrm.a).map(|f| (f, nrm.chi2, nrm.n))
+        }
+    };
+    let Some((f, chi2, n)) = last else {
+        return give_up(Some(peak), extra);
+    };
+    let [vx, vy, vn, vs] = f.inverse_diagonal();
+    let dof = n.saturating_sub(4);
+    let chi2_dof = if dof > 0 { chi2 / f32::from(dof) } else { 0.0 };
+    if chi2_dof > chi2_dof_limit(dof, params.chi2_flag_z) || !chi2_dof.is_finite() {
+        extra |= CentroidFlags::POOR_FIT;
+    }
+    let (x, y, flux, s) = theta;
+    let snr = flux / math::sqrt(vn).max(f32::MIN_POSITIVE);
+    if sigma_unreliable(s, snr, p.width.min(p.height)) {
+        extra |= CentroidFlags::SIGMA_UNRELIABLE;
+    }
+    let m = Measured {
+        col: x,
+        row: y,
+        flux_e: flux,
+        snr,
+        sigma_col: math::sqrt(vx),
+        sigma_row: math::sqrt(vy),
+    };
+    let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
+    PsfFit {
+        centroid: p.finish(m, extra),
+        psf_a_px: finite(s / SQRT_031),
+        sigma_psf_a_px: finite(math::sqrt(vs) / SQRT_031),
+        chi2_dof: finite(chi2_dof),
+    }
+}
