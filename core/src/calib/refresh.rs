@@ -186,6 +186,8 @@ pub struct WatchCounters {
     pub confirmed_lost: u32,
     /// Confirmed pixels dropped because the table in force now lists them.
     pub retired: u32,
+    /// Pixels the overlay excluded (one a window it lay in).
+    pub applied: u32,
 }
 
 /// The outcome at one watched position in one frame.
@@ -312,6 +314,7 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
                 evicted: 0,
                 confirmed_lost: 0,
                 retired: 0,
+                applied: 0,
             },
         }
     }
@@ -479,7 +482,12 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
     /// Applies the confirmed pixels to a calibrated window: value 0 and
     /// [`PixelFlags::FOUND_IN_FLIGHT`]. Returns how many pixels it changed; a window with
     /// mismatched buffers is left alone.
-    pub fn apply(&self, rect: Rect, pixels_e: &mut [Electrons], flags: &mut [PixelFlags]) -> u16 {
+    pub fn apply(
+        &mut self,
+        rect: Rect,
+        pixels_e: &mut [Electrons],
+        flags: &mut [PixelFlags],
+    ) -> u16 {
         let n = rect.len();
         if pixels_e.len() != n || flags.len() != n {
             return 0;
@@ -501,6 +509,7 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
                 changed = changed.saturating_add(1);
             }
         }
+        self.counters.applied = self.counters.applied.saturating_add(u32::from(changed));
         changed
     }
 
