@@ -29,22 +29,24 @@
 //!
 //! Why N = 4: `E` is the difference of a pixel and a median of 8, with variance
 //! `sigma^2 (1 + pi / 16) = (1.094 sigma)^2`, so `E > 5 sigma` is a 4.57-sigma Gaussian tail:
-//! `p = 2.4e-6` per watched pixel and frame. Thirty 11x11 windows watch ~2,700 pixels a
-//! frame, ~0.007 false hits a frame. A false confirmation needs 4 hits in at most 5 frames
-//! at one position: `5 p^4 = 1.7e-22` per position, 1e-10 over a year of 10 Hz frames with
+//! `p = 2.4e-6` per watched pixel and frame. Thirty 11x11 windows watch ~1,300 pixels a
+//! frame (44 of each window's 81 inner pixels lie 3.5 px or more from its star), ~0.003
+//! false hits a frame. A false confirmation needs 4 hits in at most 5 frames at one
+//! position: `5 p^4 = 1.7e-22` per position, below 1e-10 over a year of 10 Hz frames with
 //! every watched pixel fresh each frame. Cosmic rays and faint untracked stars, not noise,
 //! make most candidates: a cosmic ray does not recur, and a faint star drifting with the
 //! field leaves the pixel before it recurs. A star held still on the detector (an inertial
-//! hold) for more than N frames, faint enough (`S4` below `2 sigma_S4`, i.e. peak below
-//! ~28 sigma for a = 0.6 px) and not tracked, can be confirmed: the exclusion around the
-//! tracked stars covers only them.
+//! hold) for more than N frames, faint enough (`S4` below `2 sigma_S4`, i.e. a peak below
+//! ~14 sigma for a = 0.6 px centred on a pixel) and not tracked, can be confirmed: the
+//! exclusion around the tracked stars covers only them.
 //!
 //! # Cost and memory
 //! Per watched pixel: one sort of 8 values (~20 comparisons), ~30 arithmetic operations and
 //! a distance test to the stars near the window (at most [`MAX_NEAR_STARS`]); for an 11x11
 //! window (81 pixels inside the border) about 6 k operations (counted, not measured), plus
-//! a pass over the candidates and confirmed pixels. [`DefectWatch::apply`] is a pass over the confirmed list.
-//! Memory: 16 B a candidate and 16 B a confirmed pixel (`DefectWatch<64, 32>`: 1.5 KB).
+//! a pass over the candidates and confirmed pixels. [`DefectWatch::apply`] is a pass over
+//! the confirmed list. Memory: 16 B a candidate and 16 B a confirmed pixel
+//! (`DefectWatch<64, 32>`: 1,600 B with its settings and counters, on a 64-bit host).
 //! No allocation, no recursion, no panic: a full list evicts its weakest candidate, a full
 //! confirmed list counts what it could not keep.
 
