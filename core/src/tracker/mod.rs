@@ -52,7 +52,7 @@
 //! line, a row test per window and the copy of the rows in windows; per star, the window's
 //! calibration, in tracking the window test, and the method (`measure`). Whole frames as the
 //! board runs them (`cargo m7-bench`, 30 stars, QEMU instructions): standby 6.3 M,
-//! acquisition 37.9 M, tracking 9.4 M (`tracker_*_frame`; docs/tracker.md breaks them down).
+//! acquisition 37.9 M, tracking 9.3 M (`tracker_*_frame`; docs/tracker.md breaks them down).
 
 mod acquire;
 pub mod config;
