@@ -9,12 +9,15 @@
 //! - [`hot`]: the dark signal of a hot pixel from its own rate and temperature law.
 //! - [`pixel`]: the per-pixel formula, applied only to the pixels the pipeline reads
 //!   (a line span or a star window), with the flags it raises.
+//! - [`refresh`]: new hot and telegraph pixels found in flight, and the overlay that
+//!   excludes them until a table lists them.
 
 pub mod cti;
 pub mod formula;
 pub mod hot;
 pub mod levels;
 pub mod pixel;
+pub mod refresh;
 
 pub use levels::{DarkScaleEstimator, LineError, LineLevels};
 pub use pixel::{CalibError, FrameCalibration, FrameConditions, PixelFlags};

@@ -36,13 +36,16 @@ bitflags::bitflags! {
         const HOT_EXCLUDED = 4;
         /// A telegraph (RTS) pixel: always excluded, value 0, do not use.
         const TELEGRAPH = 8;
+        /// A defect found in flight ([`super::refresh`]) that the table does not list yet:
+        /// value 0, do not use.
+        const FOUND_IN_FLIGHT = 16;
     }
 }
 
 impl PixelFlags {
     /// True when the pixel's value must not be used.
     pub fn is_excluded(self) -> bool {
-        self.intersects(Self::HOT_EXCLUDED | Self::TELEGRAPH)
+        self.intersects(Self::HOT_EXCLUDED | Self::TELEGRAPH | Self::FOUND_IN_FLIGHT)
     }
 }
 

@@ -241,6 +241,16 @@ impl Scratch {
             .map_err(|_| MeasureError::Calibration)
     }
 
+    /// The calibrated pixels and flags of `rect`, to be amended in place (the in-flight
+    /// defect overlay).
+    pub(crate) fn calibrated_mut(
+        &mut self,
+        rect: Rect,
+    ) -> Option<(&mut [Electrons], &mut [PixelFlags])> {
+        let n = rect.len();
+        Some((self.electrons.get_mut(..n)?, self.flags.get_mut(..n)?))
+    }
+
     /// The calibrated window of `rect` as a centroid input.
     pub(crate) fn window(&self, rect: Rect, clipped: bool) -> Option<CentroidInput<'_>> {
         let n = rect.len();

@@ -42,9 +42,9 @@
 //! [`TrackerBuffers`] (the line ring 34 KB, the tracking windows 19 KB, the fused CoG's
 //! plans 15 KB) lives where the home puts it (`.bss` on the board); the [`Tracker`] itself
 //! holds the scan detector (~13 KB of line buffers plus `N` candidates of 28 B), the
-//! pending windows, the star list (`N` x ~60 B), one window's scratch (~2.8 KB) and the
-//! last frame's stars. `size_of` of both is printed and bounded by the host test
-//! `tracker_memory`.
+//! pending windows, the star list (`N` x ~60 B), one window's scratch (~2.8 KB), the
+//! last frame's stars and the in-flight defect watch ([`Watch`], 1.6 KB). `size_of` of
+//! both is printed and bounded by the host test `tracker_memory`.
 //!
 //! # Cost
 //! Every line: its bias levels and covered pixels (~5,700 M7 instructions). Per acquisition
@@ -52,7 +52,7 @@
 //! line, a row test per window and the copy of the rows in windows; per star, the window's
 //! calibration, in tracking the window test, and the method (`measure`). Whole frames as the
 //! board runs them (`cargo m7-bench`, 30 stars, QEMU instructions): standby 6.3 M,
-//! acquisition 37.9 M, tracking 9.1 M (`tracker_*_frame`; docs/tracker.md breaks them down).
+//! acquisition 37.9 M, tracking 9.3 M (`tracker_*_frame`; docs/tracker.md breaks them down).
 
 mod acquire;
 pub mod config;
@@ -75,6 +75,7 @@ pub use record::{
     TemperatureSource,
 };
 
+use crate::calib::refresh::{Defect, DefectWatch};
 use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels};
 use crate::centroid::raw_cog::RawCogPlan;
 use crate::detect::{LineRing, WindowCapture};
@@ -94,6 +95,13 @@ pub const RING_LINES: usize = 16;
 pub const RING_LINE_LEN: usize = ReadoutGeometry::CCD47_20_DUAL.line_len();
 /// Most stars tracked at once (tracking windows, fused CoG plans).
 pub const TRACK_WINDOWS: usize = 32;
+
+/// Candidates the in-flight defect watch keeps.
+pub const WATCH_CANDIDATES: usize = 64;
+/// Confirmed in-flight defects the overlay holds.
+pub const WATCH_CONFIRMED: usize = 32;
+/// The in-flight defect watch of tracking ([`crate::calib::refresh`]).
+pub type Watch = DefectWatch<WATCH_CANDIDATES, WATCH_CONFIRMED>;
 
 /// The line ring of acquisition.
 pub type Ring = LineRing<RING_LINES, RING_LINE_LEN>;
@@ -174,6 +182,8 @@ struct FrameWork<const N: usize> {
     scratch: Scratch,
     stars: StarList<N>,
     summary: FrameSummary,
+    /// New hot and telegraph pixels seen in the tracking windows, and their overlay.
+    watch: Watch,
 }
 
 /// What a mode's work reaches for one call: the large buffers and the frame's work.
@@ -184,6 +194,7 @@ pub(crate) struct Shared<'a, const N: usize> {
     pub(crate) scratch: &'a mut Scratch,
     pub(crate) stars: &'a mut StarList<N>,
     pub(crate) summary: &'a mut FrameSummary,
+    pub(crate) watch: &'a mut Watch,
 }
 
 impl<'a, const N: usize> Shared<'a, N> {
@@ -195,6 +206,7 @@ impl<'a, const N: usize> Shared<'a, N> {
             scratch: &mut work.scratch,
             stars: &mut work.stars,
             summary: &mut work.summary,
+            watch: &mut work.watch,
         }
     }
 }
@@ -236,8 +248,21 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
                 scratch: Scratch::new(),
                 stars: StarList::new(),
                 summary: FrameSummary::empty(0, Mode::Standby, 0),
+                watch: Watch::new(crate::calib::refresh::WatchConfig::DEFAULT),
             },
         })
+    }
+
+    /// Hot and telegraph pixels found in flight that the table in force does not list yet
+    /// (excluded from every tracking window from their confirmation on), for the home to
+    /// log or report.
+    pub fn new_defects(&self) -> &[Defect] {
+        self.work.watch.confirmed()
+    }
+
+    /// The in-flight defect watch: its candidates and counters.
+    pub fn defect_watch(&self) -> &Watch {
+        &self.work.watch
     }
 
     /// The configuration in force.
