@@ -543,7 +543,7 @@ pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usiz
     Some((frame, mode, count))
 }
 
-/// The attitude report's fields (TM[134,2]), in order: name, type, meaning.
+/// The attitude report's fields (`TM[134,2]`), in order: name, type, meaning.
 pub const ATTITUDE_FIELDS: [(&str, &str, &str); 17] = [
     ("frame", "u32", "the frame"),
     (
