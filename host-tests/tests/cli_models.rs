@@ -219,24 +219,5 @@ fn calib_build_writes_both_model_sections() {
 }
 
 fn base_args(dir: &std::path::Path) -> CalibBuildArgs {
-    CalibBuildArgs {
-        out: dir.join("t.bin"),
-        bias: None,
-        dark: None,
-        flat: None,
-        gains: None,
-        hot: None,
-        hot_exposure_s: 1.0,
-        hot_ref_k: 293.0,
-        hot_doubling_k: 6.0,
-        hot_exclude_above_e: 10_000.0,
-        tile_log2: 0,
-        saturation_adu: 65535,
-        psf_a_px: None,
-        pixcorr_boxes: "5,7".into(),
-        pixcorr_powers: "1,2".into(),
-        cti: None,
-        psf_model: None,
-        camera_model: None,
-    }
+    common_cli::bare_args(dir.join("t.bin"))
 }

@@ -2,6 +2,9 @@
 //! simulated case through distorted optics, the fitted model written as JSON and compared
 //! with the truth, and the model stored in the calibration table and read back.
 
+#[path = "common/cli.rs"]
+mod common_cli;
+
 use startrack_core::table::CalibTable;
 use startrack_host::cli::CliError;
 use startrack_host::cli::calib_build::{CalibBuildArgs, build};
@@ -12,24 +15,9 @@ use startrack_host::optics::simulated_truth;
 
 fn calib_args(out: std::path::PathBuf, camera_model: Option<std::path::PathBuf>) -> CalibBuildArgs {
     CalibBuildArgs {
-        out,
-        bias: None,
-        dark: None,
-        flat: None,
         gains: Some("1.5,1.5".into()),
-        hot: None,
-        hot_exposure_s: 1.0,
-        hot_ref_k: 293.0,
-        hot_doubling_k: 6.0,
-        hot_exclude_above_e: 10_000.0,
-        tile_log2: 0,
-        saturation_adu: 65535,
-        psf_a_px: None,
-        pixcorr_boxes: "5,7".into(),
-        pixcorr_powers: "1,2".into(),
-        cti: None,
-        psf_model: None,
         camera_model,
+        ..common_cli::bare_args(out)
     }
 }
 

@@ -20,17 +20,16 @@ pub fn startrack(args: &[&str]) -> (bool, String, String) {
     )
 }
 
-/// `calib build` of every map `simulate` wrote into `f`, with the command's defaults: gains
-/// from the maps' keywords, per-pixel maps, the ADC's full range as saturation, no
-/// pixel-phase curves.
-pub fn build_args(f: &SimFiles, out: PathBuf) -> CalibBuildArgs {
+/// `calib build` with every option at its command-line default and no map at all, writing
+/// `out` (a test sets the few it needs on top).
+pub fn bare_args(out: PathBuf) -> CalibBuildArgs {
     CalibBuildArgs {
         out,
-        bias: Some(f.bias.clone()),
-        dark: Some(f.dark.clone()),
-        flat: Some(f.flat.clone()),
+        bias: None,
+        dark: None,
+        flat: None,
         gains: None,
-        hot: Some(f.hot.clone()),
+        hot: None,
         hot_exposure_s: 1.0,
         hot_ref_k: 293.0,
         hot_doubling_k: 6.0,
@@ -43,5 +42,18 @@ pub fn build_args(f: &SimFiles, out: PathBuf) -> CalibBuildArgs {
         cti: None,
         psf_model: None,
         camera_model: None,
+    }
+}
+
+/// `calib build` of every map `simulate` wrote into `f`, with the command's defaults: gains
+/// from the maps' keywords, per-pixel maps, the ADC's full range as saturation, no
+/// pixel-phase curves.
+pub fn build_args(f: &SimFiles, out: PathBuf) -> CalibBuildArgs {
+    CalibBuildArgs {
+        bias: Some(f.bias.clone()),
+        dark: Some(f.dark.clone()),
+        flat: Some(f.flat.clone()),
+        hot: Some(f.hot.clone()),
+        ..bare_args(out)
     }
 }
