@@ -59,27 +59,11 @@ fn frames_since(last: &mut u32, frame: u32) -> u32 {
 fn random_commands_through_noise_keep_the_tracker_consistent() {
     let steps = env_u32("LINK_SOAK_STEPS", 12);
     let min_frames = env_u32("LINK_SOAK_MIN_FRAMES", 0);
-    let stop = Arc::new(AtomicBool::new(false));
-    let config = ServeConfig {
-        sil: SilConfig {
-            stars: 6,
-            ..SilConfig::default()
-        },
-        port: 0,
-        link_noise: 1e-4,
-        max_frames: None,
-        stop: Some(stop.clone()),
-        flash: None,
-    };
-    let (tx, rx) = std::sync::mpsc::channel();
-    let server = std::thread::spawn(move || {
-        serve(&config, &mut |p| {
-            let _ = tx.send(p);
-        })
-    });
-    let port = rx.recv_timeout(Duration::from_secs(60)).expect("port");
-    let mut g = Ground::connect(port, Duration::from_secs(30)).expect("connect");
-    g.retries = 5;
+    let Boot {
+        server,
+        stop,
+        ground: mut g,
+    } = boot(None, Duration::from_secs(30));
 
     let tables: Vec<Vec<u8>> = [3u8, 4]
         .iter()
@@ -155,14 +139,27 @@ fn random_commands_through_noise_keep_the_tracker_consistent() {
     );
 }
 
-/// A SIL served in a thread, on a flash file with a power cut armed.
+/// A SIL served in a thread and the ground connected to it.
 struct Boot {
     server: std::thread::JoinHandle<Result<ServeReport, String>>,
     stop: Arc<AtomicBool>,
     ground: Ground,
 }
 
-fn boot(flash: &std::path::Path, cut_at: u64) -> Boot {
+/// [`boot`] on the flash file `flash`, a power cut armed at flash step `cut_at`.
+fn boot_flash(flash: &std::path::Path, cut_at: u64) -> Boot {
+    boot(
+        Some(FlashConfig {
+            path: flash.to_path_buf(),
+            power_cut_at_write: Some(cut_at),
+        }),
+        Duration::from_secs(10),
+    )
+}
+
+/// Serves the SIL in a thread (tables in memory, or in the flash store with a power cut
+/// armed) and connects the ground to it.
+fn boot(flash: Option<FlashConfig>, timeout: Duration) -> Boot {
     let stop = Arc::new(AtomicBool::new(false));
     let config = ServeConfig {
         sil: SilConfig {
@@ -173,10 +170,7 @@ fn boot(flash: &std::path::Path, cut_at: u64) -> Boot {
         link_noise: 1e-4,
         max_frames: None,
         stop: Some(stop.clone()),
-        flash: Some(FlashConfig {
-            path: flash.to_path_buf(),
-            power_cut_at_write: Some(cut_at),
-        }),
+        flash,
     };
     let (tx, rx) = std::sync::mpsc::channel();
     let server = std::thread::spawn(move || {
@@ -185,7 +179,7 @@ fn boot(flash: &std::path::Path, cut_at: u64) -> Boot {
         })
     });
     let port = rx.recv_timeout(Duration::from_secs(60)).expect("port");
-    let mut ground = Ground::connect(port, Duration::from_secs(10)).expect("connect");
+    let mut ground = Ground::connect(port, timeout).expect("connect");
     ground.retries = 5;
     Boot {
         server,
@@ -211,7 +205,7 @@ fn flash_store_soak_with_power_cuts_keeps_a_committed_table() {
     // Flash steps of one upload of the larger table: 2 erases, its units, the header.
     let upload_steps = 2 + tables[0].len().div_ceil(32) as u64 + 1;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
-    let mut b = boot(&flash, rng.random_range(1..=2 * upload_steps));
+    let mut b = boot_flash(&flash, rng.random_range(1..=2 * upload_steps));
     let mut in_force = b
         .ground
         .status()
@@ -244,7 +238,7 @@ fn flash_store_soak_with_power_cuts_keeps_a_committed_table() {
                         assert!(report.power_cut, "step {step}: upload failed: {e}");
                         frames += report.frames;
                         cuts += 1;
-                        b = boot(&flash, rng.random_range(1..=2 * upload_steps));
+                        b = boot_flash(&flash, rng.random_range(1..=2 * upload_steps));
                         last_frame = 0;
                         let now = b.ground.status().expect("status after reboot").table;
                         let now = now.expect("a table in force after the cut");
