@@ -176,7 +176,7 @@ fn table(page: &str, name: &str) -> (Vec<String>, Vec<Vec<String>>) {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 14] = [
+const CHECKED: [&str; 15] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -191,6 +191,7 @@ const CHECKED: [&str; 14] = [
     "tracker-memory",
     "readout-plan",
     "accuracy-width-unknown",
+    "psf-shapes",
 ];
 
 #[test]
@@ -497,12 +498,39 @@ fn passing_up_to(
     last
 }
 
+/// The PSF-width mismatch sweep: the contiguous range of true widths around the configured one
+/// (the rows' `a_px`) over which every step passes, `lo-hi`, or `fails` when the configured
+/// width itself fails.
+fn true_width_range(recs: &[HashMap<&str, &str>], method: &str) -> String {
+    let mut steps: Vec<(f64, &str, &str, f64)> = recs
+        .iter()
+        .filter(|x| x["method"] == method && x["sweep"] == "true_a_px")
+        .map(|x| (num(x["value"]), x["value"], x["fail"], num(x["a_px"])))
+        .collect();
+    steps.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let Some(i) = steps.iter().position(|s| s.0 == s.3) else {
+        panic!("{method}: the true_a_px sweep lacks the configured width");
+    };
+    if steps[i].2 != "pass" {
+        return "fails".into();
+    }
+    let (mut lo, mut hi) = (i, i);
+    while lo > 0 && steps[lo - 1].2 == "pass" {
+        lo -= 1;
+    }
+    while hi + 1 < steps.len() && steps[hi + 1].2 == "pass" {
+        hi += 1;
+    }
+    format!("{}-{}", steps[lo].1, steps[hi].1)
+}
+
 #[test]
 fn failure_map_table_is_the_failures_csv() {
     let csv = Csv::read(FAILURES);
     let recs = csv.records();
     let (header, body) = table("docs/accuracy.md", "failure-maps");
-    assert_eq!(header.len(), 2 + SWEEPS.len());
+    // The sweeps, then the width mismatch's passing range of true widths.
+    assert_eq!(header.len(), 2 + SWEEPS.len() + 1);
     let mut listed = Vec::new();
     for r in &body {
         let m = r[0].as_str();
@@ -529,6 +557,12 @@ fn failure_map_table_is_the_failures_csv() {
                 "docs/accuracy.md: {m}, {sweep}: {cell} in the docs, {want} in {FAILURES}"
             );
         }
+        let want = true_width_range(&recs, m);
+        assert_eq!(
+            r[2 + SWEEPS.len()],
+            want,
+            "docs/accuracy.md: {m}, true a passing: {FAILURES} says {want}"
+        );
         listed.push(m.to_string());
     }
     assert_eq!(
@@ -662,11 +696,11 @@ fn failure_map_bullets_are_the_failures_csv() {
         "(a = {l5:.2}-{h5:.2} px for 5x5, {l7:.2}-{h7:.2} px for 7x7)"
     ));
 
-    // The Gauss fit: never biased nor above 2x the bound at SNR >= 3.5; at the smallest a it
-    // often does not converge.
+    // The Gauss fit told the width: never biased nor above 2x the bound at SNR >= 3.5; at the
+    // smallest a it often does not converge.
     let fit: Vec<_> = grid
         .iter()
-        .filter(|x| x["method"].starts_with("gauss fit"))
+        .filter(|x| x["method"].starts_with("gauss fit") && !x["method"].contains("width-free"))
         .collect();
     for x in fit.iter().filter(|x| num(x["snr"]) >= 3.5) {
         assert!(
@@ -692,6 +726,41 @@ fn failure_map_bullets_are_the_failures_csv() {
         "({:.0}-{:.0} % detected at SNR >= 5)",
         100.0 * rates.iter().copied().fold(f64::INFINITY, f64::min),
         100.0 * rates.iter().copied().fold(0.0, f64::max)
+    ));
+
+    // The width-free fit 7x7: the lowest grid SNR from which every cell of a >= 0.5 px passes,
+    // and its systematic error at the smallest a (below its width floor).
+    let free: Vec<_> = grid
+        .iter()
+        .filter(|x| x["method"] == "gauss fit width-free 7x7")
+        .collect();
+    let mut snrs: Vec<f64> = free.iter().map(|x| num(x["snr"])).collect();
+    snrs.sort_by(f64::total_cmp);
+    snrs.dedup();
+    let passes_from = |s: f64| {
+        free.iter()
+            .filter(|x| num(x["snr"]) >= s && num(x["a_px"]) >= 0.5)
+            .all(|x| x["fail"] == "pass")
+    };
+    let lowest = snrs
+        .iter()
+        .copied()
+        .find(|&s| passes_from(s))
+        .expect("the width-free fit passes at the top of the grid");
+    has(format!(
+        "passes every cell of a = 0.5-{} px from SNR {lowest:.1} up",
+        a_values[a_values.len() - 1]
+    ));
+    let b0: Vec<f64> = free
+        .iter()
+        .filter(|x| num(x["a_px"]) == a_values[0])
+        .map(|x| num(x["bias_px"]))
+        .collect();
+    has(format!(
+        "its systematic error at a = {} px is {:.3}-{:.3} px",
+        a_values[0],
+        b0.iter().copied().fold(f64::INFINITY, f64::min),
+        b0.iter().copied().fold(0.0, f64::max)
     ));
 }
 
@@ -1079,4 +1148,69 @@ fn width_unknown_table_is_its_csv() {
         }
     }
     assert_eq!(seen, csv.len(), "every CSV row in the table");
+}
+
+const SHAPES: &str = "host-tests/figures/psf-shapes.csv";
+
+#[test]
+fn psf_shape_table_is_its_csv() {
+    let csv = Csv::read(SHAPES);
+    let recs = csv.records();
+    let (header, body) = table("docs/accuracy.md", "psf-shapes");
+    assert_eq!(header[0], "method");
+    // Columns: `gaussian`, or `defocus|coma SIZE px`.
+    let shapes: Vec<(String, f64)> = header[1..]
+        .iter()
+        .map(|h| match h.split_whitespace().collect::<Vec<_>>()[..] {
+            [name] => (name.to_string(), 0.0),
+            [name, size, "px"] => (name.to_string(), num(size)),
+            _ => panic!("docs/accuracy.md psf-shapes: column {h:?}"),
+        })
+        .collect();
+    let mut listed = Vec::new();
+    for r in &body {
+        let m = r[0].as_str();
+        for (cell, (name, size)) in r[1..].iter().zip(&shapes) {
+            let x = recs
+                .iter()
+                .find(|x| x["method"] == m && x["shape"] == name && num(x["size_px"]) == *size)
+                .unwrap_or_else(|| panic!("{SHAPES}: no {m} on {name} {size}"));
+            let what = format!("docs/accuracy.md psf-shapes: {m} on {name} {size}");
+            if cell == "not converged" {
+                assert_eq!(x["failed"], x["trials"], "{what}");
+                continue;
+            }
+            let (rest, failed) = match cell.split_once(" (") {
+                Some((v, f)) => (v, f.strip_suffix(" failed)").expect("(N failed)")),
+                None => (cell.as_str(), "0"),
+            };
+            assert_eq!(failed, x["failed"], "{what}: failed");
+            let (rest, poor) = match rest.split_once(" [") {
+                Some((v, p)) => (v, p.strip_suffix(" % POOR_FIT]").expect("[P % POOR_FIT]")),
+                None => (rest, "0"),
+            };
+            assert!(
+                matches_value(poor, 100.0 * num(x["poor_fit_rate"])),
+                "{what}: POOR_FIT {poor} %, {} in {SHAPES}",
+                x["poor_fit_rate"]
+            );
+            let (mean, rms) = rest.split_once(" / ").expect("MEAN / RMS");
+            assert!(
+                matches(mean, x["mean_err_x_px"]),
+                "{what}: mean x error {mean}, {} in {SHAPES}",
+                x["mean_err_x_px"]
+            );
+            assert!(
+                matches(rms, x["rms_px"]),
+                "{what}: RMS {rms}, {} in {SHAPES}",
+                x["rms_px"]
+            );
+        }
+        listed.push(m.to_string());
+    }
+    assert_eq!(
+        listed,
+        csv.distinct("method"),
+        "every method, in the CSV's order"
+    );
 }

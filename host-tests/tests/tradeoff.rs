@@ -122,7 +122,7 @@ fn committed_m7_costs_cover_every_method() {
     let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/m7-costs.csv"))
         .expect("host-tests/m7-costs.csv (cargo m7-bench > host-tests/m7-costs.csv)");
     let t = M7Table::parse(&text).unwrap();
-    for m in Method::all() {
+    for m in startrack_host::tradeoff::methods() {
         let (c, _) = m7_cost(&m, &t).unwrap_or_else(|| panic!("{} has no M7 cost", m.name()));
         assert!(c > 0.0, "{}: {c}", m.name());
     }

@@ -1,7 +1,8 @@
 //! Failure-map cells pinned on each side of a boundary (host-tests/src/tradeoff/failures.rs
 //! defines the cells): the plain power-2 CoG 5x5 (pixelisation) is biased below a ~ 1 px
 //! and not at 2 px; every method fails at SNR 1; the Gauss fit passes at SNR 30, a = 1 px; an
-//! uncorrected hot pixel and a close pair break it, their absence does not.
+//! uncorrected hot pixel and a close pair break it, their absence does not; a PSF-width
+//! mismatch breaks the fit told the width, not the width-free fit.
 //!
 //! Tolerances from the trial count N (x and y pooled): an RMS has a relative standard error
 //! of 1/sqrt(4 N) ([`rms_relative_se`] of 2N); a detection rate p one of sqrt(p (1 - p) / N).
@@ -14,6 +15,7 @@ use startrack_host::accuracy::{Method, rms_relative_se};
 use startrack_host::tradeoff::failures::{
     BIAS_LIMIT_PX, DETECT_LIMIT, FailCell, Perturb, RMS_OVER_CRLB_LIMIT, Scene, Stats, run_scene,
 };
+use startrack_host::tradeoff::methods;
 
 const N: usize = 400;
 
@@ -72,7 +74,7 @@ fn plain_power_2_cog_is_biased_below_one_pixel_not_at_two() {
 
 #[test]
 fn every_method_fails_at_snr_1() {
-    for m in Method::all() {
+    for m in methods() {
         let cells = run_scene(
             &[m],
             &Scene {
@@ -107,4 +109,23 @@ fn a_hot_pixel_and_a_close_pair_break_the_gauss_fit() {
     assert!(biased(&cell(fit, 1.5, 30.0, Perturb::HotPixel(3000.0))));
     assert!(passes(&cell(fit, 1.5, 30.0, Perturb::Pair(6.0))));
     assert!(biased(&cell(fit, 1.5, 30.0, Perturb::Pair(1.0))));
+}
+
+#[test]
+fn a_width_mismatch_breaks_the_fit_told_the_width_not_the_width_free_fit() {
+    // Configured for a = 1.5 px: the Gauss fit passes on a 1.5 px star and fails on a 0.6 px
+    // one (RMS over 2x the bound).
+    let fit = Method::GaussFit { window: 5 };
+    assert!(passes(&cell(fit, 1.5, 30.0, Perturb::TrueWidth(1.5))));
+    let narrow = cell(fit, 1.5, 30.0, Perturb::TrueWidth(0.6));
+    assert!(narrow.rms_px * (1.0 - rms_margin()) > RMS_OVER_CRLB_LIMIT * narrow.crlb_px);
+    // The width-free fit is told no width: the same stars give the same cell whatever the
+    // configured a, and it passes on both.
+    let free = Method::GaussFitWidth { window: 7 };
+    for true_a in [0.6, 1.5] {
+        let a = cell(free, 1.5, 30.0, Perturb::TrueWidth(true_a));
+        let b = cell(free, 0.8, 30.0, Perturb::TrueWidth(true_a));
+        assert_eq!(a, b, "true a {true_a}");
+        assert!(passes(&a), "true a {true_a}");
+    }
 }

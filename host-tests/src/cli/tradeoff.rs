@@ -1,5 +1,6 @@
-//! `startrack tradeoff --out DIR [--quick] [--m7 FILE]`: every centroid method's cost against
-//! its accuracy with the Pareto frontier, and its failure maps (see [`crate::tradeoff`]).
+//! `startrack tradeoff --out DIR [--quick] [--m7 FILE] [--psf-shapes]`: every centroid
+//! method's cost against its accuracy with the Pareto frontier, its failure maps and its
+//! position bias on non-Gaussian PSFs (see [`crate::tradeoff`]).
 
 use crate::tradeoff::{Options, cost::M7Table, run_all};
 use std::io::IsTerminal;
@@ -25,6 +26,9 @@ pub struct TradeoffArgs {
     /// Leave the host-ns column empty (then the outputs are fully deterministic).
     #[arg(long)]
     pub no_host_time: bool,
+    /// Only the position bias on the simulator's defocus and coma PSFs: psf-shapes.csv.
+    #[arg(long)]
+    pub psf_shapes: bool,
 }
 
 /// Reads the M7 CSV: the given file, or the committed copy from the workspace root or from
@@ -60,6 +64,7 @@ pub fn run(args: &TradeoffArgs) -> ExitCode {
         m7_source,
         host_passes: if args.no_host_time { 0 } else { 5 },
         progress: std::io::stderr().is_terminal(),
+        psf_shapes_only: args.psf_shapes,
     };
     match run_all(&args.out, &opts) {
         Ok(w) => {

@@ -150,7 +150,13 @@ pub fn m7_cost(method: &Method, t: &M7Table) -> Option<(f64, String)> {
         }
         Method::GaussFitWidth { window } => {
             let (c, ex) = t.by_side("centroid_gauss_fit_width", u16::from(window))?;
-            Some((c, basis(ex, "measured, background given")))
+            Some((
+                c,
+                basis(
+                    ex,
+                    "measured (background given; the border median not counted)",
+                ),
+            ))
         }
         Method::GaussFit { window } | Method::GaussFitAssumed { window, .. } => {
             // The given-background stage runs the Monte Carlo's configuration (background

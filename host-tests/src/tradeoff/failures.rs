@@ -17,7 +17,11 @@
 //!   multiple of the 100 ke- full well; pixels are clipped there and flagged saturated;
 //! - `edge_px`: columns left of the star's pixel by more than this do not exist (the active
 //!   area's edge): windows are clipped and flagged so;
-//! - `pair_px`: a second star of equal flux that far to the right (same row phase).
+//! - `pair_px`: a second star of equal flux that far to the right (same row phase);
+//! - `true_a_px`: PSF-width mismatch: the star's true width `a` is this, the method is still
+//!   configured for the scene's `a` (the sweep's 1.5 px: the Gauss fit's sigma, the corrected
+//!   CoGs' curve). The width-free fit is told no width, so for it the sweep is the same star
+//!   at another width, not a mismatch.
 //!
 //! # What is measured, and when a cell fails
 //! - `bias_px`: the systematic error: RMS over stars (both axes) of the method's error on the
@@ -42,7 +46,7 @@
 //!
 //! Cost: per star one 9x9 render, two bounds and two runs of every method; the full map is
 //! every scene of [`MapSpec::new`] (its grid and sweeps) times its `trials` stars times every
-//! method of [`crate::accuracy::Method::all`], most of `startrack tradeoff`'s time (`time
+//! method of [`super::methods`], most of `startrack tradeoff`'s time (`time
 //! startrack tradeoff --out DIR` measures it).
 
 use crate::accuracy::{Method, PreparedMethod, crlb_x_px, flux_for_snr};
@@ -88,6 +92,8 @@ pub enum Perturb {
     Edge(u16),
     /// Separation of an equal second star to the right, px.
     Pair(f64),
+    /// The star's true PSF width a, px; the method is configured for the scene's a.
+    TrueWidth(f64),
 }
 
 impl Perturb {
@@ -101,6 +107,7 @@ impl Perturb {
             Perturb::Saturation(v) => ("saturation", v),
             Perturb::Edge(v) => ("edge_px", f64::from(v)),
             Perturb::Pair(v) => ("pair_px", v),
+            Perturb::TrueWidth(v) => ("true_a_px", v),
         }
     }
 }
@@ -198,6 +205,13 @@ impl MapSpec {
         sweeps.extend([0.5, 0.9, 1.5, 3.0, 10.0].map(Perturb::Saturation));
         sweeps.extend([0u16, 1, 2, 3, 4].map(Perturb::Edge));
         sweeps.extend([1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0].map(Perturb::Pair));
+        // True a over the configured 1.5 px: ratio 0.4-2.
+        sweeps.extend(
+            [
+                0.6, 0.75, 0.9, 1.05, 1.2, 1.35, 1.5, 1.65, 1.8, 2.1, 2.4, 3.0,
+            ]
+            .map(Perturb::TrueWidth),
+        );
         Self {
             grid_snr: crate::figures::log_space(1.0, 100.0, ns),
             grid_a_px: crate::figures::log_space(0.3, 3.0, na),
@@ -255,6 +269,14 @@ fn flux_of(scene: &Scene) -> (f64, f64) {
     }
 }
 
+/// The star's true PSF width: the scene's, or the mismatch sweep's.
+pub fn true_a_px(scene: &Scene) -> f64 {
+    match scene.perturb {
+        Perturb::TrueWidth(a) => a,
+        _ => scene.a_px,
+    }
+}
+
 /// The seed of scene number `index`: every method sees the same stars.
 fn scene_seed(seed: u64, index: usize) -> u64 {
     seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (index as u64).rotate_left(29)
@@ -268,7 +290,8 @@ pub fn run_scene(
     trials: usize,
     seed: u64,
 ) -> Vec<FailCell> {
-    let sigma = sigma_of_a(scene.a_px);
+    // The star's own width; the methods are prepared for the scene's.
+    let sigma = sigma_of_a(true_a_px(scene));
     let (flux, snr) = flux_of(scene);
     let dsnu_e = match scene.perturb {
         Perturb::Dsnu(d) => BACKGROUND_E * d,

@@ -7,8 +7,14 @@
 //!   ([`pareto`]) marked per scene.
 //! - [`failures`]: failures.csv, and one heatmap PNG per method ([`png`]): a grid over SNR x
 //!   PSF width and sweeps of DSNU, a hot pixel, a telegraph pixel, saturation, the distance
-//!   to an edge and a close pair's separation; a cell fails on bias, RMS over the bound or
-//!   detection.
+//!   to an edge, a close pair's separation and the star's true width against the width the
+//!   method is configured for; a cell fails on bias, RMS over the bound or detection.
+//!
+//! - [`shapes`]: psf-shapes.csv, each method's position bias on the simulator's defocus
+//!   ring and coma against the PSF's centroid (`--psf-shapes` runs only this part).
+//!
+//! The methods ([`methods`]) are every CoG, the Gauss fit told the width and the width-free
+//! fit of the flight configuration.
 //!
 //! Everything but the host-ns column is seeded and deterministic: two runs write identical
 //! files apart from that column. `--quick` runs fewer stars on a coarser grid, a fraction
@@ -19,6 +25,7 @@ pub mod cost;
 pub mod failures;
 pub mod pareto;
 pub mod png;
+pub mod shapes;
 
 use crate::accuracy::{Method, Noise};
 use crate::figures::{FigureError, Written, csv::write_csv};
@@ -38,6 +45,19 @@ pub struct Options {
     pub host_passes: usize,
     /// Draw a progress bar on stderr.
     pub progress: bool,
+    /// Only the non-Gaussian PSF experiment ([`shapes`]): psf-shapes.csv.
+    pub psf_shapes_only: bool,
+}
+
+/// The methods of the chart and the maps: [`Method::all`] (every CoG and the Gauss fit of
+/// known width) and the width-free fit as the flight configuration runs it
+/// ([`Method::GaussFitWidth`], border-median background, not told the width) on 5x5 and
+/// 7x7 windows.
+pub fn methods() -> Vec<Method> {
+    let mut v = Method::all();
+    v.push(Method::GaussFitWidth { window: 5 });
+    v.push(Method::GaussFitWidth { window: 7 });
+    v
 }
 
 /// The accuracy experiment of the chart: [`Noise::default`] (2000 stars), 300 with `quick`.
@@ -57,14 +77,21 @@ pub fn slug(method: &Method) -> String {
         .collect()
 }
 
-/// Writes tradeoff.csv/.png, failures.csv and failures-METHOD.png into `out` (created).
+/// Writes tradeoff.csv/.png, failures.csv, failures-METHOD.png and psf-shapes.csv into `out`
+/// (created); only psf-shapes.csv with [`Options::psf_shapes_only`].
 pub fn run_all(out: &Path, opts: &Options) -> Result<Written, FigureError> {
     std::fs::create_dir_all(out).map_err(|e| FigureError {
         path: out.to_path_buf(),
         message: e.to_string(),
     })?;
     let mut w = Written::default();
-    let methods = Method::all();
+    let methods = methods();
+    let shape_spec = shapes::ShapeSpec::new(opts.quick);
+    if opts.psf_shapes_only {
+        let cells = shapes::run(&methods, &shape_spec);
+        shapes::write(out, &shape_spec, &cells, &mut w)?;
+        return Ok(w);
+    }
     let spec = failures::MapSpec::new(opts.quick);
     let noise = chart_noise(opts.quick);
     let chart_cells = chart::SNRS.len() * chart::WIDTHS_A_PX.len() * methods.len();
@@ -86,6 +113,8 @@ pub fn run_all(out: &Path, opts: &Options) -> Result<Written, FigureError> {
     let cells = failures::run(&methods, &spec, || bar.inc(1));
     bar.finish_and_clear();
     write_failures(out, &methods, &spec, &cells, &mut w)?;
+    let shape_cells = shapes::run(&methods, &shape_spec);
+    shapes::write(out, &shape_spec, &shape_cells, &mut w)?;
     Ok(w)
 }
 
@@ -122,6 +151,7 @@ pub fn write_failures(
             spec.sweep_a_px,
             spec.sweep_snr
         ),
+        "a_px: the width the method is configured for, and the star's except in the true_a_px sweep (value = the star's true a; the width-free fit is told no width)".to_string(),
         format!(
             "fail: bias (bias_px > {}: RMS error on the noise-free image), rms (rms_px > {} crlb_px), detect (detect_rate < {}: no degenerate/not-converged/low-SNR flag and within 1 px); pass; n/a = no correction curve for this a",
             failures::BIAS_LIMIT_PX,
@@ -145,10 +175,15 @@ pub fn write_failures(
             .filter(|c| c.scene.perturb != failures::Perturb::None)
         {
             let name = c.scene.perturb.sweep().0;
+            let told = if matches!(c.scene.perturb, failures::Perturb::TrueWidth(_)) {
+                "configured for a"
+            } else {
+                "a"
+            };
             match sweeps.iter_mut().find(|(n, _)| n.starts_with(name)) {
                 Some((_, v)) => v.push(c),
                 None => sweeps.push((
-                    format!("{name} (a = {}, SNR {})", c.scene.a_px, c.scene.snr),
+                    format!("{name} ({told} = {}, SNR {})", c.scene.a_px, c.scene.snr),
                     vec![c],
                 )),
             }

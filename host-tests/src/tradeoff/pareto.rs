@@ -4,7 +4,7 @@
 //! with `q.cost <= p.cost` and `q.error <= p.error` and at least one of the two strictly
 //! smaller. Equal points are both on it. Points with a non-finite cost or error are never on
 //! it and dominate nothing. Cost: O(n^2) comparisons (n is the number of
-//! methods, [`crate::accuracy::Method::all`]).
+//! methods, [`super::methods`]).
 
 /// Which of `points` (`(cost, error)`) are on the frontier, in the same order.
 pub fn frontier(points: &[(f64, f64)]) -> Vec<bool> {
