@@ -288,3 +288,36 @@ fn corrected_power_1_cog_costs_the_cheaper_of_the_fused_and_general_paths() {
     let (c, _) = m7_cost(&cog(CogPower::Two, 7, true), &t).unwrap();
     assert!((c - (980.0 + 140.0 + 1000.0)).abs() < 1e-9, "{c}");
 }
+
+#[test]
+fn psf_shapes_flag_writes_only_the_shapes_csv_the_same_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut texts = Vec::new();
+    for run in ["a", "b"] {
+        let out = dir.path().join(run);
+        let (ok, stdout, stderr) = startrack(&[
+            "tradeoff",
+            "--psf-shapes",
+            "--quick",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{stderr}");
+        assert_eq!(stdout.lines().count(), 1, "{stdout}");
+        let names: Vec<String> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, ["psf-shapes.csv"]);
+        texts.push(std::fs::read_to_string(out.join("psf-shapes.csv")).unwrap());
+    }
+    assert_eq!(texts[0], texts[1], "two runs differ");
+    // Every method that applies at a = 1 px on each of the 6 shapes; no field holds a comma.
+    let mut lines = texts[0].lines().filter(|l| !l.starts_with('#'));
+    let fields = lines.next().unwrap().split(',').count();
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), 6 * startrack_host::tradeoff::methods().len());
+    for l in rows {
+        assert_eq!(l.split(',').count(), fields, "{l}");
+    }
+}

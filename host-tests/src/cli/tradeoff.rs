@@ -13,10 +13,12 @@ pub const DEFAULT_M7: &str = "host-tests/m7-costs.csv";
 /// Arguments of `startrack tradeoff`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct TradeoffArgs {
-    /// Directory for tradeoff.csv/.png, failures.csv and failures-METHOD.png (created).
+    /// Directory for tradeoff.csv/.png, failures.csv, failures-METHOD.png and psf-shapes.csv
+    /// (created).
     #[arg(long)]
     pub out: PathBuf,
-    /// Coarse: 300 stars per accuracy cell, a 5 x 5 failure grid, 150 stars per scene.
+    /// Coarse: 300 stars per accuracy cell, a 5 x 5 failure grid, 150 stars per scene, 300
+    /// stars per PSF shape.
     #[arg(long)]
     pub quick: bool,
     /// `cargo m7-bench` CSV (stage,unit,instructions_per_unit); default: host-tests/m7-costs.csv,
