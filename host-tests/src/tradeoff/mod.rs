@@ -9,7 +9,6 @@
 //!   PSF width and sweeps of DSNU, a hot pixel, a telegraph pixel, saturation, the distance
 //!   to an edge, a close pair's separation and the star's true width against the width the
 //!   method is configured for; a cell fails on bias, RMS over the bound or detection.
-//!
 //! - [`shapes`]: psf-shapes.csv, each method's position bias on the simulator's defocus
 //!   ring and coma against the PSF's centroid (`--psf-shapes` runs only this part).
 //!
