@@ -549,13 +549,18 @@ pub fn csv(bins: &[BinStats]) -> String {
 /// One bin as the docs' table cell text.
 fn cell(b: &BinStats) -> String {
     let pct = |k: usize| 100.0 * k as f64 / b.stars.max(1) as f64;
+    // No unflagged star, no pull of the rest.
+    let clean = if b.pull_clean.is_nan() {
+        String::new()
+    } else {
+        format!(" ({:.2})", b.pull_clean)
+    };
     format!(
-        "{:.2} / {:.2} / pull {:.2}, {:.0} % flagged ({:.2}); {} stars, {:.0} % poor fit ({:.2}), {:.0} % lost",
+        "{:.2} / {:.2} / pull {:.2}, {:.0} % flagged{clean}; {} stars, {:.0} % poor fit ({:.2}), {:.0} % lost",
         b.rms_crlb,
         b.rms_crlb_width_free,
         b.pull,
         100.0 * b.sigma_flagged as f64 / b.used.max(1) as f64,
-        b.pull_clean,
         b.stars,
         pct(b.poor_fit),
         b.rms_crlb_with_poor_fit,
