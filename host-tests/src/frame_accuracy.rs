@@ -4,6 +4,10 @@
 //! maps and hot-pixel list with the command's defaults, `process` with its defaults (the
 //! flight method, the width not told); every reported star matched to the truth.
 //!
+//! With `field_a_px` the width is instead a smooth function of the star's place (`simulate
+//! --psf-a-field`, what a field PSF model describes), and the stars are binned by the
+//! nearest width of the list.
+//!
 //! Two configurations run on the same frames: the table without a field PSF model, and the
 //! table with one (`calib psf-model` fitted to the `stars.csv` of one more frame processed
 //! with defaults, then `calib build --psf-model`), so that the flight code's use of the model
@@ -76,8 +80,12 @@ pub struct FrameMc {
     pub stars: usize,
     /// Seed of the first frame.
     pub seed: u64,
-    /// The PSF widths (80 %-energy radius) drawn from, px.
+    /// The PSF widths (80 %-energy radius) drawn from, px; with `field_a_px`, the bins'
+    /// centres (each star in the bin of the nearest).
     pub widths_a_px: Vec<f64>,
+    /// Instead of drawing from the list: the width a smooth function of the place, from the
+    /// centre's to the corners' (`simulate --psf-a-field`), px.
+    pub field_a_px: Option<[f64; 2]>,
     /// The eq. 8 SNR range, log-uniform.
     pub snr_range: [f64; 2],
     /// Dark signal non-uniformity (relative sigma).
@@ -104,6 +112,7 @@ impl FrameMc {
             stars: 300,
             seed: 1,
             widths_a_px: vec![0.6, 0.8, 1.0, 1.5, 2.0],
+            field_a_px: None,
             snr_range: [10.0, 200.0],
             dsnu: 0.25,
             prnu: 0.02,
@@ -120,6 +129,8 @@ impl FrameMc {
 pub struct StarOutcome {
     /// True width, px.
     pub a_px: f64,
+    /// The width bin: the nearest of the experiment's widths, px.
+    pub a_bin: f64,
     /// Eq. 8 SNR (5 x 5 box, mean dark and read noise).
     pub snr: f64,
     /// Another true star closer than [`CROWD_PX`].
@@ -213,7 +224,12 @@ fn sim_args(mc: &FrameMc, seed: u64, out: PathBuf) -> SimulateArgs {
         psf_a_px: None,
         measured_frames: 0,
         mix: SceneMix {
-            psf_a_list: mc.widths_a_px.clone(),
+            psf_a_list: if mc.field_a_px.is_some() {
+                Vec::new()
+            } else {
+                mc.widths_a_px.clone()
+            },
+            psf_a_field: mc.field_a_px.map(|f| f.to_vec()).unwrap_or_default(),
             snr_range: mc.snr_range.to_vec(),
             hot_fraction: mc.hot_fraction,
         },
@@ -354,8 +370,15 @@ fn outcomes(
             let (fx, fy) = (4.0 + x - cx as f64, 4.0 + y - cy as f64);
             let s = sigma_of_a(a);
             let r = mc.read_noise_e;
+            let a_bin = mc
+                .widths_a_px
+                .iter()
+                .copied()
+                .min_by(|p, q| (p - a).abs().total_cmp(&(q - a).abs()))
+                .unwrap_or(a);
             StarOutcome {
                 a_px: a,
+                a_bin,
                 snr: snr_of(signal, var),
                 crowded,
                 record,
@@ -444,7 +467,7 @@ pub fn stats(config: &'static str, outcomes: &[StarOutcome], widths: &[f64]) -> 
             let &[lo, hi] = e else { continue };
             let last = hi == SNR_EDGES[SNR_EDGES.len() - 1];
             let in_bin = |o: &&StarOutcome| {
-                o.a_px == a && o.snr >= lo && (o.snr < hi || (last && o.snr <= hi))
+                o.a_bin == a && o.snr >= lo && (o.snr < hi || (last && o.snr <= hi))
             };
             let all: Vec<&StarOutcome> = outcomes.iter().filter(in_bin).collect();
             let isolated: Vec<&StarOutcome> = all.iter().copied().filter(|o| !o.crowded).collect();

@@ -26,6 +26,10 @@ pub struct AccuracyFramesArgs {
     /// PSF widths (80 %-energy radius) each star's is drawn from, px.
     #[arg(long, value_delimiter = ',', default_values_t = [0.6, 0.8, 1.0, 1.5, 2.0])]
     pub a: Vec<f64>,
+    /// Instead of drawing each star's width from --a: the width a smooth function of its
+    /// place, "CENTRE,CORNER" px (`simulate --psf-a-field`); --a are then the bins.
+    #[arg(long, value_delimiter = ',')]
+    pub field_a: Vec<f64>,
     /// Also write the table's cells as CSV to this file.
     #[arg(long)]
     pub csv: Option<PathBuf>,
@@ -33,7 +37,17 @@ pub struct AccuracyFramesArgs {
 
 /// Runs the Monte Carlo; returns the run and its markdown table.
 pub fn run(args: &AccuracyFramesArgs) -> Result<(FrameMcRun, String), CliError> {
+    let field_a_px = match args.field_a.as_slice() {
+        [] => None,
+        &[c, k] => Some([c, k]),
+        v => {
+            return Err(CliError::Usage(format!(
+                "--field-a {v:?}: need CENTRE,CORNER"
+            )));
+        }
+    };
     let mc = FrameMc {
+        field_a_px,
         frames: args.frames,
         stars: args.stars,
         seed: args.seed,

@@ -17,7 +17,8 @@
 //!
 //! The scene options ([`SceneMix`]) make the frames of the accuracy Monte Carlo on whole
 //! frames ([`crate::frame_accuracy`]): `--psf-a-list 0.6,1,2` draws each star's width from a
-//! list (no `PSFA` keyword: the width is for the pipeline to find), `--snr-range 10,200` each
+//! list (no `PSFA` keyword: the width is for the pipeline to find), `--psf-a-field 0.6,2` as
+//! a smooth function of the star's place (field curvature), `--snr-range 10,200` each
 //! star's eq. 8 SNR (5 x 5 box, the mean dark and read noise as the noise) log-uniformly in
 //! a range instead of its signal in 5e3-2e5 e-, and `--hot-fraction F` turns on the
 //! simulator's hot pixels ([`HotPixels`], [`HOT_RATES_E_PER_S`] at 293 K, 1 s) and lists
@@ -80,6 +81,11 @@ pub struct SceneMix {
     /// (0.3 to 10 px each; no `PSFA` keyword is written).
     #[arg(long, value_delimiter = ',', conflicts_with = "psf_a_px")]
     pub psf_a_list: Vec<f64>,
+    /// "CENTRE,CORNER": each star's width a smooth function of its place, px (0.3 to 10):
+    /// `CENTRE + (CORNER - CENTRE) (u^2 + v^2) / 2` with `u`, `v` the field coordinates in
+    /// -1..1 (what a field PSF model of degree 2 describes exactly; no `PSFA` keyword).
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["psf_a_px", "psf_a_list"])]
+    pub psf_a_field: Vec<f64>,
     /// "LO,HI": each star's signal set for an eq. 8 SNR (5 x 5 box, the mean dark and the
     /// read noise as the noise) drawn log-uniformly from LO to HI (1 to 10000).
     #[arg(long, value_delimiter = ',')]
@@ -194,6 +200,27 @@ fn mix_stars(
             "--psf-a-list {a}: each must be 0.3 to 10 px"
         )));
     }
+    let field = match mix.psf_a_field.as_slice() {
+        [] => None,
+        &[c, k]
+            if [c, k]
+                .iter()
+                .all(|a| a.is_finite() && (0.3..=10.0).contains(a)) =>
+        {
+            if !mix.psf_a_list.is_empty() {
+                return Err(CliError::Usage(
+                    "--psf-a-list and --psf-a-field: give one of them".into(),
+                ));
+            }
+            Some((c, k))
+        }
+        v => {
+            return Err(CliError::Usage(format!(
+                "--psf-a-field {v:?}: need CENTRE,CORNER, each 0.3 to 10 px"
+            )));
+        }
+    };
+    let g = p.geometry;
     let snr = match mix.snr_range.as_slice() {
         [] => None,
         &[lo, hi] if lo.is_finite() && hi.is_finite() && 1.0 <= lo && lo <= hi && hi <= 1e4 => {
@@ -211,6 +238,11 @@ fn mix_stars(
         if !mix.psf_a_list.is_empty() {
             let i = r.random_range(0..mix.psf_a_list.len());
             s.a_px = mix.psf_a_list.get(i).copied().unwrap_or(s.a_px);
+        }
+        if let Some((c, k)) = field {
+            let u = crate::psf_model::norm(s.x_px, g.active_cols);
+            let v = crate::psf_model::norm(s.y_px, g.active_rows);
+            s.a_px = c + (k - c) * (u * u + v * v) / 2.0;
         }
         if let Some((lo, hi)) = snr {
             let snr = (lo.ln() + r.random::<f64>() * (hi.ln() - lo.ln())).exp();
@@ -255,9 +287,9 @@ pub fn run(args: &SimulateArgs) -> Result<SimFiles, CliError> {
     }
     let mut stars = star_field(args.seed, args.stars, &p);
     if let Some(a) = args.psf_a_px {
-        if !args.mix.psf_a_list.is_empty() {
+        if !(args.mix.psf_a_list.is_empty() && args.mix.psf_a_field.is_empty()) {
             return Err(CliError::Usage(
-                "--psf-a-px and --psf-a-list: give one of them".into(),
+                "--psf-a-px and --psf-a-list or --psf-a-field: give one of them".into(),
             ));
         }
         for s in &mut stars {
