@@ -18,7 +18,9 @@
 //! maps' subject, not this one's) and counted. Of the rest:
 //! - `missed`: no reported star within [`MATCH_PX`] of the truth;
 //! - `bad`: matched but flagged as no clean position ([`BAD_POSITION`]: degenerate, not
-//!   converged, poor fit, an excluded or saturated pixel, clipped, blended...);
+//!   converged, poor fit, an excluded or saturated pixel, clipped, blended...), and of
+//!   those `poor_fit`, flagged `POOR_FIT` and nothing else of it (their RMS / CRLB is
+//!   printed apart: what a user who ignores the flag gets);
 //! - of the others (`used`), the RMS over both axes of `error / CRLB`, each star against its
 //!   own bound ([`crlb_x_px`] on a 9 x 9 window: its true width, signal, the local true dark
 //!   as background, the read noise) and against its width-unknown bound
@@ -30,8 +32,8 @@
 //! ([`rms_relative_se`]), printed with it.
 //!
 //! Cost: per frame one simulated full readout (the render dominates: about 2 s in release,
-//! 3 s in the test profile), one `calib build` and one `process` per configuration, and
-//! two 9 x 9 Fisher sums per star. The files of each frame (18 MB) are deleted once the
+//! 3 s in the dev profile), one `calib build` and one `process` per configuration, and
+//! four 9 x 9 Fisher sums per star. The files of each frame (18 MB) are deleted once the
 //! frame is measured.
 
 use crate::accuracy::{crlb_x_px, crlb_x_width_free_px, rms_relative_se};
@@ -94,7 +96,7 @@ pub struct FrameMc {
     pub prnu: f64,
     /// Share of hot pixels.
     pub hot_fraction: f64,
-    /// Mean dark, e- (the background), and read noise, e-.
+    /// Mean dark, e- (the background).
     pub dark_e: f64,
     /// Read noise, e- RMS.
     pub read_noise_e: f64,

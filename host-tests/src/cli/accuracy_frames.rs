@@ -1,8 +1,8 @@
 //! `startrack accuracy-frames`: the end-to-end accuracy Monte Carlo on whole simulated frames
 //! of mixed PSF widths ([`crate::frame_accuracy`]): simulate, `calib build`, `process` with
 //! defaults, without and with a field PSF model in the table; prints the markdown table and
-//! optionally writes its CSV. Cost: about 2-3 s of CPU per frame in release (the full table,
-//! 20 frames, about a minute).
+//! optionally writes its CSV. Cost: about 3 s of CPU per frame in the dev profile (the full
+//! table, 20 frames: a minute of CPU).
 
 use super::CliError;
 use crate::frame_accuracy::{FrameMc, FrameMcRun, csv, markdown, run as run_mc};
