@@ -11,6 +11,7 @@ pub mod figures;
 pub mod fits;
 pub mod flash_home;
 pub mod flash_model;
+pub mod frame_accuracy;
 pub mod ground;
 pub mod home;
 pub mod link_home;

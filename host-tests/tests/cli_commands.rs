@@ -31,6 +31,7 @@ fn simulate(dir: &Path, seed: u64, stars: usize) -> SimFiles {
         prnu: 0.02,
         psf_a_px: None,
         measured_frames: 0,
+        mix: Default::default(),
     })
     .expect("simulate")
 }
@@ -146,6 +147,7 @@ fn calib_build_recovers_the_true_table_to_one_lsb() {
         prnu: 0.02,
         psf_a_px: None,
         measured_frames: 0,
+        mix: Default::default(),
     })
     .unwrap();
     let sim = Simulator::new(params, Vec::new());
@@ -490,6 +492,7 @@ fn measured_maps_carry_the_noise_of_n_frames_and_still_calibrate() {
         prnu: 0.02,
         psf_a_px: None,
         measured_frames: N,
+        mix: Default::default(),
     };
     let files = startrack_host::cli::simulate::run(&args).unwrap();
     let sim = Simulator::new(

@@ -37,6 +37,7 @@ fn simulate(dir: &Path) -> SimFiles {
         prnu: 0.02,
         psf_a_px: Some(A_PX),
         measured_frames: 0,
+        mix: Default::default(),
     })
     .expect("simulate")
 }

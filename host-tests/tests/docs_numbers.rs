@@ -176,7 +176,7 @@ fn table(page: &str, name: &str) -> (Vec<String>, Vec<Vec<String>>) {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 15] = [
+const CHECKED: [&str; 16] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -192,6 +192,7 @@ const CHECKED: [&str; 15] = [
     "readout-plan",
     "accuracy-width-unknown",
     "psf-shapes",
+    "accuracy-frames",
 ];
 
 #[test]
@@ -1212,5 +1213,23 @@ fn psf_shape_table_is_its_csv() {
         listed,
         csv.distinct("method"),
         "every method, in the CSV's order"
+    );
+}
+
+/// docs/accuracy.md's end-to-end table is `startrack accuracy-frames`' markdown of
+/// `host-tests/figures/accuracy-frames.csv` (its `--csv`), cell for cell.
+#[test]
+fn frames_table_is_its_csv() {
+    use startrack_host::frame_accuracy::{from_csv, markdown};
+    let bins = from_csv(&read("host-tests/figures/accuracy-frames.csv"))
+        .expect("host-tests/figures/accuracy-frames.csv: rows of accuracy-frames --csv");
+    assert_eq!(bins.len(), 30, "two configurations, 5 widths, 3 SNR bins");
+    let (header, body) = table("docs/accuracy.md", "accuracy-frames");
+    let want: Vec<Vec<String>> = markdown(&bins).lines().map(cells).collect();
+    assert_eq!(header, want[0], "docs/accuracy.md accuracy-frames header");
+    assert_eq!(
+        body,
+        want[2..],
+        "docs/accuracy.md accuracy-frames: not the CSV's table"
     );
 }

@@ -60,6 +60,9 @@ enum Command {
     Simulate(startrack_host::cli::simulate::SimulateArgs),
     /// Every centroid method's RMS error over the Cramer-Rao bound, by Monte Carlo (markdown).
     Accuracy(startrack_host::cli::accuracy::AccuracyArgs),
+    /// RMS error over the Cramer-Rao bound end to end on simulated frames of mixed PSF widths
+    /// (simulate, calib build, process with defaults; without and with a field PSF model).
+    AccuracyFrames(startrack_host::cli::accuracy_frames::AccuracyFramesArgs),
     /// The founding paper's Figures 1-6 (CSV with parameters, PNG) from the core's code.
     Figures(startrack_host::cli::figures::FiguresArgs),
     /// Cost per star against accuracy (Pareto frontier) and failure maps of every centroid method.
@@ -174,6 +177,13 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             }
             Err(e) => fail("accuracy", &e),
+        },
+        Command::AccuracyFrames(args) => match startrack_host::cli::accuracy_frames::run(&args) {
+            Ok((_, table)) => {
+                print!("{table}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail("accuracy-frames", &e),
         },
         Command::Sil(args) if args.port.is_some() => match startrack_host::cli::sil::serve(&args) {
             Ok(r) if r.power_cut => {

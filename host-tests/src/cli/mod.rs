@@ -3,6 +3,7 @@
 //! prints it as one line and exits non-zero; nothing here panics on bad input).
 
 pub mod accuracy;
+pub mod accuracy_frames;
 pub mod calib_build;
 pub mod calib_frames;
 pub mod calib_models;

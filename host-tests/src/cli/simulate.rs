@@ -8,17 +8,29 @@
 //! | `bias.fits` | true bias, ADU, full readout (`GAIN1`, `GAIN2` keywords, e-/ADU) |
 //! | `dark.fits` | true relative dark, full readout, covered columns' mean = 1 |
 //! | `flat.fits` | true flat (relative response), active area |
-//! | `hot.csv` | `col,row,dark_e` (the simulated sensor has none yet: header only) |
+//! | `hot.csv` | `col,row,dark_e`: the hot pixels of `--hot-fraction` (header only without) |
 //!
 //! The maps are the sensor's truth (noise-free), the inputs of `startrack calib build`.
 //! With `--psf-a-px A` every star has the 80 %-energy radius `A` (else each its own, 0.8 to
 //! 2 px) and the frame's `PSFA` keyword says so: `startrack calib build --psf-a-px A` then
 //! builds the pixel-phase curves that `startrack process --method cog1` picks for it.
+//!
+//! The scene options ([`SceneMix`]) make the frames of the accuracy Monte Carlo on whole
+//! frames ([`crate::frame_accuracy`]): `--psf-a-list 0.6,1,2` draws each star's width from a
+//! list (no `PSFA` keyword: the width is for the pipeline to find), `--psf-a-field 0.6,2` as
+//! a smooth function of the star's place (field curvature), `--snr-range 10,200` each
+//! star's eq. 8 SNR (5 x 5 box, the mean dark and read noise as the noise) log-uniformly in
+//! a range instead of its signal in 5e3-2e5 e-, and `--hot-fraction F` turns on the
+//! simulator's hot pixels ([`HotPixels`], [`HOT_RATES_E_PER_S`] at 293 K, 1 s) and lists
+//! every one with its true dark in `hot.csv`, as a ground calibration would.
 
 use super::{CliError, write_file};
+use crate::accuracy::flux_for_snr;
 use crate::demo::{render_frame, star_field};
 use crate::fits::{MapF32, RawFrame, write_map, write_raw_frame};
+use crate::sim::effects::HotPixels;
 use crate::sim::{SensorParams, Simulator};
+use rand::{RngExt as _, SeedableRng as _};
 use startrack_core::geometry::Segment;
 use startrack_core::window::Rect;
 use std::fmt::Write as _;
@@ -56,7 +68,41 @@ pub struct SimulateArgs {
     /// of the simulator's truth; 0 writes the truth. The bias map is always the truth.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=1000))]
     pub measured_frames: u32,
+    /// Mixed widths, SNR range, hot pixels.
+    #[command(flatten)]
+    pub mix: SceneMix,
 }
+
+/// The options of `simulate` that shape the scene beyond the basic field (all off by
+/// default: the frame is then the basic one, bit for bit).
+#[derive(Clone, Debug, Default, PartialEq, clap::Args)]
+pub struct SceneMix {
+    /// PSF 80 %-energy radii, px, "A,B,...": each star's drawn uniformly from the list
+    /// (0.3 to 10 px each; no `PSFA` keyword is written).
+    #[arg(long, value_delimiter = ',', conflicts_with = "psf_a_px")]
+    pub psf_a_list: Vec<f64>,
+    /// "CENTRE,CORNER": each star's width a smooth function of its place, px (0.3 to 10):
+    /// `CENTRE + (CORNER - CENTRE) (u^2 + v^2) / 2` with `u`, `v` the field coordinates in
+    /// -1..1 (what a field PSF model of degree 2 describes exactly; no `PSFA` keyword).
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["psf_a_px", "psf_a_list"])]
+    pub psf_a_field: Vec<f64>,
+    /// "LO,HI": each star's signal set for an eq. 8 SNR (5 x 5 box, the mean dark and the
+    /// read noise as the noise) drawn log-uniformly from LO to HI (1 to 10000).
+    #[arg(long, value_delimiter = ',')]
+    pub snr_range: Vec<f64>,
+    /// Share of hot pixels (0 to 0.01), each with its own dark rate (`HOT_RATES_E_PER_S`
+    /// at 293 K), listed in hot.csv.
+    #[arg(long, default_value_t = 0.0)]
+    pub hot_fraction: f64,
+}
+
+/// The range of the hot pixels' dark rates at 293 K, e-/s (log-uniform): with `calib
+/// build`'s default exclusion above 10 000 e- in 1 s, about 30 % of them are excluded and
+/// the rest corrected by their own law.
+pub const HOT_RATES_E_PER_S: [f64; 2] = [200.0, 50_000.0];
+
+/// Seed offset of the scene mix's draws (widths, SNRs), apart from the star field's.
+const MIX_SEED: u64 = 0x4d49_5845;
 
 /// First frame number of the simulated calibration frames of `--measured-frames` (the scene
 /// is frame 0; these never share noise with it).
@@ -107,14 +153,120 @@ pub fn params(args: &SimulateArgs) -> Result<SensorParams, CliError> {
     if let Some((name, v)) = checks.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
         return Err(CliError::Usage(format!("{name} {v}: must be 0 or more")));
     }
-    Ok(SensorParams {
+    let f = args.mix.hot_fraction;
+    if !(f.is_finite() && (0.0..=0.01).contains(&f)) {
+        return Err(CliError::Usage(format!(
+            "--hot-fraction {f}: must be 0 to 0.01"
+        )));
+    }
+    let mut p = SensorParams {
         seed: args.seed,
         dark_mean_e: args.dark_e,
         read_noise_e: args.read_noise_e,
         dsnu: args.dsnu,
         prnu: args.prnu,
         ..SensorParams::default()
-    })
+    };
+    if f > 0.0 {
+        p.effects.temperature_k = HOT_REF_K;
+        p.effects.hot = Some(HotPixels {
+            fraction: f,
+            rate_min_e_per_s: HOT_RATES_E_PER_S[0],
+            rate_max_e_per_s: HOT_RATES_E_PER_S[1],
+            reference_k: HOT_REF_K,
+            doubling_k: 6.0,
+            exposure_s: 1.0,
+        });
+    }
+    Ok(p)
+}
+
+/// The frame's temperature (`CCDTEMP`) and the hot pixels' reference, K.
+const HOT_REF_K: f64 = 293.0;
+
+/// Applies `mix`'s widths and SNRs to `stars` (positions kept), from its own seeded stream.
+fn mix_stars(
+    mix: &SceneMix,
+    seed: u64,
+    p: &SensorParams,
+    stars: &mut [crate::sim::Star],
+) -> Result<(), CliError> {
+    if let Some(a) = mix
+        .psf_a_list
+        .iter()
+        .find(|a| !(a.is_finite() && (0.3..=10.0).contains(*a)))
+    {
+        return Err(CliError::Usage(format!(
+            "--psf-a-list {a}: each must be 0.3 to 10 px"
+        )));
+    }
+    let field = match mix.psf_a_field.as_slice() {
+        [] => None,
+        &[c, k]
+            if [c, k]
+                .iter()
+                .all(|a| a.is_finite() && (0.3..=10.0).contains(a)) =>
+        {
+            if !mix.psf_a_list.is_empty() {
+                return Err(CliError::Usage(
+                    "--psf-a-list and --psf-a-field: give one of them".into(),
+                ));
+            }
+            Some((c, k))
+        }
+        v => {
+            return Err(CliError::Usage(format!(
+                "--psf-a-field {v:?}: need CENTRE,CORNER, each 0.3 to 10 px"
+            )));
+        }
+    };
+    let g = p.geometry;
+    let snr = match mix.snr_range.as_slice() {
+        [] => None,
+        &[lo, hi] if lo.is_finite() && hi.is_finite() && 1.0 <= lo && lo <= hi && hi <= 1e4 => {
+            Some((lo, hi))
+        }
+        v => {
+            return Err(CliError::Usage(format!(
+                "--snr-range {v:?}: need LO,HI with 1 <= LO <= HI <= 10000"
+            )));
+        }
+    };
+    let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ MIX_SEED);
+    let var_bg = p.dark_mean_e + p.sky_e + p.read_noise_e * p.read_noise_e;
+    for s in stars {
+        if !mix.psf_a_list.is_empty() {
+            let i = r.random_range(0..mix.psf_a_list.len());
+            s.a_px = mix.psf_a_list.get(i).copied().unwrap_or(s.a_px);
+        }
+        if let Some((c, k)) = field {
+            let u = crate::psf_model::norm(s.x_px, g.active_cols);
+            let v = crate::psf_model::norm(s.y_px, g.active_rows);
+            s.a_px = c + (k - c) * (u * u + v * v) / 2.0;
+        }
+        if let Some((lo, hi)) = snr {
+            let snr = (lo.ln() + r.random::<f64>() * (hi.ln() - lo.ln())).exp();
+            s.signal_e = flux_for_snr(snr, 5.0, var_bg);
+        }
+    }
+    Ok(())
+}
+
+/// `hot.csv` of the simulator's hot pixels: full-readout `col,row` and the dark in the
+/// 1 s reference exposure at the reference temperature, e-.
+fn hot_csv(sim: &Simulator) -> String {
+    let g = sim.params.geometry;
+    let mut s = String::from("col,row,dark_e\n");
+    if sim.params.effects.hot.is_some() {
+        for l in 0..usize::from(g.lines) {
+            for c in 0..g.line_len() {
+                if sim.hot_rate_e_per_s(c, l).is_some() {
+                    let _ = writeln!(s, "{c},{l},{:.3}", sim.hot_dark_e(c, l));
+                }
+            }
+        }
+    }
+    s
 }
 
 /// Runs `startrack simulate`.
@@ -135,10 +287,16 @@ pub fn run(args: &SimulateArgs) -> Result<SimFiles, CliError> {
     }
     let mut stars = star_field(args.seed, args.stars, &p);
     if let Some(a) = args.psf_a_px {
+        if !(args.mix.psf_a_list.is_empty() && args.mix.psf_a_field.is_empty()) {
+            return Err(CliError::Usage(
+                "--psf-a-px and --psf-a-list or --psf-a-field: give one of them".into(),
+            ));
+        }
         for s in &mut stars {
             s.a_px = a;
         }
     }
+    mix_stars(&args.mix, args.seed, &p, &mut stars)?;
     let sim = Simulator::new(p.clone(), stars.clone());
     let (lines, len) = (usize::from(g.lines), g.line_len());
     let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
@@ -152,7 +310,7 @@ pub fn run(args: &SimulateArgs) -> Result<SimFiles, CliError> {
         cols: len,
         data_adu: render_frame(&sim),
     };
-    let mut keys = vec![("EXPTIME", 1.0), ("CCDTEMP", 293.0)];
+    let mut keys = vec![("EXPTIME", 1.0), ("CCDTEMP", HOT_REF_K)];
     if let Some(a) = args.psf_a_px {
         keys.push(("PSFA", a));
     }
@@ -205,7 +363,7 @@ pub fn run(args: &SimulateArgs) -> Result<SimFiles, CliError> {
         keys: gains,
     };
     write_map(&files.flat, &flat)?;
-    write_file(&files.hot, b"col,row,dark_e\n")?;
+    write_file(&files.hot, hot_csv(&sim).as_bytes())?;
     Ok(files)
 }
 
