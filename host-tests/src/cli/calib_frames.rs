@@ -71,6 +71,10 @@ pub struct LabSetArgs {
     /// into this folder, to judge other tools' products against.
     #[arg(long)]
     pub truth_dir: Option<PathBuf>,
+    /// Leave out the saturation ladder (the 20 flats past the linear range, recorded last):
+    /// the 78 frames that a tool combining every flat into its master flat can use.
+    #[arg(long)]
+    pub no_saturation_ladder: bool,
 }
 
 /// The FITS files of `dirs`, sorted by path.
@@ -131,10 +135,13 @@ pub fn run(args: &CalibFramesArgs) -> Result<Products, CliError> {
 
 /// Runs `startrack calib lab-set`: writes the frames and prints how many.
 pub fn run_lab_set(args: &LabSetArgs) -> Result<Vec<PathBuf>, CliError> {
-    let set = match args.sensor {
+    let mut set = match args.sensor {
         Sensor::Ccd4720 => LabSet::ccd47_20(args.seed),
         Sensor::Test128 => LabSet::small(args.seed),
     };
+    if args.no_saturation_ladder {
+        set.saturation_exposures_s.clear();
+    }
     let paths = set.write(Path::new(&args.out))?;
     println!("wrote {} frames in {}", paths.len(), args.out.display());
     if let Some(dir) = &args.truth_dir {
