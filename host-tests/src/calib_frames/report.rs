@@ -7,7 +7,7 @@
 //! | `rts.csv` | `col,row` (raw readout coordinates) |
 //! | `cti_traps.json`, `cti.json` | the trap law measured by EPER, and the table's CTI coefficients from it (`calib build --cti`, `calib cti --traps`); written when EPER measured one |
 //! | `master_bias.fits`, `dark_rel.fits`, `flat.fits` | the maps for DS9 (full readout, full readout, active area) |
-//! | `ptc.png`, `dark_temperature.png` | photon transfer per output with its full well marked; dark rate against temperature (covered pixels and hot pixels) |
+//! | `ptc.png`, `dark_temperature.png` | photon transfer per output with its full well marked (where the mean stops rising) and its linearity error (LE) in the legend; dark rate against temperature (covered pixels and hot pixels) |
 //!
 //! The PNGs are drawn by the figures' chart code ([`crate::figures::plot`]); without a font
 //! they are skipped with a reason. Cost: writing the maps, a few kilobytes else.
@@ -129,7 +129,13 @@ fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
             .copied()
             .flatten()
             .map_or(top, |fw| top.min(fw / 1e3));
-        series.push(Series::solid(format!("output {o}: measured"), pts, o));
+        let le = p
+            .nonlinearity_pct
+            .get(o)
+            .copied()
+            .flatten()
+            .map_or(String::new(), |l| format!(", LE {l:.3} %"));
+        series.push(Series::solid(format!("output {o}: measured{le}"), pts, o));
         series.push(Series {
             label: format!("output {o}: fit, gain {g:.4} e-/ADU"),
             points: vec![(0.0, bv / 1e3), (fit_top, (bv + 1e3 * fit_top / g) / 1e3)],
@@ -139,16 +145,8 @@ fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
         if let (Some(Some(fw_adu)), Some(Some(fw_e))) =
             (p.full_well_adu.get(o), p.full_well_e.get(o))
         {
-            let le = p
-                .nonlinearity_pct
-                .get(o)
-                .copied()
-                .flatten()
-                .map_or("no linearity error".to_string(), |l| {
-                    format!("linearity error {l:.2} %")
-                });
             series.push(Series {
-                label: format!("output {o}: full well {fw_e:.0} e- (mean stops rising), {le}"),
+                label: format!("output {o}: full well {fw_e:.0} e-"),
                 points: vec![(fw_adu / 1e3, 0.0), (fw_adu / 1e3, var_top)],
                 color: o,
                 dashed: true,
@@ -159,7 +157,7 @@ fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
         dir,
         "ptc.png",
         &Chart {
-            title: "Photon transfer: temporal variance against mean signal".into(),
+            title: "Photon transfer (LE: EMVA 1288 linearity error)".into(),
             x_label: "mean signal above bias, kADU".into(),
             y_label: "var(A - B) / 2, thousand ADU^2".into(),
             log_x: false,
