@@ -3,8 +3,10 @@
 //! --out DIR`, which writes a simulated lab set to try it on. Every `*.fits`/`*.fit` file of
 //! the folders is read; a bad input stops the run with one line naming the file and the
 //! problem, and no table is written. Cost: reading each file once and a few operations per
-//! sample (1.2 s and 81 MB for the CCD47-20 lab set of 78 frames, in release); a progress
-//! bar on a terminal. Writing that lab set takes about 3 minutes (simulating 86 M samples).
+//! sample (1.2 s and 81 MB for the CCD47-20 lab set of 78 frames without its saturation
+//! ladder, 4.2 s and 82 MB for the 98 with it on a loaded machine, in release); a progress
+//! bar on a terminal. Writing that lab set takes about 4 minutes (simulating 108 M samples;
+//! 3 minutes and 86 M without the ladder).
 
 use super::{CliError, write_file};
 use crate::calib_frames::labset::LabSet;
