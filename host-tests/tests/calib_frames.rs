@@ -1,6 +1,7 @@
 //! `calib frames` against the simulator's truth on a small simulated lab set
 //! (`LabSet::small`: 128 x 128 active pixels, two outputs, 10 bias frames, 10 flat pairs,
-//! darks at 3 temperatures x 2 exposures x 3 frames, a 30-frame dark series). The set is
+//! darks at 3 temperatures x 2 exposures x 3 frames, a 30-frame dark series, a saturation
+//! ladder of 10 flat pairs past the full well). The set is
 //! written and calibrated once per test binary. Each tolerance is stated with its Monte Carlo
 //! basis. `CALIB_FRAMES_SET=ccd47-20` runs the same tests on the CCD47-20's full readout
 //! (`LabSet::ccd47_20`, the command in docs/calibration.md; minutes in release).
@@ -77,11 +78,148 @@ fn gain_and_read_noise_per_output_match_the_truth() {
             100.0 * read_tol
         );
         assert!(err.abs() <= read_tol.min(0.02), "read noise {rn}");
+    }
+}
+
+/// The full well and the linearity error of `p` against the truth of `set` on every output,
+/// printed, with their tolerances asserted:
+/// - the plateau in ADU within 0.1 %: the mean of every pixel clipped at one level, which
+///   only the over-scan and column-bias levels' noise (0.1 ADU of 60 000) moves;
+/// - the full well in e- (the plateau through the measured gain) within the gain's
+///   tolerance (4 sigma of `sqrt(2 / (N pairs))`, N pixels per output) plus 0.1 %, plus
+///   `2.1 k` for an output chain of non-linearity `k`: its PTC reads `var / mean` low by
+///   `3 k m / W` at charge `m` (variance through the slope `1 - 2 k m / W` squared, mean
+///   through `1 - k m / W`), up to `m = 0.7 W` in the gain fit, so the gain is high by up
+///   to that much;
+/// - the linearity error within 6 sigma of the lowest point's relative noise
+///   `1 / sqrt(2 N m_min)` (two frames of N pixels at `m_min` e-), which the relative
+///   deviation weighs most: 0.066 pp on the small set (5 000 e-, 8 192 pixels).
+fn assert_full_well_and_linearity(set: &LabSet, p: &Products) {
+    use startrack_host::calib_frames::ptc::{LINEARITY_RANGE, fit_line};
+    use startrack_host::sim::SaturationLimit;
+    let sim = set.sensor();
+    let g = set.geometry;
+    let n = pixels_per_output(&g);
+    let pairs = set.flat_exposures_s.len() as f64;
+    let gain_tol = 4.0 * (2.0 / (n * pairs)).sqrt();
+    let m_min = set.lamp_e_per_s
+        * set
+            .flat_exposures_s
+            .iter()
+            .copied()
+            .fold(f64::MAX, f64::min);
+    let linearity_tol_pp = 100.0 * 6.0 / (2.0 * n * m_min).sqrt();
+    for o in 0..usize::from(g.outputs) {
+        let full_well_tol = gain_tol + 1e-3 + 2.1 * set.nonlinearity_at_full_well[o];
+        // Truth: the level the output's samples cannot pass, mean over its active columns
+        // (e- above bias and column bias through the true gain), and what sets it.
+        let cols: Vec<usize> = (0..g.line_len())
+            .filter(|&c| {
+                g.segment(c) == Some(Segment::Active) && usize::from(g.output_of_col(c).0) == o
+            })
+            .collect();
+        let sat: Vec<(f64, SaturationLimit)> = cols.iter().map(|&c| sim.saturation_e(c)).collect();
+        let truth_e = sat.iter().map(|s| s.0).sum::<f64>() / sat.len() as f64;
+        let by_adc = sat.iter().filter(|s| s.1 == SaturationLimit::Adc).count();
+        let gain = sim.params.gain_e_per_adu[o];
+        let truth_adu = truth_e / gain;
+        let adu = p.full_well_adu[o].expect("the ladder reaches saturation");
+        let e = p.full_well_e[o].expect("a full well");
+        println!(
+            "output {o}: full well {e:.0} e- (truth {truth_e:.0} e-, set by the {} on {by_adc} of {} columns), error {:+.3} % (tolerance {:.3} %); plateau {adu:.1} ADU (truth {truth_adu:.1}), error {:+.4} %",
+            if by_adc * 2 > cols.len() {
+                "ADC's top"
+            } else {
+                "pixel's full well"
+            },
+            cols.len(),
+            100.0 * (e / truth_e - 1.0),
+            100.0 * full_well_tol,
+            100.0 * (adu / truth_adu - 1.0)
+        );
         assert!(
-            r.products.nonlinearity[o] < 0.005,
-            "the simulated sensor is linear"
+            (adu / truth_adu - 1.0).abs() <= 1e-3,
+            "plateau {adu} vs {truth_adu}"
+        );
+        assert!(
+            (e / truth_e - 1.0).abs() <= full_well_tol,
+            "full well {e} vs {truth_e}"
+        );
+        // Linearity error: the truth at the exposures the measurement used, from the sensor's
+        // expected charge through its non-linearity.
+        let (lo, hi) = LINEARITY_RANGE;
+        let used: Vec<f64> = p
+            .ptc
+            .iter()
+            .filter(|q| {
+                usize::from(q.output) == o
+                    && q.exptime_s > 0.0
+                    && (lo * adu..=hi * adu).contains(&q.mean_adu)
+            })
+            .map(|q| q.exptime_s)
+            .collect();
+        let xy: Vec<(f64, f64)> = used
+            .iter()
+            .map(|&t| (t, set.expected_flat_mean_adu(t, o as u8)))
+            .collect();
+        let (a, b) = fit_line(&xy).expect("3 points or more");
+        let truth_le = 100.0
+            * xy.iter()
+                .map(|&(t, y)| ((y - (a + b * t)) / (a + b * t)).abs())
+                .fold(0.0, f64::max);
+        let le = p.nonlinearity_pct[o].expect("a linearity error");
+        println!(
+            "output {o}: linearity error {le:.4} % (truth {truth_le:.4} %, {} pairs from {} to {} s), error {:+.4} pp (tolerance {linearity_tol_pp:.4} pp)",
+            used.len(),
+            used.first().copied().unwrap_or(0.0),
+            used.last().copied().unwrap_or(0.0),
+            le - truth_le
+        );
+        assert!(used.len() >= 10, "the ladder and the flats fill 5 to 95 %");
+        assert!(
+            (le - truth_le).abs() <= linearity_tol_pp,
+            "{le} vs {truth_le}"
         );
     }
+}
+
+#[test]
+fn full_well_and_linearity_error_match_the_truth() {
+    let r = run();
+    assert_full_well_and_linearity(&r.set, &r.products);
+}
+
+/// A set whose output chains read a full well 0.5 % (output 0) and 1 % (output 1) low: the
+/// small set's flats and ladder, 4 bias frames and 2 darks.
+fn nonlinear_set() -> LabSet {
+    LabSet {
+        bias_frames: 4,
+        dark_temperatures_k: vec![263.0, 273.0],
+        dark_exposures_s: vec![10.0],
+        darks_per_setting: 1,
+        series_frames: 0,
+        nonlinearity_at_full_well: [0.005, 0.01],
+        ..LabSet::small(SEED + 1)
+    }
+}
+
+#[test]
+fn a_non_linear_output_chain_is_measured() {
+    let set = nonlinear_set();
+    let dir = tempfile::tempdir().unwrap();
+    let paths = set.write(dir.path()).unwrap();
+    let p = calibrate(&paths, &set.geometry, &|| ()).unwrap();
+    for o in 0..2 {
+        println!(
+            "output {o}: gain {:.5} e-/ADU (truth {}, the small-signal gain), error {:+.3} %",
+            p.gain_e_per_adu[o],
+            set.sensor().params.gain_e_per_adu[o],
+            100.0 * (p.gain_e_per_adu[o] / set.sensor().params.gain_e_per_adu[o] - 1.0)
+        );
+    }
+    assert_full_well_and_linearity(&set, &p);
+    // The non-linearity is seen: ten times the linear set's error and more.
+    assert!(p.nonlinearity_pct.iter().all(|l| l.unwrap() > 0.5));
 }
 
 #[test]
@@ -184,13 +322,11 @@ fn flat_error_is_what_the_frames_allow() {
             means[usize::from(x >= half)] += sim.flat(x, y) / (half * rows) as f64;
         }
     }
-    let lamp: f64 = r
-        .set
-        .flat_exposures_s
-        .iter()
-        .map(|t| 2.0 * t * r.set.lamp_e_per_s)
-        .sum();
-    let nflat = 2.0 * r.set.flat_exposures_s.len() as f64;
+    // The flats of the flat field: the saturation ladder is left out.
+    let used = &r.products.flat_field_exposures_s;
+    assert_eq!(used.len(), 2 * r.set.flat_exposures_s.len());
+    let lamp: f64 = used.iter().map(|t| t * r.set.lamp_e_per_s).sum();
+    let nflat = used.len() as f64;
     let read = sim.params.read_noise_e;
     let (mut err2, mut exp2, mut n) = (0.0, 0.0, 0);
     for y in 0..rows {
@@ -413,4 +549,37 @@ fn star_frames_with_the_built_table_match_the_true_table() {
         rms_built <= 1.05 * rms_true,
         "built {rms_built} vs true {rms_true}"
     );
+}
+
+#[test]
+fn linearity_error_and_plateau_by_hand() {
+    use startrack_host::calib_frames::ptc::{PairPoint, linearity_error_pct, saturation};
+    let pt = |t: f64, m: f64| PairPoint {
+        output: 0,
+        exptime_s: t,
+        mean_adu: m,
+        var_adu2: m,
+        pixels: 1,
+    };
+    // Line through (1, 1), (2, 2), (3, 3.3): a = -0.2, b = 1.15; the first point is 0.05
+    // above 0.95, 5.263 %.
+    let pts = [pt(1.0, 1.0), pt(2.0, 2.0), pt(3.0, 3.3)];
+    let (le, n) = linearity_error_pct(&pts, 3.5).unwrap();
+    assert_eq!(n, 3);
+    assert!((le - 100.0 * 0.05 / 0.95).abs() < 1e-9, "{le}");
+    // 3.3 is above 95 % of 3.4 when the saturation is 3.0: two points, no error.
+    assert_eq!(linearity_error_pct(&pts, 3.0), None);
+    // A plateau from 3 s: 3.3 then 3.301 (rise 0.03 %); the largest mean of the plateau.
+    let ladder = [
+        pt(1.0, 1.0),
+        pt(2.0, 2.0),
+        pt(3.0, 3.3),
+        pt(4.0, 3.301),
+        pt(5.0, 3.3),
+    ];
+    let s = saturation(&ladder).unwrap();
+    assert_eq!((s.mean_adu, s.exptime_s), (3.301, 3.0));
+    // Still rising 10 % between the two longest: no saturation, and by how much.
+    let r = saturation(&pts[..2]).unwrap_err();
+    assert!((r.rise - 1.0).abs() < 1e-12 && r.from_s == 1.0 && r.to_s == 2.0);
 }

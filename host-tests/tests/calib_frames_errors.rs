@@ -18,6 +18,7 @@ fn minimal() -> LabSet {
         dark_exposures_s: vec![10.0],
         darks_per_setting: 1,
         series_frames: 0,
+        saturation_exposures_s: Vec::new(),
         ..LabSet::small(3)
     }
 }
@@ -49,9 +50,23 @@ fn the_minimal_set_runs_through_the_command() {
     let p = run(&args).expect("runs");
     assert_eq!(p.frames, (2, 6, 2));
     assert!(p.rts_series.is_none(), "no series of 10 frames");
+    // No flat reaches saturation: no full well, no linearity error, and a note says why.
+    assert_eq!(p.full_well_e, vec![None, None]);
+    assert_eq!(p.nonlinearity_pct, vec![None, None]);
+    let note = p
+        .notes
+        .iter()
+        .find(|n| n.starts_with("output 0: no flat reaches saturation"))
+        .expect("a note");
+    assert!(note.contains("from 2 s to 3 s"), "{note}");
     let bytes = std::fs::read(&args.out).unwrap();
     startrack_core::table::CalibTable::parse(&bytes).expect("a valid table");
-    assert!(args.report_dir.join("report.json").exists());
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(args.report_dir.join("report.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(json["full_well_e"], serde_json::json!([null, null]));
+    assert_eq!(json["nonlinearity_pct"], serde_json::json!([null, null]));
 }
 
 #[test]

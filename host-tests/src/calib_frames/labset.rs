@@ -3,19 +3,27 @@
 //! every product of [`super`] can be checked against the sensor's truth.
 //!
 //! The set ([`LabSet`]): bias frames (0 s), flat pairs at several exposures of a constant lamp
-//! (photon transfer), darks at several exposures and temperatures, and one long
-//! time-ordered dark series at one setting (telegraph pixels). Each frame is a raw readout
+//! (photon transfer), darks at several exposures and temperatures, one long time-ordered dark
+//! series at one setting (telegraph pixels), and last a ladder of flat pairs from the top of
+//! the linear range to past saturation (full well and linearity error, as EMVA 1288 measures
+//! saturation capacity: the exposure raised until the mean stops rising). The ladder is
+//! recorded last so that every earlier frame is the same with or without it. Each frame is a raw readout
 //! (BITPIX 16 + BZERO 32768) with `IMAGETYP` (`BIAS`, `DARK`, `FLAT`), `EXPTIME` (s),
 //! `CCDTEMP` (K) and `DATE-OBS` (ISO 8601, one second apart in recording order).
 //!
 //! Physics switched on ([`LabSet::sensor`]): the regular dark follows a doubling law
 //! (`dark_rate_e_per_s_at_293k`, `dark_doubling_k`) scaled by the exposure; hot pixels with
 //! their own rate (log-uniform) and doubling; telegraph pixels (a step added with probability
-//! 1/2 in each frame); read noise, column bias, DSNU and PRNU as the basic sensor.
+//! 1/2 in each frame); read noise, column bias, DSNU and PRNU as the basic sensor; the output
+//! chains' quadratic non-linearity ([`LabSet::nonlinearity_at_full_well`], 0 in the standard
+//! sets). With the simulator's gains and biases, output 0 saturates at the ADC's 65535
+//! (96.8 ke- through its 1.5 e-/ADU above a 1000 ADU bias) before the pixel's 100 ke- full
+//! well, output 1 at the full well (its ADC top is 103 ke-).
 //!
 //! Cost: one rendered raw sample per element of every frame (the basic sensor's cost, see
-//! [`crate::sim::render`]); the small set of the tests ([`LabSet::small`]) is 78 frames of
-//! 22 880 samples, the CCD47-20 set ([`LabSet::ccd47_20`]) 78 frames of 1.1 M.
+//! [`crate::sim::render`]); the small set of the tests ([`LabSet::small`]) is 98 frames of
+//! 22 880 samples (78 and the 20 of the ladder), the CCD47-20 set ([`LabSet::ccd47_20`]) 98
+//! frames of 1.1 M.
 
 use crate::fits::{FitsError, RawFrame, write_raw_frame};
 use crate::sim::effects::{ChargeTraps, DarkLaw, HotPixels, TelegraphPixels};
@@ -60,6 +68,12 @@ pub struct LabSet {
     pub series_temperature_k: f64,
     /// Charge traps of the sensor (none in the standard sets).
     pub traps: Option<ChargeTraps>,
+    /// Exposures of the saturation ladder's flat pairs, s (two frames each, recorded after
+    /// everything else); empty: no ladder.
+    pub saturation_exposures_s: Vec<f64>,
+    /// Each output chain's response non-linearity, the fraction a full well reads low
+    /// ([`SensorParams::nonlinearity_at_full_well`]).
+    pub nonlinearity_at_full_well: [f64; 2],
 }
 
 /// Hot-pixel reference temperature of the lab set, K (the `hot.csv` rates hold there).
@@ -67,8 +81,11 @@ pub const REFERENCE_K: f64 = 293.0;
 
 impl LabSet {
     /// The test set: a 128 x 128 active area with the CCD47-20's over-scan and covered
-    /// strips, two outputs, 10 bias frames, 10 flat pairs, darks at 3 temperatures x 2
-    /// exposures x 3 frames and a 30-frame series.
+    /// strips, two outputs, 10 bias frames, 10 flat pairs (5 000 to 50 000 e-), darks at 3
+    /// temperatures x 2 exposures x 3 frames, a 30-frame series, and a saturation ladder of
+    /// 10 flat pairs from 15 to 26 s (75 000 to 130 000 e-: four pairs on output 0 and
+    /// five on output 1 inside 95 % of saturation, the last two past it on every pixel of
+    /// both outputs).
     pub fn small(seed: u64) -> Self {
         Self {
             geometry: ReadoutGeometry {
@@ -106,6 +123,10 @@ impl LabSet {
             series_exposure_s: 10.0,
             series_temperature_k: 263.0,
             traps: None,
+            saturation_exposures_s: vec![
+                15.0, 16.0, 17.0, 18.0, 18.5, 19.5, 20.5, 22.0, 24.0, 26.0,
+            ],
+            nonlinearity_at_full_well: [0.0, 0.0],
         }
     }
 
@@ -123,6 +144,7 @@ impl LabSet {
             geometry: self.geometry,
             seed: self.seed,
             dark_mean_e: 0.0,
+            nonlinearity_at_full_well: self.nonlinearity_at_full_well,
             effects: crate::sim::Effects {
                 temperature_k: REFERENCE_K,
                 dark_law: Some(DarkLaw {
@@ -183,6 +205,10 @@ impl LabSet {
         }
         for _ in 0..self.series_frames {
             v.push(("DARK", self.series_exposure_s, self.series_temperature_k));
+        }
+        for &t in &self.saturation_exposures_s {
+            v.push(("FLAT", t, self.flat_temperature_k));
+            v.push(("FLAT", t, self.flat_temperature_k));
         }
         v
     }
@@ -310,6 +336,35 @@ impl LabSet {
             paths.push(p);
         }
         Ok(paths)
+    }
+}
+
+impl LabSet {
+    /// The expected mean signal above bias of `output`'s active pixels in a flat of
+    /// `exposure_s`, ADU, from the sensor's truth: each pixel's expected charge `m` (lamp
+    /// through its flat, plus its dark) read through the output's non-linearity
+    /// (`E[e (1 - k e / W)] = m - k (m^2 + m) / W` for a Poisson charge) and gain. Below
+    /// saturation only (the full well and the ADC's top are not applied). Cost: one expected
+    /// charge per active pixel of the output.
+    pub fn expected_flat_mean_adu(&self, exposure_s: f64, output: u8) -> f64 {
+        let s = self.frame_sensor(0, exposure_s, self.flat_temperature_k, true);
+        let p = &s.params;
+        let g = self.geometry;
+        let o = usize::from(output).min(1);
+        let (k, well) = (p.nonlinearity_at_full_well[o], p.full_well_e.max(1.0));
+        let (mut sum, mut n) = (0.0, 0usize);
+        for line in 0..usize::from(g.active_rows) {
+            for col in (0..g.line_len()).filter(|&c| {
+                g.segment(c) == Some(startrack_core::geometry::Segment::Active)
+                    && g.output_of_col(c).0 == output
+            }) {
+                let (light, dark) = s.expected_e(col, line);
+                let m = light + dark;
+                sum += m - k * (m * m + m) / well;
+                n += 1;
+            }
+        }
+        sum / n.max(1) as f64 / p.gain_e_per_adu[o]
     }
 }
 

@@ -5,7 +5,8 @@
 //! One stage per file, in the order the frames are read:
 //! - [`read`]: headers, sorting, flat pairs, and every bad input as one line naming the file;
 //! - [`bias`]: master bias and the column bias against each line's over-scan;
-//! - [`ptc`]: gain and read noise per output by photon transfer, and the non-linearity;
+//! - [`ptc`]: gain and read noise per output by photon transfer, the full well (where the
+//!   mean stops rising) and EMVA 1288's linearity error;
 //! - [`dark`]: the relative dark map normalised by the core's covered-pixel estimator, and the
 //!   hot pixels with their own rate and doubling temperature;
 //! - [`flat`]: the flat field per output;
@@ -45,8 +46,17 @@ use startrack_core::table::{CalibTable, HotPixel, HotPolicy, MapSpec, TableSpec}
 use startrack_core::units::{ColumnBiasAdu, DarkRel, ERatePerS, GainEPerAdu, Kelvin};
 use std::path::PathBuf;
 
-/// Share of a flat's active pixels at the ADC's top above which the flat is refused.
+/// Share of a flat's active pixels at the ADC's top above which the flat is saturated: it
+/// serves the full well and the linearity error only (not the gain, the flat field or EPER).
 pub const SATURATED_SHARE: f64 = 0.001;
+
+/// A saturated flat is refused when a flat of equal or longer exposure has a share of pixels
+/// at the ADC's top smaller by more than this: once a pixel saturates it stays saturated at
+/// longer exposures. Which pixels saturate is set mostly by their fixed response (PRNU, 2 %
+/// of the signal against a shot noise of 0.3 % near full well), so two flats of one exposure
+/// share far less than this margin's worth of chance: only a changed lamp or a broken frame
+/// passes it.
+pub const SATURATED_SHARE_DROP: f64 = 0.01;
 
 /// Hot pixels with a rate above this at 293 K are excluded rather than corrected (`calib
 /// build`'s default, 10 000 e- in 1 s).
@@ -63,8 +73,16 @@ pub struct Products {
     pub read_noise_e: Vec<f64>,
     /// Bias-pair variance per output (read noise and rounding), ADU^2.
     pub bias_var_adu2: Vec<f64>,
-    /// Largest relative departure from a linear response per output.
-    pub nonlinearity: Vec<f64>,
+    /// Full well per output, e- through the gain: where the flats' mean stops rising (`None`
+    /// when no flat pair reaches the plateau).
+    pub full_well_e: Vec<Option<f64>>,
+    /// The same, mean signal above bias, ADU.
+    pub full_well_adu: Vec<Option<f64>>,
+    /// EMVA 1288 linearity error per output, percent, over 5 to 95 % of the full well
+    /// (`None` without a full well or with fewer than 3 pairs in that range).
+    pub nonlinearity_pct: Vec<Option<f64>>,
+    /// EXPTIME of every flat in the flat field and EPER (the pairs of the linear range), s.
+    pub flat_field_exposures_s: Vec<f64>,
     /// Photon transfer points (every flat pair on every output).
     pub ptc: Vec<PairPoint>,
     /// Master bias, ADU, full readout.
@@ -202,32 +220,55 @@ pub fn calibrate(
             65535.0 - sum / n.max(1) as f64
         })
         .collect();
+    // Pairs in order of exposure: a saturated flat is accepted as the top of the ladder only.
+    let mut most_saturated: Option<(f64, PathBuf)> = None;
+    let mut flat_field_exposures_s = Vec::new();
     for (a_info, b_info) in &inv.flat_pairs {
         let a = read::read_frame(a_info, g)?;
         tick();
         let b = read::read_frame(b_info, g)?;
         tick();
+        let mut saturated = false;
         for (f, info) in [(&a, a_info), (&b, b_info)] {
-            check_saturation(f, g, info)?;
-            edges.extend(eper::edge_response(f, g, &cb_adu).unwrap_or_default());
-            flat.add(f, &t1, info.exptime_s, info.ccdtemp_k)
-                .ok_or_else(|| {
-                    FramesError::Missing(format!(
-                        "{}: a line without over-scan levels",
-                        info.path.display()
-                    ))
-                })?;
+            let share = saturated_share(f, g);
+            if let Some((top, path)) = &most_saturated
+                && share < top - SATURATED_SHARE_DROP
+            {
+                return Err(FramesError::Saturated {
+                    path: path.clone(),
+                    fraction: *top,
+                    unsaturated: info.path.clone(),
+                });
+            }
+            if share > SATURATED_SHARE && most_saturated.as_ref().is_none_or(|m| share > m.0) {
+                most_saturated = Some((share, info.path.clone()));
+            }
+            saturated |= share > SATURATED_SHARE;
         }
-        for o in 0..outputs {
-            points.push(ptc::pair_point(
-                &a,
-                &b,
-                g,
-                Output(o as u8),
-                &cb_adu,
-                a_info.exptime_s,
-            ));
+        let pair: Vec<PairPoint> = (0..outputs)
+            .map(|o| ptc::pair_point(&a, &b, g, Output(o as u8), &cb_adu, a_info.exptime_s))
+            .collect();
+        // The flat field and EPER take the pairs of the ADC's linear range on every output.
+        let linear = !saturated
+            && pair.iter().all(|p| {
+                p.mean_adu
+                    < ptc::LINEAR_FRACTION
+                        * range_adu.get(usize::from(p.output)).copied().unwrap_or(0.0)
+            });
+        if linear {
+            for (f, info) in [(&a, a_info), (&b, b_info)] {
+                edges.extend(eper::edge_response(f, g, &cb_adu).unwrap_or_default());
+                flat.add(f, &t1, info.exptime_s, info.ccdtemp_k)
+                    .ok_or_else(|| {
+                        FramesError::Missing(format!(
+                            "{}: a line without over-scan levels",
+                            info.path.display()
+                        ))
+                    })?;
+                flat_field_exposures_s.push(info.exptime_s);
+            }
         }
+        points.extend(pair);
     }
     if !inv.unpaired_flats.is_empty() {
         notes.push(format!(
@@ -236,6 +277,8 @@ pub fn calibrate(
         ));
     }
     let mut fits = Vec::new();
+    let (mut full_well_e, mut full_well_adu, mut nonlinearity_pct) =
+        (Vec::new(), Vec::new(), Vec::new());
     for o in 0..outputs {
         let pts: Vec<PairPoint> = points
             .iter()
@@ -244,17 +287,72 @@ pub fn calibrate(
             .collect();
         let bv = bias_var_adu2.get(o).copied().unwrap_or(0.0);
         let range = range_adu.get(o).copied().unwrap_or(65535.0);
-        let fit = ptc::fit_output(&pts, bv, range, read::MIN_FLAT_PAIRS).ok_or_else(|| {
+        let sat = ptc::saturation(&pts);
+        let top = sat.map_or(range, |s| s.mean_adu.min(range));
+        let fit = ptc::fit_output(&pts, bv, top, read::MIN_FLAT_PAIRS).ok_or_else(|| {
             FramesError::Missing(format!(
-                "too few flats: output {o} has fewer than {} pairs in the linear range (below {:.0} % of the ADC's range)",
+                "too few flats: output {o} has fewer than {} pairs in the linear range (below {:.0} % of {})",
                 read::MIN_FLAT_PAIRS,
-                100.0 * ptc::LINEAR_FRACTION
+                100.0 * ptc::LINEAR_FRACTION,
+                if sat.is_ok() { "the saturation signal" } else { "the ADC's range" }
             ))
         })?;
         notes.push(format!(
             "output {o}: gain {:.4} e-/ADU, read noise {:.3} e- from {} flat pairs",
             fit.gain_e_per_adu, fit.read_noise_e, fit.pairs_fitted
         ));
+        match sat {
+            Ok(s) => {
+                let fw = fit.gain_e_per_adu * s.mean_adu;
+                let le = ptc::linearity_error_pct(&pts, s.mean_adu);
+                notes.push(format!(
+                    "output {o}: full well {fw:.0} e- ({:.1} ADU above bias: the mean stops rising from {} s); {}",
+                    s.mean_adu,
+                    s.exptime_s,
+                    match le {
+                        Some((pct, n)) => format!(
+                            "linearity error {pct:.3} % over 5 to 95 % of it ({n} pairs)"
+                        ),
+                        None => "no linearity error: fewer than 3 pairs within 5 to 95 % of it".into(),
+                    }
+                ));
+                let used_above = flat_field_exposures_s
+                    .iter()
+                    .step_by(2)
+                    .filter_map(|t| {
+                        pts.iter()
+                            .find(|p| p.exptime_s == *t)
+                            .filter(|p| p.mean_adu >= ptc::LINEAR_FRACTION * s.mean_adu)
+                    })
+                    .count();
+                if used_above > 0 {
+                    notes.push(format!(
+                        "output {o}: {used_above} flat pairs of the flat field are above {:.0} % of the full well",
+                        100.0 * ptc::LINEAR_FRACTION
+                    ));
+                }
+                full_well_e.push(Some(fw));
+                full_well_adu.push(Some(s.mean_adu));
+                nonlinearity_pct.push(le.map(|l| l.0));
+            }
+            Err(r) => {
+                notes.push(if r.to_s > 0.0 {
+                    format!(
+                        "output {o}: no flat reaches saturation (the mean still rises {:.2} % from {} s to {} s): no full well or linearity error",
+                        100.0 * r.rise,
+                        r.from_s,
+                        r.to_s
+                    )
+                } else {
+                    format!(
+                        "output {o}: no flat reaches saturation: no full well or linearity error"
+                    )
+                });
+                full_well_e.push(None);
+                full_well_adu.push(None);
+                nonlinearity_pct.push(None);
+            }
+        }
         fits.push(fit);
     }
     let gains: Vec<f64> = fits.iter().map(|f| f.gain_e_per_adu).collect();
@@ -342,7 +440,10 @@ pub fn calibrate(
     });
     Ok(Products {
         geometry: *g,
-        nonlinearity: fits.iter().map(|f| f.nonlinearity).collect(),
+        full_well_e,
+        full_well_adu,
+        nonlinearity_pct,
+        flat_field_exposures_s,
         gain_e_per_adu: gains,
         read_noise_e,
         bias_var_adu2,
@@ -362,12 +463,8 @@ pub fn calibrate(
     })
 }
 
-/// Refuses a flat with more than [`SATURATED_SHARE`] of its active pixels at 65535 ADU.
-fn check_saturation(
-    f: &crate::fits::RawFrame,
-    g: &ReadoutGeometry,
-    info: &FrameInfo,
-) -> Result<(), FramesError> {
+/// Share of a frame's active pixels at 65535 ADU.
+fn saturated_share(f: &crate::fits::RawFrame, g: &ReadoutGeometry) -> f64 {
     let (mut top, mut n) = (0usize, 0usize);
     for line in f.lines().take(usize::from(g.active_rows)) {
         for (c, v) in line.iter().enumerate() {
@@ -377,14 +474,7 @@ fn check_saturation(
             }
         }
     }
-    let share = top as f64 / n.max(1) as f64;
-    if share > SATURATED_SHARE {
-        return Err(FramesError::Saturated {
-            path: info.path.clone(),
-            fraction: share,
-        });
-    }
-    Ok(())
+    top as f64 / n.max(1) as f64
 }
 
 impl Products {

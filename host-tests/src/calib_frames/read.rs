@@ -65,12 +65,16 @@ pub enum FramesError {
         /// (lines, columns) expected.
         expected: (usize, usize),
     },
-    /// A flat is saturated.
+    /// A flat is saturated while a flat of equal or longer exposure is not (a flat past
+    /// saturation belongs at the top of the exposure ladder only: a lamp flash or a broken
+    /// frame otherwise).
     Saturated {
         /// The file.
         path: PathBuf,
         /// Fraction of the active pixels at the ADC's top.
         fraction: f64,
+        /// The flat of equal or longer exposure with fewer pixels at the top.
+        unsaturated: PathBuf,
     },
     /// The set lacks frames a product needs, or the geometry cannot give one.
     Missing(String),
@@ -94,11 +98,16 @@ impl fmt::Display for FramesError {
                 expected.0,
                 expected.1
             ),
-            Self::Saturated { path, fraction } => write!(
+            Self::Saturated {
+                path,
+                fraction,
+                unsaturated,
+            } => write!(
                 f,
-                "{}: saturated flat: {:.2} % of the active pixels at 65535 ADU",
+                "{}: saturated flat: {:.2} % of the active pixels at 65535 ADU, but {} of equal or longer EXPTIME is not",
                 path.display(),
-                100.0 * fraction
+                100.0 * fraction,
+                unsaturated.display()
             ),
             Self::Missing(m) => f.write_str(m),
         }

@@ -2,12 +2,12 @@
 //!
 //! | file | contents |
 //! |---|---|
-//! | `report.json` | `gain_e_per_adu`, `read_noise_e`, `nonlinearity` (one per output), photon transfer points, covered dark rate per temperature, counts, notes |
+//! | `report.json` | `gain_e_per_adu`, `read_noise_e`, `full_well_e` (where the mean stops rising), `full_well_adu`, `nonlinearity_pct` (EMVA 1288 linearity error over 5 to 95 % of the full well), one per output and `null` when no flat pair reaches saturation (a note says so); photon transfer points, covered dark rate per temperature, counts, notes |
 //! | `hot.csv` | `col,row,rate_e_per_s_at_293k,doubling_k` (raw readout coordinates) |
 //! | `rts.csv` | `col,row` (raw readout coordinates) |
 //! | `cti_traps.json`, `cti.json` | the trap law measured by EPER, and the table's CTI coefficients from it (`calib build --cti`, `calib cti --traps`); written when EPER measured one |
 //! | `master_bias.fits`, `dark_rel.fits`, `flat.fits` | the maps for DS9 (full readout, full readout, active area) |
-//! | `ptc.png`, `dark_temperature.png` | photon transfer per output; dark rate against temperature (covered pixels and hot pixels) |
+//! | `ptc.png`, `dark_temperature.png` | photon transfer per output with its full well marked (where the mean stops rising) and its linearity error (LE) in the legend; dark rate against temperature (covered pixels and hot pixels) |
 //!
 //! The PNGs are drawn by the figures' chart code ([`crate::figures::plot`]); without a font
 //! they are skipped with a reason. Cost: writing the maps, a few kilobytes else.
@@ -25,7 +25,9 @@ pub fn json(p: &Products) -> serde_json::Value {
     serde_json::json!({
         "gain_e_per_adu": p.gain_e_per_adu,
         "read_noise_e": p.read_noise_e,
-        "nonlinearity": p.nonlinearity,
+        "full_well_e": p.full_well_e,
+        "full_well_adu": p.full_well_adu,
+        "nonlinearity_pct": p.nonlinearity_pct,
         "bias_variance_adu2": p.bias_var_adu2,
         "frames": { "bias": p.frames.0, "flat": p.frames.1, "dark": p.frames.2 },
         "ptc": p.ptc.iter().map(|q| serde_json::json!({
@@ -119,19 +121,43 @@ fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
         let bv = p.bias_var_adu2.get(o).copied().unwrap_or(0.0);
         let g = p.gain_e_per_adu.get(o).copied().unwrap_or(1.0);
         let top = pts.iter().map(|q| q.0).fold(0.0, f64::max);
-        series.push(Series::solid(format!("output {o}: measured"), pts, o));
+        let var_top = pts.iter().map(|q| q.1).fold(0.0, f64::max);
+        // The fit over the linear range, not past it.
+        let fit_top = p
+            .full_well_adu
+            .get(o)
+            .copied()
+            .flatten()
+            .map_or(top, |fw| top.min(fw / 1e3));
+        let le = p
+            .nonlinearity_pct
+            .get(o)
+            .copied()
+            .flatten()
+            .map_or(String::new(), |l| format!(", LE {l:.3} %"));
+        series.push(Series::solid(format!("output {o}: measured{le}"), pts, o));
         series.push(Series {
             label: format!("output {o}: fit, gain {g:.4} e-/ADU"),
-            points: vec![(0.0, bv / 1e3), (top, (bv + 1e3 * top / g) / 1e3)],
+            points: vec![(0.0, bv / 1e3), (fit_top, (bv + 1e3 * fit_top / g) / 1e3)],
             color: o,
             dashed: true,
         });
+        if let (Some(Some(fw_adu)), Some(Some(fw_e))) =
+            (p.full_well_adu.get(o), p.full_well_e.get(o))
+        {
+            series.push(Series {
+                label: format!("output {o}: full well {fw_e:.0} e-"),
+                points: vec![(fw_adu / 1e3, 0.0), (fw_adu / 1e3, var_top)],
+                color: o,
+                dashed: true,
+            });
+        }
     }
     lines(
         dir,
         "ptc.png",
         &Chart {
-            title: "Photon transfer: temporal variance against mean signal".into(),
+            title: "Photon transfer (LE: EMVA 1288 linearity error)".into(),
             x_label: "mean signal above bias, kADU".into(),
             y_label: "var(A - B) / 2, thousand ADU^2".into(),
             log_x: false,

@@ -9,8 +9,9 @@
 //! Physics (each term switchable through [`SensorParams`]): pixel-integrated Gaussian stars
 //! (paper eq. 3 and 5) with Poisson photon noise, dark charge with DSNU collected by active
 //! and covered pixels alike (Poisson), PRNU on the photon signal only, bias per output plus a
-//! per-column pattern, output gains, Gaussian read noise, full-well clipping, 16-bit ADC
-//! rounding and saturation. Optional, in [`effects`]: defocus or coma PSFs, a dark
+//! per-column pattern, output gains, Gaussian read noise, full-well clipping, an optional
+//! quadratic response non-linearity per output (`nonlinearity_at_full_well`, off by default),
+//! 16-bit ADC rounding and saturation. Optional, in [`effects`]: defocus or coma PSFs, a dark
 //! temperature law, hot pixels with their own law, telegraph pixels, cosmic rays and CTI
 //! trails. [`measured`] gives calibration maps measured from simulated dark and flat frames.
 
@@ -24,4 +25,4 @@ pub mod truth;
 
 pub use effects::Effects;
 pub use params::{SensorParams, Star};
-pub use render::Simulator;
+pub use render::{SaturationLimit, Simulator};

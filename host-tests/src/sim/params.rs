@@ -41,6 +41,12 @@ pub struct SensorParams {
     pub prnu: f64,
     /// Full well, e-: a pixel never holds more.
     pub full_well_e: f64,
+    /// Response non-linearity of each output chain (output node, amplifier, CDS), as the
+    /// fraction a charge packet of [`Self::full_well_e`] reads low: a packet of `e` electrons
+    /// reads as `e (1 - k e / full_well_e)` (a quadratic term; its deficit is `k` at full well,
+    /// `k / 4` at half). Deterministic, no draw. `[0, 0]` (linear) by default, and then every
+    /// sample is bit for bit the linear sensor's.
+    pub nonlinearity_at_full_well: [f64; 2],
     /// Add shot and read noise (off: the expected value, rounded to ADU).
     pub noise: bool,
     /// Uniform illumination (sky background, or a flat-field lamp), e- per active pixel
@@ -64,6 +70,7 @@ impl Default for SensorParams {
             dsnu: 0.1,
             prnu: 0.02,
             full_well_e: 100_000.0,
+            nonlinearity_at_full_well: [0.0, 0.0],
             noise: true,
             sky_e: 0.0,
             effects: Effects::default(),

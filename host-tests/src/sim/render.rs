@@ -13,6 +13,15 @@ use rand_distr::{Distribution, Normal, Poisson};
 use startrack_core::geometry::Segment;
 use startrack_core::window::Rect;
 
+/// What stops a pixel's signal from rising ([`Simulator::saturation_e`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SaturationLimit {
+    /// The pixel's full well.
+    FullWell,
+    /// The ADC's top code, 65535.
+    Adc,
+}
+
 /// A sensor looking at a scene, for one frame at a time.
 #[derive(Clone, Debug)]
 pub struct Simulator {
@@ -55,6 +64,24 @@ impl Simulator {
                     * normal(&mut stream(p.seed, FIXED, col, 0, Purpose::ColumnBias))
             }
             _ => 0.0,
+        }
+    }
+
+    /// The signal at which the samples of raw column `col` stop rising, and the limit that
+    /// sets it: e- above bias and column bias referred through the output's gain (read noise
+    /// aside), the smaller of the pixel's full well as the output reads it
+    /// (`full_well_e (1 - k)`, `k` its non-linearity at full well) and the ADC's 65535 ADU.
+    /// The serial register and the summing well hold more than a pixel (sensor doc) and are
+    /// not modelled.
+    pub fn saturation_e(&self, col: usize) -> (f64, SaturationLimit) {
+        let p = &self.params;
+        let out = usize::from(p.geometry.output_of_col(col).0).min(1);
+        let well = p.full_well_e * (1.0 - p.nonlinearity_at_full_well[out]);
+        let adc = (65535.0 - p.bias_adu[out] - self.column_bias_adu(col)) * p.gain_e_per_adu[out];
+        if adc < well {
+            (adc, SaturationLimit::Adc)
+        } else {
+            (well, SaturationLimit::FullWell)
         }
     }
 
@@ -263,6 +290,10 @@ impl Simulator {
         }
         e = e.min(p.full_well_e);
         let out = usize::from(g.output_of_col(col).0);
+        let k = p.nonlinearity_at_full_well[out];
+        if k != 0.0 && p.full_well_e > 0.0 {
+            e *= 1.0 - k * e / p.full_well_e;
+        }
         let adu = p.bias_adu[out] + self.column_bias_adu(col) + (e + read) / p.gain_e_per_adu[out];
         adu.round().clamp(0.0, 65535.0) as u16
     }
