@@ -367,6 +367,13 @@ impl LinkService {
             table: tables.active(p::TABLE_KIND_CALIBRATION),
             uptime_us: self.now_us,
             setup_faults: self.setup_faults,
+            dark_ratio_u8f8: s.map_or(0, |s| s.dark_drift.ratio_u8f8),
+            status: if s.is_some_and(|s| s.dark_drift.out_of_band) {
+                super::telemetry::status::DARK_DRIFT
+            } else {
+                0
+            },
+            defects_pending: s.map_or(0, |s| s.defects_pending),
         }
     }
 
