@@ -212,6 +212,10 @@ impl TableUpload for FlashHome {
     fn active(&self, kind: u8) -> Option<TableInfo> {
         active_info(&self.store, kind)
     }
+
+    fn read_active(&mut self, kind: u8, offset: u32, out: &mut [u8]) -> bool {
+        startrack_core::link::read_active_at(&mut self.store, kind, offset, out)
+    }
 }
 
 impl TableStore<'static> for FlashHome {

@@ -776,6 +776,9 @@ pub mod event {
     pub const TABLE_ACCEPTED: u16 = 5;
     /// A table upload was refused at commit (anomaly): kind u8, refusal u16.
     pub const TABLE_REFUSED: u16 = 6;
+    /// The in-flight defects were committed into a new table: hot pixels added u16,
+    /// telegraph pixels added u16, length u32, CRC-32 u32, sequence u32.
+    pub const DEFECTS_COMMITTED: u16 = 7;
 }
 
 /// Bytes of event data after the event number (zero-padded).

@@ -389,6 +389,11 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
                 len_bytes: len,
             });
             self.table_len = Some(len);
+            // A new table (an in-flight defect commit's among them) may list what the
+            // overlay holds.
+            if let Some(t) = table {
+                self.work.watch.retire_listed(&t);
+            }
         }
         self.table = table;
 
