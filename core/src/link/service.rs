@@ -148,13 +148,19 @@ pub struct LinkService {
     now_us: u64,
     answer: Answer,
     setup_faults: u16,
-    /// The in-flight defect commit under way: its plan and the bytes written so far.
-    amend: Option<(AmendPlan, u32)>,
+    /// The in-flight defect commit under way: its plan, the bytes written so far, and the
+    /// link rounds in a row the table in force could not be read.
+    amend: Option<(AmendPlan, u32, u16)>,
 }
 
 /// Bytes of an in-flight defect commit written to the store per link round (a flash unit
 /// of 32 bytes programs in tens of microseconds on the STM32H7: ~8 KB is a few ms).
 pub const AMEND_BYTES_PER_ROUND: u32 = 8192;
+
+/// Link rounds in a row in which the table in force cannot be read before an in-flight
+/// defect commit is given up (the board's store is out of reach while its erase task holds
+/// it: ~2 s a sector, one round a frame).
+pub const AMEND_READ_ROUNDS: u16 = 600;
 
 impl Default for LinkService {
     fn default() -> Self {
@@ -366,7 +372,7 @@ impl LinkService {
         t.tables
             .begin(kind, plan.len_bytes(), plan.crc32())
             .map_err(Rejection::Upload)?;
-        self.amend = Some((plan, 0));
+        self.amend = Some((plan, 0, 0));
         Ok(())
     }
 
@@ -375,7 +381,7 @@ impl LinkService {
     /// then the commit. Ends with a `DEFECTS_COMMITTED` event, or a `TABLE_REFUSED`
     /// anomaly (the upload dropped, the table in force kept).
     fn advance_amend(&mut self, tables: &mut dyn TableUpload) {
-        let Some((plan, mut next)) = self.amend.take() else {
+        let Some((plan, mut next, unread)) = self.amend.take() else {
             return;
         };
         let kind = p::TABLE_KIND_CALIBRATION;
@@ -388,6 +394,11 @@ impl LinkService {
             };
             let n = match emitted {
                 Ok(n) if n > 0 => n,
+                Err(crate::table::AmendError::Read) if unread < AMEND_READ_ROUNDS => {
+                    // The store may be out of reach this round (its erase running).
+                    self.amend = Some((plan, next, unread + 1));
+                    return;
+                }
                 _ => return self.amend_failed(tables, UploadRefusal::Storage),
             };
             match tables.chunk(next, buf.get(..n).unwrap_or(&[])) {
@@ -398,14 +409,14 @@ impl LinkService {
                 }
                 Err(UploadRefusal::Busy) => {
                     // The slot is not erased yet: the owner's erase runs between rounds.
-                    self.amend = Some((plan, next));
+                    self.amend = Some((plan, next, 0));
                     return;
                 }
                 Err(r) => return self.amend_failed(tables, r),
             }
         }
         if next < plan.len_bytes() {
-            self.amend = Some((plan, next));
+            self.amend = Some((plan, next, 0));
             return;
         }
         match tables.commit() {
@@ -420,7 +431,7 @@ impl LinkService {
                     .u32(info.sequence);
                 self.send_event(event::DEFECTS_COMMITTED, &d, false);
             }
-            Err(UploadRefusal::Busy) => self.amend = Some((plan, next)),
+            Err(UploadRefusal::Busy) => self.amend = Some((plan, next, 0)),
             Err(r) => self.amend_failed(tables, r),
         }
     }
