@@ -162,8 +162,8 @@ fn frames<const N: usize>(
     link: &mut LinkService,
     frames: std::ops::Range<u32>,
 ) {
-    // A 4 x 3 grid of stars, 20,000 to 42,000 e-, 250 px apart across and 25 px down, drifting (0.3, -0.2) px a
-    // frame: over 60 frames they stay 8 px or more inside the area.
+    // A 4 x 3 grid of stars, 20,000 to 42,000 e-, 250 px apart across and 25 px down,
+    // drifting (0.3, -0.2) px a frame: over 60 frames they stay 8 px or more inside the area.
     let base: Vec<Star> = (0..12)
         .map(|i| Star {
             x_px: 100.3 + 250.0 * f64::from(i % 4),
@@ -192,13 +192,9 @@ fn frames<const N: usize>(
         let Ok(s) = block_on(tracker.run_frame(&mut source, &mut ports));
         if std::env::var_os("DEFECT_COMMIT_TRACE").is_some() {
             println!(
-                "frame {}: {:?}, cal {} lines {} refused {} stars {} {} centroids, {} windows, {} candidates, {} confirmed",
+                "frame {}: {:?}, {} centroids, {} windows, {} candidates, {} confirmed",
                 s.frame,
                 s.mode,
-                s.calibrated,
-                s.lines,
-                s.lines_refused,
-                s.stars,
                 s.centroids,
                 s.track_windows,
                 tracker.defect_watch().candidates().len(),

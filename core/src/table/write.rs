@@ -364,7 +364,8 @@ impl Additions {
 /// force, read through a caller's reader, with pixels merged into its hot-pixel (section 5)
 /// and telegraph (section 6) lists; every other byte copied. Streamed, never held whole: the
 /// new table is produced piece by piece with [`Self::emit`] (into a flash slot's upload
-/// chunks), so amending a 200 KB table costs a 1,184-byte plan (on a 64-bit host) and a chunk buffer.
+/// chunks), so amending a 200 KB table costs a 1,184-byte plan (on a 64-bit host) and a
+/// chunk buffer.
 ///
 /// What it is for: the in-flight defect watch confirms pixels; this puts them in the table
 /// so that they survive a reset and the overlay can forget them. The new hot entries are

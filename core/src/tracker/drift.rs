@@ -8,8 +8,8 @@
 //! lab law, rising as the dark current grows. A ratio outside the configured band sets the
 //! `DARK_DRIFT` status bit of housekeeping.
 //!
-//! What it costs: one `exp2f` and a few integer operations a frame (in `end_frame`), 28 B
-//! in the tracker.
+//! What it costs: one `exp2f` and a few integer operations a frame (in `end_frame`), under
+//! 32 B in the tracker.
 //!
 //! # The law and the statistic
 //! [`DarkLaw`]: the covered pixels' mean dark rate `rate` at `reference_k` and its doubling

@@ -43,7 +43,8 @@
 //! plans 15 KB) lives where the home puts it (`.bss` on the board); the [`Tracker`] itself
 //! holds the scan detector (~13 KB of line buffers plus `N` candidates of 28 B), the
 //! pending windows, the star list (`N` x ~60 B), one window's scratch (~2.8 KB), the
-//! last frame's stars and the in-flight defect watch ([`Watch`], 1.6 KB). `size_of` of
+//! last frame's stars, the in-flight defect watch ([`Watch`], 1.6 KB) and the dark-drift
+//! monitor ([`drift`], under 32 B). `size_of` of
 //! both is printed and bounded by the host test `tracker_memory`.
 //!
 //! # Cost
