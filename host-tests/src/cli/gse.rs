@@ -81,7 +81,7 @@ pub enum GseCommand {
     },
     /// Reset the tracker.
     Reset,
-    /// Write the pixels confirmed in flight into a new calibration table (TC[133,7]).
+    /// Write the pixels confirmed in flight into a new calibration table (`TC[133,7]`).
     CommitDefects,
 }
 
