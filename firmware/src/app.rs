@@ -8,7 +8,7 @@
 //! | lines | [`ChannelLines`]: the request to the sequencer, the readout task's DMA'd line buffers back ([`crate::lines`]) |
 //! | clock | embassy-time's `Instant` |
 //! | temperature | [`BoardThermometer`]: the CCD board's TMP117 ([`crate::board_temp`]), else the MCU's ([`crate::mcu_temp`]) |
-//! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none; uploads through the link go to the flash store ([`crate::flash_store::with_link_tables`]) and are used from the next start |
+//! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none; uploads through the link, and the in-flight defect commit (`TC[133,7]`, moved on by `LinkService::poll` between frames), go to the flash store ([`crate::flash_store::with_link_tables`]) and are used from the next start |
 //! | telemetry | the defmt log ([`crate::telemetry`]) |
 //!
 //! After every frame the task gives the frame's star list to the attitude stage
@@ -273,6 +273,13 @@ pub async fn tracker_task(
     loop {
         crate::flash_store::with_link_tables(&mut store, |tables| {
             crate::link::serve(link, &mut tracker, tables);
+            // An in-flight defect commit (TC[133,7]) goes on between frames as the store's
+            // erase task frees the slot; the new table is used from the next start.
+            link.poll(&mut startrack_core::link::Targets {
+                tracker: &mut tracker,
+                tables,
+                windows: &mut startrack_core::link::NoWindows,
+            });
         });
         if link.reset_requested() {
             // Let the transmit task send the acceptance, then reset.

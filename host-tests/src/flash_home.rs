@@ -111,6 +111,12 @@ impl FlashHome {
         self.store.flash_mut().cut_power(at, CutMode::During);
     }
 
+    /// Cuts the power right after the `n`-th flash step from now completed, `n` from 1.
+    pub fn cut_power_after(&mut self, n: u64) {
+        let at = self.store.flash().steps() + n.saturating_sub(1);
+        self.store.flash_mut().cut_power(at, CutMode::After);
+    }
+
     /// Whether the power was cut.
     pub fn power_cut(&self) -> bool {
         self.store.flash().is_off()
@@ -211,6 +217,10 @@ impl TableUpload for FlashHome {
 
     fn active(&self, kind: u8) -> Option<TableInfo> {
         active_info(&self.store, kind)
+    }
+
+    fn read_active(&mut self, kind: u8, offset: u32, out: &mut [u8]) -> bool {
+        startrack_core::link::read_active_at(&mut self.store, kind, offset, out)
     }
 }
 

@@ -14,7 +14,7 @@ use spacepackets::ecss::{CreatorConfig, MessageTypeId};
 use startrack_core::link::command::mode_number;
 use startrack_core::link::framing::{Deframer, Pushed, encode, encoded_len_max};
 use startrack_core::link::protocol::{self as p, MessageType};
-use startrack_core::link::telemetry::{Housekeeping, Reader, decode_stars};
+use startrack_core::link::telemetry::{Housekeeping, Reader, decode_stars, event};
 use startrack_core::link::{Rejection, TableInfo, UploadRefusal, WindowKind};
 use startrack_core::tracker::{Mode, StarRecord};
 use std::fmt;
@@ -323,6 +323,50 @@ impl Ground {
     /// Resets the tracker.
     pub fn reset(&mut self) -> Result<(), GroundError> {
         self.command("reset", p::TC_RESET, &[]).map(|_| ())
+    }
+
+    /// Commits the pixels the tracker's in-flight watch confirmed into a new calibration
+    /// table (`TC[133,7]`) and waits for the end of the commit: the hot and telegraph
+    /// pixels added and the table now in force, or the store's refusal.
+    pub fn commit_defects(&mut self) -> Result<(u16, u16, TableInfo), GroundError> {
+        let deadline = Instant::now() + self.timeout;
+        let mut seen = self.command("table-commit-defects", p::TC_TABLE_COMMIT_DEFECTS, &[])?;
+        loop {
+            for t in seen.drain(..) {
+                if t.apid != p::APID_CONTROL
+                    || (t.kind != p::TM_EVENT_INFO && t.kind != p::TM_EVENT_ANOMALY)
+                {
+                    continue;
+                }
+                let mut r = Reader::new(&t.data);
+                match r.u16() {
+                    Some(event::DEFECTS_COMMITTED) => {
+                        let (hot, tel) = (r.u16().unwrap_or(0), r.u16().unwrap_or(0));
+                        let info = TableInfo {
+                            kind: p::TABLE_KIND_CALIBRATION,
+                            len_bytes: r.u32().unwrap_or(0),
+                            crc32: r.u32().unwrap_or(0),
+                            sequence: r.u32().unwrap_or(0),
+                        };
+                        return Ok((hot, tel, info));
+                    }
+                    Some(event::TABLE_REFUSED) => {
+                        let _kind = r.u8();
+                        let code = r.u16().unwrap_or(0);
+                        return Err(GroundError::Protocol(format!(
+                            "table-commit-defects: the store refused the new table (refusal {code})"
+                        )));
+                    }
+                    _ => {}
+                }
+            }
+            seen.push(self.next_tm(deadline).map_err(|e| match e {
+                GroundError::Timeout(_) => {
+                    GroundError::Timeout("table-commit-defects: no end of the commit".into())
+                }
+                e => e,
+            })?);
+        }
     }
 
     /// Uploads `table` as a calibration table in chunks of `chunk` bytes (at most

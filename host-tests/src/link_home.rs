@@ -48,14 +48,20 @@ struct Upload {
 pub struct MemoryTables {
     geometry: ReadoutGeometry,
     active: Option<(CalibTable<'static>, TableInfo)>,
+    /// The bytes of the table in force.
+    active_bytes: &'static [u8],
     upload: Option<Upload>,
     sequence: u32,
 }
 
 /// Leaks `bytes` and parses them as a table of `geometry`.
-fn keep(bytes: Vec<u8>, geometry: &ReadoutGeometry) -> Option<CalibTable<'static>> {
-    let t = CalibTable::parse(bytes.leak()).ok()?;
-    (t.geometry() == geometry).then_some(t)
+fn keep(
+    bytes: Vec<u8>,
+    geometry: &ReadoutGeometry,
+) -> Option<(CalibTable<'static>, &'static [u8])> {
+    let b: &'static [u8] = bytes.leak();
+    let t = CalibTable::parse(b).ok()?;
+    (t.geometry() == geometry).then_some((t, b))
 }
 
 impl MemoryTables {
@@ -72,7 +78,8 @@ impl MemoryTables {
         });
         Self {
             geometry,
-            active,
+            active_bytes: active.map_or(&[], |((_, b), _)| b),
+            active: active.map(|((t, _), i)| (t, i)),
             upload: None,
             sequence: 0,
         }
@@ -121,7 +128,8 @@ impl TableUpload for MemoryTables {
         if CRC32.checksum(&u.bytes) != u.crc32 {
             return Err(UploadRefusal::CrcMismatch);
         }
-        let table = keep(u.bytes, &self.geometry).ok_or(UploadRefusal::Invalid)?;
+        let (table, bytes) = keep(u.bytes, &self.geometry).ok_or(UploadRefusal::Invalid)?;
+        self.active_bytes = bytes;
         self.sequence += 1;
         let info = TableInfo {
             kind: u.kind,
@@ -139,6 +147,20 @@ impl TableUpload for MemoryTables {
 
     fn active(&self, kind: u8) -> Option<TableInfo> {
         self.active.map(|(_, i)| i).filter(|i| i.kind == kind)
+    }
+
+    fn read_active(&mut self, kind: u8, offset: u32, out: &mut [u8]) -> bool {
+        let at = offset as usize;
+        match self
+            .active(kind)
+            .and(self.active_bytes.get(at..at + out.len()))
+        {
+            Some(b) => {
+                out.copy_from_slice(b);
+                true
+            }
+            None => false,
+        }
     }
 }
 

@@ -9,6 +9,7 @@ use startrack_core::link::telemetry::{
     ATTITUDE_FIELDS, ATTITUDE_LEN, HK_FIELDS, HK_LEN, STAR_FIELDS, event, type_len,
 };
 use startrack_core::link::{Rejection, UploadRefusal};
+use startrack_core::table::AmendError;
 use std::fmt::Write;
 
 const BEGIN: &str = "<!-- generated: protocol -->";
@@ -49,6 +50,8 @@ fn render() -> String {
         "0",
         "refusal << 16 \\| low 16 bits of the expected offset",
         "0",
+        "0",
+        "the defect commit's error (below)",
     ];
     for (code, param) in (1u16..).zip(params) {
         writeln!(s, "| {code} | {} | {param} |", Rejection::name_of(code)).unwrap();
@@ -66,6 +69,25 @@ fn render() -> String {
         UploadRefusal::Storage,
     ] {
         writeln!(s, "| {} | {} |", r.code(), r.name()).unwrap();
+    }
+    s.push_str("\n### Defect-commit errors (rejection 12)\n\n| error | meaning |\n|---|---|\n");
+    for (e, meaning) in [
+        (
+            AmendError::NothingToAdd,
+            "every confirmed pixel is listed already, or none is confirmed",
+        ),
+        (AmendError::Read, "the table in force could not be read"),
+        (
+            AmendError::BadTable,
+            "the table in force is not one the core reads",
+        ),
+        (
+            AmendError::DirectoryFull,
+            "no room in the directory for a new hot or telegraph section",
+        ),
+        (AmendError::TooLong, "the new table would pass 4 GiB"),
+    ] {
+        writeln!(s, "| {} | {meaning} |", e.code()).unwrap();
     }
     s.push_str(
         "\n### Events (TM[5,1] informative, TM[5,2] anomaly)\n\n| event | data |\n|---|---|\n",
@@ -86,6 +108,10 @@ fn render() -> String {
             "kind u8, length u32, CRC-32 u32, sequence u32",
         ),
         (event::TABLE_REFUSED, "kind u8, refusal u16 (anomaly)"),
+        (
+            event::DEFECTS_COMMITTED,
+            "hot pixels added u16, telegraph pixels added u16, length u32, CRC-32 u32, sequence u32",
+        ),
     ] {
         writeln!(s, "| {id} | {data} |").unwrap();
     }

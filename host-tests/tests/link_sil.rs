@@ -230,6 +230,16 @@ fn gse_command_prints_json_and_exits_by_error_kind() {
         "frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags,psf_a_px,chi2_dof\n"
     ));
 
+    // The SIL's table lists every defect of its sensor: nothing to commit, the tracker says
+    // why (rejection 12, NothingToAdd), and housekeeping shows no pending defect.
+    let e =
+        gse::run(&args(GseCommand::CommitDefects), &mut Vec::new()).expect_err("nothing to commit");
+    assert!(
+        e.to_string().contains("in-flight defects not committed"),
+        "{e}"
+    );
+    assert_eq!(v["defects_pending"].as_u64(), Some(0), "{v}");
+
     let port = server.port;
     let _ = server.finish();
     // Nobody listening any more: a link error, exit code 3, one line.

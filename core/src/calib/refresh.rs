@@ -557,6 +557,22 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
         changed
     }
 
+    /// Retires every confirmed pixel that `table` lists (hot or telegraph), wherever it lies:
+    /// once a table update holds them, the overlay has nothing left to do for them. Returns
+    /// how many were retired. Cost: a binary search of each list per confirmed pixel.
+    pub fn retire_listed(&mut self, table: &crate::table::CalibTable<'_>) -> usize {
+        let before = self.confirmed.len();
+        let (hot, tel) = (table.hot_pixels(), table.telegraph_pixels());
+        self.confirmed
+            .retain(|d| hot.find(d.x_px, d.y_px).is_none() && !tel.contains(d.x_px, d.y_px));
+        let n = before - self.confirmed.len();
+        self.counters.retired = self
+            .counters
+            .retired
+            .saturating_add(u32::try_from(n).unwrap_or(u32::MAX));
+        n
+    }
+
     /// True when a confirmed pixel lies in `rect`.
     pub fn touches(&self, rect: Rect) -> bool {
         self.confirmed.iter().any(|d| {

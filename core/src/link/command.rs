@@ -6,6 +6,7 @@
 
 use super::protocol::{self as p, MessageType};
 use super::upload::UploadRefusal;
+use crate::table::AmendError;
 use crate::tracker::{ConfigError, Mode};
 
 /// A configuration change of [`Command::SetParams`]: parameter id and raw value.
@@ -84,6 +85,8 @@ pub enum Command<'a> {
     TableAbort,
     /// `TC[133,5]`.
     TableReport(u8),
+    /// `TC[133,7]`.
+    TableCommitDefects,
 }
 
 /// Why a telecommand was not executed. Codes ([`Self::code`]) and parameters are stable:
@@ -117,6 +120,9 @@ pub enum Rejection {
     /// housekeeping's `setup_faults` names): mode and configuration commands have nothing to
     /// act on. Housekeeping, tables and reset are still served.
     Standby,
+    /// The in-flight defects could not be put into a table update (nothing new to add, the
+    /// table in force unreadable, no room in its directory).
+    Amend(AmendError),
 }
 
 impl Rejection {
@@ -134,11 +140,13 @@ impl Rejection {
             Self::Upload(_) => 9,
             Self::WindowUnavailable => 10,
             Self::Standby => 11,
+            Self::Amend(_) => 12,
         }
     }
 
     /// The reason's parameter in `TM[1,2]`: the APID, the service << 8 | subtype, the upload
-    /// refusal's code << 16 | (its expected offset's low 16 bits), or 0.
+    /// refusal's code << 16 | (its expected offset's low 16 bits), the amendment error's
+    /// code, or 0.
     pub fn parameter(self) -> u32 {
         match self {
             Self::UnknownApid(a) => u32::from(a),
@@ -150,6 +158,7 @@ impl Rejection {
                 };
                 u32::from(r.code()) << 16 | low
             }
+            Self::Amend(e) => u32::from(e.code()),
             _ => 0,
         }
     }
@@ -168,6 +177,7 @@ impl Rejection {
             9 => "table upload refused",
             10 => "window unavailable",
             11 => "tracker not running (safe standby)",
+            12 => "in-flight defects not committed",
             _ => "unknown reason",
         }
     }
@@ -179,6 +189,7 @@ impl core::fmt::Display for Rejection {
         match self {
             Self::Config(e) => write!(f, ": {e:?}"),
             Self::Upload(r) => write!(f, ": {r}"),
+            Self::Amend(e) => write!(f, ": {e:?}"),
             Self::UnknownApid(a) => write!(f, " {a:#x}"),
             Self::UnknownCommand(m) => write!(f, " [{},{}]", m.service, m.subtype),
             _ => Ok(()),
@@ -308,6 +319,7 @@ impl<'a> Command<'a> {
                 exact(d, 1)?;
                 Self::TableReport(*d.first().ok_or(short)?)
             }
+            p::TC_TABLE_COMMIT_DEFECTS => exact(d, 0).map(|()| Self::TableCommitDefects)?,
             other => return Err(Rejection::UnknownCommand(other)),
         })
     }

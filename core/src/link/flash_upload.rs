@@ -150,4 +150,32 @@ where
     fn active(&self, kind: u8) -> Option<TableInfo> {
         active_info(self.store, kind)
     }
+
+    fn read_active(&mut self, kind: u8, offset: u32, out: &mut [u8]) -> bool {
+        read_active_at(self.store, kind, offset, out)
+    }
+}
+
+/// Reads `out.len()` bytes of the table of link kind `kind` in force from byte `offset`
+/// (the slot in force is never written while it is in force); `false` past its end or on a
+/// read error.
+pub fn read_active_at<F: NorFlash>(
+    store: &mut FlashStore<F>,
+    kind: u8,
+    offset: u32,
+    out: &mut [u8],
+) -> bool {
+    let Some(a) = TableKind::from_code(kind).and_then(|k| store.active(k)) else {
+        return false;
+    };
+    let Ok(n) = u32::try_from(out.len()) else {
+        return false;
+    };
+    if offset.checked_add(n).is_none_or(|end| end > a.header.len_b) {
+        return false;
+    }
+    store
+        .flash_mut()
+        .read(a.data_offset_b + offset, out)
+        .is_ok()
 }

@@ -101,6 +101,9 @@ pub const TC_TABLE_COMMIT: MessageType = mt(133, 3);
 pub const TC_TABLE_ABORT: MessageType = mt(133, 4);
 /// `TC[133,5]`: report the table in force.
 pub const TC_TABLE_REPORT: MessageType = mt(133, 5);
+/// `TC[133,7]`: write the pixels the in-flight watch confirmed into a new calibration table
+/// (the table in force with them added to its defect lists) through the upload path.
+pub const TC_TABLE_COMMIT_DEFECTS: MessageType = mt(133, 7);
 /// `TM[133,6]`: the table in force.
 pub const TM_TABLE_REPORT: MessageType = mt(133, 6);
 /// A frame's attitude (every frame the attitude stage runs).
@@ -151,7 +154,7 @@ const fn tm(name: &'static str, apid: u16, kind: MessageType, data: &'static str
 }
 
 /// Every message, telecommands first.
-pub const MESSAGES: [MessageDef; 23] = [
+pub const MESSAGES: [MessageDef; 24] = [
     tc("ping", TC_PING, "none"),
     tc("housekeeping", TC_HOUSEKEEPING, "none"),
     tc(
@@ -193,6 +196,7 @@ pub const MESSAGES: [MessageDef; 23] = [
     tc("table-commit", TC_TABLE_COMMIT, "none"),
     tc("table-abort", TC_TABLE_ABORT, "none"),
     tc("table-report", TC_TABLE_REPORT, "kind u8"),
+    tc("table-commit-defects", TC_TABLE_COMMIT_DEFECTS, "none"),
     tm(
         "accepted",
         APID_CONTROL,

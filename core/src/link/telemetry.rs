@@ -211,10 +211,23 @@ pub struct Housekeeping {
     pub uptime_us: u64,
     /// The set-up steps that failed at this boot (`safe::SetupFaults` bits 0-15; 0: none).
     pub setup_faults: u16,
+    /// The running dark ratio, covered pixels measured / the dark law's prediction (U8F8
+    /// bits; 0: not measured).
+    pub dark_ratio_u8f8: u16,
+    /// [`status`] bits.
+    pub status: u8,
+    /// Pixels confirmed in flight that the table in force does not list yet.
+    pub defects_pending: u16,
+}
+
+/// Bits of housekeeping's `status` field.
+pub mod status {
+    /// The running dark ratio is outside the dark law's band.
+    pub const DARK_DRIFT: u8 = 1;
 }
 
 /// Every housekeeping field in order: name, type, meaning.
-pub const HK_FIELDS: [(&str, &str, &str); 34] = [
+pub const HK_FIELDS: [(&str, &str, &str); 37] = [
     ("sid", "u16", "structure id, 1"),
     (
         "mode",
@@ -292,6 +305,21 @@ pub const HK_FIELDS: [(&str, &str, &str); 34] = [
         "setup_faults",
         "u16",
         "set-up steps that failed at this boot (SetupFaults bits, docs/storage.md); 0: none",
+    ),
+    (
+        "dark_ratio",
+        "u16",
+        "running dark ratio, covered pixels / dark law, x 256 (U8F8); 0: not measured",
+    ),
+    (
+        "status",
+        "u8",
+        "bit 0 DARK_DRIFT: dark ratio outside its band",
+    ),
+    (
+        "defects_pending",
+        "u16",
+        "pixels confirmed in flight, not yet in the table",
     ),
 ];
 
@@ -425,7 +453,10 @@ impl Housekeeping {
             .u32(table.crc32)
             .u32(table.sequence)
             .u64(self.uptime_us)
-            .u16(self.setup_faults);
+            .u16(self.setup_faults)
+            .u16(self.dark_ratio_u8f8)
+            .u8(self.status)
+            .u16(self.defects_pending);
         w.finish()
     }
 
@@ -479,6 +510,9 @@ impl Housekeeping {
         };
         let uptime_us = r.u64()?;
         let setup_faults = r.u16()?;
+        let dark_ratio_u8f8 = r.u16()?;
+        let status = r.u8()?;
+        let defects_pending = r.u16()?;
         Some(Self {
             mode,
             next_mode,
@@ -493,6 +527,9 @@ impl Housekeeping {
             table: present.then_some(info),
             uptime_us,
             setup_faults,
+            dark_ratio_u8f8,
+            status,
+            defects_pending,
         })
     }
 }
@@ -739,6 +776,9 @@ pub mod event {
     pub const TABLE_ACCEPTED: u16 = 5;
     /// A table upload was refused at commit (anomaly): kind u8, refusal u16.
     pub const TABLE_REFUSED: u16 = 6;
+    /// The in-flight defects were committed into a new table: hot pixels added u16,
+    /// telegraph pixels added u16, length u32, CRC-32 u32, sequence u32.
+    pub const DEFECTS_COMMITTED: u16 = 7;
 }
 
 /// Bytes of event data after the event number (zero-padded).

@@ -111,4 +111,11 @@ pub trait TableUpload {
     fn abort(&mut self);
     /// The table of `kind` in force.
     fn active(&self, kind: u8) -> Option<TableInfo>;
+    /// Reads `out.len()` bytes of the table of `kind` in force from byte `offset` (the
+    /// in-flight defect commit builds its new table from them); `false` when it cannot (no
+    /// table, past its end, a read error, or a store that does not read back: the default).
+    fn read_active(&mut self, kind: u8, offset: u32, out: &mut [u8]) -> bool {
+        let _ = (kind, offset, out);
+        false
+    }
 }

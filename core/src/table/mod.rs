@@ -79,6 +79,7 @@ pub use cti::{CtiCoeffs, CtiOutput};
 pub use error::{SectionKind, TableError, WriteError};
 pub use parse::{CalibTable, DefectList, HotList, MapView};
 pub use psfmodel::PsfModel;
+pub use write::{AmendError, AmendPlan, MAX_AMEND_PIXELS, TableReader};
 pub use write::{MapSpec, TableSpec, write_table, write_table_with_pixcorr};
 
 use crate::units::{ERatePerS, Kelvin};

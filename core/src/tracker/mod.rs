@@ -43,7 +43,8 @@
 //! plans 15 KB) lives where the home puts it (`.bss` on the board); the [`Tracker`] itself
 //! holds the scan detector (~13 KB of line buffers plus `N` candidates of 28 B), the
 //! pending windows, the star list (`N` x ~60 B), one window's scratch (~2.8 KB), the
-//! last frame's stars and the in-flight defect watch ([`Watch`], 1.6 KB). `size_of` of
+//! last frame's stars, the in-flight defect watch ([`Watch`], 1.6 KB) and the dark-drift
+//! monitor ([`drift`], under 32 B). `size_of` of
 //! both is printed and bounded by the host test `tracker_memory`.
 //!
 //! # Cost
@@ -56,6 +57,7 @@
 
 mod acquire;
 pub mod config;
+pub mod drift;
 mod list;
 mod measure;
 mod modes;
@@ -64,6 +66,7 @@ pub mod record;
 mod track;
 
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
+pub use drift::{DarkDrift, DarkLaw};
 pub use measure::select_curve;
 pub use modes::CommandError;
 pub use ports::{
@@ -167,6 +170,9 @@ pub struct Tracker<'t, 'b, const N: usize> {
     modes: Modes,
     estimator: DarkScaleEstimator,
     prev_dark_scale: Option<Electrons>,
+    /// The frame's temperature when it came from the sensor.
+    measured_k: Option<Kelvin>,
+    drift: drift::DriftMonitor,
     last_line: Option<u16>,
     conditions: Option<FrameConditions>,
     temperature_k: Kelvin,
@@ -238,6 +244,8 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             modes: Modes::new(),
             estimator: DarkScaleEstimator::new(),
             prev_dark_scale: None,
+            measured_k: None,
+            drift: drift::DriftMonitor::new(),
             last_line: None,
             conditions: None,
             temperature_k: Kelvin::ZERO,
@@ -263,6 +271,22 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
     /// The in-flight defect watch: its candidates and counters.
     pub fn defect_watch(&self) -> &Watch {
         &self.work.watch
+    }
+
+    /// Sets the covered pixels' dark law the dark drift is measured against (`None`: no
+    /// drift measured), restarting the running ratio.
+    pub fn set_dark_law(&mut self, law: Option<DarkLaw>) {
+        self.drift.set_law(law);
+    }
+
+    /// The dark law in force.
+    pub fn dark_law(&self) -> Option<DarkLaw> {
+        self.drift.law()
+    }
+
+    /// The running dark ratio now (also in every [`FrameSummary`]).
+    pub fn dark_drift(&self) -> DarkDrift {
+        self.drift.report()
     }
 
     /// The configuration in force.
@@ -366,6 +390,11 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
                 len_bytes: len,
             });
             self.table_len = Some(len);
+            // A new table (an in-flight defect commit's among them) may list what the
+            // overlay holds.
+            if let Some(t) = table {
+                self.work.watch.retire_listed(&t);
+            }
         }
         self.table = table;
 
@@ -388,6 +417,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             (None, None) => (Kelvin::ZERO, TemperatureSource::None),
         };
         self.temperature_k = temperature_k;
+        self.measured_k = inputs.temperature_k;
         self.work.summary = FrameSummary {
             calibrated: table.is_some(),
             temperature_k,
@@ -549,9 +579,14 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         }
         let estimate = self.table.and(self.estimator.estimate());
         self.work.summary.dark_scale_e = estimate;
-        if estimate.is_some() {
+        if let Some(e) = estimate {
             self.prev_dark_scale = estimate;
+            self.drift
+                .frame(e, self.measured_k, self.config.exposure_ms);
         }
+        self.work.summary.dark_drift = self.drift.report();
+        self.work.summary.defects_pending =
+            u16::try_from(self.work.watch.confirmed().len()).unwrap_or(u16::MAX);
         let mut centroids = 0u16;
         for s in self.work.stars.records() {
             telemetry.star(self.frame, s);

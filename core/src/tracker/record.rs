@@ -288,6 +288,10 @@ pub struct FrameSummary {
     pub track_lost: u16,
     /// Stars not reported because the star list was full (the brightest are kept).
     pub stars_dropped: u16,
+    /// The running dark ratio after this frame (covered pixels against the dark law).
+    pub dark_drift: super::drift::DarkDrift,
+    /// Pixels confirmed in flight that the table in force does not list yet (the overlay).
+    pub defects_pending: u16,
 }
 
 impl FrameSummary {
@@ -315,6 +319,12 @@ impl FrameSummary {
             track_refused: 0,
             track_lost: 0,
             stars_dropped: 0,
+            dark_drift: super::drift::DarkDrift {
+                ratio_u8f8: 0,
+                frames: 0,
+                out_of_band: false,
+            },
+            defects_pending: 0,
         }
     }
 }

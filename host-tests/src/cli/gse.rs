@@ -81,6 +81,8 @@ pub enum GseCommand {
     },
     /// Reset the tracker.
     Reset,
+    /// Write the pixels confirmed in flight into a new calibration table (`TC[133,7]`).
+    CommitDefects,
 }
 
 /// Why `startrack gse` failed.
@@ -145,6 +147,9 @@ pub fn status_json(h: &Housekeeping) -> serde_json::Value {
         "centroids": h.centroids,
         "uptime_us": h.uptime_us,
         "setup_faults": h.setup_faults,
+        "dark_ratio": (h.dark_ratio_u8f8 != 0).then(|| f64::from(h.dark_ratio_u8f8) / 256.0),
+        "dark_drift": h.status & startrack_core::link::telemetry::status::DARK_DRIFT != 0,
+        "defects_pending": h.defects_pending,
         "totals": {
             "frames": t.frames,
             "lines_refused": t.lines_refused,
@@ -266,6 +271,15 @@ pub fn run(args: &GseArgs, out: &mut dyn Write) -> Result<(), GseError> {
                 .map_err(|e| GseError::Usage(format!("{}: {e}", path.display())))?;
         }
         GseCommand::Reset => g.reset()?,
+        GseCommand::CommitDefects => {
+            let (hot, tel, info) = g.commit_defects()?;
+            writeln!(
+                out,
+                "committed {hot} hot and {tel} telegraph pixels: table in force {} bytes, CRC-32 {:08x}, sequence {}",
+                info.len_bytes, info.crc32, info.sequence
+            )
+            .map_err(io)?;
+        }
     }
     Ok(())
 }

@@ -1,0 +1,187 @@
+//! The dark drift in housekeeping: the covered pixels' dark measured by the tracker against
+//! the lab's dark law, on simulated frames whose dark follows that law (ratio ~1, in band)
+//! or has grown by half since the lab (ratio ~1.5, `DARK_DRIFT`), and without a sensor
+//! temperature (not measured).
+
+use fixed::types::U8F8;
+use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::link::LinkService;
+use startrack_core::link::telemetry::{Housekeeping, status};
+use startrack_core::table::CalibTable;
+use startrack_core::tracker::{
+    DarkLaw, FixedTable, FixedTemperature, Ports, Tracker, TrackerBuffers, TrackerConfig,
+};
+use startrack_core::units::{ERatePerS, Kelvin};
+use startrack_host::home::{FrameClock, SimLines, block_on};
+use startrack_host::link_home::MemoryTables;
+use startrack_host::sim::effects::{DarkLaw as SimDarkLaw, Effects};
+use startrack_host::sim::truth::TruthSections;
+use startrack_host::sim::{SensorParams, Simulator};
+
+/// A small readout (128 x 128 active, 16 covered columns a side) to keep the test fast.
+fn small() -> SensorParams {
+    SensorParams {
+        geometry: ReadoutGeometry {
+            overscan_px: 8,
+            covered_px: 16,
+            active_cols: 128,
+            active_rows: 128,
+            lines: 130,
+            outputs: 2,
+        },
+        ..SensorParams::default()
+    }
+}
+
+/// The lab's law: the default sensor's 250 e- in the 1 s exposure at 293 K, doubling every
+/// 6.5 K; band 0.8 to 1.25.
+fn lab_law() -> DarkLaw {
+    DarkLaw {
+        rate_e_per_s: ERatePerS::from_num(250),
+        reference_k: Kelvin::from_num(293),
+        doubling_k: U8F8::from_num(6.5),
+        band_low: U8F8::from_num(0.8),
+        band_high: U8F8::from_num(1.25),
+    }
+}
+
+/// Runs `frames` empty frames of a sensor at 286.5 K (half the dark of 293 K) whose dark at
+/// 293 K is `dark_e`, with the table of the lab sensor, the law set and the thermometer
+/// reading `sensor_k`; returns the link's housekeeping after the last frame.
+fn run(dark_e: f64, sensor_k: Option<f64>, frames: u32) -> Housekeeping {
+    let lab = SensorParams { seed: 5, ..small() };
+    let table_bytes = Simulator::new(lab.clone(), Vec::new())
+        .truth_table(TruthSections::ALL)
+        .unwrap();
+    let table = CalibTable::parse(&table_bytes).unwrap();
+    let params = SensorParams {
+        dark_mean_e: dark_e,
+        effects: Effects {
+            temperature_k: 286.5,
+            dark_law: Some(SimDarkLaw {
+                reference_k: 293.0,
+                doubling_k: 6.5,
+            }),
+            ..Effects::default()
+        },
+        ..lab
+    };
+    let mut buffers = Box::new(TrackerBuffers::new());
+    let mut tracker =
+        Box::new(Tracker::<32>::new(TrackerConfig::FLIGHT, params.geometry, &mut buffers).unwrap());
+    tracker.set_dark_law(Some(lab_law()));
+    let mut source = SimLines::new(|frame| Simulator {
+        frame,
+        ..Simulator::new(params.clone(), Vec::new())
+    });
+    let mut link = Box::new(LinkService::new());
+    let mut tables = FixedTable(Some(table));
+    let mut thermometer = FixedTemperature(sensor_k.map(Kelvin::from_num));
+    for k in 0..frames {
+        let mut clock = FrameClock {
+            frame: k,
+            period_us: 100_000,
+        };
+        let mut ports = Ports {
+            clock: &mut clock,
+            thermometer: &mut thermometer,
+            tables: &mut tables,
+            telemetry: &mut *link,
+        };
+        let Ok(summary) = block_on(tracker.run_frame(&mut source, &mut ports));
+        assert_eq!(summary.dark_drift, tracker.dark_drift());
+    }
+    let store = MemoryTables::new(params.geometry, Some(table_bytes.clone()));
+    let hk = link.housekeeping(&store);
+    // Through the wire and back.
+    let mut buf = [0u8; startrack_core::link::telemetry::HK_LEN];
+    let n = hk.encode(&mut buf).unwrap();
+    assert_eq!(Housekeeping::decode(&buf[..n]), Some(hk));
+    hk
+}
+
+fn ratio(hk: &Housekeeping) -> f64 {
+    f64::from(hk.dark_ratio_u8f8) / 256.0
+}
+
+#[test]
+fn a_sensor_on_its_lab_law_reads_one_in_band() {
+    let hk = run(250.0, Some(286.5), 6);
+    println!(
+        "on the law: dark_ratio {:.3}, status {}",
+        ratio(&hk),
+        hk.status
+    );
+    assert!((ratio(&hk) - 1.0).abs() < 0.05, "{}", ratio(&hk));
+    assert_eq!(hk.status & status::DARK_DRIFT, 0);
+}
+
+#[test]
+fn a_dark_grown_by_half_is_reported_as_drift() {
+    let hk = run(375.0, Some(286.5), 6);
+    println!(
+        "dark x1.5: dark_ratio {:.3}, status {}",
+        ratio(&hk),
+        hk.status
+    );
+    assert!((ratio(&hk) - 1.5).abs() < 0.075, "{}", ratio(&hk));
+    assert_eq!(hk.status & status::DARK_DRIFT, status::DARK_DRIFT);
+}
+
+#[test]
+fn without_a_sensor_temperature_nothing_is_measured() {
+    let hk = run(375.0, None, 3);
+    assert_eq!(hk.dark_ratio_u8f8, 0);
+    assert_eq!(hk.status, 0);
+}
+
+/// The running ratio moves by 1/16 of a step a frame: after a jump from 1 to 1.5 it has
+/// gone 1 - (15/16)^k of the way.
+#[test]
+fn the_running_ratio_follows_a_step_with_its_time_constant() {
+    // First frames on the law, then the same sensor with half more dark: one tracker.
+    let lab = SensorParams { seed: 6, ..small() };
+    let table_bytes = Simulator::new(lab.clone(), Vec::new())
+        .truth_table(TruthSections::ALL)
+        .unwrap();
+    let table = CalibTable::parse(&table_bytes).unwrap();
+    let at = |dark_e: f64| SensorParams {
+        dark_mean_e: dark_e,
+        ..lab.clone()
+    };
+    let mut law = lab_law();
+    law.reference_k = Kelvin::from_num(286.5);
+    let mut buffers = Box::new(TrackerBuffers::new());
+    let mut tracker =
+        Box::new(Tracker::<32>::new(TrackerConfig::FLIGHT, lab.geometry, &mut buffers).unwrap());
+    tracker.set_dark_law(Some(law));
+    let mut source = SimLines::new(|frame| Simulator {
+        frame,
+        ..Simulator::new(at(if frame < 3 { 250.0 } else { 375.0 }), Vec::new())
+    });
+    let mut link = Box::new(LinkService::new());
+    let mut tables = FixedTable(Some(table));
+    let mut thermometer = FixedTemperature(Some(Kelvin::from_num(286.5)));
+    let mut ratios = Vec::new();
+    for k in 0..7 {
+        let mut clock = FrameClock {
+            frame: k,
+            period_us: 100_000,
+        };
+        let mut ports = Ports {
+            clock: &mut clock,
+            thermometer: &mut thermometer,
+            tables: &mut tables,
+            telemetry: &mut *link,
+        };
+        let Ok(s) = block_on(tracker.run_frame(&mut source, &mut ports));
+        ratios.push(f64::from(s.dark_drift.ratio_u8f8) / 256.0);
+    }
+    println!("running ratio: {ratios:.3?}");
+    assert!((ratios[2] - 1.0).abs() < 0.05, "{ratios:?}");
+    for (k, r) in ratios.iter().enumerate().skip(3) {
+        let want = 1.0 + 0.5 * (1.0 - (15.0f64 / 16.0).powi(k as i32 - 2));
+        assert!((r - want).abs() < 0.03, "frame {k}: {r} against {want}");
+    }
+    assert!(!tracker.dark_drift().out_of_band);
+}
