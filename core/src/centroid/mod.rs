@@ -116,6 +116,10 @@ bitflags::bitflags! {
         /// wrong by more than 10 % in this configuration (docs/accuracy.md, the pull
         /// table): use it only as an order of magnitude.
         const SIGMA_UNRELIABLE = 1024;
+        /// The star's own PSF width disagrees with the field PSF model's beyond what the
+        /// model's scatter and the fit's width error allow (a blend, a cosmic ray, a PSF the
+        /// model does not describe): the result is the width-free fit's.
+        const PSF_MISMATCH = 2048;
     }
 }
 

@@ -18,12 +18,13 @@ use super::record::{StarFlags, StarRecord};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::centroid::cog::{CogParams, CogPower, cog, sigma_unreliable as cog_sigma_unreliable};
 use crate::centroid::gauss_fit::{
-    GaussFitParams, PsfFit, WidthFitParams, gauss_fit, gauss_fit_width,
+    GaussFitParams, PsfFit, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width,
+    gauss_fit_width_prior,
 };
 use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
 use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
-use crate::table::CalibTable;
 use crate::table::pixcorr::{PixCorr, PixCorrBackground};
+use crate::table::{CalibTable, PsfModel};
 use crate::units::{BiasAdu, Electrons};
 use crate::window::{Rect, Window};
 
@@ -75,6 +76,9 @@ pub(crate) struct Policy<'t> {
     /// The table's CTI correction (section 8), applied to every centroid [`Self::record`]
     /// makes.
     pub(crate) cti: Option<crate::calib::cti::CtiCorrection>,
+    /// The table's field PSF model (section 9) and the active area it is normalised to
+    /// (columns, rows): the width-free fit takes its width at each star as a prior.
+    pub(crate) psf_model: Option<(PsfModel, u16, u16)>,
 }
 
 impl<'t> Policy<'t> {
@@ -107,6 +111,10 @@ impl<'t> Policy<'t> {
             curve,
             fused_curve,
             cti: crate::calib::cti::CtiCorrection::from_table(table, config.psf_sigma_px()),
+            psf_model: table.psf_model().map(|m| {
+                let g = table.geometry();
+                (m, g.active_cols, g.active_rows)
+            }),
         }
     }
 
@@ -117,17 +125,28 @@ impl<'t> Policy<'t> {
 
     /// The star's record from `input` by the method (the fused CoG's general path is the
     /// CoG), a CoG corrected with the curve (flagged [`StarFlags::UNCORRECTED`] without
-    /// one), `flags` added.
+    /// one), the width fit with the field PSF model's width at the window's centre as a
+    /// prior when the table has a model ([`StarFlags::PSF_MISMATCH`] and the width-free
+    /// result when the star disagrees with it), `flags` added.
     pub(crate) fn record(&self, input: &CentroidInput<'_>, flags: StarFlags) -> StarRecord {
         if self.method == CentroidMethod::GaussFitWidth {
-            let f = gauss_fit_width(
-                input,
-                &WidthFitParams {
-                    start_box: self.box_px,
-                    background: Background::PerimeterMedian,
-                    ..WidthFitParams::new()
-                },
-            );
+            let params = WidthFitParams {
+                start_box: self.box_px,
+                background: Background::PerimeterMedian,
+                ..WidthFitParams::new()
+            };
+            let f = match self.psf_model {
+                Some((m, cols, rows)) => {
+                    let r = input.window.rect;
+                    let at = |p0: u16, n: u16| f32::from(p0) + 0.5 * f32::from(n.saturating_sub(1));
+                    let prior = WidthPrior {
+                        a_px: m.a_px(at(r.x0, r.width), at(r.y0, r.height), cols, rows),
+                        scatter_px: m.scatter_px.to_num::<f32>(),
+                    };
+                    gauss_fit_width_prior(input, &params, &prior)
+                }
+                None => gauss_fit_width(input, &params),
+            };
             let f = PsfFit {
                 centroid: self.cti.map_or(f.centroid, |k| k.corrected(f.centroid)),
                 ..f

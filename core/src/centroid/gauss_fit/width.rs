@@ -96,6 +96,25 @@ const SQRT_031: f32 = 0.556_776_4;
 /// one-sided false-flag rate of 1e-3 per star whose PSF the model describes.
 pub const CHI2_FLAG_Z: f32 = 3.09;
 
+/// The two-sided normal point for the `PSF_MISMATCH` flag: 3.29 sigma, a false-flag rate
+/// of 1e-3 per star whose width the model describes within its scatter.
+pub const PSF_MISMATCH_Z: f32 = 3.29;
+
+/// The smallest model scatter the prior takes, px of `a` (one step of the table's U8F8
+/// scatter): a model that claims to be exact still leaves the width a little freedom.
+pub const MIN_PRIOR_SCATTER_PX: f32 = 1.0 / 256.0;
+
+/// The field PSF model's width at a star (table section 9: [`crate::table::PsfModel::a_px`]
+/// and its `scatter_px`), as a Gaussian prior on the fit's width.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WidthPrior {
+    /// The model's 80 %-energy radius at the star, px.
+    pub a_px: f32,
+    /// The model's RMS scatter about it, px (at least [`MIN_PRIOR_SCATTER_PX`]).
+    pub scatter_px: f32,
+}
+
 /// Parameters of [`gauss_fit_width`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -115,6 +134,10 @@ pub struct WidthFitParams {
     /// The normal upper-tail point of [`chi2_dof_limit`] (the false-flag rate of
     /// [`CentroidFlags::POOR_FIT`]); [`CHI2_FLAG_Z`] by default.
     pub chi2_flag_z: f32,
+    /// With a field PSF model ([`gauss_fit_width_prior`]): the largest `|z|` of the star's
+    /// own width against the model's before the star is flagged
+    /// [`CentroidFlags::PSF_MISMATCH`] and fitted width-free; [`PSF_MISMATCH_Z`] by default.
+    pub mismatch_z: f32,
 }
 
 impl WidthFitParams {
@@ -128,6 +151,7 @@ impl WidthFitParams {
             start_box: 5,
             background: Background::PerimeterMedian,
             chi2_flag_z: CHI2_FLAG_Z,
+            mismatch_z: PSF_MISMATCH_Z,
         }
     }
 }
@@ -198,10 +222,47 @@ pub fn gauss_fit_width(input: &CentroidInput<'_>, params: &WidthFitParams) -> Ps
         Err(c) => return PsfFit::unfitted(c),
     };
     if p.flags.contains(CentroidFlags::EXCLUDED_PIXEL) {
-        fit::<false>(&p, params)
+        fit::<false>(&p, params, None)
     } else {
-        fit::<true>(&p, params)
+        fit::<true>(&p, params, None)
     }
+}
+
+/// The width fit of `input` with a field PSF model's width as a Gaussian prior (see the
+/// module docs, "With a field PSF model"): the MAP fit, or, when the star's own width
+/// disagrees with the model, the width-free fit flagged [`CentroidFlags::PSF_MISMATCH`].
+pub fn gauss_fit_width_prior(
+    input: &CentroidInput<'_>,
+    params: &WidthFitParams,
+    prior: &WidthPrior,
+) -> PsfFit {
+    let p = match Prepared::new(input, params.background) {
+        Ok(p) => p,
+        Err(c) => return PsfFit::unfitted(c),
+    };
+    let sp = prior.scatter_px.max(MIN_PRIOR_SCATTER_PX) * SQRT_031;
+    let s_model = prior.a_px * SQRT_031;
+    let info = 1.0 / (sp * sp);
+    if !(s_model.is_finite() && s_model > 0.0 && info.is_finite()) {
+        return gauss_fit_width(input, params);
+    }
+    let prior = Some(Prior { s_model, info });
+    let clean = !p.flags.contains(CentroidFlags::EXCLUDED_PIXEL);
+    let (map, z) = if clean {
+        fit_z::<true>(&p, params, prior)
+    } else {
+        fit_z::<false>(&p, params, prior)
+    };
+    if z <= params.mismatch_z {
+        return map;
+    }
+    let mut free = if clean {
+        fit::<true>(&p, params, None)
+    } else {
+        fit::<false>(&p, params, None)
+    };
+    free.centroid.flags |= CentroidFlags::PSF_MISMATCH;
+    free
 }
 
 /// The normal equations' sums at one parameter point.
@@ -216,6 +277,14 @@ struct Normal {
 }
 
 impl Normal {
+    /// Adds the width's prior.
+    fn add_prior(&mut self, pr: Prior, s: f32) {
+        // The prior as a fifth measurement row `(0, 0, 0, 1)`, residual `s_model - s`, weight
+        // `I_p`: not counted in `chi2` (the data's goodness of fit).
+        self.a[9] += pr.info;
+        self.b[3] += pr.info * (pr.s_model - s);
+    }
+
     /// Holds `s`: its row and column decoupled, a unit pivot and a zero right-hand side
     /// (its step is then 0 and the other parameters' covariance that of the 3-parameter
     /// fit).
@@ -500,17 +569,39 @@ struct Start {
     clipped: bool,
 }
 
-/// The width-free fit of a prepared window (see the module docs).
-fn fit<const CLEAN: bool>(p: &Prepared<'_>, params: &WidthFitParams) -> PsfFit {
+/// A Gaussian prior on `s`: the model's `s` and the information `1 / sigma_s^2`.
+#[derive(Clone, Copy)]
+struct Prior {
+    s_model: f32,
+    info: f32,
+}
+
+/// The width fit of a prepared window (see the module docs), free or with a prior.
+fn fit<const CLEAN: bool>(
+    p: &Prepared<'_>,
+    params: &WidthFitParams,
+    prior: Option<Prior>,
+) -> PsfFit {
+    fit_z::<CLEAN>(p, params, prior).0
+}
+
+/// [`fit`] and, with a prior, the mismatch statistic `|z|` of the star's own width against
+/// the model's (0 without a prior or a converged fit).
+fn fit_z<const CLEAN: bool>(
+    p: &Prepared<'_>,
+    params: &WidthFitParams,
+    prior: Option<Prior>,
+) -> (PsfFit, f32) {
     let give_up = |peak: Option<(u16, u16)>, extra: CentroidFlags| {
         let c = peak.and_then(|(pc, pr)| {
             let (bx, _) = p.box_around(pc, pr, params.start_box);
             cog_in_box(p, bx, (pc, pr), CogPower::One)
         });
-        PsfFit::unfitted(match c {
+        let f = PsfFit::unfitted(match c {
             Some(m) => p.finish(m, extra | CentroidFlags::NOT_CONVERGED),
             None => p.degenerate(extra),
-        })
+        });
+        (f, 0.0)
     };
     let Some(Start {
         peak,
@@ -532,15 +623,25 @@ fn fit<const CLEAN: bool>(p: &Prepared<'_>, params: &WidthFitParams) -> PsfFit {
     let level_e = p.bg.level_e();
     let var1 = p.bg.variance_e2 + 1.0;
     let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
-    let mut theta = (x0, y0, flux0, s0.clamp(MIN_START_SIGMA_PX, max_s));
+    // With a prior the model's width starts the fit (and the moments' only the free one).
+    let s_start = match prior {
+        Some(pr) => pr.s_model.clamp(MIN_SIGMA_PX, max_s),
+        None => s0.clamp(MIN_START_SIGMA_PX, max_s),
+    };
+    let mut theta = (x0, y0, flux0, s_start);
+    let mut pinned = false;
     let mut prof = [[0.0f32; M]; 6];
     let mut converged = false;
     let mut last = None;
     let tol = params.tolerance_px;
     for _ in 0..params.max_iterations {
         let mut nrm = normal::<CLEAN>(p, level_e, var1, theta, &mut prof);
+        if let Some(pr) = prior {
+            nrm.add_prior(pr, theta.3);
+        }
         // A star narrower than the floor: `s` held there while chi2 wants it lower.
-        if theta.3 <= MIN_SIGMA_PX && nrm.b[3] <= 0.0 {
+        pinned = theta.3 <= MIN_SIGMA_PX && nrm.b[3] <= 0.0;
+        if pinned {
             nrm.pin_width();
         }
         let Some(f) = Ldl4::new(nrm.a) else {
@@ -580,7 +681,11 @@ fn fit<const CLEAN: bool>(p: &Prepared<'_>, params: &WidthFitParams) -> PsfFit {
         Some(l) => Some(l),
         None => {
             let mut nrm = normal::<CLEAN>(p, level_e, var1, theta, &mut prof);
-            if theta.3 <= MIN_SIGMA_PX && nrm.b[3] <= 0.0 {
+            if let Some(pr) = prior {
+                nrm.add_prior(pr, theta.3);
+            }
+            pinned = theta.3 <= MIN_SIGMA_PX && nrm.b[3] <= 0.0;
+            if pinned {
                 nrm.pin_width();
             }
             Ldl4::new(nrm.a).map(|f| (f, nrm.chi2, nrm.n))
@@ -609,10 +714,38 @@ fn fit<const CLEAN: bool>(p: &Prepared<'_>, params: &WidthFitParams) -> PsfFit {
         sigma_row: math::sqrt(vy),
     };
     let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
-    PsfFit {
+    let z = match prior {
+        Some(pr) if converged => mismatch_z(pr, s, vs, pinned),
+        _ => 0.0,
+    };
+    let f = PsfFit {
         centroid: p.finish(m, extra),
         psf_a_px: finite(s / SQRT_031),
         sigma_psf_a_px: finite(math::sqrt(vs) / SQRT_031),
         chi2_dof: finite(chi2_dof),
-    }
+    };
+    (f, finite(z))
+}
+
+/// `|z|` of the star's own width against the model's, from the MAP fit: with `I` the
+/// data's information on `s` (the last pivot of the normal matrix less the prior's) and
+/// `I_p` the prior's, the width-free fit's `s` would differ from the model's by
+/// `(s_map - s_model) (I + I_p) / I`, whose variance (fit and model) is `1 / I + 1 / I_p`:
+/// `z^2 = (s_map - s_model)^2 I I_p / (I + I_p)`. A width held at the floor (`pinned`: the
+/// data wants it narrower still) counts as fully determined (`I` infinite).
+fn mismatch_z(pr: Prior, s: f32, vs: f32, pinned: bool) -> f32 {
+    let d = s - pr.s_model;
+    let data = if pinned {
+        f32::INFINITY
+    } else {
+        1.0 / vs - pr.info
+    };
+    let z2 = if data.is_nan() || data <= 0.0 {
+        0.0
+    } else if data.is_infinite() {
+        d * d * pr.info
+    } else {
+        d * d * data * pr.info / (data + pr.info)
+    };
+    math::sqrt(z2)
 }
