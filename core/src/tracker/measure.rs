@@ -337,3 +337,83 @@ pub(crate) fn measure(
         background,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fixed::types::{I16F16, U8F8};
+
+    /// A noise-free star of 80 %-energy radius `a_px` and 20,000 e- on 100 e-/px, centred
+    /// at active pixel (100.3, 200.2) in the 7x7 window around (100, 200).
+    fn star(a_px: f32) -> [Electrons; 49] {
+        let s = a_px * 0.556_776_4;
+        let mut e = [Electrons::ZERO; 49];
+        for (k, v) in e.iter_mut().enumerate() {
+            let (c, r) = ((k % 7) as f32, (k / 7) as f32);
+            let f = crate::centroid::math::pixel_fraction(c, 3.3, s)
+                * crate::centroid::math::pixel_fraction(r, 3.2, s);
+            *v = Electrons::from_num(100.0 + 20_000.0 * f);
+        }
+        e
+    }
+
+    fn policy(model_a_px: Option<f32>) -> Policy<'static> {
+        let psf_model = model_a_px.map(|a| {
+            let mut coeffs = [I16F16::ZERO; crate::table::psfmodel::MAX_PSF_TERMS];
+            if let Some(c) = coeffs.first_mut() {
+                *c = I16F16::from_num(a);
+            }
+            let m = PsfModel {
+                degree: 0,
+                scatter_px: U8F8::from_num(0.02),
+                stars: 100,
+                coeffs,
+            };
+            (m, 1024, 1024)
+        });
+        Policy {
+            method: CentroidMethod::GaussFitWidth,
+            box_px: 5,
+            sigma_px: 0.67,
+            psf_a_px: 1.2,
+            curve: None,
+            fused_curve: None,
+            cti: None,
+            psf_model,
+        }
+    }
+
+    fn record(model_a_px: Option<f32>, e: &[Electrons]) -> Option<StarRecord> {
+        let rect = Rect {
+            x0: 97,
+            y0: 197,
+            width: 7,
+            height: 7,
+        };
+        let input = CentroidInput::new(Window::new(rect, e)?);
+        Some(policy(model_a_px).record(&input, StarFlags::empty()))
+    }
+
+    #[test]
+    fn the_field_model_holds_the_width_and_flags_a_star_it_does_not_describe() {
+        let e = star(1.5);
+        let (free, agrees, wrong) = (
+            record(None, &e),
+            record(Some(1.5), &e),
+            record(Some(1.0), &e),
+        );
+        assert!(free.is_some() && agrees.is_some() && wrong.is_some());
+        let (Some(free), Some(agrees), Some(wrong)) = (free, agrees, wrong) else {
+            return;
+        };
+        // The model agrees: the width stays at it, no flag, the position the free fit's.
+        assert!(!agrees.flags.contains(StarFlags::PSF_MISMATCH));
+        assert!((agrees.psf_a_px - 1.5).abs() < 0.01, "{}", agrees.psf_a_px);
+        assert!((agrees.x_px - 100.3).abs() < 1e-3 && (agrees.y_px - 200.2).abs() < 1e-3);
+        // A model of a = 1 px for an a = 1.5 px star: flagged, the width-free result.
+        assert!(wrong.flags.contains(StarFlags::PSF_MISMATCH));
+        assert_eq!(wrong.x_px, free.x_px);
+        assert_eq!(wrong.psf_a_px, free.psf_a_px);
+        assert!(!free.flags.contains(StarFlags::PSF_MISMATCH));
+    }
+}

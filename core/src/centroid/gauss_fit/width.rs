@@ -67,7 +67,7 @@ use super::step_usable;
 use crate::centroid::cog::{CogPower, cog_in_box};
 use crate::centroid::math;
 use crate::centroid::prepared::{Measured, Prepared};
-use crate::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
+use crate::centroid::{Background, BackgroundEstimate, Centroid, CentroidFlags, CentroidInput};
 
 /// Largest window side fitted (the profile buffers' length).
 pub const MAX_WIDTH_FIT_SIDE: u16 = 16;
@@ -190,15 +190,14 @@ impl PsfFit {
 }
 
 /// True where the fit's `sigma_x`, `sigma_y` are known to miss its error by more than 10 %
-/// (the pull table of docs/accuracy.md, `startrack accuracy --width-unknown`): below SNR 20
-/// (the width's noise makes the fit non-linear: pulls 1.08-1.33); a star narrower than
-/// a = 0.7 px below SNR 60 (the width and position couple: pulls up to 1.34); a star whose
-/// 3-sigma radius reaches the window's border above SNR 50 (the border, the background's
-/// source, holds its wings: sigmas up to 30 % too large). `s` px, `side` the window's
-/// smaller side, px.
-pub fn sigma_unreliable(s: f32, snr: f32, side: u16) -> bool {
-    let border_px = 0.5 * f32::from(side.saturating_sub(1));
-    snr < 20.0 || (s < 0.7 * SQRT_031 && snr < 60.0) || (3.0 * s > border_px && snr > 50.0)
+/// (the pull table of docs/accuracy.md, `startrack accuracy --width-unknown`): without a
+/// field PSF model, a star that may be narrower than a = 0.7 px (`s` less twice its error
+/// below that) under SNR 60: the width and the position couple through the pixel's own
+/// width and the fit is non-linear there (pulls 1.3 at a = 0.6 px, SNR 10-30). With the
+/// model's width as a prior (`with_model`) no cell of the table misses: never. `s`,
+/// `sigma_s` px.
+pub fn sigma_unreliable(s: f32, sigma_s: f32, snr: f32, with_model: bool) -> bool {
+    !with_model && s - 2.0 * sigma_s < 0.7 * SQRT_031 && snr < 60.0
 }
 
 /// The largest `chi2 / dof` a window of `dof` degrees of freedom passes: the chi-square
@@ -270,6 +269,9 @@ struct Normal {
     /// Upper triangle `a00 a01 a02 a03 a11 a12 a13 a22 a23 a33` (order `x, y, N, s`).
     a: [f32; 10],
     b: [f32; 4],
+    /// `J^T W 1`: how the parameters move with the background level (the border's estimate
+    /// is common to every pixel).
+    g: [f32; 4],
     /// `sum w r^2`.
     chi2: f32,
     /// Usable pixels.
@@ -321,6 +323,7 @@ fn normal<const CLEAN: bool>(
     }
     let mut a = [0.0f32; 10];
     let (mut b0, mut b1, mut b2, mut b3, mut chi2) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let (mut g0, mut g1, mut g2, mut g3) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
     let mut used = 0u16;
     let rows = p
         .pixels
@@ -333,6 +336,7 @@ fn normal<const CLEAN: bool>(
             (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
         let (mut sww, mut sdr, mut sfr, mut swr, mut srr) =
             (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let (mut sd, mut sf, mut sw) = (0.0f32, 0.0f32, 0.0f32);
         let cols = px.iter().zip(dpx.iter().zip(wpx.iter()));
         for (i, (e, (&fx, (&dx, &wx)))) in line.iter().zip(cols).enumerate() {
             let f = e.to_bits() as f32 * (1.0 / 64.0) - level_e;
@@ -357,6 +361,9 @@ fn normal<const CLEAN: bool>(
             sfr += wf * res;
             swr += ww * res;
             srr += wt * res * res;
+            sd += wd;
+            sf += wf;
+            sw += ww;
         }
         first += w;
         let (fy2, fdy, fwy) = (fy * fy, fy * dy, fy * wy);
@@ -375,6 +382,10 @@ fn normal<const CLEAN: bool>(
         b1 += dy * sfr;
         b2 += fy * sfr;
         b3 += fy * swr + wy * sfr;
+        g0 += fy * sd;
+        g1 += dy * sf;
+        g2 += fy * sf;
+        g3 += fy * sw + wy * sf;
         chi2 += srr;
     }
     if CLEAN {
@@ -396,6 +407,7 @@ fn normal<const CLEAN: bool>(
             a33 * n2,
         ],
         b: [b0 * n, b1 * n, b2, b3 * n],
+        g: [g0 * n, g1 * n, g2, g3 * n],
         chi2,
         n: used,
     }
@@ -620,81 +632,69 @@ fn fit_z<const CLEAN: bool>(
         return give_up(Some(peak), extra);
     }
     let max_s = 0.5 * f32::from(p.width.max(p.height));
-    let level_e = p.bg.level_e();
-    let var1 = p.bg.variance_e2 + 1.0;
-    let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
+    let mut prof = [[0.0f32; M]; 6];
+    // The border's median is robust; its MAD's variance is noisy: the variance from the
+    // border's clipped sample variance instead.
+    let bg = if params.background == Background::PerimeterMedian {
+        clipped_variance::<CLEAN>(p, &prof, 0.0, p.bg)
+    } else {
+        p.bg
+    };
+    let (mut level_e, mut var1) = (bg.level_e(), bg.variance_e2 + 1.0);
+    let mut level_var = bg.level_variance_e2;
     // With a prior the model's width starts the fit (and the moments' only the free one).
     let s_start = match prior {
         Some(pr) => pr.s_model.clamp(MIN_SIGMA_PX, max_s),
         None => s0.clamp(MIN_START_SIGMA_PX, max_s),
     };
-    let mut theta = (x0, y0, flux0, s_start);
-    let mut pinned = false;
-    let mut prof = [[0.0f32; M]; 6];
-    let mut converged = false;
-    let mut last = None;
-    let tol = params.tolerance_px;
-    for _ in 0..params.max_iterations {
+    let it = Iteration {
+        params,
+        prior,
+        max_s,
+    };
+    let Some(mut sol) = it.run::<CLEAN>(p, (level_e, var1), (x0, y0, flux0, s_start), &mut prof)
+    else {
+        return give_up(Some(peak), extra);
+    };
+    // The border (the background's source when not given) holds the star's wings: its
+    // median was biased high and its spread taken for noise. Once, the background from the
+    // border's residuals to the fitted star, and the fit again from where it stopped.
+    if sol.converged
+        && !matches!(params.background, Background::Given { .. })
+        && wings_on_border(p, &prof, sol.theta.2) > WINGS_REFIT * math::sqrt(var1)
+        && let Some(bg) = border_residuals::<CLEAN>(p, &prof, sol.theta.2)
+    {
+        (level_e, var1) = (bg.level_e(), bg.variance_e2 + 1.0);
+        level_var = bg.level_variance_e2;
+        let Some(again) = it.run::<CLEAN>(p, (level_e, var1), sol.theta, &mut prof) else {
+            return give_up(Some(peak), extra);
+        };
+        sol = again;
+    }
+    let Solved {
+        theta,
+        converged,
+        mut last,
+        mut pinned,
+    } = sol;
+    if !converged {
+        extra |= CentroidFlags::NOT_CONVERGED;
+    }
+    if last.is_none() {
         let mut nrm = normal::<CLEAN>(p, level_e, var1, theta, &mut prof);
         if let Some(pr) = prior {
             nrm.add_prior(pr, theta.3);
         }
-        // A star narrower than the floor: `s` held there while chi2 wants it lower.
         pinned = theta.3 <= MIN_SIGMA_PX && nrm.b[3] <= 0.0;
         if pinned {
             nrm.pin_width();
         }
-        let Some(f) = Ldl4::new(nrm.a) else {
-            return give_up(Some(peak), extra);
-        };
-        let [dx, dy, dn, ds] = f.solve(nrm.b);
-        let (sx, sy) = (dx.clamp(-1.0, 1.0), dy.clamp(-1.0, 1.0));
-        let half = 0.5 * theta.3;
-        let s_new = (theta.3 + ds.clamp(-half, half)).clamp(MIN_SIGMA_PX, max_s);
-        let ss = s_new - theta.3;
-        theta = (theta.0 + sx, theta.1 + sy, theta.2 + dn, s_new);
-        let (x, y, flux, s) = theta;
-        if !step_usable(x, y, flux, wmax, hmax) || !s.is_finite() {
-            return give_up(Some(peak), extra);
-        }
-        let done = if sx.abs() < tol && sy.abs() < tol && ss.abs() < S_TOLERANCE_FACTOR * tol {
-            true
-        } else if params.tolerance_sigmas > 0.0 {
-            // Faint stars: Gauss-Newton converges only linearly (the noise's curvature term
-            // it leaves out), so stop once every step is a small fraction of its own error.
-            let [vx, vy, _, vs] = f.inverse_diagonal();
-            let t2 = params.tolerance_sigmas * params.tolerance_sigmas;
-            sx * sx < t2 * vx && sy * sy < t2 * vy && ss * ss < t2 * vs
-        } else {
-            false
-        };
-        if done {
-            converged = true;
-            last = Some((f, nrm.chi2, nrm.n));
-            break;
-        }
+        last = Ldl4::new(nrm.a).map(|f| (f, nrm.chi2, nrm.n, nrm.g));
     }
-    if !converged {
-        extra |= CentroidFlags::NOT_CONVERGED;
-    }
-    let last = match last {
-        Some(l) => Some(l),
-        None => {
-            let mut nrm = normal::<CLEAN>(p, level_e, var1, theta, &mut prof);
-            if let Some(pr) = prior {
-                nrm.add_prior(pr, theta.3);
-            }
-            pinned = theta.3 <= MIN_SIGMA_PX && nrm.b[3] <= 0.0;
-            if pinned {
-                nrm.pin_width();
-            }
-            Ldl4::new(nrm.a).map(|f| (f, nrm.chi2, nrm.n))
-        }
-    };
-    let Some((f, chi2, n)) = last else {
+    let Some((f, chi2, n, g)) = last else {
         return give_up(Some(peak), extra);
     };
-    let [vx, vy, vn, vs] = f.inverse_diagonal();
+    let [vx, vy, vn, vs] = with_level_noise(&f, g, level_var);
     let dof = n.saturating_sub(4);
     let chi2_dof = if dof > 0 { chi2 / f32::from(dof) } else { 0.0 };
     if chi2_dof > chi2_dof_limit(dof, params.chi2_flag_z) || !chi2_dof.is_finite() {
@@ -702,7 +702,7 @@ fn fit_z<const CLEAN: bool>(
     }
     let (x, y, flux, s) = theta;
     let snr = flux / math::sqrt(vn).max(f32::MIN_POSITIVE);
-    if sigma_unreliable(s, snr, p.width.min(p.height)) {
+    if sigma_unreliable(s, math::sqrt(vs), snr, prior.is_some()) {
         extra |= CentroidFlags::SIGMA_UNRELIABLE;
     }
     let m = Measured {
@@ -725,6 +725,219 @@ fn fit_z<const CLEAN: bool>(
         chi2_dof: finite(chi2_dof),
     };
     (f, finite(z))
+}
+
+/// The border's brightest pixel's share of the fitted star over the background's noise
+/// above which the background is estimated again from the border's residuals (0.5: a wing
+/// of half the noise moves the border's median and widens its MAD by a few per cent).
+const WINGS_REFIT: f32 = 0.5;
+
+/// The Gauss-Newton iteration's fixed inputs.
+struct Iteration<'a> {
+    params: &'a WidthFitParams,
+    prior: Option<Prior>,
+    max_s: f32,
+}
+
+/// Where [`Iteration::run`] stopped: the parameters, whether it converged, the last
+/// factor with its `chi2` and usable pixels (when converged) and whether `s` was pinned.
+struct Solved {
+    theta: (f32, f32, f32, f32),
+    converged: bool,
+    last: Option<(Ldl4, f32, u16, [f32; 4])>,
+    pinned: bool,
+}
+
+impl Iteration<'_> {
+    /// Gauss-Newton steps from `theta` with the background `(level_e, var1)` held; `None`
+    /// when a step leaves the window or the matrix is not positive definite (give up). The
+    /// profiles are left at the last step's start.
+    fn run<const CLEAN: bool>(
+        &self,
+        p: &Prepared<'_>,
+        (level_e, var1): (f32, f32),
+        mut theta: (f32, f32, f32, f32),
+        prof: &mut Profiles,
+    ) -> Option<Solved> {
+        let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
+        let tol = self.params.tolerance_px;
+        let mut pinned = false;
+        for _ in 0..self.params.max_iterations {
+            let mut nrm = normal::<CLEAN>(p, level_e, var1, theta, prof);
+            if let Some(pr) = self.prior {
+                nrm.add_prior(pr, theta.3);
+            }
+            // A star narrower than the floor: `s` held there while chi2 wants it lower.
+            pinned = theta.3 <= MIN_SIGMA_PX && nrm.b[3] <= 0.0;
+            if pinned {
+                nrm.pin_width();
+            }
+            let f = Ldl4::new(nrm.a)?;
+            let [dx, dy, dn, ds] = f.solve(nrm.b);
+            let (sx, sy) = (dx.clamp(-1.0, 1.0), dy.clamp(-1.0, 1.0));
+            let half = 0.5 * theta.3;
+            let s_new = (theta.3 + ds.clamp(-half, half)).clamp(MIN_SIGMA_PX, self.max_s);
+            let ss = s_new - theta.3;
+            theta = (theta.0 + sx, theta.1 + sy, theta.2 + dn, s_new);
+            let (x, y, flux, s) = theta;
+            if !step_usable(x, y, flux, wmax, hmax) || !s.is_finite() {
+                return None;
+            }
+            let done = if sx.abs() < tol && sy.abs() < tol && ss.abs() < S_TOLERANCE_FACTOR * tol {
+                true
+            } else if self.params.tolerance_sigmas > 0.0 {
+                // Faint stars: Gauss-Newton converges only linearly (the noise's curvature
+                // term it leaves out), so stop once every step is a small fraction of its own
+                // error.
+                let [vx, vy, _, vs] = f.inverse_diagonal();
+                let t2 = self.params.tolerance_sigmas * self.params.tolerance_sigmas;
+                sx * sx < t2 * vx && sy * sy < t2 * vy && ss * ss < t2 * vs
+            } else {
+                false
+            };
+            if done {
+                return Some(Solved {
+                    theta,
+                    converged: true,
+                    last: Some((f, nrm.chi2, nrm.n, nrm.g)),
+                    pinned,
+                });
+            }
+        }
+        Some(Solved {
+            theta,
+            converged: false,
+            last: None,
+            pinned,
+        })
+    }
+}
+
+/// The fitted star's largest share of a border pixel, e- (flux `n`, the profiles of
+/// [`normal`]): the brightest edge column's or row's fraction times the other axis' peak.
+fn wings_on_border(p: &Prepared<'_>, prof: &Profiles, n: f32) -> f32 {
+    let [px, _, _, py, _, _] = prof;
+    let (w, h) = (usize::from(p.width), usize::from(p.height));
+    let ends = |v: &[f32], len: usize| {
+        let a = v.first().copied().unwrap_or(0.0);
+        let b = v.get(len.saturating_sub(1)).copied().unwrap_or(0.0);
+        a.max(b)
+    };
+    let peak = |v: &[f32], len: usize| v.iter().take(len).fold(0.0f32, |m, &x| m.max(x));
+    n * (ends(px, w) * peak(py, h)).max(ends(py, h) * peak(px, w))
+}
+
+/// Calls `each` with `pixel - star` (bits, 1/64 e-) of every usable border pixel, the star of
+/// flux `n` on the profiles of [`normal`] (`n` 0: the pixels themselves).
+fn border_walk<const CLEAN: bool>(
+    p: &Prepared<'_>,
+    prof: &Profiles,
+    n: f32,
+    mut each: impl FnMut(i32),
+) {
+    let [px, _, _, py, _, _] = prof;
+    let (w, h) = (p.width, p.height);
+    for r in 0..h {
+        let fy = py.get(usize::from(r)).copied().unwrap_or(0.0);
+        let edge_row = r == 0 || r + 1 == h;
+        let step = if edge_row {
+            1
+        } else {
+            w.saturating_sub(1).max(1)
+        };
+        let mut c = 0u16;
+        while c < w {
+            let i = usize::from(r) * usize::from(w) + usize::from(c);
+            if CLEAN || p.usable(i) {
+                let star_bits = if n > 0.0 {
+                    let fx = px.get(usize::from(c)).copied().unwrap_or(0.0);
+                    (n * fx * fy * 64.0) as i32
+                } else {
+                    0
+                };
+                let e = p.pixels.get(i).map_or(0, |e| e.to_bits());
+                each(e.saturating_sub(star_bits));
+            }
+            c += step;
+        }
+    }
+}
+
+/// Border pixels further than this many sigmas (the MAD's) from the level are left out of
+/// [`clipped_variance`] (a hot pixel, a cosmic ray): at 4 sigmas a Gaussian loses 0.006 %
+/// of its samples and 0.1 % of its variance.
+const CLIP_SIGMAS: f32 = 4.0;
+
+/// The background estimate with its variance from the border's sample variance about the
+/// held level (`pixel - star` as [`border_walk`]), clipped at [`CLIP_SIGMAS`] of the MAD's
+/// sigma (`bg.variance_e2`): the MAD's variance of 16-24 pixels is itself noisy (relative
+/// error ~24 % on sigma for 24 pixels, against ~15 % for the sample variance), and at low SNR
+/// the position's sigma scales with it, so the pulls were ~7 % high. Unchanged when fewer
+/// than 2 pixels pass.
+fn clipped_variance<const CLEAN: bool>(
+    p: &Prepared<'_>,
+    prof: &Profiles,
+    n: f32,
+    bg: BackgroundEstimate,
+) -> BackgroundEstimate {
+    let clip = CLIP_SIGMAS * math::sqrt(bg.variance_e2) * 64.0;
+    let (mut ss, mut k, mut all) = (0.0f32, 0u16, 0u16);
+    let level = bg.level_bits;
+    border_walk::<CLEAN>(p, prof, n, |b| {
+        let d = (i64::from(b) - level) as f32;
+        all += 1;
+        if d.abs() <= clip {
+            ss += d * d;
+            k += 1;
+        }
+    });
+    if k < 2 {
+        return bg;
+    }
+    let var = ss / (f32::from(k - 1) * 4096.0);
+    BackgroundEstimate {
+        variance_e2: var,
+        level_variance_e2: var * core::f32::consts::FRAC_PI_2 / f32::from(all.max(1)),
+        ..bg
+    }
+}
+
+/// The background from the border's residuals to the fitted star (flux `n`, the profiles
+/// of [`normal`]): the median of `pixel - star` over the border's usable pixels, the
+/// variance as [`clipped_variance`]. `None` for an empty border.
+fn border_residuals<const CLEAN: bool>(
+    p: &Prepared<'_>,
+    prof: &Profiles,
+    n: f32,
+) -> Option<BackgroundEstimate> {
+    let mut ring = [0i32; 4 * M];
+    let mut k = 0usize;
+    border_walk::<CLEAN>(p, prof, n, |b| {
+        if let Some(slot) = ring.get_mut(k) {
+            *slot = b;
+            k += 1;
+        }
+    });
+    let bg = crate::centroid::background::median_estimate(ring.get_mut(..k)?)?;
+    Some(clipped_variance::<CLEAN>(p, prof, n, bg))
+}
+
+/// The parameters' variances with the background level's own noise: the level the fit holds
+/// is the border's estimate, common to every pixel, so its error `dL` moves the solution by
+/// `-A^-1 g dL` (`g = J^T W 1`): `diag(A^-1) + level_var (A^-1 g)^2`. One more solve.
+fn with_level_noise(f: &Ldl4, g: [f32; 4], level_var: f32) -> [f32; 4] {
+    let v = f.inverse_diagonal();
+    let u = f.solve(g);
+    let lv = if level_var.is_finite() {
+        level_var.max(0.0)
+    } else {
+        0.0
+    };
+    let mut out = [0.0f32; 4];
+    for ((o, vi), ui) in out.iter_mut().zip(v).zip(u) {
+        *o = vi + lv * ui * ui;
+    }
+    out
 }
 
 /// `|z|` of the star's own width against the model's, from the MAP fit: with `I` the
