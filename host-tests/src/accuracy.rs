@@ -864,7 +864,7 @@ pub fn width_unknown_markdown(cells: &[Cell], snrs: &[f64], noise: &Noise) -> St
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Width unknown ({} stars per cell, uniform pixel phase, background {} e-/px, read noise {} e-, seed {}; SNR by eq. 8 in 5x5; each cell: RMS / CRLB of a star whose width is known, then for the width-free fit RMS / CRLB with the width unknown and the pull):\n",
+        "Width unknown ({} stars per cell, uniform pixel phase, background {} e-/px, read noise {} e-, seed {}; SNR by eq. 8 in 5x5; each cell: RMS / CRLB of a star whose width is known, then for the width fits RMS / CRLB for what the fit knows of the width (unknown; the model's scatter) and the pull):\n",
         noise.trials, noise.background_e, noise.read_noise_e, noise.seed
     );
     let _ = write!(s, "| method | a |");

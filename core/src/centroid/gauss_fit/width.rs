@@ -1,7 +1,9 @@
 //! The pixel-integrated Gaussian fit with the PSF width free: `(x, y, N, s)`, for stars whose
 //! width is not known (defocus, field curvature and coma change it across the field and from
 //! star to star). Reports each star's width `psf_a_px` with its error and a goodness of fit
-//! `chi2_dof`, and flags a window the model cannot describe.
+//! `chi2_dof`, and flags a window the model cannot describe. With a field PSF model (table
+//! section 9) the same fit takes the model's width as a prior ([`gauss_fit_width_prior`]):
+//! near the bound of a star whose width is known, for the price of one matrix element.
 //!
 //! # Model and fit
 //! ```text
@@ -28,30 +30,63 @@
 //! with the same flag. Windows over 16 px a side are not fitted (the profile buffers are sized
 //! for star windows): the starting CoG with `NOT_CONVERGED`.
 //!
+//! Background: with the border's median (the flight's), the per-pixel variance is the
+//! border's sample variance about the median, pixels beyond 4 MAD-sigmas left out (a hot
+//! pixel, a cosmic ray): the MAD's own variance of 16-24 pixels is noisy, and at low SNR the
+//! sigmas scale with it (the pulls were 1.05-1.12 at SNR 10 with it). When the fitted star's
+//! brightest border pixel exceeds half the background's noise (a = 2 px at SNR 100 in 7x7)
+//! the border held its wings, biasing the median high and the variance with the wings'
+//! spread (pull 0.77): once, the background is estimated again from the border's residuals
+//! to the fitted star and one more Gauss-Newton step is taken from the solution (its
+//! covariance from the step's start).
+//!
+//! # With a field PSF model
+//! [`gauss_fit_width_prior`] adds the model's width at the star as a Gaussian prior,
+//! `s ~ N(s_model, (scatter sqrt 0.31)^2)`: a fifth measurement row `(0, 0, 0, 1)` with
+//! weight `I_p = 1 / sigma_p^2`, i.e. `I_p` added to the normal matrix's `s s` element and
+//! `I_p (s_model - s)` to its right-hand side (MAP; `chi2` stays the data's). The fit starts
+//! at the model's width. A star whose own width disagrees with the model (the width-free
+//! fit's `s` against `s_model`, with the fit's and the model's variance: `z^2 = (s_map -
+//! s_model)^2 I I_p / (I + I_p)`, `I` the data's information on `s`) by more than
+//! [`PSF_MISMATCH_Z`] is refitted width-free and flagged [`CentroidFlags::PSF_MISMATCH`]:
+//! a blend, a cosmic ray, a PSF the model does not describe. A scatter below
+//! [`MIN_PRIOR_SCATTER_PX`] is taken as that.
+//!
 //! # Error estimate and goodness of fit
 //! `sigma_x`, `sigma_y`, `sigma_N`, `sigma_s` from the diagonal of `(J^T W J)^-1` at the
 //! solution (the last step's start, less than `tolerance_px` away): the information with the
 //! width a free parameter, so a star's position error includes what not knowing its width
-//! costs. `v_k` counts the star's shot noise and the perimeter's measured variance (sky and
-//! dark shot noise, read noise, the dark and flat maps' residual non-uniformity together).
+//! costs (with a prior, what knowing it to the model's scatter costs). `v_k` counts the
+//! star's shot noise and the perimeter's measured variance (sky and dark shot noise, read
+//! noise, the dark and flat maps' residual non-uniformity together). The held level's own
+//! error (common to every pixel) is left out: added as `level_var (A^-1 J^T W 1)^2` it
+//! moved the position's pulls by 0.01 at most in the width-unknown table, for ~3
+//! instructions a pixel a step.
 //! `psf_a_px = s / sqrt(0.31)` with `sigma_psf_a_px = sigma_s / sqrt(0.31)`.
 //! `chi2_dof = chi2 / (n - 4)` over the `n` usable pixels; for a star the model describes it
 //! follows `chi2(n - 4) / (n - 4)`, and above [`chi2_dof_limit`] (the distribution's upper
 //! `z`-sigma point, `z` = [`CHI2_FLAG_Z`]: a false-flag rate of 1e-3 per star) the
 //! centroid gets [`CentroidFlags::POOR_FIT`]: a blend, a cosmic ray, coma or defocus the
 //! Gaussian cannot follow. The position is still reported, flagged, never as a clean number.
-//! Where the linearised sigmas are known to miss the error by more than 10 % (faint,
-//! undersampled, or wings on the border: [`sigma_unreliable`]) the centroid gets
-//! [`CentroidFlags::SIGMA_UNRELIABLE`].
+//! Where the linearised sigmas are known to miss the error by more than 10 % (without a
+//! model, a star that may be narrower than a = 0.7 px below SNR 60: [`sigma_unreliable`])
+//! the centroid gets [`CentroidFlags::SIGMA_UNRELIABLE`].
 //!
 //! # Cost
 //! Per step `w + h + 2` edge `erfc`s, densities and width terms, ~35 instructions a pixel
 //! for the normal equations (the ten row sums), a 4x4 `LDL^T`; from the moment start the
 //! bench's bright star converges in 2 steps on 5x5, 3 on 7x7. Measured on the Cortex-M7
-//! (`cargo m7-bench`, background given; the exact counts in docs/speed.md): ~7,000
-//! instructions for a 5x5 window (`centroid_gauss_fit_width_5x5`, ~2,700 a step, ~1,700 for
-//! validation, start and output) and ~13,300 for 7x7 (`centroid_gauss_fit_width_7x7`,
-//! ~3,700 a step): 1.5x and 1.9x the fit with the width given.
+//! (`cargo m7-bench`, background given; the exact counts in docs/speed.md): ~7,400
+//! instructions for a 5x5 window (`centroid_gauss_fit_width_5x5`, ~2,700 a step, ~2,000 for
+//! validation, start and output) and ~13,600 for 7x7 (`centroid_gauss_fit_width_7x7`,
+//! ~3,700 a step): 1.5x and 1.9x the fit with the width given. With a prior that agrees
+//! with the star, ~7,500 and ~10,000 (`centroid_gauss_fit_width_model_*`: it starts at the
+//! model's width and the 7x7 fit needs a step less); a mismatched star pays the width-free
+//! fit again. The border's clipped variance (~10 instructions a border pixel) and the wings'
+//! refit (the border's median of the residuals and one more step, on stars whose wings
+//! reach the border) are the flight's, not in these stages (background given): the 30-star
+//! tracking frame, whose bench stars are bright and reach the border, grew by ~12,800
+//! instructions a star with them (`tracker_tracking_frame`).
 //!
 //! # Where it fails
 //! - Faint stars (SNR below ~10 in 5x5): the width is poorly determined and the position
@@ -59,8 +94,11 @@
 //!   frequent.
 //! - Non-Gaussian PSFs: the fitted `s` is the Gaussian closest to the PSF; the position is
 //!   the model's centre, not the PSF's centroid; `chi2_dof` flags a strong mismatch.
-//! - A perimeter that holds the star's wings (a window too small for the star) biases the
-//!   held background high and `s` low.
+//! - A perimeter that holds much of the star (a window too small for the star) biases the
+//!   held background high and `s` low beyond what the one refit recovers.
+//! - Below a = 0.7 px without a model: the width and the position couple (through the
+//!   pixel's own width), the fit is non-linear there and the sigmas are ~30 % small below
+//!   SNR 60 (flagged); a model removes it.
 
 use super::Grid;
 use super::step_usable;
@@ -269,9 +307,6 @@ struct Normal {
     /// Upper triangle `a00 a01 a02 a03 a11 a12 a13 a22 a23 a33` (order `x, y, N, s`).
     a: [f32; 10],
     b: [f32; 4],
-    /// `J^T W 1`: how the parameters move with the background level (the border's estimate
-    /// is common to every pixel).
-    g: [f32; 4],
     /// `sum w r^2`.
     chi2: f32,
     /// Usable pixels.
@@ -323,7 +358,6 @@ fn normal<const CLEAN: bool>(
     }
     let mut a = [0.0f32; 10];
     let (mut b0, mut b1, mut b2, mut b3, mut chi2) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
-    let (mut g0, mut g1, mut g2, mut g3) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
     let mut used = 0u16;
     let rows = p
         .pixels
@@ -336,7 +370,6 @@ fn normal<const CLEAN: bool>(
             (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
         let (mut sww, mut sdr, mut sfr, mut swr, mut srr) =
             (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
-        let (mut sd, mut sf, mut sw) = (0.0f32, 0.0f32, 0.0f32);
         let cols = px.iter().zip(dpx.iter().zip(wpx.iter()));
         for (i, (e, (&fx, (&dx, &wx)))) in line.iter().zip(cols).enumerate() {
             let f = e.to_bits() as f32 * (1.0 / 64.0) - level_e;
@@ -361,9 +394,6 @@ fn normal<const CLEAN: bool>(
             sfr += wf * res;
             swr += ww * res;
             srr += wt * res * res;
-            sd += wd;
-            sf += wf;
-            sw += ww;
         }
         first += w;
         let (fy2, fdy, fwy) = (fy * fy, fy * dy, fy * wy);
@@ -382,10 +412,6 @@ fn normal<const CLEAN: bool>(
         b1 += dy * sfr;
         b2 += fy * sfr;
         b3 += fy * swr + wy * sfr;
-        g0 += fy * sd;
-        g1 += dy * sf;
-        g2 += fy * sf;
-        g3 += fy * sw + wy * sf;
         chi2 += srr;
     }
     if CLEAN {
@@ -407,7 +433,6 @@ fn normal<const CLEAN: bool>(
             a33 * n2,
         ],
         b: [b0 * n, b1 * n, b2, b3 * n],
-        g: [g0 * n, g1 * n, g2, g3 * n],
         chi2,
         n: used,
     }
@@ -641,7 +666,6 @@ fn fit_z<const CLEAN: bool>(
         p.bg
     };
     let (mut level_e, mut var1) = (bg.level_e(), bg.variance_e2 + 1.0);
-    let mut level_var = bg.level_variance_e2;
     // With a prior the model's width starts the fit (and the moments' only the free one).
     let s_start = match prior {
         Some(pr) => pr.s_model.clamp(MIN_SIGMA_PX, max_s),
@@ -665,17 +689,39 @@ fn fit_z<const CLEAN: bool>(
         && let Some(bg) = border_residuals::<CLEAN>(p, &prof, sol.theta.2)
     {
         (level_e, var1) = (bg.level_e(), bg.variance_e2 + 1.0);
-        level_var = bg.level_variance_e2;
-        let Some(again) = it.run::<CLEAN>(p, (level_e, var1), sol.theta, &mut prof) else {
+        let one = Iteration {
+            params: &WidthFitParams {
+                max_iterations: 1,
+                ..*params
+            },
+            ..it
+        };
+        let Some(again) = one.run::<CLEAN>(p, (level_e, var1), sol.theta, &mut prof) else {
             return give_up(Some(peak), extra);
         };
-        sol = again;
+        // One Gauss-Newton step from the solution (the new background moves it little):
+        // the covariance from the step's start.
+        let Solved {
+            theta,
+            last,
+            prev,
+            pinned,
+            ..
+        } = again;
+        sol = Solved {
+            theta,
+            converged: true,
+            last: last.or(prev),
+            prev: None,
+            pinned,
+        };
     }
     let Solved {
         theta,
         converged,
         mut last,
         mut pinned,
+        ..
     } = sol;
     if !converged {
         extra |= CentroidFlags::NOT_CONVERGED;
@@ -689,12 +735,12 @@ fn fit_z<const CLEAN: bool>(
         if pinned {
             nrm.pin_width();
         }
-        last = Ldl4::new(nrm.a).map(|f| (f, nrm.chi2, nrm.n, nrm.g));
+        last = Ldl4::new(nrm.a).map(|f| (f, nrm.chi2, nrm.n));
     }
-    let Some((f, chi2, n, g)) = last else {
+    let Some((f, chi2, n)) = last else {
         return give_up(Some(peak), extra);
     };
-    let [vx, vy, vn, vs] = with_level_noise(&f, g, level_var);
+    let [vx, vy, vn, vs] = f.inverse_diagonal();
     let dof = n.saturating_sub(4);
     let chi2_dof = if dof > 0 { chi2 / f32::from(dof) } else { 0.0 };
     if chi2_dof > chi2_dof_limit(dof, params.chi2_flag_z) || !chi2_dof.is_finite() {
@@ -744,7 +790,9 @@ struct Iteration<'a> {
 struct Solved {
     theta: (f32, f32, f32, f32),
     converged: bool,
-    last: Option<(Ldl4, f32, u16, [f32; 4])>,
+    last: Option<(Ldl4, f32, u16)>,
+    /// The last step's factor, converged or not.
+    prev: Option<(Ldl4, f32, u16)>,
     pinned: bool,
 }
 
@@ -762,6 +810,7 @@ impl Iteration<'_> {
         let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
         let tol = self.params.tolerance_px;
         let mut pinned = false;
+        let mut prev = None;
         for _ in 0..self.params.max_iterations {
             let mut nrm = normal::<CLEAN>(p, level_e, var1, theta, prof);
             if let Some(pr) = self.prior {
@@ -799,15 +848,18 @@ impl Iteration<'_> {
                 return Some(Solved {
                     theta,
                     converged: true,
-                    last: Some((f, nrm.chi2, nrm.n, nrm.g)),
+                    last: Some((f, nrm.chi2, nrm.n)),
+                    prev: None,
                     pinned,
                 });
             }
+            prev = Some((f, nrm.chi2, nrm.n));
         }
         Some(Solved {
             theta,
             converged: false,
             last: None,
+            prev,
             pinned,
         })
     }
@@ -920,24 +972,6 @@ fn border_residuals<const CLEAN: bool>(
     });
     let bg = crate::centroid::background::median_estimate(ring.get_mut(..k)?)?;
     Some(clipped_variance::<CLEAN>(p, prof, n, bg))
-}
-
-/// The parameters' variances with the background level's own noise: the level the fit holds
-/// is the border's estimate, common to every pixel, so its error `dL` moves the solution by
-/// `-A^-1 g dL` (`g = J^T W 1`): `diag(A^-1) + level_var (A^-1 g)^2`. One more solve.
-fn with_level_noise(f: &Ldl4, g: [f32; 4], level_var: f32) -> [f32; 4] {
-    let v = f.inverse_diagonal();
-    let u = f.solve(g);
-    let lv = if level_var.is_finite() {
-        level_var.max(0.0)
-    } else {
-        0.0
-    };
-    let mut out = [0.0f32; 4];
-    for ((o, vi), ui) in out.iter_mut().zip(v).zip(u) {
-        *o = vi + lv * ui * ui;
-    }
-    out
 }
 
 /// `|z|` of the star's own width against the model's, from the MAP fit: with `I` the
