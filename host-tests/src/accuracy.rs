@@ -36,7 +36,7 @@ use startrack_core::centroid::cog::{
     Anchor, CogParams, CogPower, cog, sigma_unreliable as cog_sigma_unreliable,
 };
 use startrack_core::centroid::gauss_fit::{
-    GaussFitParams, WidthFitParams, gauss_fit, gauss_fit_width,
+    GaussFitParams, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width, gauss_fit_width_prior,
 };
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
@@ -74,6 +74,16 @@ pub enum Method {
     GaussFitWidth {
         /// Window side.
         window: u8,
+    },
+    /// The flight configuration's fit with a field PSF model in the table
+    /// ([`gauss_fit_width_prior`]): each star's model width is its true `a` plus a seeded
+    /// normal error of RMS `scatter_a_px` (a model as good as its stated scatter), the prior
+    /// `N(a_model, scatter_a_px)`; otherwise as [`Method::GaussFitWidth`].
+    GaussFitWidthModel {
+        /// Window side.
+        window: u8,
+        /// The model's RMS scatter (and the error drawn), px.
+        scatter_a_px: f64,
     },
 }
 
@@ -115,6 +125,12 @@ impl Method {
                 format!("gauss fit {window}x{window} a {a_px} assumed")
             }
             Method::GaussFitWidth { window } => format!("gauss fit width-free {window}x{window}"),
+            Method::GaussFitWidthModel {
+                window,
+                scatter_a_px,
+            } => format!(
+                "gauss fit width-free {window}x{window} + field model (scatter {scatter_a_px})"
+            ),
         }
     }
 
@@ -124,7 +140,8 @@ impl Method {
             Method::Cog { box_side, .. } => u16::from(*box_side) + 2,
             Method::GaussFit { window }
             | Method::GaussFitAssumed { window, .. }
-            | Method::GaussFitWidth { window } => u16::from(*window),
+            | Method::GaussFitWidth { window }
+            | Method::GaussFitWidthModel { window, .. } => u16::from(*window),
         }
     }
 }
@@ -167,8 +184,9 @@ pub struct Cell {
     pub rms_px: f64,
     /// RMS Cramer-Rao bound over the same stars, px.
     pub crlb_px: f64,
-    /// RMS over the same stars of the bound when the width is also unknown
-    /// ([`crlb_x_width_free_px`]), px.
+    /// RMS over the same stars of the bound for what the method knows of the width: unknown
+    /// for the width-free fit ([`crlb_x_width_free_px`]), known to the model's scatter for
+    /// the model fit ([`crlb_x_prior_px`]); NaN for the other methods, px.
     pub crlb_width_free_px: f64,
     /// RMS of the noise part of the error, px.
     pub scatter_px: f64,
@@ -182,6 +200,8 @@ pub struct Cell {
     pub pull_rms_clean: f64,
     /// Stars flagged `SIGMA_UNRELIABLE`.
     pub sigma_flagged: usize,
+    /// Stars flagged `PSF_MISMATCH` (the model methods; kept in the statistics).
+    pub psf_mismatch: usize,
     /// Results flagged degenerate or not converged (left out).
     pub failures: usize,
     /// Stars used.
@@ -257,6 +277,33 @@ pub fn crlb_x_width_free_px(
     background_e: f64,
     read_noise_e: f64,
 ) -> f64 {
+    crlb_x_prior_px(
+        width,
+        height,
+        x,
+        y,
+        sigma_px,
+        flux_e,
+        (background_e, read_noise_e),
+        0.0,
+    )
+}
+
+/// The Cramer-Rao bound on x (px) when the PSF sigma is known only to a Gaussian prior of
+/// information `prior_info` (`1 / sigma_s^2`, px^-2; 0: not known at all, the bound of
+/// [`crlb_x_width_free_px`]): the `(x, y, N, s)` Fisher matrix plus the prior's information
+/// on `s`, inverted (the Bayesian information bound at the star's true width).
+#[allow(clippy::too_many_arguments)]
+pub fn crlb_x_prior_px(
+    width: u16,
+    height: u16,
+    x: f64,
+    y: f64,
+    sigma_px: f64,
+    flux_e: f64,
+    (background_e, read_noise_e): (f64, f64),
+    prior_info: f64,
+) -> f64 {
     let phi = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
     // Fraction, d/dcentre, d/dsigma of pixel i for centre c.
     let prof = |i: f64, c: f64| {
@@ -290,6 +337,7 @@ pub fn crlb_x_width_free_px(
             }
         }
     }
+    f[3][3] += prior_info;
     invert4(f).map_or(f64::INFINITY, |inv| inv[0][0].max(0.0).sqrt())
 }
 
@@ -384,7 +432,9 @@ impl Prepared {
         })
     }
 
-    fn run(&self, input: &CentroidInput<'_>) -> Centroid {
+    /// Runs the method; `a_model_px` is the field model's width at the star (only the
+    /// model method uses it).
+    fn run(&self, input: &CentroidInput<'_>, a_model_px: f64) -> Centroid {
         let s = self.sigma_px as f32;
         match self.method {
             Method::Cog {
@@ -433,6 +483,24 @@ impl Prepared {
                 )
                 .centroid
             }
+            Method::GaussFitWidthModel {
+                window,
+                scatter_a_px,
+            } => {
+                gauss_fit_width_prior(
+                    input,
+                    &WidthFitParams {
+                        background: Background::PerimeterMedian,
+                        start_box: window.saturating_sub(2).min(5),
+                        ..WidthFitParams::new()
+                    },
+                    &WidthPrior {
+                        a_px: a_model_px as f32,
+                        scatter_px: scatter_a_px as f32,
+                    },
+                )
+                .centroid
+            }
         }
     }
 }
@@ -476,6 +544,14 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
     let mut crlb_free2 = 0.0;
     let (mut pull_clean2, mut flagged) = (0.0, 0usize);
     let width_free = matches!(method, Method::GaussFitWidth { .. });
+    // The field model's error per star, from its own stream (the stars stay the same).
+    let model_scatter = match method {
+        Method::GaussFitWidthModel { scatter_a_px, .. } => Some(scatter_a_px),
+        _ => None,
+    };
+    let mut model_rng = ChaCha8Rng::seed_from_u64(cell_seed(noise.seed, a_px, snr) ^ 0x5eed_a0de1);
+    let unit = Normal::new(0.0, 1.0).ok()?;
+    let mut mismatched = 0usize;
     let (mut used, mut failures) = (0usize, 0usize);
     let bad = CentroidFlags::DEGENERATE | CentroidFlags::NOT_CONVERGED;
     let u = rand_distr::Uniform::new(-0.5, 0.5).ok()?;
@@ -491,8 +567,12 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
             .collect();
         let e = to_electrons(&noisy);
         let e0 = to_electrons(&mean);
-        let c = prepared.run(&CentroidInput::new(Window::new(rect, &e)?));
-        let c0 = prepared.run(&CentroidInput::new(Window::new(rect, &e0)?));
+        let a_model = model_scatter.map_or(a_px, |sc| a_px + sc * unit.sample(&mut model_rng));
+        let c = prepared.run(&CentroidInput::new(Window::new(rect, &e)?), a_model);
+        let c0 = prepared.run(&CentroidInput::new(Window::new(rect, &e0)?), a_model);
+        if c.flags.contains(CentroidFlags::PSF_MISMATCH) {
+            mismatched += 1;
+        }
         if c.flags.intersects(bad) || c0.flags.intersects(bad) {
             failures += 1;
             continue;
@@ -537,7 +617,31 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
             noise.read_noise_e,
         );
         crlb2 += bx * bx + by * by;
-        if width_free {
+        if let Some(sc) = model_scatter {
+            // The bound for a width known to the model's scatter: the prior's information.
+            let info = 1.0 / (sc * sigma_of_a(1.0)).powi(2);
+            let fx = crlb_x_prior_px(
+                9,
+                9,
+                x - centre + 4.0,
+                y - centre + 4.0,
+                sigma,
+                flux,
+                (noise.background_e, noise.read_noise_e),
+                info,
+            );
+            let fy = crlb_x_prior_px(
+                9,
+                9,
+                y - centre + 4.0,
+                x - centre + 4.0,
+                sigma,
+                flux,
+                (noise.background_e, noise.read_noise_e),
+                info,
+            );
+            crlb_free2 += fx * fx + fy * fy;
+        } else if width_free {
             let fx = crlb_x_width_free_px(
                 9,
                 9,
@@ -569,7 +673,7 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
         snr,
         rms_px: (err2 / n).sqrt(),
         crlb_px: (crlb2 / n).sqrt(),
-        crlb_width_free_px: if width_free {
+        crlb_width_free_px: if width_free || model_scatter.is_some() {
             (crlb_free2 / n).sqrt()
         } else {
             f64::NAN
@@ -579,6 +683,7 @@ pub fn run_cell(method: Method, a_px: f64, snr: f64, noise: &Noise) -> Option<Ce
         pull_rms: (pull2 / n).sqrt(),
         pull_rms_clean: (pull_clean2 / (2 * (used - flagged.min(used))) as f64).sqrt(),
         sigma_flagged: flagged,
+        psf_mismatch: mismatched,
         failures,
         trials: noise.trials,
     })
@@ -699,12 +804,20 @@ pub fn markdown(
     s
 }
 
+/// The field model's scatter of the "width unknown" table's model rows, px of `a`.
+pub const MODEL_SCATTER_A_PX: f64 = 0.02;
+
 /// The methods of the "width unknown" table: the width-free fit as the flight configuration
-/// runs it, and the fit of the flight configuration's former fixed width, a = 1.2 px, on
-/// stars of every width, both on 7x7 windows.
-pub fn width_unknown_methods() -> [Method; 2] {
+/// runs it without and with a field PSF model (scatter [`MODEL_SCATTER_A_PX`]), and the fit
+/// of the flight configuration's former fixed width, a = 1.2 px, on stars of every width,
+/// all on 7x7 windows.
+pub fn width_unknown_methods() -> [Method; 3] {
     [
         Method::GaussFitWidth { window: 7 },
+        Method::GaussFitWidthModel {
+            window: 7,
+            scatter_a_px: MODEL_SCATTER_A_PX,
+        },
         Method::GaussFitAssumed {
             window: 7,
             a_px: 1.2,
@@ -713,12 +826,12 @@ pub fn width_unknown_methods() -> [Method; 2] {
 }
 
 /// The "width unknown" cells as CSV: `method,a_px,snr,rms_over_crlb,
-/// rms_over_crlb_width_free,pull_rms,pull_rms_unflagged,sigma_flagged,failures,trials`
-/// (the width-free bound only for the
-/// width-free fit; empty otherwise).
+/// rms_over_crlb_width_free,pull_rms,pull_rms_unflagged,sigma_flagged,failures,trials,
+/// psf_mismatch` (`rms_over_crlb_width_free`: over the bound for what the method knows of
+/// the width, [`Cell::crlb_width_free_px`]; empty for the assumed width).
 pub fn width_unknown_csv(cells: &[Cell]) -> String {
     let mut s = String::from(
-        "method,a_px,snr,rms_over_crlb,rms_over_crlb_width_free,pull_rms,pull_rms_unflagged,sigma_flagged,failures,trials\n",
+        "method,a_px,snr,rms_over_crlb,rms_over_crlb_width_free,pull_rms,pull_rms_unflagged,sigma_flagged,failures,trials,psf_mismatch\n",
     );
     for c in cells {
         let free = if c.crlb_width_free_px.is_finite() {
@@ -728,7 +841,7 @@ pub fn width_unknown_csv(cells: &[Cell]) -> String {
         };
         let _ = writeln!(
             s,
-            "{},{},{},{:.3},{free},{:.3},{:.3},{},{},{}",
+            "{},{},{},{:.3},{free},{:.3},{:.3},{},{},{},{}",
             c.method.name(),
             c.a_px,
             c.snr,
@@ -737,7 +850,8 @@ pub fn width_unknown_csv(cells: &[Cell]) -> String {
             c.pull_rms_clean,
             c.sigma_flagged,
             c.failures,
-            c.trials
+            c.trials,
+            c.psf_mismatch
         );
     }
     s
@@ -750,7 +864,7 @@ pub fn width_unknown_markdown(cells: &[Cell], snrs: &[f64], noise: &Noise) -> St
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Width unknown ({} stars per cell, uniform pixel phase, background {} e-/px, read noise {} e-, seed {}; SNR by eq. 8 in 5x5; each cell: RMS / CRLB of a star whose width is known, then for the width-free fit RMS / CRLB with the width unknown and the pull):\n",
+        "Width unknown ({} stars per cell, uniform pixel phase, background {} e-/px, read noise {} e-, seed {}; SNR by eq. 8 in 5x5; each cell: RMS / CRLB of a star whose width is known, then for the width fits RMS / CRLB for what the fit knows of the width (unknown; the model's scatter) and the pull):\n",
         noise.trials, noise.background_e, noise.read_noise_e, noise.seed
     );
     let _ = write!(s, "| method | a |");
@@ -777,9 +891,14 @@ pub fn width_unknown_markdown(cells: &[Cell], snrs: &[f64], noise: &Noise) -> St
                 .find(|c| c.method.name() == name && c.a_px == a && c.snr == snr)
             {
                 Some(c) if c.crlb_width_free_px.is_finite() => {
+                    let mismatch = if c.psf_mismatch > 0 {
+                        format!(", {} mismatched", c.psf_mismatch)
+                    } else {
+                        String::new()
+                    };
                     let _ = write!(
                         s,
-                        " {:.2} / {:.2} / pull {}{} |",
+                        " {:.2} / {:.2} / pull {}{mismatch}{} |",
                         c.efficiency_ratio(),
                         c.rms_px / c.crlb_width_free_px,
                         pull_cell(c),
@@ -834,6 +953,7 @@ impl PreparedMethod {
 
     /// Runs the method on `input`.
     pub fn run(&self, input: &CentroidInput<'_>) -> Centroid {
-        self.0.run(input)
+        let a_px = self.0.sigma_px / sigma_of_a(1.0);
+        self.0.run(input, a_px)
     }
 }

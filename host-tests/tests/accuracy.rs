@@ -91,7 +91,7 @@ fn estimate_should_hold(c: &Cell) -> bool {
         Method::GaussFit { .. } => true,
         // Not in the table: the width-free fit's pulls are in `accuracy_width`; a wrong
         // assumed width makes the estimate a model's, not the scatter's.
-        Method::GaussFitWidth { .. } => true,
+        Method::GaussFitWidth { .. } | Method::GaussFitWidthModel { .. } => true,
         Method::GaussFitAssumed { .. } => false,
     }
 }

@@ -1,7 +1,8 @@
 //! The core's width-free Gaussian fit (`gauss_fit_width`): noise-free recovery of position
 //! and width, agreement with an f64 implementation of the same estimator, and under noise its
 //! pull (error / own sigma), its `chi2_dof` against the chi-square law and the `POOR_FIT`
-//! flag on windows the model cannot describe.
+//! flag on windows the model cannot describe; with a field PSF model's width as a prior
+//! (`gauss_fit_width_prior`), the `PSF_MISMATCH` flag on stars the model does not describe.
 //!
 //! `-- --nocapture` prints the measured numbers.
 
@@ -10,7 +11,8 @@ mod psf;
 
 use psf::{NOISE_BG_E, NOISE_READ_E, Rng, Star, Win, sigma_of_a};
 use startrack_core::centroid::gauss_fit::{
-    CHI2_FLAG_Z, PsfFit, WidthFitParams, chi2_dof_limit, gauss_fit_width,
+    CHI2_FLAG_Z, PsfFit, WidthFitParams, WidthPrior, chi2_dof_limit, gauss_fit_width,
+    gauss_fit_width_prior,
 };
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::window::Window;
@@ -356,4 +358,45 @@ fn flags_blends_and_cosmic_rays() {
     eprintln!("POOR_FIT: {blends} / 100 blends, {hits} / 100 cosmic-ray hits");
     assert!(blends >= 95, "{blends}");
     assert_eq!(hits, 100);
+}
+
+#[test]
+fn a_star_the_field_model_does_not_describe_is_flagged_and_fitted_free() {
+    // Stars of a = 1.5 px at SNR 50 against a model of a = 1.0 px, scatter 0.02: every one
+    // is flagged PSF_MISMATCH and reported as the width-free fit reports it; against a
+    // model of their own width, none is, and the width comes out within the scatter.
+    let mut rng = Rng::new(78);
+    let flux = psf::flux_for_snr(50.0, 5.0, VAR_BG);
+    let wrong = WidthPrior {
+        a_px: 1.0,
+        scatter_px: 0.02,
+    };
+    let right = WidthPrior { a_px: 1.5, ..wrong };
+    let (mut flagged, mut false_flags, mut worst_a) = (0, 0, 0.0f32);
+    for _ in 0..100 {
+        let win = Win::centred(40, 50, 7);
+        let star = star_at(&mut rng, 1.5, flux);
+        let mean = psf::render(win, star, NOISE_BG_E);
+        let e = psf::to_electrons(&psf::add_noise(&mean, NOISE_BG_E, VAR_BG, &mut rng));
+        let input = CentroidInput::new(Window::new(win.rect(), &e).unwrap());
+        let free = gauss_fit_width(&input, &params());
+        let m = gauss_fit_width_prior(&input, &params(), &wrong);
+        if m.centroid.flags.contains(CentroidFlags::PSF_MISMATCH) {
+            flagged += 1;
+            assert_eq!(m.centroid.x_px, free.centroid.x_px);
+            assert_eq!(m.psf_a_px, free.psf_a_px);
+        }
+        let r = gauss_fit_width_prior(&input, &params(), &right);
+        if r.centroid.flags.contains(CentroidFlags::PSF_MISMATCH) {
+            false_flags += 1;
+        }
+        worst_a = worst_a.max((r.psf_a_px - 1.5).abs());
+    }
+    eprintln!(
+        "PSF_MISMATCH: {flagged} / 100 against a wrong model, {false_flags} / 100 against the right one; width within {worst_a:.4} px of the model's"
+    );
+    assert_eq!(flagged, 100);
+    assert!(false_flags <= 1, "{false_flags}");
+    // The prior holds the width to a few of the model's scatter.
+    assert!(worst_a < 0.1, "{worst_a}");
 }

@@ -10,20 +10,22 @@
 //!   sub-window of a tracking window), ~2.8 KB.
 //!
 //! Cost per star: the window's calibration (~95 M7 instructions a pixel, `cargo m7-bench`
-//! stage `window_calibrate`), then the method (the width-free Gauss fit 7x7 ~13,300, the
-//! Gauss fit of a given width ~7,000, the CoG a few hundred plus ~140 for the curve).
+//! stage `window_calibrate`), then the method (the width-free Gauss fit 7x7 ~13,600, with
+//! the table's field PSF model as a prior ~10,000 plus the model's polynomial, ~40;
+//! the Gauss fit of a given width ~7,000, the CoG a few hundred plus ~140 for the curve).
 
 use super::config::{CentroidMethod, TrackerConfig};
 use super::record::{StarFlags, StarRecord};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::centroid::cog::{CogParams, CogPower, cog, sigma_unreliable as cog_sigma_unreliable};
 use crate::centroid::gauss_fit::{
-    GaussFitParams, PsfFit, WidthFitParams, gauss_fit, gauss_fit_width,
+    GaussFitParams, PsfFit, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width,
+    gauss_fit_width_prior,
 };
 use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
 use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
-use crate::table::CalibTable;
 use crate::table::pixcorr::{PixCorr, PixCorrBackground};
+use crate::table::{CalibTable, PsfModel};
 use crate::units::{BiasAdu, Electrons};
 use crate::window::{Rect, Window};
 
@@ -75,6 +77,9 @@ pub(crate) struct Policy<'t> {
     /// The table's CTI correction (section 8), applied to every centroid [`Self::record`]
     /// makes.
     pub(crate) cti: Option<crate::calib::cti::CtiCorrection>,
+    /// The table's field PSF model (section 9) and the active area it is normalised to
+    /// (columns, rows): the width-free fit takes its width at each star as a prior.
+    pub(crate) psf_model: Option<(PsfModel, u16, u16)>,
 }
 
 impl<'t> Policy<'t> {
@@ -107,6 +112,10 @@ impl<'t> Policy<'t> {
             curve,
             fused_curve,
             cti: crate::calib::cti::CtiCorrection::from_table(table, config.psf_sigma_px()),
+            psf_model: table.psf_model().map(|m| {
+                let g = table.geometry();
+                (m, g.active_cols, g.active_rows)
+            }),
         }
     }
 
@@ -117,17 +126,28 @@ impl<'t> Policy<'t> {
 
     /// The star's record from `input` by the method (the fused CoG's general path is the
     /// CoG), a CoG corrected with the curve (flagged [`StarFlags::UNCORRECTED`] without
-    /// one), `flags` added.
+    /// one), the width fit with the field PSF model's width at the window's centre as a
+    /// prior when the table has a model ([`StarFlags::PSF_MISMATCH`] and the width-free
+    /// result when the star disagrees with it), `flags` added.
     pub(crate) fn record(&self, input: &CentroidInput<'_>, flags: StarFlags) -> StarRecord {
         if self.method == CentroidMethod::GaussFitWidth {
-            let f = gauss_fit_width(
-                input,
-                &WidthFitParams {
-                    start_box: self.box_px,
-                    background: Background::PerimeterMedian,
-                    ..WidthFitParams::new()
-                },
-            );
+            let params = WidthFitParams {
+                start_box: self.box_px,
+                background: Background::PerimeterMedian,
+                ..WidthFitParams::new()
+            };
+            let f = match self.psf_model {
+                Some((m, cols, rows)) => {
+                    let r = input.window.rect;
+                    let at = |p0: u16, n: u16| f32::from(p0) + 0.5 * f32::from(n.saturating_sub(1));
+                    let prior = WidthPrior {
+                        a_px: m.a_px(at(r.x0, r.width), at(r.y0, r.height), cols, rows),
+                        scatter_px: m.scatter_px.to_num::<f32>(),
+                    };
+                    gauss_fit_width_prior(input, &params, &prior)
+                }
+                None => gauss_fit_width(input, &params),
+            };
             let f = PsfFit {
                 centroid: self.cti.map_or(f.centroid, |k| k.corrected(f.centroid)),
                 ..f
@@ -316,5 +336,85 @@ pub(crate) fn measure(
     Measured {
         record: policy.record(input, flags | StarFlags::from_pixels(pixel_flags)),
         background,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fixed::types::{I16F16, U8F8};
+
+    /// A noise-free star of 80 %-energy radius `a_px` and 20,000 e- on 100 e-/px, centred
+    /// at active pixel (100.3, 200.2) in the 7x7 window around (100, 200).
+    fn star(a_px: f32) -> [Electrons; 49] {
+        let s = a_px * 0.556_776_4;
+        let mut e = [Electrons::ZERO; 49];
+        for (k, v) in e.iter_mut().enumerate() {
+            let (c, r) = ((k % 7) as f32, (k / 7) as f32);
+            let f = crate::centroid::math::pixel_fraction(c, 3.3, s)
+                * crate::centroid::math::pixel_fraction(r, 3.2, s);
+            *v = Electrons::from_num(100.0 + 20_000.0 * f);
+        }
+        e
+    }
+
+    fn policy(model_a_px: Option<f32>) -> Policy<'static> {
+        let psf_model = model_a_px.map(|a| {
+            let mut coeffs = [I16F16::ZERO; crate::table::psfmodel::MAX_PSF_TERMS];
+            if let Some(c) = coeffs.first_mut() {
+                *c = I16F16::from_num(a);
+            }
+            let m = PsfModel {
+                degree: 0,
+                scatter_px: U8F8::from_num(0.02),
+                stars: 100,
+                coeffs,
+            };
+            (m, 1024, 1024)
+        });
+        Policy {
+            method: CentroidMethod::GaussFitWidth,
+            box_px: 5,
+            sigma_px: 0.67,
+            psf_a_px: 1.2,
+            curve: None,
+            fused_curve: None,
+            cti: None,
+            psf_model,
+        }
+    }
+
+    fn record(model_a_px: Option<f32>, e: &[Electrons]) -> Option<StarRecord> {
+        let rect = Rect {
+            x0: 97,
+            y0: 197,
+            width: 7,
+            height: 7,
+        };
+        let input = CentroidInput::new(Window::new(rect, e)?);
+        Some(policy(model_a_px).record(&input, StarFlags::empty()))
+    }
+
+    #[test]
+    fn the_field_model_holds_the_width_and_flags_a_star_it_does_not_describe() {
+        let e = star(1.5);
+        let (free, agrees, wrong) = (
+            record(None, &e),
+            record(Some(1.5), &e),
+            record(Some(1.0), &e),
+        );
+        assert!(free.is_some() && agrees.is_some() && wrong.is_some());
+        let (Some(free), Some(agrees), Some(wrong)) = (free, agrees, wrong) else {
+            return;
+        };
+        // The model agrees: the width stays at it, no flag, the position the free fit's.
+        assert!(!agrees.flags.contains(StarFlags::PSF_MISMATCH));
+        assert!((agrees.psf_a_px - 1.5).abs() < 0.01, "{}", agrees.psf_a_px);
+        assert!((agrees.x_px - 100.3).abs() < 1e-3 && (agrees.y_px - 200.2).abs() < 1e-3);
+        // A model of a = 1 px for an a = 1.5 px star: flagged, the width-free result.
+        assert!(wrong.flags.contains(StarFlags::PSF_MISMATCH));
+        assert_eq!(wrong.x_px, free.x_px);
+        assert_eq!(wrong.psf_a_px, free.psf_a_px);
+        assert!(!free.flags.contains(StarFlags::PSF_MISMATCH));
     }
 }

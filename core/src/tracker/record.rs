@@ -94,6 +94,10 @@ bitflags::bitflags! {
         /// Centroid: the method's `sigma_x_px`, `sigma_y_px` are known to be wrong by more
         /// than 10 % in this configuration (docs/accuracy.md, the pull table).
         const SIGMA_UNRELIABLE = 1 << 23;
+        /// Centroid: the star's own PSF width disagrees with the table's field PSF model
+        /// beyond the model's scatter and the fit's width error; the position is the
+        /// width-free fit's.
+        const PSF_MISMATCH = 1 << 24;
     }
 }
 
@@ -120,7 +124,7 @@ const TRACK_BITS: [(TrackFlags, StarFlags); 5] = [
     (TrackFlags::EXCLUDED_PIXEL, StarFlags::DETECT_EXCLUDED),
 ];
 
-const CENTROID_BITS: [(CentroidFlags, StarFlags); 9] = [
+const CENTROID_BITS: [(CentroidFlags, StarFlags); 10] = [
     (CentroidFlags::SATURATED, StarFlags::SATURATED),
     (CentroidFlags::EDGE_CLIPPED, StarFlags::EDGE_CLIPPED),
     (CentroidFlags::EXCLUDED_PIXEL, StarFlags::EXCLUDED_PIXEL),
@@ -130,6 +134,7 @@ const CENTROID_BITS: [(CentroidFlags, StarFlags); 9] = [
     (CentroidFlags::CLAMPED, StarFlags::CLAMPED),
     (CentroidFlags::POOR_FIT, StarFlags::POOR_FIT),
     (CentroidFlags::SIGMA_UNRELIABLE, StarFlags::SIGMA_UNRELIABLE),
+    (CentroidFlags::PSF_MISMATCH, StarFlags::PSF_MISMATCH),
 ];
 
 impl StarFlags {

@@ -86,8 +86,9 @@ mod held;
 mod width;
 
 pub use width::{
-    CHI2_FLAG_Z, MAX_WIDTH_FIT_SIDE, MIN_SIGMA_PX, PsfFit, WidthFitParams, chi2_dof_limit,
-    gauss_fit_width, sigma_unreliable,
+    CHI2_FLAG_Z, MAX_WIDTH_FIT_SIDE, MIN_PRIOR_SCATTER_PX, MIN_SIGMA_PX, PSF_MISMATCH_Z, PsfFit,
+    WidthFitParams, WidthPrior, chi2_dof_limit, gauss_fit_width, gauss_fit_width_prior,
+    sigma_unreliable,
 };
 
 use super::math;

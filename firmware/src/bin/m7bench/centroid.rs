@@ -3,7 +3,7 @@
 //! pixel-phase curve; the fused CoG replaces it in tracking) and each of [`METHOD_NAMES`] on
 //! the 7x7 window and on its central 5x5, the box filling the window
 //! (`centroid_<method>_<n>x<n>`). The windows come from [`crate::window`]'s
-//! `calibrate_window`. Cost: thirteen centroids a window.
+//! `calibrate_window`. Cost: fifteen centroids a window.
 
 use crate::harness::{Bench, Out};
 use crate::inputs::PSF_SIGMA_PX;
@@ -12,14 +12,14 @@ use core::hint::black_box;
 use startrack_core::calib::PixelFlags;
 use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{
-    GaussFitParams, WidthFitParams, gauss_fit, gauss_fit_width,
+    GaussFitParams, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width, gauss_fit_width_prior,
 };
 use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::table::pixcorr::PixCorr;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 
-const METHODS: usize = 6;
+const METHODS: usize = 7;
 /// The methods timed on both window sizes, as they appear in the stage names.
 pub const METHOD_NAMES: [&str; METHODS] = [
     "cog1",
@@ -28,6 +28,7 @@ pub const METHOD_NAMES: [&str; METHODS] = [
     "gauss_fit",
     "gauss_fit_given_bg",
     "gauss_fit_width",
+    "gauss_fit_width_model",
 ];
 
 /// Ticks summed over the windows: the corrected CoG, and every method on 5x5 and 7x7.
@@ -143,6 +144,24 @@ fn run_method(m: usize, side: u8, input: &CentroidInput<'_>) -> f32 {
                     background: given,
                     start_box: side.min(5),
                     ..WidthFitParams::new()
+                },
+            )
+            .centroid
+        }
+        // The same with a field PSF model's width as a prior that agrees with the star (the
+        // synthetic star is point-sampled: its pixel-integrated width is sqrt(s^2 - 1/12);
+        // scatter 0.1 px): the flight method when the table holds a model.
+        6 => {
+            gauss_fit_width_prior(
+                input,
+                &WidthFitParams {
+                    background: given,
+                    start_box: side.min(5),
+                    ..WidthFitParams::new()
+                },
+                &WidthPrior {
+                    a_px: 1.719_6 * PSF_SIGMA_PX,
+                    scatter_px: 0.1,
                 },
             )
             .centroid
