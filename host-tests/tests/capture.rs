@@ -85,10 +85,23 @@ fn ring_gives_windows_whose_rows_are_held_and_refuses_the_others() {
         ring.copy_window(rect(0, 12, 2, 3), &mut short, &mut lv),
         Err(RingError::BufferLength)
     );
+    let mut long = line(20);
+    long.push(0);
     assert_eq!(
-        ring.push(20, &line(20)[1..], &levels(20)),
+        ring.push(20, &long, &levels(20)),
         Err(RingError::LineLength)
     );
+    // A shorter line (a binned or narrower readout) fills the start of its slot: windows
+    // inside it come back, one reaching past its end is outside the line, even though the
+    // slot's previous, longer line was there.
+    let short_len = LINE / 2;
+    for y in 20..23 {
+        ring.push(y, &line(y)[..short_len], &levels(y)).unwrap();
+    }
+    let inside = rect((short_len - G.first_active_col() - 3) as u16, 20, 3, 3);
+    assert_eq!(copy(&ring, inside).unwrap().0, model_window(inside));
+    let past = rect((short_len - G.first_active_col() - 2) as u16, 20, 3, 3);
+    assert_eq!(copy(&ring, past).err(), Some(RingError::OutsideLine));
     ring.clear();
     assert_eq!(
         copy(&ring, rect(100, 19, 3, 1)).err(),

@@ -43,7 +43,7 @@ const ZERO_LEVELS: LineLevels = LineLevels {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum RingError {
-    /// The raw line's length differs from the ring's line length.
+    /// The raw line is longer than the ring's lines (or the ring holds no lines).
     LineLength,
     /// The output buffers do not match the window's size.
     BufferLength,
@@ -58,7 +58,7 @@ pub enum RingError {
 impl core::fmt::Display for RingError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.write_str(match self {
-            Self::LineLength => "line ring: raw line length differs from the ring's",
+            Self::LineLength => "line ring: raw line longer than the ring's",
             Self::BufferLength => "line ring: buffers do not match the window",
             Self::OutsideLine => "line ring: window outside the line",
             Self::RowNotYet => "line ring: a row of the window has not arrived yet",
@@ -69,12 +69,15 @@ impl core::fmt::Display for RingError {
 
 impl core::error::Error for RingError {}
 
-/// The last `R` raw lines of `W` samples and their levels, by active row.
+/// The last `R` raw lines of at most `W` samples and their levels, by active row (a geometry
+/// with shorter lines, e.g. a binned or narrower readout, uses the start of each slot).
 #[derive(Clone, Debug)]
 pub struct LineRing<const R: usize, const W: usize> {
     lines: [[u16; W]; R],
     levels: [LineLevels; R],
     rows: [Option<u16>; R],
+    /// Samples held in each slot (`<= W`).
+    lens: [u16; R],
     first_active_col: usize,
     newest: Option<u16>,
 }
@@ -86,6 +89,7 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
             lines: [[0; W]; R],
             levels: [ZERO_LEVELS; R],
             rows: [None; R],
+            lens: [0; R],
             first_active_col,
             newest: None,
         }
@@ -101,6 +105,7 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
     /// Forgets every line (at a frame start).
     pub fn clear(&mut self) {
         self.rows = [None; R];
+        self.lens = [0; R];
         self.newest = None;
     }
 
@@ -109,20 +114,29 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
         self.newest
     }
 
-    /// Stores raw line `raw_line` of active row `y` with its levels, replacing row `y - R`.
+    /// Stores raw line `raw_line` (at most `W` samples) of active row `y` with its levels,
+    /// replacing row `y - R`.
     pub fn push(&mut self, y: u16, raw_line: &[u16], levels: &LineLevels) -> Result<(), RingError> {
-        if raw_line.len() != W || R == 0 {
+        let n = raw_line.len();
+        let Ok(n16) = u16::try_from(n) else {
+            return Err(RingError::LineLength);
+        };
+        if n > W || R == 0 {
             return Err(RingError::LineLength);
         }
         let slot = usize::from(y) % R;
-        if let (Some(line), Some(lv), Some(row)) = (
+        if let (Some(line), Some(lv), Some(row), Some(len)) = (
             self.lines.get_mut(slot),
             self.levels.get_mut(slot),
             self.rows.get_mut(slot),
+            self.lens.get_mut(slot),
         ) {
-            line.copy_from_slice(raw_line);
+            if let Some(dst) = line.get_mut(..n) {
+                dst.copy_from_slice(raw_line);
+            }
             *lv = *levels;
             *row = Some(y);
+            *len = n16;
         }
         self.newest = Some(y);
         Ok(())
@@ -170,10 +184,17 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
             .zip(rect.y0..)
         {
             let slot = usize::from(y) % R;
-            let (Some(line), Some(l)) = (self.lines.get(slot), self.levels.get(slot)) else {
+            let (Some(line), Some(l), Some(&len)) = (
+                self.lines.get(slot),
+                self.levels.get(slot),
+                self.lens.get(slot),
+            ) else {
                 return Err(RingError::RowGone);
             };
-            let src = line.get(start..start + w).ok_or(RingError::OutsideLine)?;
+            let src = line
+                .get(..usize::from(len))
+                .and_then(|held| held.get(start..start + w))
+                .ok_or(RingError::OutsideLine)?;
             out.copy_from_slice(src);
             *lv = *l;
         }
