@@ -176,7 +176,7 @@ fn table(page: &str, name: &str) -> (Vec<String>, Vec<Vec<String>>) {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 16] = [
+const CHECKED: [&str; 17] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -193,6 +193,7 @@ const CHECKED: [&str; 16] = [
     "accuracy-width-unknown",
     "psf-shapes",
     "accuracy-frames",
+    "accuracy-frames-field",
 ];
 
 #[test]
@@ -1231,5 +1232,27 @@ fn frames_table_is_its_csv() {
         body,
         want[2..],
         "docs/accuracy.md accuracy-frames: not the CSV's table"
+    );
+}
+
+/// docs/accuracy.md's smooth-field table is `startrack accuracy-frames --field-a 0.6,2`'s
+/// markdown of `host-tests/figures/accuracy-frames-field.csv` (its `--csv`), cell for cell.
+#[test]
+fn field_frames_table_is_its_csv() {
+    use startrack_host::frame_accuracy::{from_csv, markdown};
+    let bins = from_csv(&read("host-tests/figures/accuracy-frames-field.csv")).expect(
+        "host-tests/figures/accuracy-frames-field.csv: rows of accuracy-frames --field-a --csv",
+    );
+    assert_eq!(bins.len(), 30, "two configurations, 5 widths, 3 SNR bins");
+    let (header, body) = table("docs/accuracy.md", "accuracy-frames-field");
+    let want: Vec<Vec<String>> = markdown(&bins).lines().map(cells).collect();
+    assert_eq!(
+        header, want[0],
+        "docs/accuracy.md accuracy-frames-field header"
+    );
+    assert_eq!(
+        body,
+        want[2..],
+        "docs/accuracy.md accuracy-frames-field: not the CSV's table"
     );
 }
