@@ -56,6 +56,7 @@ fn table(hot: &[HotPixel], telegraph: &[(u16, u16)]) -> Vec<u8> {
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law: None,
     };
     let mut out = vec![0u8; spec.encoded_len()];
     let n = write_table(&spec, &mut out).unwrap();

@@ -133,6 +133,7 @@ fn level_table(
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law: None,
     };
     encode(&spec, &[]).map_err(|e| FramesError::Missing(e.to_string()))
 }
@@ -573,6 +574,7 @@ impl Products {
             cti: self.cti_coeffs(),
             psf_model: None,
             camera_model: None,
+            dark_law: None,
         };
         encode(&spec, &[])
     }
