@@ -190,6 +190,8 @@ fn the_running_ratio_follows_a_step_with_its_time_constant() {
 
 #[path = "common/cli.rs"]
 mod cli;
+#[path = "common/table_fixtures/mod.rs"]
+mod table_fixtures;
 
 use startrack_host::calib_frames::calibrate;
 use startrack_host::calib_frames::labset::LabSet;
@@ -351,4 +353,59 @@ fn calib_build_writes_a_users_dark_law() {
             other => panic!("{bad}: {other:?}"),
         }
     }
+}
+
+/// A replacement table of the same length whose only change is its law (twice the lab's
+/// rate) is taken at the next frame: the sensor with its dark doubled reads about 2 against
+/// the lab table, then about 1 against the new one, the ratio restarted.
+#[test]
+fn a_replacement_table_brings_its_own_law() {
+    use startrack_core::table::SectionKind;
+    let (lab, bytes_a) = lab_table();
+    let law_a = CalibTable::parse(bytes_a).unwrap().dark_law().unwrap();
+    let law_b = DarkLaw {
+        rate_e_per_s: law_a.rate_e_per_s * 2,
+        ..law_a
+    };
+    let mut raw = table_fixtures::RawTable::decompose(bytes_a);
+    *raw.section_mut(SectionKind::DarkLaw) = law_b.encode().to_vec();
+    let bytes_b = raw.build();
+    assert_eq!(bytes_a.len(), bytes_b.len());
+    let sensor = LabSet {
+        dark_rate_e_per_s_at_293k: 2.0 * lab.dark_rate_e_per_s_at_293k,
+        ..lab.clone()
+    };
+    let mut buffers = Box::new(TrackerBuffers::new());
+    let mut tracker =
+        Box::new(Tracker::<32>::new(TrackerConfig::FLIGHT, lab.geometry, &mut buffers).unwrap());
+    let mut source = SimLines::new(|frame| sensor.frame_sensor(frame, 1.0, 288.0, false));
+    let mut link = Box::new(LinkService::new());
+    let mut tables = FixedTable(Some(CalibTable::parse(bytes_a).unwrap()));
+    let mut thermometer = FixedTemperature(Some(Kelvin::from_num(288)));
+    let mut ratios = Vec::new();
+    for k in 0..6 {
+        if k == 3 {
+            tables.0 = Some(CalibTable::parse(&bytes_b).unwrap());
+        }
+        let mut clock = FrameClock {
+            frame: k,
+            period_us: 1_100_000,
+        };
+        let mut ports = Ports {
+            clock: &mut clock,
+            thermometer: &mut thermometer,
+            tables: &mut tables,
+            telemetry: &mut *link,
+        };
+        let Ok(s) = block_on(tracker.run_frame(&mut source, &mut ports));
+        ratios.push((
+            f64::from(s.dark_drift.ratio_u8f8) / 256.0,
+            s.dark_drift.frames,
+        ));
+    }
+    println!("lab table then its doubled-law twin: {ratios:.3?}");
+    assert_eq!(tracker.dark_law(), Some(law_b));
+    assert!((ratios[2].0 - 2.0).abs() < 0.1, "{ratios:?}");
+    assert_eq!(ratios[3].1, 1, "the ratio restarts with the new law");
+    assert!((ratios[5].0 - 1.0).abs() < 0.05, "{ratios:?}");
 }

@@ -410,8 +410,10 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             if let Some(t) = table {
                 self.work.watch.retire_listed(&t);
             }
-            self.apply_dark_law(table.and_then(|t| t.dark_law()));
         }
+        // Every frame, not only at a length change: a replacement table of the same length
+        // may carry another law (a 16-byte comparison).
+        self.apply_dark_law(table.and_then(|t| t.dark_law()));
         self.table = table;
 
         let (to, change) = self.modes.begin(self.trk.priors_len() > 0, table.is_some());
