@@ -271,7 +271,7 @@ pub struct CoveredLaw {
 }
 
 /// Least-squares fit of `ln rate` against temperature over `rates` ((K, e-/s), one per
-/// temperature, as [`DarkAccumulator::covered_rates`] gives them): `None` with fewer than
+/// temperature, as [`DarkAccum::covered_rates`] gives them): `None` with fewer than
 /// two temperatures of positive rate, or a rate that does not rise with temperature. Each
 /// temperature weighs the same: its rate is the mean over all its darks of a few thousand
 /// covered pixels, a relative error of about 1 %, far below the spread of the rates.

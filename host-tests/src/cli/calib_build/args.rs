@@ -75,7 +75,7 @@ pub struct CalibBuildArgs {
     pub dark_law: Option<String>,
 }
 
-/// The dark law of `--dark-law`: "RATE,TREF,DOUBLING[,LOW,HIGH]", each in its section-11
+/// The dark law of `--dark-law`: `RATE,TREF,DOUBLING[,LOW,HIGH]`, each in its section-11
 /// format and range (rate > 0 e-/px/s, TREF 100..=400 K, doubling 2..=20 K, LOW < HIGH).
 pub fn parse_dark_law(s: &str) -> Result<DarkLaw, CliError> {
     let v: Vec<f64> = parse_list("--dark-law", s)?;
