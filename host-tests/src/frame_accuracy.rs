@@ -260,6 +260,7 @@ pub fn build_args(f: &SimFiles, out: PathBuf, psf_model: Option<PathBuf>) -> Cal
         cti: None,
         psf_model,
         camera_model: None,
+        dark_law: None,
     }
 }
 

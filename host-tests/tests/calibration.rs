@@ -113,6 +113,7 @@ fn encode(m: &Maps, sat: u16) -> Vec<u8> {
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law: None,
     };
     let mut buf = vec![0u8; spec.encoded_len()];
     let n = write_table(&spec, &mut buf).expect("valid spec");

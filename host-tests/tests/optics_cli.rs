@@ -17,6 +17,7 @@ fn calib_args(out: std::path::PathBuf, camera_model: Option<std::path::PathBuf>)
     CalibBuildArgs {
         gains: Some("1.5,1.5".into()),
         camera_model,
+        dark_law: None,
         ..common_cli::bare_args(out)
     }
 }

@@ -40,6 +40,7 @@ fn table(cam: Option<Camera>) -> Result<Vec<u8>, WriteError> {
         cti: None,
         psf_model: None,
         camera_model: cam,
+        dark_law: None,
     };
     let mut out = vec![0u8; spec.encoded_len()];
     write_table(&spec, &mut out).map(|n| {

@@ -298,6 +298,7 @@ fn a_table_with_curves_from_the_host_builder() {
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law: None,
     };
     let bytes = write_table_with_curves(&spec, &curves).unwrap();
     let t = CalibTable::parse(&bytes).unwrap();

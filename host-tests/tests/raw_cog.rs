@@ -108,6 +108,7 @@ impl Maps {
             cti: None,
             psf_model: None,
             camera_model: None,
+            dark_law: None,
         };
         let mut buf = vec![0u8; spec.encoded_len()];
         let n = write_table(&spec, &mut buf).expect("table writes");

@@ -414,6 +414,7 @@ mod random_tables {
             cti: None,
             psf_model: None,
             camera_model: None,
+            dark_law: None,
         };
         let mut buf = vec![0u8; spec.encoded_len()];
         write_table(&spec, &mut buf).unwrap();

@@ -41,6 +41,14 @@ fn excluded(x: u16, y: u16) -> HotPixel {
 }
 
 fn table(hot: &[HotPixel], telegraph: &[(u16, u16)]) -> Vec<u8> {
+    table_with_law(hot, telegraph, None)
+}
+
+fn table_with_law(
+    hot: &[HotPixel],
+    telegraph: &[(u16, u16)],
+    dark_law: Option<startrack_core::table::DarkLaw>,
+) -> Vec<u8> {
     let gains = [GainEPerAdu::from_num(2.0); 2];
     let bias = vec![startrack_core::units::ColumnBiasAdu::from_num(0.5); GEOMETRY.line_len()];
     let spec = TableSpec {
@@ -56,6 +64,7 @@ fn table(hot: &[HotPixel], telegraph: &[(u16, u16)]) -> Vec<u8> {
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law,
     };
     let mut out = vec![0u8; spec.encoded_len()];
     let n = write_table(&spec, &mut out).unwrap();
@@ -120,6 +129,27 @@ fn new_pixels_merge_into_both_lists_as_write_table_would() {
     }
     assert_eq!(p.len_bytes() as usize, want.len());
     assert_eq!(p.crc32(), crc(&want));
+}
+
+/// An in-flight defect commit keeps the table's dark law (section 11), whether the lists it
+/// grows come before it or are appended after it.
+#[test]
+fn an_amended_table_keeps_its_dark_law() {
+    let law = startrack_core::table::DarkLaw {
+        rate_e_per_s: ERatePerS::from_num(19.75),
+        reference_k: Kelvin::from_num(293),
+        doubling_k: U8F8::from_num(6.5),
+        band_low: U8F8::from_num(0.8),
+        band_high: U8F8::from_num(1.25),
+    };
+    for (old_hot, old_tel) in [(vec![hot(5, 5, 100.0)], vec![(7, 7)]), (vec![], vec![])] {
+        let old = table_with_law(&old_hot, &old_tel, Some(law));
+        let p = plan(&old, &[(3, 4)], &[(9, 9)]).unwrap();
+        let new = emit(&old, &p, 64);
+        let t = CalibTable::parse(&new).unwrap();
+        assert_eq!(t.dark_law(), Some(law));
+        assert_eq!(t.hot_pixels().len(), old_hot.len() + 1);
+    }
 }
 
 #[test]

@@ -203,6 +203,7 @@ fn arb_spec() -> impl Strategy<Value = OwnedSpec> {
                     }
                 }),
                 camera_model: None,
+                dark_law: None,
             }
         },
     )
@@ -436,7 +437,10 @@ fn resealed_section_corruption_of_each_kind_is_caught_or_harmless() {
                             rejected += 1;
                         }
                         Err(TableError::Reserved)
-                            if matches!(kind, SectionKind::Cti | SectionKind::PsfModel) =>
+                            if matches!(
+                                kind,
+                                SectionKind::Cti | SectionKind::PsfModel | SectionKind::DarkLaw
+                            ) =>
                         {
                             rejected += 1;
                         }

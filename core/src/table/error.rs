@@ -25,11 +25,13 @@ pub enum SectionKind {
     PsfModel = 9,
     /// The camera model: focal length, principal point, distortion, lateral colour.
     CameraModel = 10,
+    /// The covered pixels' dark law: rate at a reference temperature, doubling, band.
+    DarkLaw = 11,
 }
 
 impl SectionKind {
     /// Every kind, in directory order.
-    pub const ALL: [SectionKind; 10] = [
+    pub const ALL: [SectionKind; 11] = [
         Self::Gains,
         Self::ColumnBias,
         Self::DarkRel,
@@ -40,6 +42,7 @@ impl SectionKind {
         Self::Cti,
         Self::PsfModel,
         Self::CameraModel,
+        Self::DarkLaw,
     ];
 
     /// The kind with this code, if any.
@@ -60,6 +63,7 @@ impl SectionKind {
             Self::Cti => "CTI coefficients",
             Self::PsfModel => "field PSF model",
             Self::CameraModel => "camera model",
+            Self::DarkLaw => "dark law",
         }
     }
 }

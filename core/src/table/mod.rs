@@ -38,11 +38,13 @@
 //! | 8 | CTI coefficients | reference flux, exponent, per output parallel and serial shift per transfer | see [`cti`] |
 //! | 9 | field PSF model | degree, scatter, star count, polynomial coefficients of `a(x, y)` | see [`psfmodel`] |
 //! | 10 | camera model | 36 bytes, below | see [`camera`] |
+//! | 11 | dark law | 16 bytes: covered dark rate at `T_ref`, `T_ref`, doubling, band | see [`darklaw`] |
 //!
 //! Gains are required; every other section is optional and its absence means "no
 //! correction": column bias 0, relative dark 1 (the covered columns' dark subtracted
 //! uniformly), flat 1, no hot or telegraph pixels, an uncorrected centre of gravity, no CTI
-//! correction, no field PSF model.
+//! correction, no field PSF model, no dark law (the tracker's dark drift is not measured
+//! unless the home sets a law).
 //!
 //! A pixel-phase correction curve (section 7) is an 8-byte header (power, box side,
 //! background, knot count, PSF width `a` U8F8 px, largest measured phase U0F16 px) and its
@@ -69,6 +71,7 @@
 
 pub mod camera;
 pub mod cti;
+pub mod darklaw;
 mod error;
 mod parse;
 pub mod pixcorr;
@@ -76,6 +79,7 @@ pub mod psfmodel;
 mod write;
 
 pub use cti::{CtiCoeffs, CtiOutput};
+pub use darklaw::DarkLaw;
 pub use error::{SectionKind, TableError, WriteError};
 pub use parse::{CalibTable, DefectList, HotList, MapView};
 pub use psfmodel::PsfModel;

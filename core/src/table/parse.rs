@@ -46,6 +46,7 @@ pub struct CalibTable<'a> {
     cti: Option<CtiCoeffs>,
     psf_model: Option<PsfModel>,
     camera_model: Option<&'a [u8]>,
+    dark_law: Option<super::DarkLaw>,
 }
 
 /// A tiled map over the active area, read in place.
@@ -253,6 +254,7 @@ impl<'a> CalibTable<'a> {
 
         let mut found: [Option<&'a [u8]>; 9] = [None; 9];
         let mut camera_model: Option<&'a [u8]> = None;
+        let mut dark_law: Option<&'a [u8]> = None;
         // (offset, length, kind) of each section, to prove they cover the table exactly.
         let mut extents = [(0usize, 0usize, SectionKind::Gains); MAX_SECTIONS];
         for i in 0..usize::from(n_sections) {
@@ -262,6 +264,12 @@ impl<'a> CalibTable<'a> {
             }
             if s.kind == SectionKind::CameraModel {
                 if camera_model.replace(s.bytes).is_some() {
+                    return Err(TableError::DuplicateSection(s.kind));
+                }
+                continue;
+            }
+            if s.kind == SectionKind::DarkLaw {
+                if dark_law.replace(s.bytes).is_some() {
                     return Err(TableError::DuplicateSection(s.kind));
                 }
                 continue;
@@ -333,6 +341,7 @@ impl<'a> CalibTable<'a> {
         if let Some(c) = camera_model {
             super::camera::parse(c, geometry.active_cols, geometry.active_rows)?;
         }
+        let dark_law = dark_law.map(super::darklaw::parse).transpose()?;
 
         Ok(Self {
             len: bytes.len(),
@@ -348,6 +357,7 @@ impl<'a> CalibTable<'a> {
             cti,
             psf_model,
             camera_model,
+            dark_law,
         })
     }
 
@@ -460,6 +470,12 @@ impl<'a> CalibTable<'a> {
     pub fn camera_model(&self) -> Option<crate::attitude::Camera> {
         self.camera_model
             .and_then(|b| super::camera::decode(b).ok())
+    }
+
+    /// The covered pixels' dark law (section 11), if present: the tracker measures its dark
+    /// drift against it.
+    pub fn dark_law(&self) -> Option<super::DarkLaw> {
+        self.dark_law
     }
 }
 

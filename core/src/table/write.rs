@@ -50,6 +50,8 @@ pub struct TableSpec<'a> {
     pub psf_model: Option<PsfModel>,
     /// The fitted camera model (section 10), or none.
     pub camera_model: Option<crate::attitude::Camera>,
+    /// The covered pixels' dark law (section 11), or none.
+    pub dark_law: Option<super::DarkLaw>,
 }
 
 impl TableSpec<'_> {
@@ -108,6 +110,8 @@ fn sections<'s>(
         }),
         spec.camera_model
             .map(|_| (SectionKind::CameraModel, super::camera::CAMERA_SECTION_LEN)),
+        spec.dark_law
+            .map(|_| (SectionKind::DarkLaw, super::darklaw::DARK_LAW_SECTION_LEN)),
     ]
     .into_iter()
     .flatten()
@@ -255,6 +259,11 @@ fn write_section(o: &mut Out<'_>, spec: &TableSpec<'_>, curves: &[PixCorr<'_>], 
                 .and_then(|c| super::camera::encode(&c).ok())
             {
                 o.put(&b);
+            }
+        }
+        SectionKind::DarkLaw => {
+            if let Some(l) = spec.dark_law {
+                o.put(&l.encode());
             }
         }
         SectionKind::PixCorr => {

@@ -13,51 +13,23 @@
 //!
 //! # The law and the statistic
 //! [`DarkLaw`]: the covered pixels' mean dark rate `rate` at `reference_k` and its doubling
-//! temperature, as the lab set measured them (`startrack calib frames` reports the covered
-//! rate per temperature): `predicted_e = rate x exposure x 2^((T - T_ref) / doubling)`.
+//! temperature, as the lab set measured them (`startrack calib frames` fits it from the
+//! covered rate per temperature and writes it into the table's section 11, which the
+//! tracker takes with the table): `predicted_e = rate x exposure x 2^((T - T_ref) / doubling)`.
 //! A frame with a dark scale, a measured temperature and a prediction of at least
 //! [`MIN_PREDICTED_E`] gives `x = measured / predicted`, clamped to `0..=255`; the running
 //! ratio `r` (U16F16 in a `u32`, 0 to 255.99998) is the first such `x`, then
 //! `r += (x - r) / 16`: an exponentially weighted mean with a 16-frame time constant, so a
 //! single odd frame moves it by at most 1/16 of its excess.
 
-use crate::units::{ERatePerS, Electrons, Kelvin};
-use fixed::types::U8F8;
+pub use crate::table::DarkLaw;
+use crate::units::{Electrons, Kelvin};
 
 /// A frame whose predicted dark is below this many electrons is not compared (the ratio of
 /// two small numbers is noise), e-.
 pub const MIN_PREDICTED_E: f32 = 1.0;
 /// Weight of a new frame in the running ratio: 1 / 2^this.
 pub const DRIFT_WEIGHT_LOG2: u32 = 4;
-
-/// The covered pixels' dark law from the lab, and the band the ratio may move in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct DarkLaw {
-    /// Mean dark rate of the covered pixels at `reference_k`, e-/s (U16F16).
-    pub rate_e_per_s: ERatePerS,
-    /// Temperature of `rate_e_per_s`, K (U16F16).
-    pub reference_k: Kelvin,
-    /// The rate doubles every this many kelvin (U8F8, > 0).
-    pub doubling_k: U8F8,
-    /// Lowest ratio measured/predicted still in band (U8F8).
-    pub band_low: U8F8,
-    /// Highest ratio still in band (U8F8).
-    pub band_high: U8F8,
-}
-
-impl DarkLaw {
-    /// The dark signal the law predicts after `exposure_ms` at `temperature_k`, e-; `None`
-    /// for a zero doubling temperature.
-    pub fn predicted_e(&self, temperature_k: Kelvin, exposure_ms: u32) -> Option<f32> {
-        if self.doubling_k == U8F8::ZERO {
-            return None;
-        }
-        let dt = temperature_k.to_num::<f32>() - self.reference_k.to_num::<f32>();
-        let factor = libm::exp2f((dt / self.doubling_k.to_num::<f32>()).clamp(-64.0, 64.0));
-        Some(self.rate_e_per_s.to_num::<f32>() * (exposure_ms as f32 * 1e-3) * factor)
-    }
-}
 
 /// The running ratio as housekeeping reports it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]

@@ -173,6 +173,8 @@ pub struct Tracker<'t, 'b, const N: usize> {
     /// The frame's temperature when it came from the sensor.
     measured_k: Option<Kelvin>,
     drift: drift::DriftMonitor,
+    /// A dark law the home set over the table's ([`Tracker::set_dark_law`]).
+    dark_law_override: Option<DarkLaw>,
     last_line: Option<u16>,
     conditions: Option<FrameConditions>,
     temperature_k: Kelvin,
@@ -246,6 +248,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             prev_dark_scale: None,
             measured_k: None,
             drift: drift::DriftMonitor::new(),
+            dark_law_override: None,
             last_line: None,
             conditions: None,
             temperature_k: Kelvin::ZERO,
@@ -273,10 +276,22 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         &self.work.watch
     }
 
-    /// Sets the covered pixels' dark law the dark drift is measured against (`None`: no
-    /// drift measured), restarting the running ratio.
+    /// Sets a covered-pixel dark law over the table's (section 11) for the dark drift to be
+    /// measured against (a law known better than the table's, or one for a table that has
+    /// none); `None` goes back to the table's law. A change of the law in force restarts
+    /// the running ratio.
     pub fn set_dark_law(&mut self, law: Option<DarkLaw>) {
-        self.drift.set_law(law);
+        self.dark_law_override = law;
+        self.apply_dark_law(self.table.and_then(|t| t.dark_law()));
+    }
+
+    /// Puts the override, else `table_law`, in force; the running ratio restarts only when
+    /// the law changes (a table amended with new defects keeps its ratio).
+    fn apply_dark_law(&mut self, table_law: Option<DarkLaw>) {
+        let law = self.dark_law_override.or(table_law);
+        if law != self.drift.law() {
+            self.drift.set_law(law);
+        }
     }
 
     /// The dark law in force.
@@ -396,6 +411,9 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
                 self.work.watch.retire_listed(&t);
             }
         }
+        // Every frame, not only at a length change: a replacement table of the same length
+        // may carry another law (a 16-byte comparison).
+        self.apply_dark_law(table.and_then(|t| t.dark_law()));
         self.table = table;
 
         let (to, change) = self.modes.begin(self.trk.priors_len() > 0, table.is_some());

@@ -42,7 +42,7 @@ use dark::HotFit;
 use fixed::types::U8F8;
 use ptc::PairPoint;
 use startrack_core::geometry::{Output, ReadoutGeometry, Segment};
-use startrack_core::table::{CalibTable, HotPixel, HotPolicy, MapSpec, TableSpec};
+use startrack_core::table::{CalibTable, DarkLaw, HotPixel, HotPolicy, MapSpec, TableSpec};
 use startrack_core::units::{ColumnBiasAdu, DarkRel, ERatePerS, GainEPerAdu, Kelvin};
 use std::path::PathBuf;
 
@@ -93,6 +93,9 @@ pub struct Products {
     pub dark_rel: MapF32,
     /// The covered pixels' dark rate per temperature: (K, e-/s).
     pub covered_rates: Vec<(f64, f64)>,
+    /// The covered pixels' dark law fitted over [`Self::covered_rates`] (`None`: darks at
+    /// fewer than two temperatures, or a rate that does not rise).
+    pub covered_dark_law: Option<dark::CoveredLaw>,
     /// Hot pixels with their laws (raw coordinates).
     pub hot: Vec<HotFit>,
     /// Hot candidates without a usable temperature law.
@@ -133,6 +136,7 @@ fn level_table(
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law: None,
     };
     encode(&spec, &[]).map_err(|e| FramesError::Missing(e.to_string()))
 }
@@ -392,6 +396,16 @@ pub fn calibrate(
         );
     }
     let (hot, hot_unfitted) = darks.hot_pixels(&read_noise_e);
+    let covered_dark_law = dark::fit_covered_law(&darks.covered_rates());
+    notes.push(match covered_dark_law {
+        Some(l) => format!(
+            "covered dark law {:.4} e-/px/s at {} K, doubling {:.3} K (table section 11)",
+            l.rate_e_per_s_at_293k,
+            dark::HOT_REFERENCE_K,
+            l.doubling_k
+        ),
+        None => "no covered dark law (darks at fewer than two temperatures, or no rise): the tracker's dark drift is not measured".into(),
+    });
     notes.push(format!(
         "relative dark from {} darks at {} temperatures; {} hot pixels ({} candidates without a law)",
         darks.frames(),
@@ -452,6 +466,7 @@ pub fn calibrate(
         column_bias,
         dark_rel,
         covered_rates: darks.covered_rates(),
+        covered_dark_law,
         hot,
         hot_unfitted,
         flat: flat_map,
@@ -573,7 +588,24 @@ impl Products {
             cti: self.cti_coeffs(),
             psf_model: None,
             camera_model: None,
+            dark_law: self.dark_law(),
         };
         encode(&spec, &[])
+    }
+
+    /// The covered dark law as the table stores it (reference 293 K, the default band 0.8
+    /// to 1.25), or `None` without a fit or when the fit is outside the section's ranges
+    /// (doubling 2 to 20 K, a rate that rounds to a positive U16F16).
+    pub fn dark_law(&self) -> Option<DarkLaw> {
+        let l = self.covered_dark_law?;
+        let [band_low, band_high] = DarkLaw::DEFAULT_BAND;
+        let law = DarkLaw {
+            rate_e_per_s: ERatePerS::checked_from_num(l.rate_e_per_s_at_293k)?,
+            reference_k: Kelvin::from_num(dark::HOT_REFERENCE_K),
+            doubling_k: U8F8::checked_from_num(l.doubling_k)?,
+            band_low,
+            band_high,
+        };
+        law.out_of_range_field().is_none().then_some(law)
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! | file | contents |
 //! |---|---|
-//! | `report.json` | `gain_e_per_adu`, `read_noise_e`, `full_well_e` (where the mean stops rising), `full_well_adu`, `nonlinearity_pct` (EMVA 1288 linearity error over 5 to 95 % of the full well), one per output and `null` when no flat pair reaches saturation (a note says so); photon transfer points, covered dark rate per temperature, counts, notes |
+//! | `report.json` | `gain_e_per_adu`, `read_noise_e`, `full_well_e` (where the mean stops rising), `full_well_adu`, `nonlinearity_pct` (EMVA 1288 linearity error over 5 to 95 % of the full well), one per output and `null` when no flat pair reaches saturation (a note says so); photon transfer points, covered dark rate per temperature, `covered_dark_law` (the law fitted over them as the table's section 11 stores it: `rate_e_per_s` at `reference_k`, `doubling_k`, `band`; `null` without one), counts, notes |
 //! | `hot.csv` | `col,row,rate_e_per_s_at_293k,doubling_k` (raw readout coordinates) |
 //! | `rts.csv` | `col,row` (raw readout coordinates) |
 //! | `cti_traps.json`, `cti.json` | the trap law measured by EPER, and the table's CTI coefficients from it (`calib build --cti`, `calib cti --traps`); written when EPER measured one |
@@ -37,6 +37,12 @@ pub fn json(p: &Products) -> serde_json::Value {
         "covered_dark_e_per_s": p.covered_rates.iter()
             .map(|(t, r)| serde_json::json!({ "ccdtemp_k": t, "rate_e_per_s": r }))
             .collect::<Vec<_>>(),
+        "covered_dark_law": p.dark_law().map(|l| serde_json::json!({
+            "rate_e_per_s": l.rate_e_per_s.to_num::<f64>(),
+            "reference_k": l.reference_k.to_num::<f64>(),
+            "doubling_k": l.doubling_k.to_num::<f64>(),
+            "band": [l.band_low.to_num::<f64>(), l.band_high.to_num::<f64>()],
+        })),
         "hot_pixels": p.hot.len(),
         "hot_without_law": p.hot_unfitted,
         "telegraph_pixels": p.rts.len(),

@@ -168,6 +168,7 @@ impl Simulator {
             cti: None,
             psf_model: None,
             camera_model: None,
+            dark_law: None,
         };
         if curves.is_empty() {
             encode(&spec)
@@ -259,6 +260,7 @@ impl Simulator {
             cti: None,
             psf_model: None,
             camera_model: None,
+            dark_law: None,
         };
         encode(&spec)
     }

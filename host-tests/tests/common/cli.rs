@@ -42,6 +42,7 @@ pub fn bare_args(out: PathBuf) -> CalibBuildArgs {
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law: None,
     }
 }
 

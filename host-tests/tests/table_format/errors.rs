@@ -159,6 +159,7 @@ fn write_table_buffer_too_small() {
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law: None,
     };
     assert_eq!(
         spec.encoded_len(),

@@ -8,7 +8,8 @@
 //! - [`errors`]: `write_table` refuses what the parser refuses; every error's display;
 //! - [`layout`]: every byte under a CRC; tables at the start of a larger region;
 //! - [`pixcorr`]: the pixel-phase correction section;
-//! - [`cti_psf`]: the CTI coefficients and the field PSF model.
+//! - [`cti_psf`]: the CTI coefficients and the field PSF model;
+//! - [`darklaw`]: the covered pixels' dark law.
 //!
 //! The fixtures (owned specs, an independent encoder, CRC re-sealing) are shared with
 //! `table_fuzz` in `tests/common/table_fixtures/`.
@@ -17,6 +18,7 @@
 mod table_fixtures;
 
 mod cti_psf;
+mod darklaw;
 mod errors;
 mod header;
 mod layout;

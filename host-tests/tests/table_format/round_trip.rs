@@ -99,6 +99,7 @@ fn assert_matches_spec(t: &CalibTable<'_>, s: &OwnedSpec) {
     assert_eq!(tg.get(s.telegraph.len()), None);
     assert_eq!(t.cti(), s.cti, "CTI coefficients");
     assert_eq!(t.psf_model(), s.psf_model, "field PSF model");
+    assert_eq!(t.dark_law(), s.dark_law, "dark law");
     let set = t.pixcorr();
     assert_eq!(set.len(), s.pixcorr.len());
     for (c, want) in set.iter().zip(&s.pixcorr) {
@@ -347,6 +348,10 @@ fn each_optional_section_alone() {
         },
         OwnedSpec {
             psf_model: full.psf_model,
+            ..base.clone()
+        },
+        OwnedSpec {
+            dark_law: full.dark_law,
             ..base.clone()
         },
     ];

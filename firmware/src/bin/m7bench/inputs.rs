@@ -77,6 +77,7 @@ pub fn write_bench_table(rng: &mut Lcg, buf: &mut [u8]) -> Result<usize, &'stati
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law: None,
     };
     write_table(&spec, buf).map_err(|_| "write_table failed")
 }

@@ -4,8 +4,10 @@
 //! beyond parsing a few numbers.
 
 use crate::cli::CliError;
+use fixed::types::U8F8;
+use startrack_core::table::DarkLaw;
 use startrack_core::table::MAX_TILE_LOG2;
-use startrack_core::units::GainEPerAdu;
+use startrack_core::units::{ERatePerS, GainEPerAdu, Kelvin};
 use std::path::PathBuf;
 
 /// Options of `startrack calib build`.
@@ -66,6 +68,46 @@ pub struct CalibBuildArgs {
     /// Camera model (JSON from `startrack optics fit`): adds the camera-model section.
     #[arg(long)]
     pub camera_model: Option<PathBuf>,
+    /// Covered pixels' dark law "RATE,TREF,DOUBLING" (e-/px/s at TREF K, doubling K), or
+    /// "RATE,TREF,DOUBLING,LOW,HIGH" with the dark ratio's band (default 0.8,1.25): adds
+    /// section 11, which arms the tracker's dark drift check.
+    #[arg(long)]
+    pub dark_law: Option<String>,
+}
+
+/// The dark law of `--dark-law`: `RATE,TREF,DOUBLING[,LOW,HIGH]`, each in its section-11
+/// format and range (rate > 0 e-/px/s, TREF 100..=400 K, doubling 2..=20 K, LOW < HIGH).
+pub fn parse_dark_law(s: &str) -> Result<DarkLaw, CliError> {
+    let v: Vec<f64> = parse_list("--dark-law", s)?;
+    let bad = |why: &str| CliError::Usage(format!("--dark-law {s}: {why}"));
+    let [rate, t_ref, doubling, band @ ..] = v.as_slice() else {
+        return Err(bad("need RATE,TREF,DOUBLING[,LOW,HIGH]"));
+    };
+    let [low, high] = match band {
+        [] => DarkLaw::DEFAULT_BAND,
+        [lo, hi] => [
+            U8F8::checked_from_num(*lo).ok_or_else(|| bad("LOW must be 0 to 255"))?,
+            U8F8::checked_from_num(*hi).ok_or_else(|| bad("HIGH must be 0 to 255"))?,
+        ],
+        _ => return Err(bad("need RATE,TREF,DOUBLING[,LOW,HIGH]")),
+    };
+    let law = DarkLaw {
+        rate_e_per_s: ERatePerS::checked_from_num(*rate)
+            .ok_or_else(|| bad("RATE must be 0 to 65535 e-/px/s"))?,
+        reference_k: Kelvin::checked_from_num(*t_ref)
+            .ok_or_else(|| bad("TREF must be 100 to 400 K"))?,
+        doubling_k: U8F8::checked_from_num(*doubling)
+            .ok_or_else(|| bad("DOUBLING must be 2 to 20 K"))?,
+        band_low: low,
+        band_high: high,
+    };
+    match law.out_of_range_field() {
+        None => Ok(law),
+        Some(0) => Err(bad("RATE must be above 0 e-/px/s")),
+        Some(1) => Err(bad("TREF must be 100 to 400 K")),
+        Some(2) => Err(bad("DOUBLING must be 2 to 20 K")),
+        Some(_) => Err(bad("the band's LOW must be below its HIGH")),
+    }
 }
 
 /// A comma-separated list of numbers of option `name`.

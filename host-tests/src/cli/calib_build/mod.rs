@@ -123,6 +123,11 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
             .transpose()?,
         cti: None,
         psf_model: None,
+        dark_law: args
+            .dark_law
+            .as_deref()
+            .map(args::parse_dark_law)
+            .transpose()?,
     };
     let spec = TableSpec {
         cti: args
@@ -147,6 +152,12 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
     };
     if let Some(p) = &args.camera_model {
         notes.push(format!("camera model from {}", p.display()));
+    }
+    if let Some(l) = spec.dark_law {
+        notes.push(format!(
+            "dark law {:.4} e-/px/s at {:.2} K, doubling {:.2} K, band {:.3} to {:.3}",
+            l.rate_e_per_s, l.reference_k, l.doubling_k, l.band_low, l.band_high
+        ));
     }
     let (curves, curve_notes) = curves_from_args(args)?;
     notes.extend(curve_notes);

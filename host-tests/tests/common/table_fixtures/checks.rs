@@ -119,6 +119,14 @@ pub fn exercise(t: &CalibTable<'_>) -> usize {
             }
         }
     }
+    if let Some(l) = t.dark_law() {
+        assert_eq!(l.out_of_range_field(), None, "dark law out of range: {l:?}");
+        let p = l.predicted_e(startrack_core::units::Kelvin::from_num(253), 1000);
+        assert!(
+            p.is_some_and(|p| p.is_finite() && p > 0.0),
+            "dark law predicts {p:?}"
+        );
+    }
     if let Some(m) = t.psf_model() {
         for (x, y) in [
             (0.0, 0.0),

@@ -112,6 +112,18 @@ pub fn enc_cti(outputs: u8, c: &CtiCoeffs) -> Vec<u8> {
     v
 }
 
+/// The dark-law section from its documented layout: rate U16F16, T_ref U16F16, doubling
+/// U8F8, band low and high U8F8, reserved u16.
+pub fn enc_dark_law(l: &startrack_core::table::DarkLaw) -> Vec<u8> {
+    let mut v = l.rate_e_per_s.to_bits().to_le_bytes().to_vec();
+    v.extend(l.reference_k.to_bits().to_le_bytes());
+    v.extend(l.doubling_k.to_bits().to_le_bytes());
+    v.extend(l.band_low.to_bits().to_le_bytes());
+    v.extend(l.band_high.to_bits().to_le_bytes());
+    v.extend([0, 0]);
+    v
+}
+
 /// The PSF model section: degree u8, reserved u8, scatter u16, stars u16, reserved u16, then
 /// (d + 1)(d + 2) / 2 coefficients (i32 each).
 pub fn enc_psf_model(m: &PsfModel) -> Vec<u8> {
@@ -224,6 +236,10 @@ impl RawTable {
                     .expect("fixture camera encodes")
                     .to_vec(),
             ));
+        }
+        if let Some(l) = &s.dark_law {
+            t.sections
+                .push(RawSection::new(SectionKind::DarkLaw, enc_dark_law(l)));
         }
         t
     }

@@ -60,6 +60,8 @@ pub struct OwnedSpec {
     pub psf_model: Option<PsfModel>,
     /// The camera model (none: no section).
     pub camera_model: Option<startrack_core::attitude::Camera>,
+    /// The covered pixels' dark law (none: no section).
+    pub dark_law: Option<startrack_core::table::DarkLaw>,
 }
 
 impl OwnedSpec {
@@ -96,6 +98,7 @@ impl OwnedSpec {
             cti: self.cti,
             psf_model: self.psf_model,
             camera_model: self.camera_model,
+            dark_law: self.dark_law,
         }
     }
 
@@ -222,6 +225,7 @@ pub fn full_spec(g: ReadoutGeometry, dark_log2: u8, flat_log2: u8) -> OwnedSpec 
         cti: Some(cti_coeffs(&g)),
         psf_model: Some(psf_model()),
         camera_model: Some(camera_model(&g)),
+        dark_law: Some(dark_law()),
     }
 }
 
@@ -272,6 +276,18 @@ pub fn camera_model(g: &ReadoutGeometry) -> startrack_core::attitude::Camera {
             4.0 * w,
             [0.5 * w + 0.25, 0.5 * f64::from(g.active_rows) - 0.75],
         )
+    }
+}
+
+/// A dark law with a distinct bit pattern in every field: 12.3456 e-/px/s at 253.75 K,
+/// doubling 6.5 K, band 0.75 to 1.5.
+pub fn dark_law() -> startrack_core::table::DarkLaw {
+    startrack_core::table::DarkLaw {
+        rate_e_per_s: ERatePerS::from_bits(0x000C_5876),
+        reference_k: Kelvin::from_num(253.75),
+        doubling_k: U8F8::from_bits(0x0680),
+        band_low: U8F8::from_bits(0x00C0),
+        band_high: U8F8::from_bits(0x0180),
     }
 }
 
@@ -331,5 +347,6 @@ pub fn gains_only(g: ReadoutGeometry) -> OwnedSpec {
         cti: None,
         psf_model: None,
         camera_model: None,
+        dark_law: None,
     }
 }
