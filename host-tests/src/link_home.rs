@@ -10,7 +10,8 @@
 //! [`LINK_PHASE_MS`] (longer while bytes keep arriving, at most [`LINK_PHASE_MAX_MS`]), so
 //! a table upload goes at the TCP's speed and a frame never waits for the ground.
 //!
-//! Cost: the frames' (see [`crate::sil`]); the link adds a few us a packet.
+//! Cost: the frames' (see [`crate::sil`]); the link adds a few us a packet; a sky scene adds
+//! the attitude stage's per frame and one 76-byte report (a 99-byte packet).
 
 use crate::home::{FrameClock, SimLines, block_on};
 use crate::sil::{self, SilConfig};
