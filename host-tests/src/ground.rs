@@ -14,8 +14,8 @@ use spacepackets::ecss::{CreatorConfig, MessageTypeId};
 use startrack_core::link::command::mode_number;
 use startrack_core::link::framing::{Deframer, Pushed, encode, encoded_len_max};
 use startrack_core::link::protocol::{self as p, MessageType};
-use startrack_core::link::telemetry::{Housekeeping, Reader, decode_stars, event};
-use startrack_core::link::{Rejection, TableInfo, UploadRefusal, WindowKind};
+use startrack_core::link::telemetry::{ATTITUDE_LEN, Housekeeping, Reader, decode_stars, event};
+use startrack_core::link::{AttitudeReport, Rejection, TableInfo, UploadRefusal, WindowKind};
 use startrack_core::tracker::{Mode, StarRecord};
 use std::fmt;
 use std::io::{ErrorKind, Read, Write};
@@ -554,6 +554,27 @@ impl Ground {
         Ok(out)
     }
 
+    /// The attitude reports of the next `frames` frames (`TM[134,2]`, sent after every frame
+    /// by a tracker that runs its attitude stage; none come from one that does not, and
+    /// this then times out).
+    pub fn attitude(&mut self, frames: usize) -> Result<Vec<AttitudeReport>, GroundError> {
+        let mut out = Vec::with_capacity(frames);
+        // Each report is awaited at most the timeout, whatever other telemetry comes.
+        let mut deadline = Instant::now() + self.timeout;
+        while out.len() < frames {
+            let t = self.next_tm(deadline).map_err(|e| match e {
+                GroundError::Timeout(_) => GroundError::Timeout("attitude report".into()),
+                e => e,
+            })?;
+            if t.apid != p::APID_ATTITUDE || t.kind != p::TM_ATTITUDE {
+                continue;
+            }
+            out.push(decode_attitude(&t.data).map_err(|e| GroundError::Protocol(e.to_string()))?);
+            deadline = Instant::now() + self.timeout;
+        }
+        Ok(out)
+    }
+
     /// A `side` x `side` window at (`x0`, `y0`) of the next frame, row-major (raw ADU, or
     /// e- x 64 calibrated).
     pub fn window(
@@ -614,6 +635,42 @@ pub fn frame_telecommand(kind: MessageType, data: &[u8], seq: u16) -> (Vec<u8>, 
     let m = encode(&pkt, &mut framed).unwrap_or(0);
     framed.truncate(m);
     (framed, request_id(&pkt))
+}
+
+/// Why an attitude report's source data did not read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum AttitudeDecodeError {
+    /// Not the report's length ([`ATTITUDE_LEN`] bytes).
+    Length {
+        /// Bytes received.
+        got: usize,
+    },
+    /// The right length, but a status the protocol does not have (garbled).
+    Status(u8),
+}
+
+impl fmt::Display for AttitudeDecodeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Length { got } => {
+                write!(f, "attitude report of {got} bytes, not {ATTITUDE_LEN}")
+            }
+            Self::Status(s) => write!(f, "attitude report with unknown status {s}"),
+        }
+    }
+}
+
+impl std::error::Error for AttitudeDecodeError {}
+
+/// The attitude report (`TM[134,2]`) in a packet's source data.
+pub fn decode_attitude(data: &[u8]) -> Result<AttitudeReport, AttitudeDecodeError> {
+    if data.len() != ATTITUDE_LEN {
+        return Err(AttitudeDecodeError::Length { got: data.len() });
+    }
+    AttitudeReport::decode(data).ok_or(AttitudeDecodeError::Status(
+        data.get(4).copied().unwrap_or(0),
+    ))
 }
 
 /// A telemetry packet's fields, or `None` if it is not a PUS-C TM with a good CRC.

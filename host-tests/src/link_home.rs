@@ -2,27 +2,35 @@
 //! the core's table-upload port), the simulated sensor as the diagnostic window source
 //! ([`SimWindows`]), and the software-in-the-loop served over TCP ([`serve`]): the core's
 //! [`LinkService`] on 127.0.0.1:P standing in for the UART, optionally with seeded bit
-//! errors on the received bytes (`--link-noise`).
+//! errors on the received bytes (`--link-noise`). With a sky scene ([`SilConfig::sky`]) each
+//! frame's star list also goes through the attitude stage as on the board, and its attitude
+//! report (`TM[134,2]`) goes out on the link.
 //!
 //! The server runs frames back to back; between two frames it serves the link for up to
 //! [`LINK_PHASE_MS`] (longer while bytes keep arriving, at most [`LINK_PHASE_MAX_MS`]), so
 //! a table upload goes at the TCP's speed and a frame never waits for the ground.
 //!
-//! Cost: the frames' (see [`crate::sil`]); the link adds a few us a packet.
+//! Cost: the frames' (see [`crate::sil`]); the link adds a few us a packet; a sky scene adds
+//! the attitude stage's per frame and one 76-byte report (a 99-byte packet).
 
 use crate::home::{FrameClock, SimLines, block_on};
 use crate::sil::{self, SilConfig};
 use crate::sim::{SensorParams, Simulator, Star};
+use crate::sky::scene::committed_catalog;
 use rand::{RngExt, SeedableRng};
 use startrack_core::calib::{FrameCalibration, FrameConditions};
+use startrack_core::catalog::Catalog;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::{
-    LinkService, TableInfo, TableUpload, Targets, UploadRefusal, WindowKind, WindowReader,
-    WindowRequest,
+    AttitudeReport, LinkService, TableInfo, TableUpload, Targets, UploadRefusal, WindowKind,
+    WindowReader, WindowRequest,
 };
 use startrack_core::table::CalibTable;
-use startrack_core::tracker::{FixedTemperature, Ports, TableStore, Tracker, TrackerBuffers};
+use startrack_core::tracker::{
+    Event, FixedTemperature, FrameSummary, LineSummary, Ports, StarRecord, TableStore,
+    TelemetrySink, Tracker, TrackerBuffers,
+};
 use startrack_core::units::Electrons;
 use startrack_core::window::Rect;
 use std::io::{ErrorKind, Read, Write};
@@ -281,7 +289,8 @@ pub const LINK_PHASE_MAX_MS: u64 = 500;
 /// What [`serve`] runs.
 #[derive(Clone, Debug)]
 pub struct ServeConfig {
-    /// The scene, the sensor and the tracker.
+    /// The scene, the sensor and the tracker (a sky scene, `sil.sky`, also runs the attitude
+    /// stage after each frame and sends its report).
     pub sil: SilConfig,
     /// TCP port on 127.0.0.1 (0: any free port, reported through `on_listen`).
     pub port: u16,
@@ -398,6 +407,22 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
         ..SensorParams::default()
     };
     let base = sil::scene(sc, &params);
+    // A sky scene: the on-board catalog's stars, and after each frame the attitude stage as
+    // the board runs it (firmware/src/app.rs), its report sent on the link.
+    let catalog_bytes = match sc.sky {
+        Some(_) => committed_catalog()?,
+        None => Vec::new(),
+    };
+    let sky = match sc.sky {
+        Some(scene) => Some((
+            scene,
+            Catalog::parse(&catalog_bytes).map_err(|e| format!("catalog: {e}"))?,
+        )),
+        None => None,
+    };
+    let catalog = sky.as_ref().map(|(_, c)| c);
+    let stars_of = |k: u32| sil::frame_stars(sc, &base, catalog, k);
+    let mut stars: Vec<StarRecord> = Vec::new();
     let mut tables: Box<dyn SilTables> = match &config.flash {
         None => Box::new(MemoryTables::new(
             params.geometry,
@@ -427,9 +452,13 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                 .map_err(|e| e.to_string())?,
         );
         let mut link = Box::new(LinkService::new());
+        // A reset starts the attitude stage afresh (no prior), as the board's does.
+        let mut solver = sky
+            .as_ref()
+            .map(|(scene, cat)| sil::sky_solver(scene, *cat));
         let mut source = SimLines::new(|k| Simulator {
             frame: k,
-            ..Simulator::new(params.clone(), sil::stars_at(&base, sc.drift_px, k))
+            ..Simulator::new(params.clone(), stars_of(k))
         });
         let mut thermometer = FixedTemperature(None);
         loop {
@@ -444,7 +473,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             let phase_end = Instant::now() + Duration::from_millis(LINK_PHASE_MS);
             let hard_end = Instant::now() + Duration::from_millis(LINK_PHASE_MAX_MS);
             windows.frame = frame;
-            windows.stars = sil::stars_at(&base, sc.drift_px, frame);
+            windows.stars = stars_of(frame);
             windows.table = tables.active_table();
             windows.exposure_ms = sc.tracker.exposure_ms;
             loop {
@@ -529,18 +558,53 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                 period_us: sc.period_us,
             };
             link.set_time(start.elapsed().as_micros() as u64);
+            stars.clear();
+            let mut telemetry = KeepStars {
+                inner: &mut *link,
+                stars: &mut stars,
+            };
             let mut ports = Ports {
                 clock: &mut clock,
                 thermometer: &mut thermometer,
                 tables: &mut *tables,
-                telemetry: &mut *link,
+                telemetry: &mut telemetry,
             };
-            let Ok(_) = block_on(tracker.run_frame(&mut source, &mut ports));
+            let Ok(summary) = block_on(tracker.run_frame(&mut source, &mut ports));
             link.end_of_frame(&*tables);
+            if let Some(solver) = solver.as_mut() {
+                let result = solver.update(&stars, summary.start_us);
+                link.send_attitude(&AttitudeReport::of(summary.frame, &result));
+            }
             drain(&mut link, &mut client, &mut report);
             report.frames += 1;
             frame += 1;
         }
+    }
+}
+
+/// A telemetry port that passes everything on to the link and keeps the frame's stars for
+/// the attitude stage (the board's own, in firmware/src/app.rs).
+struct KeepStars<'a> {
+    inner: &'a mut dyn TelemetrySink,
+    stars: &'a mut Vec<StarRecord>,
+}
+
+impl TelemetrySink for KeepStars<'_> {
+    fn line(&mut self, summary: &LineSummary) {
+        self.inner.line(summary);
+    }
+
+    fn star(&mut self, frame: u32, star: &StarRecord) {
+        self.stars.push(*star);
+        self.inner.star(frame, star);
+    }
+
+    fn frame(&mut self, summary: &FrameSummary) {
+        self.inner.frame(summary);
+    }
+
+    fn event(&mut self, event: &Event) {
+        self.inner.event(event);
     }
 }
 

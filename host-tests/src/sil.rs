@@ -331,17 +331,8 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         )),
         None => None,
     };
-    let a_px = f64::from(config.tracker.psf_a_px);
-    let stars_of = |frame: u32| match &sky {
-        Some((scene, cat)) => scene.stars(cat, frame, a_px),
-        None => stars_at(&base, config.drift_px, frame),
-    };
-    let mut solver = sky.as_ref().map(|(scene, cat)| {
-        Solver::new(
-            *cat,
-            SolverConfig::for_camera(scene.camera, SOLVER_SIGMA_PX),
-        )
-    });
+    let stars_of = |frame: u32| frame_stars(config, &base, sky.as_ref().map(|(_, c)| c), frame);
+    let mut solver = sky.as_ref().map(|(scene, cat)| sky_solver(scene, *cat));
     let table_bytes = truth_table(config, &params)?;
     let table = CalibTable::parse(&table_bytes).map_err(|e| e.to_string())?;
     let mut buffers = Box::new(TrackerBuffers::new());
@@ -395,6 +386,30 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         frames,
         events: recorder.events,
     })
+}
+
+/// The stars of frame `frame` of `config`'s scene: the sky's when it has one and its
+/// `catalog` is given, else those of the drifting random scene `base` ([`scene`]).
+pub fn frame_stars(
+    config: &SilConfig,
+    base: &[Star],
+    catalog: Option<&Catalog<'_>>,
+    frame: u32,
+) -> Vec<Star> {
+    match (&config.sky, catalog) {
+        (Some(sky), Some(cat)) => sky.stars(cat, frame, f64::from(config.tracker.psf_a_px)),
+        _ => stars_at(base, config.drift_px, frame),
+    }
+}
+
+/// The attitude stage the SIL runs after each frame of a sky scene: the core's solver over
+/// `catalog` (the on-board catalog, [`committed_catalog`]) with the scene's camera and
+/// [`SOLVER_SIGMA_PX`]. [`run`] and the served SIL ([`crate::link_home::serve`]) both use it.
+pub fn sky_solver<'c>(scene: &SkyScene, catalog: Catalog<'c>) -> Solver<'c> {
+    Solver::new(
+        catalog,
+        SolverConfig::for_camera(scene.camera, SOLVER_SIGMA_PX),
+    )
 }
 
 /// The sensor's true calibration table (per pixel) as the SIL starts with it, with the

@@ -1,5 +1,6 @@
 //! The SIL served over TCP and driven by the ground client and `startrack gse`: status,
-//! mode, table upload, star lists, a raw window, reset, and the errors' exit codes.
+//! mode, table upload, star lists, a raw window, reset, the errors' exit codes, and over a
+//! sky scene the attitude reports.
 
 use startrack_core::link::WindowKind;
 use startrack_core::tracker::Mode;
@@ -23,12 +24,19 @@ struct Server {
 
 impl Server {
     fn start(link_noise: f64) -> Self {
-        let stop = Arc::new(AtomicBool::new(false));
-        let config = ServeConfig {
-            sil: SilConfig {
+        Self::start_with(
+            SilConfig {
                 stars: 8,
                 ..SilConfig::default()
             },
+            link_noise,
+        )
+    }
+
+    fn start_with(sil: SilConfig, link_noise: f64) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let config = ServeConfig {
+            sil,
             port: 0,
             link_noise,
             max_frames: Some(200),
@@ -287,4 +295,88 @@ fn a_noisy_link_loses_commands_never_the_tracker() {
     assert_eq!(l.accepted + l.rejected, l.packets, "{l:?}");
     assert!(l.rejected >= l.crc_errors, "{l:?}");
     let _ = server.finish();
+}
+
+/// Over a sky scene the served SIL runs the attitude stage after every frame, as the board
+/// does: the ground reads one report a frame, each within 5 of its own sigmas of the truth on
+/// every axis; a truncated or garbled report is an error, never misread.
+#[test]
+fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
+    use rand::SeedableRng;
+    use startrack_core::link::telemetry::ATTITUDE_LEN;
+    use startrack_host::ground::{AttitudeDecodeError, decode_attitude};
+    use startrack_host::sky::field::{FieldSpec, random_attitude};
+    use startrack_host::sky::scene::SkyScene;
+
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let q0 = random_attitude(&mut rng);
+    let f = FieldSpec::ccd47_15deg(0.0).camera.focal_length_px;
+    let scene = SkyScene::ccd47_15deg(q0, [0.2 / f, 0.3 / f, 1e-5]);
+    let server = Server::start_with(
+        SilConfig {
+            sky: Some(scene),
+            ..SilConfig::default()
+        },
+        0.0,
+    );
+    let mut g = Ground::connect(server.port, Duration::from_secs(60)).expect("connect");
+    let reports = g.attitude(4).expect("attitude reports");
+    assert_eq!(reports.len(), 4);
+    for w in reports.windows(2) {
+        assert!(w[1].frame > w[0].frame, "frames increase: {reports:?}");
+    }
+    for r in &reports {
+        let fix = r.fix.as_ref().expect("every frame of the sky solves");
+        let e = fix.attitude.q.error_vector(scene.attitude(r.frame));
+        for (i, v) in e.iter().enumerate() {
+            let sigma = fix.attitude.cov_rad2[i][i].sqrt();
+            assert!(
+                sigma > 0.0 && v.abs() < 5.0 * sigma,
+                "frame {}: axis {i} error {v:e} rad, sigma {sigma:e}",
+                r.frame
+            );
+        }
+        assert!(fix.matched >= 10, "frame {}: {fix:?}", r.frame);
+    }
+
+    // The ground tool prints them (the link takes one ground station at a time): a header
+    // and one row a frame, each with its attitude.
+    drop(g);
+    let mut csv = Vec::new();
+    gse::run(
+        &GseArgs {
+            port: server.port,
+            timeout_s: 60.0,
+            command: GseCommand::Attitude { frames: 2 },
+        },
+        &mut csv,
+    )
+    .expect("gse attitude");
+    let _ = server.finish();
+    let csv = String::from_utf8(csv).expect("utf-8");
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 3, "{csv}");
+    assert_eq!(lines[0], gse::ATTITUDE_CSV_HEADER);
+    for row in &lines[1..] {
+        let cols: Vec<&str> = row.split(',').collect();
+        assert_eq!(cols.len(), 11, "{row}");
+        assert!(matches!(cols[1], "tracking" | "lost_in_space"), "{row}");
+        let q: Vec<f64> = cols[4..8].iter().map(|c| c.parse().expect("q")).collect();
+        let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!((norm - 1.0).abs() < 1e-6, "{row}");
+    }
+
+    // A report cut short, or with a status the protocol lacks, does not decode.
+    let mut bytes = [0u8; ATTITUDE_LEN];
+    let n = reports[0].encode(0, &mut bytes).expect("encodes");
+    assert_eq!(n, ATTITUDE_LEN);
+    assert_eq!(decode_attitude(&bytes), Ok(reports[0]));
+    assert_eq!(
+        decode_attitude(&bytes[..ATTITUDE_LEN - 1]),
+        Err(AttitudeDecodeError::Length {
+            got: ATTITUDE_LEN - 1
+        })
+    );
+    bytes[4] = 9;
+    assert_eq!(decode_attitude(&bytes), Err(AttitudeDecodeError::Status(9)));
 }

@@ -7,6 +7,10 @@
 //! - `upload-table FILE`: the table in chunks, then commit;
 //! - `stars --frames N [--out FILE]`: the next N frames' star lists as CSV
 //!   (`frame,mode,` and the `stars.csv` columns);
+//! - `attitude --frames N`: the next N frames' attitude reports (`TM[134,2]`) as CSV,
+//!   `frame,status,used,matched,qw,qx,qy,qz,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability`
+//!   (status `too_few_stars`, `not_identified`, `tracking` or `lost_in_space`; the quaternion
+//!   takes ICRS to the camera, scalar first; empty fields without an attitude);
 //! - `window X Y SIZE --out FILE [--calibrated]`: a window of the next frame as FITS;
 //! - `reset`.
 //!
@@ -15,7 +19,8 @@
 use crate::fits::{MapF32, write_map};
 use crate::ground::{Ground, GroundError};
 use crate::home::{CSV_HEADER, csv_row};
-use startrack_core::link::{Housekeeping, WindowKind};
+use startrack_core::link::{AttitudeMissing, AttitudeReport, Housekeeping, WindowKind};
+use startrack_core::solver::SolveMode;
 use startrack_core::tracker::Mode;
 use std::io::Write;
 use std::path::PathBuf;
@@ -63,6 +68,12 @@ pub enum GseCommand {
         /// Output file (default: standard output).
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// The next frames' attitude reports as CSV.
+    Attitude {
+        /// Frames.
+        #[arg(long, default_value_t = 1)]
+        frames: usize,
     },
     /// A window of the next frame as FITS.
     Window {
@@ -181,6 +192,39 @@ pub fn status_json(h: &Housekeeping) -> serde_json::Value {
     })
 }
 
+/// Header of the attitude CSV ([`attitude_row`]).
+pub const ATTITUDE_CSV_HEADER: &str = "frame,status,used,matched,qw,qx,qy,qz,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability";
+
+/// One attitude report as a row of [`ATTITUDE_CSV_HEADER`].
+pub fn attitude_row(r: &AttitudeReport) -> String {
+    const ARCSEC_PER_RAD: f64 = 206_264.806;
+    match &r.fix {
+        Ok(fix) => {
+            let a = &fix.attitude;
+            let [w, x, y, z] = a.q.0;
+            let mode = match fix.mode {
+                SolveMode::Tracking => "tracking",
+                SolveMode::LostInSpace => "lost_in_space",
+            };
+            format!(
+                "{},{mode},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.2e}",
+                r.frame,
+                fix.used,
+                fix.matched,
+                a.boresight_sigma_rad() * ARCSEC_PER_RAD,
+                a.roll_sigma_rad() * ARCSEC_PER_RAD,
+                fix.false_probability
+            )
+        }
+        Err(AttitudeMissing::TooFewStars { used }) => {
+            format!("{},too_few_stars,{used},0,,,,,,,", r.frame)
+        }
+        Err(AttitudeMissing::NotIdentified { used }) => {
+            format!("{},not_identified,{used},0,,,,,,,", r.frame)
+        }
+    }
+}
+
 /// Runs `startrack gse`, writing its output to `out`.
 pub fn run(args: &GseArgs, out: &mut dyn Write) -> Result<(), GseError> {
     if !(args.timeout_s.is_finite() && args.timeout_s > 0.0 && args.timeout_s <= 3600.0) {
@@ -242,6 +286,15 @@ pub fn run(args: &GseArgs, out: &mut dyn Write) -> Result<(), GseError> {
                     .map_err(|e| GseError::Usage(format!("{}: {e}", p.display())))?,
                 None => out.write_all(text.as_bytes()).map_err(io)?,
             }
+        }
+        GseCommand::Attitude { frames } => {
+            let reports = g.attitude(*frames)?;
+            let mut text = format!("{ATTITUDE_CSV_HEADER}\n");
+            for r in &reports {
+                text.push_str(&attitude_row(r));
+                text.push('\n');
+            }
+            out.write_all(text.as_bytes()).map_err(io)?;
         }
         GseCommand::Window {
             x,

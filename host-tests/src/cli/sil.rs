@@ -9,6 +9,9 @@
 //! - with `--sky`, `--attitude FILE`: one row per frame,
 //!   `frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability`
 //!   (the quaternion takes ICRS to the camera, scalar first; errors against the truth).
+//!
+//! With `--port P` it serves the link instead ([`crate::link_home::serve`]); with `--sky` too,
+//! each frame's attitude report (`TM[134,2]`) is sent as the board sends it.
 
 use super::CliError;
 use crate::home::csv_row;
@@ -51,7 +54,9 @@ pub struct SilArgs {
     pub attitude: Option<PathBuf>,
     /// Serve the tracker's command and telemetry link on TCP 127.0.0.1:PORT (standing in
     /// for the UART) and run until stopped; `--frames`, `--telemetry` and `--truth` are then
-    /// not used (drive it with `startrack gse --port PORT`).
+    /// not used (drive it with `startrack gse --port PORT`). With `--sky` the attitude stage
+    /// runs after every frame, as on the board, and its report goes out on the link
+    /// (`startrack gse --port PORT attitude`).
     #[arg(long)]
     pub port: Option<u16>,
     /// With `--port`: probability that a received byte has a bit flipped (seeded).
