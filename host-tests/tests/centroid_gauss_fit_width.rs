@@ -124,6 +124,7 @@ fn clean_stars_rarely_flagged_with_the_border_background() {
         (5u16, 1.0, 100.0, 11u64, 0.005),
         (7, 1.0, 100.0, 12, 0.005),
         (7, 1.0, 20.0, 13, 0.01),
+        (7, 2.0, 100.0, 15, 0.005),
         (7, 2.0, 200.0, 14, 0.005),
     ] {
         let flux = psf::flux_for_snr(snr, 5.0, VAR_BG);

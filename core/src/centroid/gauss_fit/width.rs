@@ -37,10 +37,11 @@
 //! brightest border pixel exceeds half the background's noise (a = 2 px at SNR 100 in 7x7)
 //! the border held its wings, biasing the median high and the variance with the wings'
 //! spread (pull 0.77): once, the background is estimated again from the border's residuals
-//! to the fitted star and the fit runs again from the solution to convergence (its chi2 and
-//! covariance at the new solution: one step's start, with the new background and the old
-//! star, left a chi2 that flagged 4 % of the clean a = 2 px stars at SNR 100 in 7x7, 65 % at
-//! SNR 200).
+//! to the fitted star and one more Gauss-Newton step is taken from the solution (its
+//! covariance from the step's start, its chi2 the linearised model's prediction at the
+//! step's end, `chi2 - b . d`: the chi2 at the start, the new background against the old
+//! star, flagged 4 % of the clean a = 2 px stars at SNR 100 in 7x7 and 65 % at SNR 200;
+//! iterating to convergence instead costs a step, ~3,700 instructions a 7x7 star).
 //!
 //! # With a field PSF model
 //! [`gauss_fit_width_prior`] adds the model's width at the star as a Gaussian prior,
@@ -82,17 +83,19 @@
 //! Per step `w + h + 2` edge `erfc`s, densities and width terms, ~35 instructions a pixel
 //! for the normal equations (the ten row sums), a 4x4 `LDL^T`; from the moment start the
 //! bench's bright star converges in 2 steps on 5x5, 3 on 7x7. Measured on the Cortex-M7
-//! (`cargo m7-bench`, background given; the exact counts in docs/speed.md): ~7,400
+//! (`cargo m7-bench`, background given; the exact counts in docs/speed.md): ~7,450
 //! instructions for a 5x5 window (`centroid_gauss_fit_width_5x5`, ~2,700 a step, ~2,000 for
-//! validation, start and output) and ~13,600 for 7x7 (`centroid_gauss_fit_width_7x7`,
+//! validation, start and output) and ~13,700 for 7x7 (`centroid_gauss_fit_width_7x7`,
 //! ~3,700 a step): 1.5x and 1.9x the fit with the width given. With a prior that agrees
-//! with the star, ~7,500 and ~10,000 (`centroid_gauss_fit_width_model_*`: it starts at the
+//! with the star, ~7,600 and ~10,100 (`centroid_gauss_fit_width_model_*`: it starts at the
 //! model's width and the 7x7 fit needs a step less); a mismatched star pays the width-free
 //! fit again. The border's clipped variance (~10 instructions a border pixel) and the wings'
 //! refit (the border's median of the residuals and one more step, on stars whose wings
 //! reach the border) are the flight's, not in these stages (background given): the 30-star
 //! tracking frame, whose bench stars are bright and reach the border, grew by ~12,800
-//! instructions a star with them (`tracker_tracking_frame`).
+//! instructions a star with them (`tracker_tracking_frame`). The chi2's predicted fall
+//! after each step (the refit's goodness of fit) adds ~40 instructions a step (75 and 115
+//! on the bench's 5x5 and 7x7 stars).
 //!
 //! # Where it fails
 //! - Faint stars (SNR below ~10 in 5x5): the width is poorly determined and the position
@@ -735,7 +738,14 @@ fn fit_z<const CLEAN: bool>(
         && let Some((bg, k)) = border_residuals::<CLEAN>(p, &prof, sol.theta.2)
     {
         (level_e, var1, border) = (bg.level_e(), bg.variance_e2 + 1.0, k);
-        let Some(again) = it.run::<CLEAN>(p, (level_e, var1), sol.theta, &mut prof) else {
+        let one = Iteration {
+            params: &WidthFitParams {
+                max_iterations: 1,
+                ..*params
+            },
+            ..it
+        };
+        let Some(again) = one.run::<CLEAN>(p, (level_e, var1), sol.theta, &mut prof) else {
             return give_up(Some(peak), extra);
         };
         // One Gauss-Newton step from the solution (the new background moves it little):
@@ -892,7 +902,11 @@ impl Iteration<'_> {
                     pinned,
                 });
             }
-            prev = Some((f, nrm.chi2, nrm.n));
+            // The chi2 the linearised model predicts after the full step (`chi2 - b . d`):
+            // the one-step refit's goodness of fit at its end, not at its start.
+            let [b0, b1, b2, b3] = nrm.b;
+            let fall = b0 * dx + b1 * dy + b2 * dn + b3 * ds;
+            prev = Some((f, (nrm.chi2 - fall).max(0.0), nrm.n));
         }
         Some(Solved {
             theta,
