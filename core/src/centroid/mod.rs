@@ -109,7 +109,8 @@ bitflags::bitflags! {
         /// The computed position fell outside the window and was clamped to its edge.
         const CLAMPED = 256;
         /// The fitted model does not describe the window: `chi2_dof` above the limit of
-        /// [`gauss_fit::chi2_dof_limit`] (a blend, a cosmic ray, a PSF the Gaussian cannot
+        /// [`gauss_fit::chi2_dof_limit`] ([`gauss_fit::chi2_dof_limit_border`] with the
+        /// variance from the window's border) (a blend, a cosmic ray, a PSF the Gaussian cannot
         /// follow). The position is reported but is not a clean measurement.
         const POOR_FIT = 512;
         /// The method's own error estimate (`sigma_x_px`, `sigma_y_px`) is known to be

@@ -87,8 +87,8 @@ mod width;
 
 pub use width::{
     CHI2_FLAG_Z, MAX_WIDTH_FIT_SIDE, MIN_PRIOR_SCATTER_PX, MIN_SIGMA_PX, PSF_MISMATCH_Z, PsfFit,
-    WidthFitParams, WidthPrior, chi2_dof_limit, gauss_fit_width, gauss_fit_width_prior,
-    sigma_unreliable,
+    WidthFitParams, WidthPrior, chi2_dof_limit, chi2_dof_limit_border, gauss_fit_width,
+    gauss_fit_width_prior, sigma_unreliable,
 };
 
 use super::math;

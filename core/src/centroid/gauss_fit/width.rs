@@ -38,7 +38,10 @@
 //! the border held its wings, biasing the median high and the variance with the wings'
 //! spread (pull 0.77): once, the background is estimated again from the border's residuals
 //! to the fitted star and one more Gauss-Newton step is taken from the solution (its
-//! covariance from the step's start).
+//! covariance from the step's start, its chi2 the linearised model's prediction at the
+//! step's end, `chi2 - b . d`: the chi2 at the start, the new background against the old
+//! star, flagged 4 % of the clean a = 2 px stars at SNR 100 in 7x7 and 65 % at SNR 200;
+//! iterating to convergence instead costs a step, ~3,700 instructions a 7x7 star).
 //!
 //! # With a field PSF model
 //! [`gauss_fit_width_prior`] adds the model's width at the star as a Gaussian prior,
@@ -64,10 +67,14 @@
 //! instructions a pixel a step.
 //! `psf_a_px = s / sqrt(0.31)` with `sigma_psf_a_px = sigma_s / sqrt(0.31)`.
 //! `chi2_dof = chi2 / (n - 4)` over the `n` usable pixels; for a star the model describes it
-//! follows `chi2(n - 4) / (n - 4)`, and above [`chi2_dof_limit`] (the distribution's upper
-//! `z`-sigma point, `z` = [`CHI2_FLAG_Z`]: a false-flag rate of 1e-3 per star) the
-//! centroid gets [`CentroidFlags::POOR_FIT`]: a blend, a cosmic ray, coma or defocus the
-//! Gaussian cannot follow. The position is still reported, flagged, never as a clean number.
+//! follows `chi2(n - 4) / (n - 4)` with a given background variance, and above
+//! [`chi2_dof_limit`] (the distribution's upper `z`-sigma point, `z` = [`CHI2_FLAG_Z`]: a
+//! false-flag rate of 1e-3 per star) the centroid gets [`CentroidFlags::POOR_FIT`]: a
+//! blend, a cosmic ray, coma or defocus the Gaussian cannot follow. With the variance from
+//! the window's own border (the flight's) the statistic is `F`-distributed, not chi-square,
+//! and the limit is [`chi2_dof_limit_border`]'s (the chi-square limit flagged 1.1-1.5 % of
+//! clean stars in 7x7; host test `centroid_gauss_fit_width`: 0.05-0.5 % now, the rest the
+//! held level's own error, left out of the limit). The position is still reported, flagged, never as a clean number.
 //! Where the linearised sigmas are known to miss the error by more than 10 % (without a
 //! model, a star that may be narrower than a = 0.7 px below SNR 60: [`sigma_unreliable`])
 //! the centroid gets [`CentroidFlags::SIGMA_UNRELIABLE`].
@@ -76,17 +83,19 @@
 //! Per step `w + h + 2` edge `erfc`s, densities and width terms, ~35 instructions a pixel
 //! for the normal equations (the ten row sums), a 4x4 `LDL^T`; from the moment start the
 //! bench's bright star converges in 2 steps on 5x5, 3 on 7x7. Measured on the Cortex-M7
-//! (`cargo m7-bench`, background given; the exact counts in docs/speed.md): ~7,400
+//! (`cargo m7-bench`, background given; the exact counts in docs/speed.md): ~7,450
 //! instructions for a 5x5 window (`centroid_gauss_fit_width_5x5`, ~2,700 a step, ~2,000 for
-//! validation, start and output) and ~13,600 for 7x7 (`centroid_gauss_fit_width_7x7`,
+//! validation, start and output) and ~13,700 for 7x7 (`centroid_gauss_fit_width_7x7`,
 //! ~3,700 a step): 1.5x and 1.9x the fit with the width given. With a prior that agrees
-//! with the star, ~7,500 and ~10,000 (`centroid_gauss_fit_width_model_*`: it starts at the
+//! with the star, ~7,600 and ~10,100 (`centroid_gauss_fit_width_model_*`: it starts at the
 //! model's width and the 7x7 fit needs a step less); a mismatched star pays the width-free
 //! fit again. The border's clipped variance (~10 instructions a border pixel) and the wings'
 //! refit (the border's median of the residuals and one more step, on stars whose wings
 //! reach the border) are the flight's, not in these stages (background given): the 30-star
 //! tracking frame, whose bench stars are bright and reach the border, grew by ~12,800
-//! instructions a star with them (`tracker_tracking_frame`).
+//! instructions a star with them (`tracker_tracking_frame`). The chi2's predicted fall
+//! after each step (the refit's goodness of fit) adds ~40 instructions a step (75 and 115
+//! on the bench's 5x5 and 7x7 stars).
 //!
 //! # Where it fails
 //! - Faint stars (SNR below ~10 in 5x5): the width is poorly determined and the position
@@ -250,6 +259,41 @@ pub fn chi2_dof_limit(dof: u16, z: f32) -> f32 {
     let c = 2.0 / (9.0 * f32::from(dof));
     let t = 1.0 - c + z * math::sqrt(c);
     t * t * t
+}
+
+/// The largest `chi2 / dof` a window of `dof` degrees of freedom passes when the pixels'
+/// background variance was estimated from `border` of its own pixels (their sample variance
+/// about the held level; 0: a given variance, [`chi2_dof_limit`]). The border's residuals
+/// then sum to `border - 1` variances whatever the noise, and the rest of the window's
+/// `d = dof - border + 1` degrees of freedom are scaled by the estimate's error: `chi2 =
+/// (border - 1) + d F(d, border - 1)`, `F` Fisher's distribution (measured in the host test
+/// `centroid_gauss_fit_width`: the mean and variance of `chi2_dof` of clean stars match it
+/// within a few per cent, where the chi-square law's variance is 30 % small in 7x7). The
+/// `F` point `z` sigmas into its upper tail by Paulson's cube-root normal approximation
+/// (the Wilson-Hilferty cube of both chi-squares; within 2 % of the exact 1e-3 quantile
+/// for the 5x5 and 7x7 borders, same test). `f32::MAX` when nothing is left to test
+/// (`d` or `border - 1` below 3, e.g. a 3x3 window).
+pub fn chi2_dof_limit_border(dof: u16, border: u16, z: f32) -> f32 {
+    if border == 0 {
+        return chi2_dof_limit(dof, z);
+    }
+    let d2 = border.saturating_sub(1);
+    let d1 = dof.saturating_sub(d2);
+    if d1 < 3 || d2 < 3 {
+        return f32::MAX;
+    }
+    let c1 = 2.0 / (9.0 * f32::from(d1));
+    let c2 = 2.0 / (9.0 * f32::from(d2));
+    let z2 = z * z;
+    // ((1 - c2) u - (1 - c1))^2 = z^2 (c2 u^2 + c1), u = F^(1/3): the larger root.
+    let a = (1.0 - c2) * (1.0 - c2) - z2 * c2;
+    if a <= 0.0 {
+        return f32::MAX;
+    }
+    let q = (1.0 - c2) * (1.0 - c1);
+    let disc = q * q - a * ((1.0 - c1) * (1.0 - c1) - z2 * c1);
+    let u = (q + math::sqrt(disc.max(0.0))) / a;
+    (f32::from(d2) + f32::from(d1) * u * u * u) / f32::from(dof)
 }
 
 /// The width-free Gaussian fit of `input` (see the module docs).
@@ -660,10 +704,15 @@ fn fit_z<const CLEAN: bool>(
     let mut prof = [[0.0f32; M]; 6];
     // The border's median is robust; its MAD's variance is noisy: the variance from the
     // border's clipped sample variance instead.
-    let bg = if params.background == Background::PerimeterMedian {
-        clipped_variance::<CLEAN>(p, &prof, 0.0, p.bg)
-    } else {
-        p.bg
+    // `border`: the pixels the variance came from (0: given), for the chi2's limit.
+    let (bg, mut border) = match params.background {
+        Background::PerimeterMedian => clipped_variance::<CLEAN>(p, &prof, 0.0, p.bg),
+        Background::PerimeterMean => {
+            let mut k = 0u16;
+            border_walk::<CLEAN>(p, &prof, 0.0, |_| k += 1);
+            (p.bg, k)
+        }
+        Background::Given { .. } => (p.bg, 0),
     };
     let (mut level_e, mut var1) = (bg.level_e(), bg.variance_e2 + 1.0);
     // With a prior the model's width starts the fit (and the moments' only the free one).
@@ -686,9 +735,9 @@ fn fit_z<const CLEAN: bool>(
     if sol.converged
         && !matches!(params.background, Background::Given { .. })
         && wings_on_border(p, &prof, sol.theta.2) > WINGS_REFIT * math::sqrt(var1)
-        && let Some(bg) = border_residuals::<CLEAN>(p, &prof, sol.theta.2)
+        && let Some((bg, k)) = border_residuals::<CLEAN>(p, &prof, sol.theta.2)
     {
-        (level_e, var1) = (bg.level_e(), bg.variance_e2 + 1.0);
+        (level_e, var1, border) = (bg.level_e(), bg.variance_e2 + 1.0, k);
         let one = Iteration {
             params: &WidthFitParams {
                 max_iterations: 1,
@@ -743,7 +792,7 @@ fn fit_z<const CLEAN: bool>(
     let [vx, vy, vn, vs] = f.inverse_diagonal();
     let dof = n.saturating_sub(4);
     let chi2_dof = if dof > 0 { chi2 / f32::from(dof) } else { 0.0 };
-    if chi2_dof > chi2_dof_limit(dof, params.chi2_flag_z) || !chi2_dof.is_finite() {
+    if chi2_dof > chi2_dof_limit_border(dof, border, params.chi2_flag_z) || !chi2_dof.is_finite() {
         extra |= CentroidFlags::POOR_FIT;
     }
     let (x, y, flux, s) = theta;
@@ -853,7 +902,11 @@ impl Iteration<'_> {
                     pinned,
                 });
             }
-            prev = Some((f, nrm.chi2, nrm.n));
+            // The chi2 the linearised model predicts after the full step (`chi2 - b . d`):
+            // the one-step refit's goodness of fit at its end, not at its start.
+            let [b0, b1, b2, b3] = nrm.b;
+            let fall = b0 * dx + b1 * dy + b2 * dn + b3 * ds;
+            prev = Some((f, (nrm.chi2 - fall).max(0.0), nrm.n));
         }
         Some(Solved {
             theta,
@@ -925,13 +978,13 @@ const CLIP_SIGMAS: f32 = 4.0;
 /// sigma (`bg.variance_e2`): the MAD's variance of 16-24 pixels is itself noisy (relative
 /// error ~24 % on sigma for 24 pixels, against ~15 % for the sample variance), and at low SNR
 /// the position's sigma scales with it, so the pulls were ~7 % high. Unchanged when fewer
-/// than 2 pixels pass.
+/// than 2 pixels pass. With the number of pixels the variance came from.
 fn clipped_variance<const CLEAN: bool>(
     p: &Prepared<'_>,
     prof: &Profiles,
     n: f32,
     bg: BackgroundEstimate,
-) -> BackgroundEstimate {
+) -> (BackgroundEstimate, u16) {
     let clip = CLIP_SIGMAS * math::sqrt(bg.variance_e2) * 64.0;
     let (mut ss, mut k, mut all) = (0.0f32, 0u16, 0u16);
     let level = bg.level_bits;
@@ -944,24 +997,25 @@ fn clipped_variance<const CLEAN: bool>(
         }
     });
     if k < 2 {
-        return bg;
+        return (bg, all);
     }
     let var = ss / (f32::from(k - 1) * 4096.0);
-    BackgroundEstimate {
+    let est = BackgroundEstimate {
         variance_e2: var,
         level_variance_e2: var * core::f32::consts::FRAC_PI_2 / f32::from(all.max(1)),
         ..bg
-    }
+    };
+    (est, k)
 }
 
 /// The background from the border's residuals to the fitted star (flux `n`, the profiles
 /// of [`normal`]): the median of `pixel - star` over the border's usable pixels, the
-/// variance as [`clipped_variance`]. `None` for an empty border.
+/// variance as [`clipped_variance`], with its pixel count. `None` for an empty border.
 fn border_residuals<const CLEAN: bool>(
     p: &Prepared<'_>,
     prof: &Profiles,
     n: f32,
-) -> Option<BackgroundEstimate> {
+) -> Option<(BackgroundEstimate, u16)> {
     let mut ring = [0i32; 4 * M];
     let mut k = 0usize;
     border_walk::<CLEAN>(p, prof, n, |b| {
