@@ -6,7 +6,7 @@
 //! | centre of gravity, power 1 (eq. 2) and 2 (eq. 6) | [`cog`] | ~6,500 and ~11,700 (`centroid_cog1_7x7`, `centroid_cog2_7x7`; ~3,900 with a given background) | 5x5: 0.049 px at a = 0.5, < 0.001 at a = 1, 0.047 at a = 2 (power 1); removed by the table's pixel-phase curve ([`pixcorr`]) | 0.86..1.1 of the CRLB-limited scatter |
 //! | the same, power 1 fused with calibration on the raw window | [`raw_cog`] | ~2,600 a frame with its plan (`centroid_cog1c_raw_planned_7x7`) | as the corrected CoG | as the CoG |
 //! | pixel-integrated Gaussian fit | [`gauss_fit`] | ~7,000 held background (`centroid_gauss_fit_given_bg_7x7`), ~22,000 fitted | < 1e-5 px (model exact) | efficiency 0.97..1.00 |
-//! | the same with the PSF width free, reporting `psf_a_px` and `chi2_dof` ([`gauss_fit::gauss_fit_width`]) | [`gauss_fit`] | ~13,600 held background (`centroid_gauss_fit_width_7x7`; ~7,400 on 5x5) | < 1e-5 px (model exact) | pull RMS 0.99..1.08 (host test `centroid_gauss_fit_width`) |
+//! | the same with the PSF width free, reporting `psf_a_px` and `chi2_dof` ([`gauss_fit::gauss_fit_width`]) | [`gauss_fit`] | ~13,700 held background (`centroid_gauss_fit_width_7x7`; ~7,400 on 5x5) | < 1e-5 px (model exact) | pull RMS 0.99..1.08 (host test `centroid_gauss_fit_width`) |
 //!
 //! (a = the paper's 80 %-energy radius, s = sqrt(0.31) a; the errors from the host tests
 //! `centroid_cog`, `centroid_cog_noise`, `centroid_gauss_fit` run with `--nocapture`; the

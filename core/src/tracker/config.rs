@@ -24,7 +24,7 @@ pub enum CentroidMethod {
     /// Fit of the pixel-integrated Gaussian with the PSF width free (each star's own: the
     /// width changes across the field and from star to star), background held at the
     /// border median; reports `psf_a_px` and `chi2_dof` and flags a window the Gaussian
-    /// cannot describe ([`super::StarFlags::POOR_FIT`]). ~13,600 M7 instructions for a 7x7
+    /// cannot describe ([`super::StarFlags::POOR_FIT`]). ~13,700 M7 instructions for a 7x7
     /// window (`cargo m7-bench`, `centroid_gauss_fit_width_7x7`); the configured `psf_a_px`
     /// is not used.
     GaussFitWidth,
@@ -122,7 +122,7 @@ impl TrackerConfig {
     /// The flight configuration. The width-free Gauss fit in both modes: a real field does
     /// not give one PSF width (defocus, field curvature, coma), and the fit of a given width
     /// loses up to 2.5x the Cramer-Rao bound on stars of another width (docs/accuracy.md,
-    /// "width unknown"); fitting each star's own costs ~13,600 M7 instructions a 7x7 star
+    /// "width unknown"); fitting each star's own costs ~13,700 M7 instructions a 7x7 star
     /// against ~7,000 for the given width and ~2,600 for the fused CoG, a small part of a
     /// 30-star tracking frame (`cargo m7-bench`, `tracker_tracking_frame`, two thirds of it
     /// the bias and dark scale of every line); the other methods stay for budgets that need

@@ -10,7 +10,7 @@
 //!   sub-window of a tracking window), ~2.8 KB.
 //!
 //! Cost per star: the window's calibration (~95 M7 instructions a pixel, `cargo m7-bench`
-//! stage `window_calibrate`), then the method (the width-free Gauss fit 7x7 ~13,600, with
+//! stage `window_calibrate`), then the method (the width-free Gauss fit 7x7 ~13,700, with
 //! the table's field PSF model as a prior ~10,000 plus the model's polynomial, ~40;
 //! the Gauss fit of a given width ~7,000, the CoG a few hundred plus ~140 for the curve).
 
