@@ -11,7 +11,8 @@ use startrack_core::link::LinkService;
 use startrack_core::link::telemetry::{Housekeeping, status};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    DarkLaw, FixedTable, FixedTemperature, Ports, Tracker, TrackerBuffers, TrackerConfig,
+    DarkLaw, FixedTable, FixedTemperature, FrameSummary, LineSource, Ports, Tracker,
+    TrackerBuffers, TrackerConfig,
 };
 use startrack_core::units::{ERatePerS, Kelvin};
 use startrack_host::home::{FrameClock, SimLines, block_on};
@@ -19,6 +20,48 @@ use startrack_host::link_home::MemoryTables;
 use startrack_host::sim::effects::{DarkLaw as SimDarkLaw, Effects};
 use startrack_host::sim::truth::TruthSections;
 use startrack_host::sim::{SensorParams, Simulator};
+use std::convert::Infallible;
+
+/// The ports a test's tracker runs on: one table, a fixed sensor temperature, the link as
+/// telemetry sink and a clock of `period_us` a frame.
+struct Bench<'t> {
+    link: Box<LinkService>,
+    tables: FixedTable<'t>,
+    thermometer: FixedTemperature,
+    period_us: u64,
+}
+
+impl<'t> Bench<'t> {
+    fn new(table: CalibTable<'t>, sensor_k: Option<f64>, period_us: u64) -> Self {
+        Self {
+            link: Box::new(LinkService::new()),
+            tables: FixedTable(Some(table)),
+            thermometer: FixedTemperature(sensor_k.map(Kelvin::from_num)),
+            period_us,
+        }
+    }
+
+    /// Runs frame `k` of `source` through `tracker`.
+    fn frame<S: LineSource<Error = Infallible>>(
+        &mut self,
+        tracker: &mut Tracker<'t, '_, 32>,
+        source: &mut S,
+        k: u32,
+    ) -> FrameSummary {
+        let mut clock = FrameClock {
+            frame: k,
+            period_us: self.period_us,
+        };
+        let mut ports = Ports {
+            clock: &mut clock,
+            thermometer: &mut self.thermometer,
+            tables: &mut self.tables,
+            telemetry: &mut *self.link,
+        };
+        let Ok(summary) = block_on(tracker.run_frame(source, &mut ports));
+        summary
+    }
+}
 
 /// A small readout (128 x 128 active, 16 covered columns a side) to keep the test fast.
 fn small() -> SensorParams {
@@ -76,25 +119,13 @@ fn run(dark_e: f64, sensor_k: Option<f64>, frames: u32) -> Housekeeping {
         frame,
         ..Simulator::new(params.clone(), Vec::new())
     });
-    let mut link = Box::new(LinkService::new());
-    let mut tables = FixedTable(Some(table));
-    let mut thermometer = FixedTemperature(sensor_k.map(Kelvin::from_num));
+    let mut bench = Bench::new(table, sensor_k, 100_000);
     for k in 0..frames {
-        let mut clock = FrameClock {
-            frame: k,
-            period_us: 100_000,
-        };
-        let mut ports = Ports {
-            clock: &mut clock,
-            thermometer: &mut thermometer,
-            tables: &mut tables,
-            telemetry: &mut *link,
-        };
-        let Ok(summary) = block_on(tracker.run_frame(&mut source, &mut ports));
+        let summary = bench.frame(&mut tracker, &mut source, k);
         assert_eq!(summary.dark_drift, tracker.dark_drift());
     }
     let store = MemoryTables::new(params.geometry, Some(table_bytes.clone()));
-    let hk = link.housekeeping(&store);
+    let hk = bench.link.housekeeping(&store);
     // Through the wire and back.
     let mut buf = [0u8; startrack_core::link::telemetry::HK_LEN];
     let n = hk.encode(&mut buf).unwrap();
@@ -161,22 +192,10 @@ fn the_running_ratio_follows_a_step_with_its_time_constant() {
         frame,
         ..Simulator::new(at(if frame < 3 { 250.0 } else { 375.0 }), Vec::new())
     });
-    let mut link = Box::new(LinkService::new());
-    let mut tables = FixedTable(Some(table));
-    let mut thermometer = FixedTemperature(Some(Kelvin::from_num(286.5)));
+    let mut bench = Bench::new(table, Some(286.5), 100_000);
     let mut ratios = Vec::new();
     for k in 0..7 {
-        let mut clock = FrameClock {
-            frame: k,
-            period_us: 100_000,
-        };
-        let mut ports = Ports {
-            clock: &mut clock,
-            thermometer: &mut thermometer,
-            tables: &mut tables,
-            telemetry: &mut *link,
-        };
-        let Ok(s) = block_on(tracker.run_frame(&mut source, &mut ports));
+        let s = bench.frame(&mut tracker, &mut source, k);
         ratios.push(f64::from(s.dark_drift.ratio_u8f8) / 256.0);
     }
     println!("running ratio: {ratios:.3?}");
@@ -233,22 +252,10 @@ fn run_lab(
     let mut tracker = Box::new(Tracker::<32>::new(config, lab.geometry, &mut buffers).unwrap());
     tracker.set_dark_law(law);
     let mut source = SimLines::new(|frame| sensor.frame_sensor(frame, exposure_s, sensor_k, false));
-    let mut link = Box::new(LinkService::new());
-    let mut tables = FixedTable(Some(table));
-    let mut thermometer = FixedTemperature(Some(Kelvin::from_num(sensor_k)));
+    let mut bench = Bench::new(table, Some(sensor_k), 1_100_000);
     let (mut ratios, mut out) = (Vec::new(), false);
     for k in 0..frames {
-        let mut clock = FrameClock {
-            frame: k,
-            period_us: 1_100_000,
-        };
-        let mut ports = Ports {
-            clock: &mut clock,
-            thermometer: &mut thermometer,
-            tables: &mut tables,
-            telemetry: &mut *link,
-        };
-        let Ok(summary) = block_on(tracker.run_frame(&mut source, &mut ports));
+        let summary = bench.frame(&mut tracker, &mut source, k);
         ratios.push(f64::from(summary.dark_drift.ratio_u8f8) / 256.0);
         out = summary.dark_drift.out_of_band;
     }
@@ -379,25 +386,13 @@ fn a_replacement_table_brings_its_own_law() {
     let mut tracker =
         Box::new(Tracker::<32>::new(TrackerConfig::FLIGHT, lab.geometry, &mut buffers).unwrap());
     let mut source = SimLines::new(|frame| sensor.frame_sensor(frame, 1.0, 288.0, false));
-    let mut link = Box::new(LinkService::new());
-    let mut tables = FixedTable(Some(CalibTable::parse(bytes_a).unwrap()));
-    let mut thermometer = FixedTemperature(Some(Kelvin::from_num(288)));
+    let mut bench = Bench::new(CalibTable::parse(bytes_a).unwrap(), Some(288.0), 1_100_000);
     let mut ratios = Vec::new();
     for k in 0..6 {
         if k == 3 {
-            tables.0 = Some(CalibTable::parse(&bytes_b).unwrap());
+            bench.tables.0 = Some(CalibTable::parse(&bytes_b).unwrap());
         }
-        let mut clock = FrameClock {
-            frame: k,
-            period_us: 1_100_000,
-        };
-        let mut ports = Ports {
-            clock: &mut clock,
-            thermometer: &mut thermometer,
-            tables: &mut tables,
-            telemetry: &mut *link,
-        };
-        let Ok(s) = block_on(tracker.run_frame(&mut source, &mut ports));
+        let s = bench.frame(&mut tracker, &mut source, k);
         ratios.push((
             f64::from(s.dark_drift.ratio_u8f8) / 256.0,
             s.dark_drift.frames,
