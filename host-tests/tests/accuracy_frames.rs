@@ -171,28 +171,39 @@ fn the_psf_model_configuration_runs_on_the_same_stars() {
     assert!(model.iter().all(|b| b.used > 0 && b.rms_crlb.is_finite()));
 }
 
-/// `simulate`'s scene options: widths only from the list, SNRs in the range, every hot
-/// pixel listed with its true dark, the frame otherwise the basic one; bad values refused.
-#[test]
-fn simulate_draws_widths_snrs_and_hot_pixels_as_asked() {
-    let dir = tempfile::tempdir().unwrap();
-    let args = SimulateArgs {
-        out: dir.path().to_path_buf(),
-        seed: 4,
-        stars: 200,
+/// The basic frame `simulate` writes into `out` (DSNU 0.25, PRNU 0.02, 250 e- of dark, read
+/// noise 5 e-) with `stars` stars drawn as `mix` says.
+fn scene(out: &std::path::Path, seed: u64, stars: usize, mix: SceneMix) -> SimulateArgs {
+    SimulateArgs {
+        out: out.to_path_buf(),
+        seed,
+        stars,
         dark_e: 250.0,
         read_noise_e: 5.0,
         dsnu: 0.25,
         prnu: 0.02,
         psf_a_px: None,
         measured_frames: 0,
-        mix: SceneMix {
+        mix,
+    }
+}
+
+/// `simulate`'s scene options: widths only from the list, SNRs in the range, every hot
+/// pixel listed with its true dark, the frame otherwise the basic one; bad values refused.
+#[test]
+fn simulate_draws_widths_snrs_and_hot_pixels_as_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = scene(
+        dir.path(),
+        4,
+        200,
+        SceneMix {
             psf_a_list: vec![0.6, 1.5],
             snr_range: vec![10.0, 200.0],
             hot_fraction: 1e-4,
             ..SceneMix::default()
         },
-    };
+    );
     let files = startrack_host::cli::simulate::run(&args).unwrap();
     let truth = std::fs::read_to_string(&files.truth).unwrap();
     let rows: Vec<Vec<f64>> = truth
@@ -334,22 +345,16 @@ fn a_field_of_widths_is_measured_and_modelled() {
     use startrack_host::cli::calib_models::{PsfModelArgs, run_psf_model};
     use startrack_host::frame_accuracy::process_args;
     let dir = tempfile::tempdir().unwrap();
-    let args = SimulateArgs {
-        out: dir.path().to_path_buf(),
-        seed: 2,
-        stars: 300,
-        dark_e: 250.0,
-        read_noise_e: 5.0,
-        dsnu: 0.25,
-        prnu: 0.02,
-        psf_a_px: None,
-        measured_frames: 0,
-        mix: SceneMix {
+    let args = scene(
+        dir.path(),
+        2,
+        300,
+        SceneMix {
             psf_a_field: vec![0.6, 2.0],
             snr_range: vec![30.0, 200.0],
             ..SceneMix::default()
         },
-    };
+    );
     let files = startrack_host::cli::simulate::run(&args).unwrap();
     let truth = std::fs::read_to_string(&files.truth).unwrap();
     let g = startrack_core::geometry::ReadoutGeometry::CCD47_20_DUAL;
