@@ -242,25 +242,12 @@ fn sim_args(mc: &FrameMc, seed: u64, out: PathBuf) -> SimulateArgs {
 /// command's default.
 pub fn build_args(f: &SimFiles, out: PathBuf, psf_model: Option<PathBuf>) -> CalibBuildArgs {
     CalibBuildArgs {
-        out,
         bias: Some(f.bias.clone()),
         dark: Some(f.dark.clone()),
         flat: Some(f.flat.clone()),
-        gains: None,
         hot: Some(f.hot.clone()),
-        hot_exposure_s: 1.0,
-        hot_ref_k: 293.0,
-        hot_doubling_k: 6.0,
-        hot_exclude_above_e: 10_000.0,
-        tile_log2: 0,
-        saturation_adu: 65535,
-        psf_a_px: None,
-        pixcorr_boxes: "5,7".into(),
-        pixcorr_powers: "1,2".into(),
-        cti: None,
         psf_model,
-        camera_model: None,
-        dark_law: None,
+        ..CalibBuildArgs::with_defaults(out)
     }
 }
 

@@ -23,27 +23,7 @@ pub fn startrack(args: &[&str]) -> (bool, String, String) {
 /// `calib build` with every option at its command-line default and no map at all, writing
 /// `out` (a test sets the few it needs on top).
 pub fn bare_args(out: PathBuf) -> CalibBuildArgs {
-    CalibBuildArgs {
-        out,
-        bias: None,
-        dark: None,
-        flat: None,
-        gains: None,
-        hot: None,
-        hot_exposure_s: 1.0,
-        hot_ref_k: 293.0,
-        hot_doubling_k: 6.0,
-        hot_exclude_above_e: 10_000.0,
-        tile_log2: 0,
-        saturation_adu: 65535,
-        psf_a_px: None,
-        pixcorr_boxes: "5,7".into(),
-        pixcorr_powers: "1,2".into(),
-        cti: None,
-        psf_model: None,
-        camera_model: None,
-        dark_law: None,
-    }
+    CalibBuildArgs::with_defaults(out)
 }
 
 /// `calib build` of every map `simulate` wrote into `f`, with the command's defaults: gains

@@ -75,6 +75,26 @@ pub struct CalibBuildArgs {
     pub dark_law: Option<String>,
 }
 
+impl CalibBuildArgs {
+    /// The options with every default as the command line gives them (clap's own defaults,
+    /// so they cannot drift from `startrack calib build --help`), writing to `out` and no
+    /// maps: what a caller then fills in.
+    pub fn with_defaults(out: PathBuf) -> Self {
+        #[derive(clap::Parser)]
+        struct Command {
+            #[command(flatten)]
+            args: CalibBuildArgs,
+        }
+        let out = out.into_os_string();
+        <Command as clap::Parser>::parse_from([
+            std::ffi::OsString::from("calib-build"),
+            "--out".into(),
+            out,
+        ])
+        .args
+    }
+}
+
 /// The dark law of `--dark-law`: `RATE,TREF,DOUBLING[,LOW,HIGH]`, each in its section-11
 /// format and range (rate > 0 e-/px/s, TREF 100..=400 K, doubling 2..=20 K, LOW < HIGH).
 pub fn parse_dark_law(s: &str) -> Result<DarkLaw, CliError> {
