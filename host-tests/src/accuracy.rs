@@ -734,27 +734,34 @@ pub fn markdown(
         }
         s.push('\n');
     };
+    // One row per method, each cell `cell` of the method's result there (`-` where none).
+    let rows = |s: &mut String, cell: &dyn Fn(&Cell) -> String| {
+        for m in methods {
+            let _ = write!(s, "| {} |", m.name());
+            for &(a, snr) in &cols {
+                match find(m, a, snr) {
+                    Some(c) => {
+                        let _ = write!(s, " {} |", cell(c));
+                    }
+                    None => s.push_str(" - |"),
+                }
+            }
+            s.push('\n');
+        }
+    };
     let _ = writeln!(
         s,
         "RMS error / Cramer-Rao bound ({} stars per cell, uniform pixel phase, background {} e-/px, read noise {} e-, seed {}; SNR by eq. 8 in 5x5; `-` = no correction curve):\n",
         noise.trials, noise.background_e, noise.read_noise_e, noise.seed
     );
     header(&mut s, "method");
-    for m in methods {
-        let _ = write!(s, "| {} |", m.name());
-        for &(a, snr) in &cols {
-            match find(m, a, snr) {
-                Some(c) if c.failures > 0 => {
-                    let _ = write!(s, " {:.2} ({} failed) |", c.efficiency_ratio(), c.failures);
-                }
-                Some(c) => {
-                    let _ = write!(s, " {:.2} |", c.efficiency_ratio());
-                }
-                None => s.push_str(" - |"),
-            }
+    rows(&mut s, &|c| {
+        if c.failures > 0 {
+            format!("{:.2} ({} failed)", c.efficiency_ratio(), c.failures)
+        } else {
+            format!("{:.2}", c.efficiency_ratio())
         }
-        s.push('\n');
-    }
+    });
     let _ = writeln!(s, "\nCRLB, px:\n");
     header(&mut s, "");
     s.push_str("| CRLB |");
@@ -772,35 +779,13 @@ pub fn markdown(
         "\nError estimate / measured scatter (sigma_x, sigma_y against the noise part of the error):\n"
     );
     header(&mut s, "method");
-    for m in methods {
-        let _ = write!(s, "| {} |", m.name());
-        for &(a, snr) in &cols {
-            match find(m, a, snr) {
-                Some(c) => {
-                    let _ = write!(s, " {:.2} |", c.sigma_est_px / c.scatter_px);
-                }
-                None => s.push_str(" - |"),
-            }
-        }
-        s.push('\n');
-    }
+    rows(&mut s, &|c| format!("{:.2}", c.sigma_est_px / c.scatter_px));
     let _ = writeln!(
         s,
         "\nPull: RMS of error / own sigma per axis (sigma_x, sigma_y against the whole error, bias included; 1 when the reported sigmas mean what they say); `flagged` where the stars carry SIGMA_UNRELIABLE (then the pull of the unflagged rest, if any, in brackets):\n"
     );
     header(&mut s, "method");
-    for m in methods {
-        let _ = write!(s, "| {} |", m.name());
-        for &(a, snr) in &cols {
-            match find(m, a, snr) {
-                Some(c) => {
-                    let _ = write!(s, " {} |", pull_cell(c));
-                }
-                None => s.push_str(" - |"),
-            }
-        }
-        s.push('\n');
-    }
+    rows(&mut s, &|c| pull_cell(c));
     s
 }
 
