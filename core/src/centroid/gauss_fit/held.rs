@@ -147,23 +147,7 @@ fn normal(
 /// flux in the box.
 fn start(p: &Prepared<'_>, level_e: f32, start_box: u8) -> Option<Start> {
     let w = usize::from(p.width).max(1);
-    let (cc, cr) = p.centre();
-    let at = |i: usize| ((i % w) as u16, (i / w) as u16);
-    let dist2 = |i: usize| {
-        let (c, r) = at(i);
-        let (dc, dr) = (u32::from(c.abs_diff(cc)), u32::from(r.abs_diff(cr)));
-        dc * dc + dr * dr
-    };
-    let (mut best_v, mut best_i) = (i32::MIN, None);
-    for (i, e) in p.pixels.iter().enumerate() {
-        let b = e.to_bits();
-        if b > best_v {
-            (best_v, best_i) = (b, Some(i));
-        } else if b == best_v && best_i.is_none_or(|j| dist2(i) < dist2(j)) {
-            best_i = Some(i);
-        }
-    }
-    let peak = at(best_i?);
+    let peak = super::peak_clean(p)?;
     let (bx, clipped) = p.box_around(peak.0, peak.1, start_box);
     let (mut s0, mut sc, mut sr) = (0.0f32, 0.0f32, 0.0f32);
     let mut rf = f32::from(bx.row0);

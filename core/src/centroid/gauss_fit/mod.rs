@@ -185,3 +185,27 @@ impl Grid {
 fn step_usable(x: f32, y: f32, flux: f32, wmax: f32, hmax: f32) -> bool {
     (-0.5..=wmax).contains(&x) && (-0.5..=hmax).contains(&y) && flux > 0.0
 }
+
+/// The brightest pixel of a window without excluded pixels (ties to the one nearest the
+/// window's centre pixel, as [`Prepared::peak`]), by one walk of the pixel bits.
+#[inline(always)]
+fn peak_clean(p: &Prepared<'_>) -> Option<(u16, u16)> {
+    let w = usize::from(p.width).max(1);
+    let (cc, cr) = p.centre();
+    let at = |i: usize| ((i % w) as u16, (i / w) as u16);
+    let dist2 = |i: usize| {
+        let (c, r) = at(i);
+        let (dc, dr) = (u32::from(c.abs_diff(cc)), u32::from(r.abs_diff(cr)));
+        dc * dc + dr * dr
+    };
+    let (mut best_v, mut best_i) = (i32::MIN, None);
+    for (i, e) in p.pixels.iter().enumerate() {
+        let b = e.to_bits();
+        if b > best_v {
+            (best_v, best_i) = (b, Some(i));
+        } else if b == best_v && best_i.is_none_or(|j| dist2(i) < dist2(j)) {
+            best_i = Some(i);
+        }
+    }
+    best_i.map(at)
+}

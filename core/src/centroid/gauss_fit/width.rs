@@ -564,7 +564,11 @@ impl Ldl4 {
 /// the peak by one walk of the pixel bits and the box by row slices, as the held path's
 /// start; else [`Prepared::peak`] and the box's usable pixels.
 fn start<const CLEAN: bool>(p: &Prepared<'_>, level_e: f32, start_box: u8) -> Option<Start> {
-    let peak = if CLEAN { peak_clean(p)? } else { p.peak()? };
+    let peak = if CLEAN {
+        super::peak_clean(p)?
+    } else {
+        p.peak()?
+    };
     let (bx, clipped) = p.box_around(peak.0, peak.1, start_box);
     // Moments about the peak pixel, so the sums keep their precision.
     let (pc, pr) = (f32::from(peak.0), f32::from(peak.1));
@@ -617,29 +621,6 @@ fn start<const CLEAN: bool>(p: &Prepared<'_>, level_e: f32, start_box: u8) -> Op
         theta: (pc + mx, pr + my, s0, math::sqrt(var)),
         clipped,
     })
-}
-
-/// The brightest pixel of a window without excluded pixels (ties to the one nearest the
-/// window's centre pixel, as [`Prepared::peak`]), by one walk of the pixel bits.
-fn peak_clean(p: &Prepared<'_>) -> Option<(u16, u16)> {
-    let w = usize::from(p.width).max(1);
-    let (cc, cr) = p.centre();
-    let at = |i: usize| ((i % w) as u16, (i / w) as u16);
-    let dist2 = |i: usize| {
-        let (c, r) = at(i);
-        let (dc, dr) = (u32::from(c.abs_diff(cc)), u32::from(r.abs_diff(cr)));
-        dc * dc + dr * dr
-    };
-    let (mut best_v, mut best_i) = (i32::MIN, None);
-    for (i, e) in p.pixels.iter().enumerate() {
-        let b = e.to_bits();
-        if b > best_v {
-            (best_v, best_i) = (b, Some(i));
-        } else if b == best_v && best_i.is_none_or(|j| dist2(i) < dist2(j)) {
-            best_i = Some(i);
-        }
-    }
-    best_i.map(at)
 }
 
 /// [`start`]'s result: the peak pixel, `(x, y, N, s)` (`s` 0 when the moments gave no
