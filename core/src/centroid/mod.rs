@@ -62,7 +62,7 @@ pub use prepared::estimate_background;
 
 /// The f32 functions of the centroid methods (`centroid::math`: square root, exponential,
 /// `erfc`, the Gaussian's pixel fractions), reachable from outside the crate only for the
-/// host accuracy tests (`host-tests/tests/centroid_math.rs`, which compare them with f64):
+/// host accuracy tests (`host-tests/tests/centroids/centroid_math.rs`, which compare them with f64):
 /// not part of the API.
 #[doc(hidden)]
 pub mod test_only_math {

@@ -1,0 +1,11 @@
+//! The tracker and the SIL: the core's application through its host homes, its mode rules, safe states, the dark drift, the attitude stage and the demo.
+//!
+//! One module per subject, each with its own module docs; the shared f64 references and table
+//! fixtures come from `startrack-test-support`.
+
+mod dark_drift;
+mod demo;
+mod safe_states;
+mod sil_sky;
+mod tracker;
+mod tracker_rules;
