@@ -29,9 +29,9 @@ use startrack_core::table::CalibTable;
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::units::{Electrons, Kelvin};
 use startrack_core::window::{Rect, Window};
-use startrack_host::pixcorr::{CurveSpec, build_curve};
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator, Star};
+use startrack_sim::pixcorr::{CurveSpec, build_curve};
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator, Star};
 use std::hint::black_box;
 
 struct Frame {

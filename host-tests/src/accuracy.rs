@@ -4,7 +4,7 @@
 //! # The experiment
 //! For a PSF width `a` and an SNR (paper eq. 8 in a 5x5 box, background `bg_e` e-/px and read
 //! noise `read_e`): `trials` stars at true positions uniform over a pixel (both axes),
-//! pixel-integrated Gaussian means (paper eq. 3 and 5, [`crate::sim::psf`]), Poisson photon
+//! pixel-integrated Gaussian means (paper eq. 3 and 5, [`startrack_sim::sim::psf`]), Poisson photon
 //! noise on star plus background and Gaussian read noise (as the simulator draws them). Each
 //! method sees the same stars (one seed per `(a, SNR)`), in its own window centred on the
 //! star's pixel, with the background given (level and variance: the detector's estimate), and
@@ -27,8 +27,6 @@
 //! method of [`Method::all`] at 4 widths and 3 SNRs with 2000 trials, a few seconds of CPU in
 //! release (`time startrack accuracy` measures it).
 
-use crate::pixcorr::{CurveSpec, build_curve};
-use crate::sim::psf::{pixel_fraction, sigma_of_a};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson};
@@ -42,6 +40,8 @@ use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInpu
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
+use startrack_sim::pixcorr::{CurveSpec, build_curve};
+use startrack_sim::sim::psf::{pixel_fraction, sigma_of_a};
 use std::fmt::Write as _;
 
 /// A centroid method and its window.

@@ -22,9 +22,6 @@
 //! Monte Carlo cell `trials` x 2 centroids.
 
 use crate::accuracy::{Method, PreparedMethod, flux_for_snr};
-use crate::sim::effects::ChargeTraps;
-use crate::sim::psf::sigma_of_a;
-use crate::sim::{Effects, SensorParams, Simulator, Star};
 use fixed::types::{U0F16, U0F32};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -35,6 +32,9 @@ use startrack_core::geometry::{MAX_OUTPUTS, ReadoutGeometry};
 use startrack_core::table::{CtiCoeffs, CtiOutput};
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
+use startrack_sim::sim::effects::ChargeTraps;
+use startrack_sim::sim::psf::sigma_of_a;
+use startrack_sim::sim::{Effects, SensorParams, Simulator, Star};
 use std::fmt::Write as _;
 
 /// The trap law the docs and tests use: 5e-5 (parallel) and 3e-5 (serial) per transfer at

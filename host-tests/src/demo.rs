@@ -11,14 +11,14 @@
 
 use crate::cli::process::{HOST_CAPACITY, process_frame};
 use crate::home::frame_levels;
-use crate::sim::truth::TruthSections;
-use crate::sim::{SensorParams, Simulator, Star};
 use rand::{RngExt, SeedableRng};
 use startrack_core::calib::{FrameCalibration, FrameConditions, PixelFlags};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{StarFlags, StarRecord, TrackerConfig};
 use startrack_core::units::Electrons;
 use startrack_core::window::Rect;
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator, Star};
 
 /// A reported star within this distance of a simulated star is that star, px.
 pub const MATCH_PX: f64 = 2.0;
@@ -205,7 +205,7 @@ pub fn run_scene(seed: u64, scene: DemoScene) -> Result<DemoReport, String> {
         ..SensorParams::default()
     };
     let catalog_bytes = match scene {
-        DemoScene::Sky => crate::sky::scene::committed_catalog()?,
+        DemoScene::Sky => startrack_sim::sky::scene::committed_catalog()?,
         DemoScene::Random(_) => Vec::new(),
     };
     let sky = match scene {
@@ -213,8 +213,11 @@ pub fn run_scene(seed: u64, scene: DemoScene) -> Result<DemoReport, String> {
             let cat = startrack_core::catalog::Catalog::parse(&catalog_bytes)
                 .map_err(|e| format!("catalog: {e}"))?;
             let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x534b_5900);
-            let q = crate::sky::field::random_attitude(&mut r);
-            Some((cat, crate::sky::scene::SkyScene::ccd47_15deg(q, [0.0; 3])))
+            let q = startrack_sim::sky::field::random_attitude(&mut r);
+            Some((
+                cat,
+                startrack_sim::sky::scene::SkyScene::ccd47_15deg(q, [0.0; 3]),
+            ))
         }
         DemoScene::Random(_) => None,
     };

@@ -13,15 +13,15 @@
 //! The erase between `begin` and the chunks is run by [`FlashHome::service`] in the link
 //! phase between frames (the model erases at once; on the board it is its own task).
 
-use crate::flash_model::{CutMode, FileFlash, MockFlash, SECTOR_B};
 use crate::sil::{self, SilConfig};
-use crate::sim::SensorParams;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::{FlashTables, TableInfo, TableUpload, UploadRefusal, active_info};
 use startrack_core::store::{FlashStore, H743_BANK2, StoreError, TableKind};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::TableStore;
+use startrack_sim::flash_model::{CutMode, FileFlash, MockFlash, SECTOR_B};
+use startrack_sim::sim::SensorParams;
 use std::path::Path;
 
 /// Tile size of the SIL's tables in flash (`2^3` = 8 x 8 px maps; a per-pixel table of the
@@ -182,7 +182,7 @@ impl FlashHome {
 
     fn bring_up(&mut self, table: &[u8]) -> Result<TableInfo, UploadRefusal> {
         let len = u32::try_from(table.len()).map_err(|_| UploadRefusal::TooLong)?;
-        let crc = crate::link_home::CRC32.checksum(table);
+        let crc = startrack_sim::flash_model::CRC32.checksum(table);
         let mut up = FlashTables::new(&mut self.store, calibration_ok(self.geometry));
         up.begin(TABLE_KIND_CALIBRATION, len, crc)?;
         up.service_all().map_err(startrack_core::link::refusal_of)?;
@@ -192,7 +192,7 @@ impl FlashHome {
 }
 
 /// Capacity of the bank the SIL's flash models, bytes.
-const H743_BANK2_CAPACITY: usize = crate::flash_model::BANK_B;
+const H743_BANK2_CAPACITY: usize = startrack_sim::flash_model::BANK_B;
 
 impl TableUpload for FlashHome {
     fn begin(&mut self, kind: u8, total_len: u32, crc32: u32) -> Result<(), UploadRefusal> {

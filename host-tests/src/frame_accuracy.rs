@@ -43,9 +43,9 @@ use crate::cli::calib_models::{PsfModelArgs, run_psf_model};
 use crate::cli::process::{ProcessArgs, measure};
 use crate::cli::simulate::{SceneMix, SimFiles, SimulateArgs, params};
 use crate::home::write_csv;
-use crate::sim::Simulator;
-use crate::sim::psf::sigma_of_a;
 use startrack_core::tracker::{StarFlags, StarRecord};
+use startrack_sim::sim::Simulator;
+use startrack_sim::sim::psf::sigma_of_a;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 

@@ -8,7 +8,6 @@
 //! only the samples the tracker's request reads (over-scan and covered columns of each line
 //! read, and the windows' pixels), so a tracking frame costs its windows, not a frame.
 
-use crate::sim::Simulator;
 use startrack_core::calib::{
     CalibError, DarkScaleEstimator, FrameCalibration, LineLevels, PixelFlags,
 };
@@ -21,6 +20,7 @@ use startrack_core::tracker::{
 use startrack_core::units::Electrons;
 use startrack_core::units::Kelvin;
 use startrack_core::window::Rect;
+use startrack_sim::sim::Simulator;
 use std::convert::Infallible;
 
 /// Stars a frame the host's tracker keeps (the board: 32): room for any field, so that a

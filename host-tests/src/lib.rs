@@ -3,22 +3,15 @@
 
 pub mod accuracy;
 pub mod calib_frames;
-pub mod ccd_model;
 pub mod cli;
 pub mod cti;
 pub mod demo;
 pub mod figures;
-pub mod fits;
 pub mod flash_home;
-pub mod flash_model;
 pub mod frame_accuracy;
-pub mod ground;
 pub mod home;
 pub mod link_home;
 pub mod optics;
-pub mod pixcorr;
 pub mod psf_model;
 pub mod sil;
-pub mod sim;
-pub mod sky;
 pub mod tradeoff;

@@ -15,8 +15,6 @@
 
 use crate::home::{FrameClock, SimLines, block_on};
 use crate::sil::{self, SilConfig};
-use crate::sim::{SensorParams, Simulator, Star};
-use crate::sky::scene::committed_catalog;
 use rand::{RngExt, SeedableRng};
 use startrack_core::calib::{FrameCalibration, FrameConditions};
 use startrack_core::catalog::Catalog;
@@ -33,12 +31,12 @@ use startrack_core::tracker::{
 };
 use startrack_core::units::Electrons;
 use startrack_core::window::Rect;
+use startrack_sim::flash_model::CRC32;
+use startrack_sim::sim::{SensorParams, Simulator, Star};
+use startrack_sim::sky::scene::committed_catalog;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::time::{Duration, Instant};
-
-/// The CRC-32 of table uploads (CRC-32/ISO-HDLC, zlib's).
-pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Largest table the memory store takes, bytes (a per-pixel table of the CCD47-20 is ~3 MB;
 /// the board's flash slot is 128 KB).

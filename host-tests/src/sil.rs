@@ -10,7 +10,7 @@
 //! the host test `sil` pins it.
 //!
 //! With a sky scene ([`SilConfig::sky`]: the catalog's stars at a turning attitude,
-//! [`crate::sky::scene`]) each frame's star list also goes through the core's attitude stage
+//! [`startrack_sim::sky::scene`]) each frame's star list also goes through the core's attitude stage
 //! ([`startrack_core::solver`]: identification, tracking from the last frame's attitude, and
 //! the q-method), and the report holds each frame's attitude error against the truth
 //! ([`SilReport::attitude_summary`]).
@@ -20,10 +20,6 @@
 //! (`time startrack sil --frames N` for a few N measures both).
 
 use crate::home::{FrameClock, Recorder, SimLines, block_on};
-use crate::pixcorr::{CurveSpec, build_curves};
-use crate::sim::truth::TruthSections;
-use crate::sim::{SensorParams, Simulator, Star};
-use crate::sky::scene::{SkyScene, committed_catalog};
 use rand::{RngExt, SeedableRng};
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
@@ -35,6 +31,10 @@ use startrack_core::tracker::{
     Event, FixedTable, FixedTemperature, FrameSummary, Mode, Ports, StarRecord, Tracker,
     TrackerBuffers, TrackerConfig,
 };
+use startrack_sim::pixcorr::{CurveSpec, build_curves};
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator, Star};
+use startrack_sim::sky::scene::{SkyScene, committed_catalog};
 
 /// Stars a frame the SIL's tracker keeps: the board's capacity.
 pub const SIL_CAPACITY: usize = 32;

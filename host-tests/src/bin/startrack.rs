@@ -296,18 +296,18 @@ fn main() -> ExitCode {
             tile_log2,
             slot_image,
         } => {
-            let params = startrack_host::sim::SensorParams {
+            let params = startrack_sim::sim::SensorParams {
                 seed,
                 ..Default::default()
             };
-            let sim = startrack_host::sim::Simulator::new(params, Vec::new());
-            let sections = startrack_host::sim::truth::TruthSections::ALL;
+            let sim = startrack_sim::sim::Simulator::new(params, Vec::new());
+            let sections = startrack_sim::sim::truth::TruthSections::ALL;
             let written = sim
                 .truth_table_tiled(sections, tile_log2)
                 .map_err(|e| e.to_string())
                 .and_then(|t| {
                     if slot_image {
-                        startrack_host::flash_model::slot_image(
+                        startrack_sim::flash_model::slot_image(
                             startrack_core::store::TableKind::Calibration,
                             &t,
                         )

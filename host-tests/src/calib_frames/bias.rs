@@ -5,8 +5,8 @@
 //! build`'s own conversion ([`crate::cli::calib_build::column_bias_from_map`]).
 //! Cost: three running maps (sum, min, max) of the full readout; one pass per bias frame.
 
-use crate::fits::{MapF32, RawFrame};
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_sim::fits::{MapF32, RawFrame};
 
 /// From this many frames on, each element's extreme values are rejected.
 pub const MINMAX_CLIP_FRAMES: u32 = 5;

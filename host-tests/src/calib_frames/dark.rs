@@ -18,10 +18,10 @@
 //! one f32 map per dark temperature, whatever the number of frames. Cost per dark: a median of
 //! the over-scan and one sort of the covered pixels per line, one multiply per sample.
 
-use crate::fits::{MapF32, RawFrame};
 use startrack_core::calib::{DarkScaleEstimator, LineLevels};
 use startrack_core::geometry::{ReadoutGeometry, Segment};
 use startrack_core::table::CalibTable;
+use startrack_sim::fits::{MapF32, RawFrame};
 
 /// Reference temperature of the hot-pixel rates, K.
 pub const HOT_REFERENCE_K: f64 = 293.0;

@@ -24,9 +24,9 @@
 //! Cost: one pass over the extra lines and the edge columns of each flat, a median per
 //! element; nothing with more than a line held.
 
-use crate::fits::RawFrame;
-use crate::sim::effects::ChargeTraps;
 use startrack_core::geometry::{Output, ReadoutGeometry};
+use startrack_sim::fits::RawFrame;
+use startrack_sim::sim::effects::ChargeTraps;
 
 /// Edge elements measured after the last active row (column).
 pub const TAIL: usize = 4;

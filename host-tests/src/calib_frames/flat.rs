@@ -10,10 +10,10 @@
 //! Cost: one subtraction per active sample and a median of the over-scan per line.
 
 use super::dark::HotFit;
-use crate::fits::{MapF32, RawFrame};
 use startrack_core::calib::LineLevels;
 use startrack_core::geometry::{Output, ReadoutGeometry};
 use startrack_core::table::CalibTable;
+use startrack_sim::fits::{MapF32, RawFrame};
 
 /// Running sums of the flats.
 #[derive(Clone, Debug)]

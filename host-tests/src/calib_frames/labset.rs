@@ -1,5 +1,5 @@
 //! A simulated lab frame set: what a ground calibration of the CCD47-20 records, written as
-//! raw FITS frames with the standard keywords, from the simulator ([`crate::sim`]) so that
+//! raw FITS frames with the standard keywords, from the simulator ([`startrack_sim::sim`]) so that
 //! every product of [`super`] can be checked against the sensor's truth.
 //!
 //! The set ([`LabSet`]): bias frames (0 s), flat pairs at several exposures of a constant lamp
@@ -21,14 +21,14 @@
 //! well, output 1 at the full well (its ADC top is 103 ke-).
 //!
 //! Cost: one rendered raw sample per element of every frame (the basic sensor's cost, see
-//! [`crate::sim::render`]); the small set of the tests ([`LabSet::small`]) is 98 frames of
+//! [`startrack_sim::sim::render`]); the small set of the tests ([`LabSet::small`]) is 98 frames of
 //! 22 880 samples (78 and the 20 of the ladder), the CCD47-20 set ([`LabSet::ccd47_20`]) 98
 //! frames of 1.1 M.
 
-use crate::fits::{FitsError, RawFrame, write_raw_frame};
-use crate::sim::effects::{ChargeTraps, DarkLaw, HotPixels, TelegraphPixels};
-use crate::sim::{SensorParams, Simulator};
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_sim::fits::{FitsError, RawFrame, write_raw_frame};
+use startrack_sim::sim::effects::{ChargeTraps, DarkLaw, HotPixels, TelegraphPixels};
+use startrack_sim::sim::{SensorParams, Simulator};
 use std::path::{Path, PathBuf};
 
 /// The frames of a lab set and the sensor they are taken of.
@@ -145,7 +145,7 @@ impl LabSet {
             seed: self.seed,
             dark_mean_e: 0.0,
             nonlinearity_at_full_well: self.nonlinearity_at_full_well,
-            effects: crate::sim::Effects {
+            effects: startrack_sim::sim::Effects {
                 temperature_k: REFERENCE_K,
                 dark_law: Some(DarkLaw {
                     reference_k: REFERENCE_K,
@@ -270,7 +270,7 @@ impl LabSet {
     /// `column_bias.fits` (one line, ADU) and `defects.fits` (full readout, 1 for a hot or
     /// telegraph pixel). Cost: a few draws per element of the readout.
     pub fn write_truth(&self, dir: &Path) -> Result<Vec<PathBuf>, FitsError> {
-        use crate::fits::{MapF32, write_map};
+        use startrack_sim::fits::{MapF32, write_map};
         std::fs::create_dir_all(dir).map_err(|e| FitsError::Io {
             path: dir.to_path_buf(),
             msg: e.to_string(),

@@ -37,13 +37,13 @@ pub use read::{FrameInfo, FrameKind, FramesError, Inventory};
 
 use crate::cli::CliError;
 use crate::cli::calib_build::{column_bias_from_map, encode, flat_from_map};
-use crate::fits::MapF32;
 use dark::HotFit;
 use fixed::types::U8F8;
 use ptc::PairPoint;
 use startrack_core::geometry::{Output, ReadoutGeometry, Segment};
 use startrack_core::table::{CalibTable, DarkLaw, HotPixel, HotPolicy, MapSpec, TableSpec};
 use startrack_core::units::{ColumnBiasAdu, DarkRel, ERatePerS, GainEPerAdu, Kelvin};
+use startrack_sim::fits::MapF32;
 use std::path::PathBuf;
 
 /// Share of a flat's active pixels at the ADC's top above which the flat is saturated: it
@@ -479,7 +479,7 @@ pub fn calibrate(
 }
 
 /// Share of a frame's active pixels at 65535 ADU.
-fn saturated_share(f: &crate::fits::RawFrame, g: &ReadoutGeometry) -> f64 {
+fn saturated_share(f: &startrack_sim::fits::RawFrame, g: &ReadoutGeometry) -> f64 {
     let (mut top, mut n) = (0usize, 0usize);
     for line in f.lines().take(usize::from(g.active_rows)) {
         for (c, v) in line.iter().enumerate() {
@@ -557,7 +557,7 @@ impl Products {
         // for a pixel without a defect, and a tile is not pulled by its hot pixels.
         let hot_at: std::collections::HashSet<(usize, usize)> =
             self.hot.iter().map(|h| (h.col, h.row)).collect();
-        let dark: Vec<DarkRel> = crate::sim::truth::tile_means(&g, tile_log2, &|x, y| {
+        let dark: Vec<DarkRel> = startrack_sim::sim::truth::tile_means(&g, tile_log2, &|x, y| {
             let (col, line) = (g.raw_col_of_x(x), g.raw_line_of_y(y));
             if hot_at.contains(&(col, line)) {
                 return 1.0;

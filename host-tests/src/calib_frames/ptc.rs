@@ -32,8 +32,8 @@
 //! output (0.06 % for the CCD47-20's 524 288 with 10 pairs). Cost: two passes over the pair's
 //! active samples (mean, then variance).
 
-use crate::fits::RawFrame;
 use startrack_core::geometry::{Output, ReadoutGeometry, Segment};
+use startrack_sim::fits::RawFrame;
 
 /// Pairs whose mean is above this fraction of the saturation signal (of the ADC's range above
 /// bias without one) are left out of the gain fit, the flat field and EPER (the linear

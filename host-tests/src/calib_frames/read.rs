@@ -5,9 +5,9 @@
 //! illumination). Cost: opening each file once for its header; the samples are read later,
 //! once per file ([`read_frame`]).
 
-use crate::fits::{FitsError, RawFrame, read_raw_frame};
 use fitsio::hdu::HduInfo;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_sim::fits::{FitsError, RawFrame, read_raw_frame};
 use std::fmt;
 use std::path::{Path, PathBuf};
 

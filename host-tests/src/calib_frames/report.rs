@@ -16,7 +16,7 @@ use super::Products;
 use crate::cli::{CliError, write_file};
 use crate::figures::Written;
 use crate::figures::plot::{Chart, Series, lines};
-use crate::fits::write_map;
+use startrack_sim::fits::write_map;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 

@@ -15,8 +15,8 @@
 //! series' length; cost: a few operations per sample.
 
 use super::ptc::overscan_mean;
-use crate::fits::RawFrame;
 use startrack_core::geometry::{ReadoutGeometry, Segment};
+use startrack_sim::fits::RawFrame;
 
 /// Fewest frames a series needs for telegraph detection.
 pub const MIN_SERIES_FRAMES: u32 = 10;

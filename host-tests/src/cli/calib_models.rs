@@ -21,8 +21,8 @@ use crate::cti::{
     CtiCoeffsJson, CtiExperiment, DEFAULT_TRAPS, McCell, bias_csv, mc_csv, summarize,
 };
 use crate::psf_model::{fit, read_stars_csv};
-use crate::sim::effects::ChargeTraps;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_sim::sim::effects::ChargeTraps;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 

@@ -8,13 +8,13 @@
 //! `--prior-error-deg` a `prior.csv` of the same form for tracking.
 
 use super::{CliError, write_file};
-use crate::sky::build::{BuildSpec, Built, build};
-use crate::sky::field::{self, FieldSpec};
-use crate::sky::{default_list_path, read_list};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
+use startrack_sim::sky::build::{BuildSpec, Built, build};
+use startrack_sim::sky::field::{self, FieldSpec};
+use startrack_sim::sky::{default_list_path, read_list};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -96,7 +96,8 @@ pub struct CatalogCaseArgs {
 
 /// Writes a case rendered from the repo's catalog (15 degree field, CCD47-20).
 pub fn run_case(args: &CatalogCaseArgs) -> Result<(), CliError> {
-    let built = crate::sky::build::default_catalog().map_err(|e| CliError::Usage(e.to_string()))?;
+    let built =
+        startrack_sim::sky::build::default_catalog().map_err(|e| CliError::Usage(e.to_string()))?;
     let cat = Catalog::parse(&built.bytes).map_err(|e| CliError::Usage(e.to_string()))?;
     let mut spec = FieldSpec::ccd47_15deg(args.sigma_px);
     spec.false_stars = args.false_stars;

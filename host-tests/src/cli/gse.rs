@@ -1,5 +1,5 @@
 //! `startrack gse --port P COMMAND`: the ground tool, driving a tracker's link (the SIL's
-//! `startrack sil --port P`) with [`crate::ground::Ground`].
+//! `startrack sil --port P`) with [`startrack_ground::Ground`].
 //!
 //! - `status`: housekeeping as JSON on standard output;
 //! - `ping`;
@@ -16,12 +16,12 @@
 //!
 //! Errors are one line on standard error; the exit code says which kind ([`GseError::exit_code`]).
 
-use crate::fits::{MapF32, write_map};
-use crate::ground::{Ground, GroundError};
 use crate::home::{CSV_HEADER, csv_row};
 use startrack_core::link::{AttitudeMissing, AttitudeReport, Housekeeping, WindowKind};
 use startrack_core::solver::SolveMode;
 use startrack_core::tracker::Mode;
+use startrack_ground::{Ground, GroundError};
+use startrack_sim::fits::{MapF32, write_map};
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;

@@ -18,8 +18,8 @@ pub mod simulate;
 pub mod solve;
 pub mod tradeoff;
 
-use crate::fits::FitsError;
 use startrack_core::table::{TableError, WriteError};
+use startrack_sim::fits::FitsError;
 use std::fmt;
 use std::path::{Path, PathBuf};
 

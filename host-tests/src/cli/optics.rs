@@ -155,7 +155,7 @@ pub fn read_camera_model(path: &Path) -> Result<Camera, CliError> {
 fn catalog_bytes(path: Option<&Path>) -> Result<Vec<u8>, CliError> {
     match path {
         Some(p) => read_file(p),
-        None => Ok(crate::sky::build::default_catalog()
+        None => Ok(startrack_sim::sky::build::default_catalog()
             .map_err(|e| CliError::Usage(e.to_string()))?
             .bytes),
     }

@@ -18,7 +18,6 @@
 //! `PSFA` keyword (px, written by `startrack simulate`), else the flight configuration's.
 
 use super::{CliError, read_file};
-use crate::fits::{read_keys, read_raw_frame};
 use crate::home::{FrameLines, acquire_once, write_csv};
 use clap::builder::TypedValueParser as _;
 use startrack_core::table::CalibTable;
@@ -27,6 +26,7 @@ use startrack_core::tracker::{
     CentroidMethod, FrameSummary, StarRecord, TrackerConfig, select_curve,
 };
 use startrack_core::units::Kelvin;
+use startrack_sim::fits::{read_keys, read_raw_frame};
 use std::path::PathBuf;
 
 pub use crate::home::HOST_CAPACITY;

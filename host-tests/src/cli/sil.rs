@@ -97,12 +97,12 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
     let sky = args.sky.then(|| {
         use rand::SeedableRng;
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed ^ 0x534b_5900);
-        let q0 = crate::sky::field::random_attitude(&mut rng);
-        let f = crate::sky::field::FieldSpec::ccd47_15deg(0.0)
+        let q0 = startrack_sim::sky::field::random_attitude(&mut rng);
+        let f = startrack_sim::sky::field::FieldSpec::ccd47_15deg(0.0)
             .camera
             .focal_length_px;
         // A turn about +y moves the field along +x, about +x along -y.
-        crate::sky::scene::SkyScene::ccd47_15deg(q0, [-dy / f, dx / f, 0.0])
+        startrack_sim::sky::scene::SkyScene::ccd47_15deg(q0, [-dy / f, dx / f, 0.0])
     });
     Ok(SilConfig {
         frames: args.frames,

@@ -27,12 +27,12 @@
 use super::{CliError, write_file};
 use crate::accuracy::flux_for_snr;
 use crate::demo::{render_frame, star_field};
-use crate::fits::{MapF32, RawFrame, write_map, write_raw_frame};
-use crate::sim::effects::HotPixels;
-use crate::sim::{SensorParams, Simulator};
 use rand::{RngExt as _, SeedableRng as _};
 use startrack_core::geometry::Segment;
 use startrack_core::window::Rect;
+use startrack_sim::fits::{MapF32, RawFrame, write_map, write_raw_frame};
+use startrack_sim::sim::effects::HotPixels;
+use startrack_sim::sim::{SensorParams, Simulator};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -189,7 +189,7 @@ fn mix_stars(
     mix: &SceneMix,
     seed: u64,
     p: &SensorParams,
-    stars: &mut [crate::sim::Star],
+    stars: &mut [startrack_sim::sim::Star],
 ) -> Result<(), CliError> {
     if let Some(a) = mix
         .psf_a_list

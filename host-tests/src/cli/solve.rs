@@ -144,7 +144,7 @@ pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
     let bytes = match &args.catalog {
         Some(p) => read_file(p)?,
         None => {
-            crate::sky::build::default_catalog()
+            startrack_sim::sky::build::default_catalog()
                 .map_err(|e| CliError::Usage(e.to_string()))?
                 .bytes
         }

@@ -21,7 +21,7 @@
 //! - `perimeter`: the paper's processing: the table has no dark map, so only a uniform dark
 //!   comes off and the pattern stays in the pixels.
 //! - `precalc`: the dark pre-calculation: the table carries a relative dark map measured from
-//!   [`Fig5Params::dark_frames`] simulated dark frames ([`crate::sim::measured`]), the core
+//!   [`Fig5Params::dark_frames`] simulated dark frames ([`startrack_sim::sim::measured`]), the core
 //!   subtracts `map x dark scale` per pixel, and the background is then known rather than
 //!   measured: level 0 with the variance of dark shot noise, read noise and the map's own
 //!   noise ([`Background::Given`]). The dark scale comes from the covered columns of
@@ -37,7 +37,6 @@
 //! the measured maps cost `dark_frames x 128^2` samples per DSNU value.
 
 use super::{Effort, FigureError, FigureFiles, Written, plot};
-use crate::sim::{SensorParams, Simulator, Star};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::{RngExt, SeedableRng};
 use startrack_core::calib::{
@@ -48,6 +47,7 @@ use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::table::CalibTable;
 use startrack_core::units::{Electrons, Kelvin};
 use startrack_core::window::{Rect, Window};
+use startrack_sim::sim::{SensorParams, Simulator, Star};
 use std::path::Path;
 
 /// Parameters of the experiment.
@@ -167,10 +167,10 @@ pub fn signal_for_snr(snr0: f64, a_px: f64) -> f64 {
     let n2 = f64::from(BOX_PX) * f64::from(BOX_PX);
     let var = DARK_MEAN_E + READ_NOISE_E * READ_NOISE_E;
     let s_box = snr0 * snr0 / 2.0 + (snr0.powi(4) / 4.0 + snr0 * snr0 * n2 * var).sqrt();
-    let s = crate::sim::psf::sigma_of_a(a_px);
+    let s = startrack_sim::sim::psf::sigma_of_a(a_px);
     let h = f64::from(BOX_PX / 2);
     let f1: f64 = (-(h as i32)..=h as i32)
-        .map(|i| crate::sim::psf::pixel_fraction(f64::from(i), 0.0, s))
+        .map(|i| startrack_sim::sim::psf::pixel_fraction(f64::from(i), 0.0, s))
         .sum();
     s_box / (f1 * f1)
 }

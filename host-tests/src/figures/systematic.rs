@@ -8,11 +8,11 @@
 //! (positions near x = 100 px, where an f32 step is 7.6e-6 px) leaves up to ~1e-5 px, the
 //! tolerance `figures_pixelisation` checks every shift to against an exact f64 computation.
 
-use crate::sim::psf::{pixel_fraction, sigma_of_a};
 use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
+use startrack_sim::sim::psf::{pixel_fraction, sigma_of_a};
 
 /// Total signal of the rendered star, e-.
 pub const SIGNAL_E: f64 = 1.0e6;

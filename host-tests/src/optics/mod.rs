@@ -23,13 +23,13 @@
 //! model's error in the image, which is what a star's direction depends on, is measured
 //! against the truth in simulations with [`model_error`] (best rotation removed).
 
-use crate::sky::field::{self, FieldSpec, FieldStar};
 use nalgebra::{DMatrix, DVector};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use startrack_core::attitude::{self, Camera, Observation, Quat};
 use startrack_core::catalog::Catalog;
 use startrack_core::ident::{self, IdentConfig, Measured};
+use startrack_sim::sky::field::{self, FieldSpec, FieldStar};
 
 /// Camera parameters the fit estimates, in this order in [`Fit::sigma`].
 pub const PARAM_NAMES: [&str; 8] = [

@@ -37,7 +37,6 @@
 //! runs) and is the one column of the outputs that is not deterministic.
 
 use crate::accuracy::{Method, PreparedMethod, flux_for_snr};
-use crate::sim::psf::{pixel_fraction, sigma_of_a};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson, Uniform};
@@ -45,6 +44,7 @@ use startrack_core::centroid::CentroidInput;
 use startrack_core::centroid::cog::CogPower;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
+use startrack_sim::sim::psf::{pixel_fraction, sigma_of_a};
 use std::collections::BTreeMap;
 use std::time::Instant;
 

@@ -50,7 +50,6 @@
 //! startrack tradeoff --out DIR` measures it).
 
 use crate::accuracy::{Method, PreparedMethod, crlb_x_px, flux_for_snr};
-use crate::sim::psf::{pixel_fraction, sigma_of_a};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson, Uniform};
@@ -58,6 +57,7 @@ use startrack_core::calib::PixelFlags;
 use startrack_core::centroid::{CentroidFlags, CentroidInput};
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
+use startrack_sim::sim::psf::{pixel_fraction, sigma_of_a};
 
 /// A cell fails when the systematic error exceeds this, px.
 pub const BIAS_LIMIT_PX: f64 = 0.05;

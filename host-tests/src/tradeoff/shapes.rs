@@ -28,20 +28,20 @@
 //!   converged (left out of the means).
 //!
 //! Seeded and deterministic. Cost: per star one canvas render of up to
-//! [`crate::sim::effects::RING_PARTS`] separable Gaussian parts, shared by every method, and
+//! [`startrack_sim::sim::effects::RING_PARTS`] separable Gaussian parts, shared by every method, and
 //! one run of each method; `time startrack tradeoff --psf-shapes --out DIR` measures it.
 
 use super::failures::{BACKGROUND_E, READ_NOISE_E};
 use crate::accuracy::{Method, PreparedMethod, flux_for_snr};
 use crate::figures::{FigureError, Written, csv::write_csv};
-use crate::sim::effects::PsfShape;
-use crate::sim::psf::pixel_fraction;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson, Uniform};
 use startrack_core::centroid::{Centroid, CentroidFlags, CentroidInput};
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
+use startrack_sim::sim::effects::PsfShape;
+use startrack_sim::sim::psf::pixel_fraction;
 use std::path::Path;
 
 /// Core width of every shape: each Gaussian part's 80 % radius, px.
@@ -143,7 +143,7 @@ pub struct ShapeCell {
 
 /// The mean electrons of `shape`'s star of `flux_e` centred at (`x`, `y`) on the canvas, on
 /// the background: the simulator's sum of pixel-integrated Gaussian parts
-/// ([`crate::sim::Simulator::star_e`] computes the same pixels), each part separable into a
+/// ([`startrack_sim::sim::Simulator::star_e`] computes the same pixels), each part separable into a
 /// row and a column profile.
 pub fn render(shape: &PsfShape, x: f64, y: f64, flux_e: f64) -> Vec<f64> {
     let n = usize::from(CANVAS);

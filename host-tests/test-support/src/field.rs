@@ -2,8 +2,8 @@
 //! sensor's true calibration table.
 
 use startrack_host::demo::star_field;
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator};
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator};
 
 /// The sensor, a seeded field of `stars` stars and its true table (encoded).
 pub fn field(seed: u64, stars: usize) -> (Simulator, Vec<u8>) {

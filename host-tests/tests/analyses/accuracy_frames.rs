@@ -225,7 +225,7 @@ fn simulate_draws_widths_snrs_and_hot_pixels_as_asked() {
     assert!((60..=140).contains(&narrow), "{narrow} of 200 at a 0.6");
     assert!((72..=128).contains(&faint), "{faint} of 200 below SNR 44.7");
     let hot = std::fs::read_to_string(&files.hot).unwrap();
-    let sim = startrack_host::sim::Simulator::new(
+    let sim = startrack_sim::sim::Simulator::new(
         startrack_host::cli::simulate::params(&args).unwrap(),
         Vec::new(),
     );

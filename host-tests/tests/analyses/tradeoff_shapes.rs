@@ -10,12 +10,12 @@
 
 use startrack_core::centroid::cog::CogPower;
 use startrack_host::accuracy::Method;
-use startrack_host::sim::effects::PsfShape;
-use startrack_host::sim::{Effects, SensorParams, Simulator, Star};
 use startrack_host::tradeoff::failures::BACKGROUND_E;
 use startrack_host::tradeoff::shapes::{
     CANVAS, ShapeCell, ShapeSpec, flux_e, render, run_shape, shapes,
 };
+use startrack_sim::sim::effects::PsfShape;
+use startrack_sim::sim::{Effects, SensorParams, Simulator, Star};
 
 const COG1_7X7: Method = Method::Cog {
     power: CogPower::One,

@@ -9,7 +9,7 @@
 use startrack_core::geometry::{ReadoutGeometry, Segment};
 use startrack_host::calib_frames::labset::LabSet;
 use startrack_host::calib_frames::{Products, calibrate};
-use startrack_host::sim::{Simulator, Star};
+use startrack_sim::sim::{Simulator, Star};
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
@@ -96,7 +96,7 @@ fn gain_and_read_noise_per_output_match_the_truth() {
 ///   deviation weighs most: 0.066 pp on the small set (5 000 e-, 8 192 pixels).
 fn assert_full_well_and_linearity(set: &LabSet, p: &Products) {
     use startrack_host::calib_frames::ptc::{LINEARITY_RANGE, fit_line};
-    use startrack_host::sim::SaturationLimit;
+    use startrack_sim::sim::SaturationLimit;
     let sim = set.sensor();
     let g = set.geometry;
     let n = pixels_per_output(&g);
@@ -582,14 +582,14 @@ fn star_frames_with_the_built_table_match_the_true_table() {
     let truth = r
         .set
         .sensor()
-        .truth_table(startrack_host::sim::truth::TruthSections::ALL)
+        .truth_table(startrack_sim::sim::truth::TruthSections::ALL)
         .unwrap();
     let (rms_built, n_built) = centroid_rms_px(r, &built, 12);
     let (rms_true, n_true) = centroid_rms_px(r, &truth, 12);
     let bare = r
         .set
         .sensor()
-        .truth_table(startrack_host::sim::truth::TruthSections::NONE)
+        .truth_table(startrack_sim::sim::truth::TruthSections::NONE)
         .unwrap();
     let (rms_bare, _) = centroid_rms_px(r, &bare, 12);
     println!("centroid RMS error with gains and over-scan only: {rms_bare:.5} px");

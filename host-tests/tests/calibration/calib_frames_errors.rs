@@ -6,7 +6,7 @@ use startrack_core::geometry::ReadoutGeometry;
 use startrack_host::calib_frames::labset::{LabSet, write_string_keys};
 use startrack_host::calib_frames::{FramesError, calibrate};
 use startrack_host::cli::calib_frames::{CalibFramesArgs, Sensor, run};
-use startrack_host::fits::{RawFrame, write_raw_frame};
+use startrack_sim::fits::{RawFrame, write_raw_frame};
 use std::path::{Path, PathBuf};
 
 /// 2 bias, 3 flat pairs, 2 darks at two temperatures: the least `calib frames` accepts.

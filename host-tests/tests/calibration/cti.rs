@@ -12,8 +12,8 @@ use startrack_test_support::field as common_field;
 
 use startrack_host::cli::calib_models::{CTI_SNRS, CalibCtiArgs, cti_trials, measure_cti};
 use startrack_host::cti::{CtiExperiment, DEFAULT_TRAPS, McCell, summarize};
-use startrack_host::sim::effects::ChargeTraps;
-use startrack_host::sim::{Effects, SensorParams, Simulator, Star};
+use startrack_sim::sim::effects::ChargeTraps;
+use startrack_sim::sim::{Effects, SensorParams, Simulator, Star};
 
 fn sim(traps: Option<ChargeTraps>, star: Star) -> Simulator {
     Simulator::new(

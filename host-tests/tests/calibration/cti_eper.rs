@@ -10,8 +10,8 @@ use startrack_host::calib_frames::eper::{edge_response, fit};
 use startrack_host::calib_frames::labset::LabSet;
 use startrack_host::cli::calib_models::CTI_FIT_FLUXES_E;
 use startrack_host::cti::CtiExperiment;
-use startrack_host::fits::RawFrame;
-use startrack_host::sim::effects::ChargeTraps;
+use startrack_sim::fits::RawFrame;
+use startrack_sim::sim::effects::ChargeTraps;
 
 /// The trap law of the test sensor: strong enough to be seen over 128 transfers.
 const TRUTH: ChargeTraps = ChargeTraps {

@@ -14,13 +14,13 @@ use startrack_core::table::{AmendError, CalibTable, HotPolicy};
 use startrack_core::tracker::{
     FixedTemperature, Mode, Ports, TableStore, Tracker, TrackerBuffers, TrackerConfig,
 };
+use startrack_ground::{decode_tm, frame_telecommand};
 use startrack_host::flash_home::{FLASH_TILE_LOG2, FlashHome};
-use startrack_host::ground::{decode_tm, frame_telecommand};
 use startrack_host::home::{FrameClock, SimLines, block_on};
 use startrack_host::sil::stars_at;
-use startrack_host::sim::effects::{Effects, HotPixels};
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator, Star};
+use startrack_sim::sim::effects::{Effects, HotPixels};
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator, Star};
 use std::collections::HashSet;
 use std::path::PathBuf;
 

@@ -329,9 +329,9 @@ fn sil_unlisted_hot_pixels_are_confirmed_and_excluded() {
     };
     use startrack_host::home::{FrameClock, Recorder, SimLines, block_on};
     use startrack_host::sil::{SilConfig, scene, stars_at};
-    use startrack_host::sim::effects::{Effects, HotPixels};
-    use startrack_host::sim::truth::TruthSections;
-    use startrack_host::sim::{SensorParams, Simulator};
+    use startrack_sim::sim::effects::{Effects, HotPixels};
+    use startrack_sim::sim::truth::TruthSections;
+    use startrack_sim::sim::{SensorParams, Simulator};
 
     let config = SilConfig {
         frames: 80,

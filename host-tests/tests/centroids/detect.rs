@@ -9,8 +9,8 @@ use startrack_core::calib::{FrameCalibration, FrameConditions, PixelFlags};
 use startrack_core::detect::{DetectConfig, DetectError, DetectionFlags, LineDetector};
 use startrack_core::table::CalibTable;
 use startrack_core::units::{Electrons, Kelvin};
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator, Star};
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator, Star};
 
 const W: u16 = 256;
 const H: u16 = 128;

@@ -1,5 +1,5 @@
 //! The pixel-phase correction of the centre of gravity, end to end: curves built by
-//! `startrack_host::pixcorr` (f64, `libm::erf`), applied by the core
+//! `startrack_sim::pixcorr` (f64, `libm::erf`), applied by the core
 //! (`startrack_core::centroid::pixcorr`, f32) to the core's CoG of stars rendered by this
 //! test's own f64 pixel-integrated Gaussian (`common/psf.rs`, its own erf), against the true
 //! positions.
@@ -15,7 +15,7 @@ use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground, PixCorrError, PixCorrSet};
 use startrack_core::window::Window;
-use startrack_host::pixcorr::{BuildError, CurveSpec, build_curve, measured_phase};
+use startrack_sim::pixcorr::{BuildError, CurveSpec, build_curve, measured_phase};
 
 const WIDTHS_A: [f64; 8] = [0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0];
 /// The required bound on the corrected CoG's systematic error, px RMS.
@@ -271,7 +271,7 @@ fn apply_never_produces_nan_and_keeps_degenerate() {
 #[test]
 fn a_table_with_curves_from_the_host_builder() {
     use startrack_core::table::CalibTable;
-    use startrack_host::pixcorr::{build_curves, write_table_with_curves};
+    use startrack_sim::pixcorr::{build_curves, write_table_with_curves};
     let specs: Vec<CurveSpec> = [0.75, 1.5, 3.0]
         .iter()
         .map(|&a_px| CurveSpec {

@@ -9,8 +9,8 @@ use startrack_core::calib::{FrameCalibration, FrameConditions, LineLevels, Pixel
 use startrack_core::detect::{DetectConfig, LineDetector, ScanDetector};
 use startrack_core::table::CalibTable;
 use startrack_core::units::{Electrons, Kelvin};
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator};
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator};
 
 struct Frame {
     table: Vec<u8>,
@@ -215,7 +215,7 @@ fn scan_noise_candidates_no_more_than_with_every_row_background() {
         }
         reference.finish();
         scan.finish();
-        let dist = |d: &startrack_core::detect::Detection, s: &startrack_host::sim::Star| {
+        let dist = |d: &startrack_core::detect::Detection, s: &startrack_sim::sim::Star| {
             (f64::from(d.x_px) - s.x_px).hypot(f64::from(d.y_px) - s.y_px)
         };
         let noise = |c: &[startrack_core::detect::Detection]| {

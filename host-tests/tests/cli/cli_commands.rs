@@ -10,10 +10,10 @@ use startrack_core::tracker::CentroidMethod;
 use startrack_host::cli::calib_build::{CalibBuildArgs, build};
 use startrack_host::cli::process::{ProcessArgs, measure};
 use startrack_host::cli::simulate::{SimFiles, SimulateArgs};
-use startrack_host::fits::{MapF32, RawFrame, write_map, write_raw_frame};
 use startrack_host::home::CSV_HEADER;
-use startrack_host::sim::Simulator;
-use startrack_host::sim::truth::TruthSections;
+use startrack_sim::fits::{MapF32, RawFrame, write_map, write_raw_frame};
+use startrack_sim::sim::Simulator;
+use startrack_sim::sim::truth::TruthSections;
 use std::path::{Path, PathBuf};
 
 const SEED: u64 = 5;
@@ -501,8 +501,8 @@ fn measured_maps_carry_the_noise_of_n_frames_and_still_calibrate() {
     let g = sim.params.geometry;
     let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
     let x0 = g.first_active_col();
-    let dark = startrack_host::fits::read_map(&files.dark, &[]).unwrap();
-    let flat = startrack_host::fits::read_map(&files.flat, &[]).unwrap();
+    let dark = startrack_sim::fits::read_map(&files.dark, &[]).unwrap();
+    let flat = startrack_sim::fits::read_map(&files.flat, &[]).unwrap();
     let norm = sim.covered_dark_mean();
     // Relative dark: the error of pixel (x, y) is its dark shot noise and read noise over N
     // frames, relative to the covered mean: sqrt(d + r^2) / (mean sqrt N), d = rel * mean.

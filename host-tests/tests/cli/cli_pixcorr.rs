@@ -188,7 +188,7 @@ fn calib_build_adds_the_curves_and_reports_them() {
     );
     assert!(fw.is_some());
     // The frame carries the width for `process`.
-    let keys = startrack_host::fits::read_keys(&s.files.frame, &["PSFA"]).unwrap();
+    let keys = startrack_sim::fits::read_keys(&s.files.frame, &["PSFA"]).unwrap();
     assert_eq!(keys, vec![("PSFA".to_string(), A_PX)]);
 }
 

@@ -6,8 +6,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use startrack_core::attitude::{self, AttitudeError, Camera, Observation, Quat};
 use startrack_core::catalog::Catalog;
-use startrack_host::sky::build::default_catalog;
-use startrack_host::sky::field::{self, FieldSpec};
+use startrack_sim::sky::build::default_catalog;
+use startrack_sim::sky::field::{self, FieldSpec};
 
 fn camera() -> Camera {
     FieldSpec::ccd47_15deg(0.0).camera

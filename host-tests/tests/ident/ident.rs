@@ -8,8 +8,8 @@ use rand_chacha::ChaCha8Rng;
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
 use startrack_core::ident::{self, IdentConfig, IdentError, Solution};
-use startrack_host::sky::build::default_catalog;
-use startrack_host::sky::field::{self, FieldSpec, FieldStar};
+use startrack_sim::sky::build::default_catalog;
+use startrack_sim::sky::field::{self, FieldSpec, FieldStar};
 use std::sync::OnceLock;
 
 fn catalog_bytes() -> &'static [u8] {

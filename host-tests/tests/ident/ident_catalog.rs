@@ -3,8 +3,8 @@
 
 use proptest::prelude::*;
 use startrack_core::catalog::{Catalog, CatalogError};
-use startrack_host::sky::build::{BuildSpec, build};
-use startrack_host::sky::{default_list_path, read_list};
+use startrack_sim::sky::build::{BuildSpec, build};
+use startrack_sim::sky::{default_list_path, read_list};
 use std::sync::OnceLock;
 
 /// A small catalog (Hp <= 4, about 500 stars) so each case parses in microseconds.
@@ -105,7 +105,7 @@ proptest! {
 fn committed_catalog_is_the_build_of_the_committed_list() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/catalog-15deg.bin");
     let committed = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let built = startrack_host::sky::build::default_catalog()
+    let built = startrack_sim::sky::build::default_catalog()
         .unwrap_or_else(|e| panic!("{e}"))
         .bytes;
     assert!(

@@ -11,8 +11,8 @@ use rand_chacha::ChaCha8Rng;
 use startrack_core::attitude::{Camera, angle_between};
 use startrack_core::catalog::Catalog;
 use startrack_core::ident::{self, IdentConfig};
-use startrack_host::sky::build::default_catalog;
-use startrack_host::sky::field::{self, FieldSpec};
+use startrack_sim::sky::build::default_catalog;
+use startrack_sim::sky::field::{self, FieldSpec};
 
 /// The simulated optics of `startrack optics case` (lateral colour 2.5e-4 per mag).
 fn optics() -> Camera {

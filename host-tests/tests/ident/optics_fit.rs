@@ -17,7 +17,7 @@
 
 use startrack_core::catalog::Catalog;
 use startrack_host::optics::{self, FitOptions, PARAM_NAMES};
-use startrack_host::sky::build::default_catalog;
+use startrack_sim::sky::build::default_catalog;
 
 /// Frames a fit uses.
 const FRAMES: usize = 120;

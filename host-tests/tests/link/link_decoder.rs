@@ -10,7 +10,7 @@ use startrack_core::link::protocol::{self as p, MessageType};
 use startrack_core::link::telemetry::Reader;
 use startrack_core::link::{LinkService, NoWindows, Targets};
 use startrack_core::tracker::{Tracker, TrackerBuffers, TrackerConfig};
-use startrack_host::ground::{Tm, decode_tm, frame_telecommand};
+use startrack_ground::{Tm, decode_tm, frame_telecommand};
 use startrack_host::link_home::MemoryTables;
 
 /// Runs `bytes` through a fresh link bound to a fresh tracker; returns the link and the

@@ -7,10 +7,10 @@ use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::{FlashTables, TableUpload, UploadRefusal, refusal_of};
 use startrack_core::store::{FlashStore, H743_BANK2, StoreError, TableKind};
 use startrack_core::table::CalibTable;
-use startrack_host::flash_model::{BANK_B, MockFlash};
-use startrack_host::link_home::CRC32;
 use startrack_host::sil::SilConfig;
-use startrack_host::sim::SensorParams;
+use startrack_sim::flash_model::CRC32;
+use startrack_sim::flash_model::{BANK_B, MockFlash};
+use startrack_sim::sim::SensorParams;
 
 /// The calibration check the SIL uses: the core parses the table where it lies.
 fn parses(f: &mut MockFlash, at: u32, len: u32) -> bool {

@@ -11,7 +11,7 @@ use startrack_core::tracker::{
     Event, FrameSummary, Mode, ModeReason, StarFlags, StarRecord, TelemetrySink, Tracker,
     TrackerBuffers, TrackerConfig,
 };
-use startrack_host::ground::{decode_tm, frame_telecommand};
+use startrack_ground::{decode_tm, frame_telecommand};
 use startrack_host::link_home::MemoryTables;
 use std::process::Command;
 

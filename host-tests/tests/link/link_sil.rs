@@ -4,12 +4,12 @@
 
 use startrack_core::link::WindowKind;
 use startrack_core::tracker::Mode;
+use startrack_ground::{Ground, GroundError};
 use startrack_host::cli::gse::{self, GseArgs, GseCommand};
-use startrack_host::ground::{Ground, GroundError};
 use startrack_host::link_home::{ServeConfig, ServeReport, serve};
 use startrack_host::sil::SilConfig;
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator};
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
@@ -125,7 +125,7 @@ fn ground_drives_the_sil_over_tcp() {
     // force kept.
     let mut bad = table.clone();
     bad[100] ^= 0xFF;
-    let crc_ok = startrack_host::link_home::CRC32.checksum(&table);
+    let crc_ok = startrack_sim::flash_model::CRC32.checksum(&table);
     let mut begin = vec![1u8];
     begin.extend_from_slice(&(bad.len() as u32).to_be_bytes());
     begin.extend_from_slice(&crc_ok.to_be_bytes());
@@ -282,7 +282,7 @@ fn a_noisy_link_loses_commands_never_the_tracker() {
     assert_eq!(info.len_bytes as usize, table.len());
     assert_eq!(
         info.crc32,
-        startrack_host::link_home::CRC32.checksum(&table),
+        startrack_sim::flash_model::CRC32.checksum(&table),
         "the table in force is the one sent, byte for byte"
     );
     let h = g.status().expect("status");
@@ -304,9 +304,9 @@ fn a_noisy_link_loses_commands_never_the_tracker() {
 fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
     use rand::SeedableRng;
     use startrack_core::link::telemetry::ATTITUDE_LEN;
-    use startrack_host::ground::{AttitudeDecodeError, decode_attitude};
-    use startrack_host::sky::field::{FieldSpec, random_attitude};
-    use startrack_host::sky::scene::SkyScene;
+    use startrack_ground::{AttitudeDecodeError, decode_attitude};
+    use startrack_sim::sky::field::{FieldSpec, random_attitude};
+    use startrack_sim::sky::scene::SkyScene;
 
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let q0 = random_attitude(&mut rng);

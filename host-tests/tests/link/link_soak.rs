@@ -20,11 +20,12 @@
 use rand::{RngExt, SeedableRng};
 use startrack_core::link::protocol as p;
 use startrack_core::tracker::Mode;
-use startrack_host::ground::{Ground, GroundError};
-use startrack_host::link_home::{CRC32, FlashConfig, ServeConfig, ServeReport, serve};
+use startrack_ground::{Ground, GroundError};
+use startrack_host::link_home::{FlashConfig, ServeConfig, ServeReport, serve};
 use startrack_host::sil::SilConfig;
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator};
+use startrack_sim::flash_model::CRC32;
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;

@@ -9,7 +9,7 @@ use startrack_core::link::telemetry::Housekeeping;
 use startrack_core::link::{LinkService, Rejection};
 use startrack_core::safe::SetupFaults;
 use startrack_core::tracker::Mode;
-use startrack_host::ground::{Tm, decode_tm, frame_telecommand};
+use startrack_ground::{Tm, decode_tm, frame_telecommand};
 use startrack_host::link_home::MemoryTables;
 
 /// Sends one telecommand to a standby link; returns its verdict (Ok, or the rejection code)

@@ -6,7 +6,7 @@ use startrack_core::store::{
     EraseProgress, FlashStore, H743_BANK2, HeaderError, Layout, Slot, SlotHeader, SlotState,
     StoreError, TableKind,
 };
-use startrack_host::flash_model::{BANK_B, FileFlash, FlashModelError, MockFlash, UNIT_B};
+use startrack_sim::flash_model::{BANK_B, FileFlash, FlashModelError, MockFlash, UNIT_B};
 
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
 
@@ -296,7 +296,7 @@ fn the_storage_page_shows_the_bank2_layout() {
 #[test]
 fn a_slot_image_flashed_into_an_erased_bank_is_the_table_in_force() {
     let t = table(5000);
-    let image = startrack_host::flash_model::slot_image(CAL, &t).expect("image");
+    let image = startrack_sim::flash_model::slot_image(CAL, &t).expect("image");
     assert_eq!(
         image.len(),
         32 + 5024,

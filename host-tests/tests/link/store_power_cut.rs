@@ -9,7 +9,7 @@ use startrack_test_support::table_fixtures;
 
 use startrack_core::store::{EraseProgress, FlashStore, H743_BANK2, StoreError, TableKind};
 use startrack_core::table::CalibTable;
-use startrack_host::flash_model::{BANK_B, CutMode, MockFlash};
+use startrack_sim::flash_model::{BANK_B, CutMode, MockFlash};
 use table_fixtures::*;
 
 const KIND: TableKind = TableKind::Calibration;

@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use startrack_core::store::{
     EraseProgress, FlashStore, H743_BANK2, SlotHeader, SlotState, StoreError, TableKind,
 };
-use startrack_host::flash_model::{BANK_B, CutMode, MockFlash};
+use startrack_sim::flash_model::{BANK_B, CutMode, MockFlash};
 
 fn crc32(b: &[u8]) -> u32 {
     crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(b)

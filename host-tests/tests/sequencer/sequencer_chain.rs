@@ -13,7 +13,7 @@ use startrack_core::sequencer::{
 };
 use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
-use startrack_host::ccd_model::CcdModel;
+use startrack_sim::ccd_model::CcdModel;
 
 fn ticks(pixel_rate_hz: u32) -> Ticks {
     let t = Timing::at_pixel_rate(pixel_rate_hz).validate(&Limits::CCD47_20);

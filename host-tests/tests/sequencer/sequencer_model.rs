@@ -10,7 +10,7 @@ use startrack_core::sequencer::{
 };
 use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
-use startrack_host::ccd_model::CcdModel;
+use startrack_sim::ccd_model::CcdModel;
 
 /// A reduced CCD47-20 with the same layout: 2 over-scan + 2 covered + 16 active + 2 + 2.
 const SMALL: ReadoutGeometry = ReadoutGeometry {

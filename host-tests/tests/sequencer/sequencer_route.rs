@@ -13,11 +13,11 @@ use startrack_core::tracker::{
     FixedTable, FixedTemperature, LineSource, Mode, Ports, ReadoutRequest, SourceLine, Tracker,
     TrackerBuffers,
 };
-use startrack_host::ccd_model::CcdModel;
 use startrack_host::cli::readout_plan::{self, ReadoutPlanArgs, plan_cost};
 use startrack_host::home::{FrameClock, FrameLines, Recorder, block_on};
 use startrack_host::sil::{self, SIL_CAPACITY, SilConfig};
-use startrack_host::sim::{SensorParams, Simulator};
+use startrack_sim::ccd_model::CcdModel;
+use startrack_sim::sim::{SensorParams, Simulator};
 use std::convert::Infallible;
 
 /// A rendered frame as the board reads it: a full frame line by line; a windowed frame

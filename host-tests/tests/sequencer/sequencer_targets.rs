@@ -9,10 +9,10 @@ use startrack_core::sequencer::{
 };
 use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
-use startrack_host::ccd_model::CcdModel;
 use startrack_host::cli::readout_plan::{
     HEADER, Mode, PlanCost, ReadoutPlanArgs, plan_cost, run, segment_name,
 };
+use startrack_sim::ccd_model::CcdModel;
 
 fn args(mode: Mode, hz: u32, windows: u16, outputs: u8) -> ReadoutPlanArgs {
     ReadoutPlanArgs {

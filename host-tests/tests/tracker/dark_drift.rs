@@ -17,9 +17,9 @@ use startrack_core::tracker::{
 use startrack_core::units::{ERatePerS, Kelvin};
 use startrack_host::home::{FrameClock, SimLines, block_on};
 use startrack_host::link_home::MemoryTables;
-use startrack_host::sim::effects::{DarkLaw as SimDarkLaw, Effects};
-use startrack_host::sim::truth::TruthSections;
-use startrack_host::sim::{SensorParams, Simulator};
+use startrack_sim::sim::effects::{DarkLaw as SimDarkLaw, Effects};
+use startrack_sim::sim::truth::TruthSections;
+use startrack_sim::sim::{SensorParams, Simulator};
 use std::convert::Infallible;
 
 /// The ports a test's tracker runs on: one table, a fixed sensor temperature, the link as

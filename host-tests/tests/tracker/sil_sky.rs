@@ -8,8 +8,8 @@ use startrack_core::catalog::Catalog;
 use startrack_core::solver::{SolveError, SolveMode, Solver, SolverConfig};
 use startrack_core::tracker::{StarFlags, StarRecord};
 use startrack_host::sil::{self, SilConfig};
-use startrack_host::sky::field::{FieldSpec, random_attitude, render};
-use startrack_host::sky::scene::{SkyScene, committed_catalog};
+use startrack_sim::sky::field::{FieldSpec, random_attitude, render};
+use startrack_sim::sky::scene::{SkyScene, committed_catalog};
 
 fn records(q: Quat, cat: &Catalog<'_>, seed: u64) -> Vec<StarRecord> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);

@@ -29,7 +29,7 @@ use startrack_host::cli::process::{HOST_CAPACITY, process_frame};
 use startrack_host::demo::render_frame;
 use startrack_host::home::{SimLines, acquire_once, frame_levels};
 use startrack_host::sil::{self, SilConfig};
-use startrack_host::sim::SensorParams;
+use startrack_sim::sim::SensorParams;
 
 /// The default SIL run: what `startrack sil --frames 20` does.
 #[test]

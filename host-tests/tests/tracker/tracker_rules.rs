@@ -12,7 +12,7 @@ use startrack_core::tracker::{
     ReadoutRequest, Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_host::home::Recorder;
-use startrack_host::sim::SensorParams;
+use startrack_sim::sim::SensorParams;
 
 /// A tracker on the default sensor with its true table, and a recorder.
 fn small_tracker(buffers: &mut TrackerBuffers) -> Tracker<'static, '_, 32> {

@@ -3,13 +3,13 @@
 //! while the section has room, one power-1 curve per width and box up to 9 for a given
 //! background (the firmware's tracking path). Each curve built or refused gives one note.
 //! Cost: one [`build_curve`] per combination, a bisection per knot on the exact
-//! pixel-integrated Gaussian (see [`crate::pixcorr`]).
+//! pixel-integrated Gaussian (see [`startrack_sim::pixcorr`]).
 
 use super::args::{CalibBuildArgs, parse_list};
 use crate::cli::CliError;
-use crate::pixcorr::{Curve, CurveSpec, build_curve};
 use startrack_core::centroid::cog::CogPower;
 use startrack_core::table::pixcorr::PixCorrBackground;
+use startrack_sim::pixcorr::{Curve, CurveSpec, build_curve};
 
 /// Knots per pixel-phase curve (74 bytes each).
 pub const PIXCORR_KNOTS: u8 = 33;

@@ -9,10 +9,10 @@
 use super::args::{CalibBuildArgs, encode_gains, parse_gains};
 use super::hot::hot_from_csv;
 use crate::cli::CliError;
-use crate::fits::{MapF32, read_map_shaped};
 use startrack_core::geometry::{Output, ReadoutGeometry, Segment};
 use startrack_core::table::{HotPixel, HotPolicy};
 use startrack_core::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu};
+use startrack_sim::fits::{MapF32, read_map_shaped};
 use std::path::Path;
 
 const GAIN_KEYS: [&str; 2] = ["GAIN1", "GAIN2"];
@@ -264,7 +264,7 @@ pub fn dark_from_map(
         ) / mean
     };
     let mut clamped = 0;
-    let tiles = crate::sim::truth::tile_means(g, tile_log2, &f)
+    let tiles = startrack_sim::sim::truth::tile_means(g, tile_log2, &f)
         .into_iter()
         .map(|v| {
             if !(0.0..=DarkRel::MAX.to_num::<f64>()).contains(&v) {
@@ -290,7 +290,7 @@ pub fn flat_from_map(g: &ReadoutGeometry, flat: &MapF32, tile_log2: u8) -> (Vec<
         let v = f64::from(flat.get(y, x).unwrap_or(1.0));
         if v <= 1.0 / limit { limit } else { 1.0 / v }
     };
-    let tiles = crate::sim::truth::tile_means(g, tile_log2, &f)
+    let tiles = startrack_sim::sim::truth::tile_means(g, tile_log2, &f)
         .into_iter()
         .map(|v| FlatInv::saturating_from_num(v).max(FlatInv::DELTA))
         .collect();

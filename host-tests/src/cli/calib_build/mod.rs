@@ -29,7 +29,7 @@
 //!   area are skipped and counted (the table lists active pixels only).
 //!
 //! - Pixel-phase correction (`--psf-a-px A[,A2..]`, the PSF's 80 %-energy radius) ->
-//!   **pixel-phase curves** (section 7, [`crate::pixcorr`]): one 33-knot curve per width,
+//!   **pixel-phase curves** (section 7, [`startrack_sim::pixcorr`]): one 33-knot curve per width,
 //!   per CoG box in `--pixcorr-boxes` (default 5 and 7: `startrack process`'s default 7 px
 //!   window and the firmware's 9 px one) and per power in `--pixcorr-powers` (default 1,2),
 //!   all for the median-perimeter background both use. A combination the builder refuses
@@ -69,10 +69,10 @@ pub use hot::hot_from_csv;
 pub use maps::{column_bias_from_map, dark_from_map, flat_from_map};
 
 use super::{CliError, write_file};
-use crate::pixcorr::write_table_with_curves;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::{MapSpec, TableSpec, write_table};
 use startrack_core::units::Kelvin;
+use startrack_sim::pixcorr::write_table_with_curves;
 
 /// What `calib build` did, for the report.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -168,7 +168,10 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
 
 /// Encodes `spec` (and the pixel-phase `curves`, none: no section) into the table's bytes:
 /// the one table writer of `calib build` and `calib frames`.
-pub fn encode(spec: &TableSpec<'_>, curves: &[crate::pixcorr::Curve]) -> Result<Vec<u8>, CliError> {
+pub fn encode(
+    spec: &TableSpec<'_>,
+    curves: &[startrack_sim::pixcorr::Curve],
+) -> Result<Vec<u8>, CliError> {
     if curves.is_empty() {
         let mut buf = vec![0u8; spec.encoded_len()];
         let n = write_table(spec, &mut buf).map_err(CliError::TableWrite)?;

@@ -108,7 +108,7 @@ fn pixcorr_write_checks_the_curve_count() {
 fn pixcorr_curve_from_the_host_builder_round_trips_and_corrects() {
     use startrack_core::centroid::cog::CogPower;
     use startrack_core::table::pixcorr::PixCorrBackground;
-    use startrack_host::pixcorr::{CurveSpec, build_curve, measured_phase};
+    use startrack_sim::pixcorr::{CurveSpec, build_curve, measured_phase};
     let spec = CurveSpec {
         a_px: 1.5,
         box_side: 3,

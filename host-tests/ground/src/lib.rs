@@ -380,7 +380,7 @@ impl Ground {
         let chunk = chunk.clamp(1, p::MAX_CHUNK_BYTES);
         let total = u32::try_from(table.len())
             .map_err(|_| GroundError::Protocol("table longer than 4 GB".into()))?;
-        let crc = crate::link_home::CRC32.checksum(table);
+        let crc = startrack_sim::flash_model::CRC32.checksum(table);
         let mut begin = vec![p::TABLE_KIND_CALIBRATION];
         begin.extend_from_slice(&total.to_be_bytes());
         begin.extend_from_slice(&crc.to_be_bytes());

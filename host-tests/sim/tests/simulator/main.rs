@@ -1,7 +1,6 @@
 //! The simulator: its optional physics and measured maps, its truth tables, and FITS frame files.
 //!
-//! One module per subject, each with its own module docs; the shared f64 references and table
-//! fixtures come from `startrack-test-support`.
+//! One module per subject, each with its own module docs.
 
 mod fits_io;
 mod sim_effects;

@@ -83,6 +83,6 @@ impl SkyScene {
 /// The on-board catalog the repo carries (`host-tests/data/catalog-15deg.bin`, the build of
 /// the repo's star list that `startrack catalog build` makes; a test keeps them equal).
 pub fn committed_catalog() -> Result<Vec<u8>, String> {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/catalog-15deg.bin");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/catalog-15deg.bin");
     std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))
 }

@@ -424,7 +424,11 @@ pub fn slot_image(kind: TableKind, table: &[u8]) -> Result<Vec<u8>, StoreError> 
     Ok(store.flash().bytes()[slot.offset_b as usize..end].to_vec())
 }
 
+/// The CRC-32 of table images (CRC-32/ISO-HDLC, zlib's): the store's, and the one a table
+/// upload over the link carries.
+pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
 /// CRC-32/ISO-HDLC, the store's CRC.
 fn store_crc32(b: &[u8]) -> u32 {
-    crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(b)
+    CRC32.checksum(b)
 }

@@ -7,11 +7,11 @@
 //! within 5 relative standard errors `1 / sqrt(2 n)`.
 
 use startrack_core::window::Rect;
-use startrack_host::sim::effects::{
+use startrack_sim::sim::effects::{
     CosmicRays, Cti, DarkLaw, Effects, HotPixels, PsfShape, TelegraphPixels,
 };
-use startrack_host::sim::measured::MeasuredMap;
-use startrack_host::sim::{SensorParams, Simulator, Star};
+use startrack_sim::sim::measured::MeasuredMap;
+use startrack_sim::sim::{SensorParams, Simulator, Star};
 
 fn all_effects() -> Effects {
     Effects {
@@ -478,7 +478,7 @@ fn truth_table_hot_pixels_are_corrected_by_the_core() {
     };
     use startrack_core::table::CalibTable;
     use startrack_core::units::{Electrons, Kelvin};
-    use startrack_host::sim::truth::TruthSections;
+    use startrack_sim::sim::truth::TruthSections;
     let params = SensorParams {
         noise: false,
         prnu: 0.0,

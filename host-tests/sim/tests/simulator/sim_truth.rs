@@ -3,8 +3,8 @@
 
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::CalibTable;
-use startrack_host::sim::truth::{TruthSections, tile_means};
-use startrack_host::sim::{SensorParams, Simulator};
+use startrack_sim::sim::truth::{TruthSections, tile_means};
+use startrack_sim::sim::{SensorParams, Simulator};
 
 #[test]
 fn tiled_table_fits_calib_sector_and_holds_tile_means() {

@@ -1,7 +1,7 @@
-//! FITS round trips and every typed error of `startrack_host::fits`.
+//! FITS round trips and every typed error of `startrack_sim::fits`.
 
 use startrack_core::geometry::ReadoutGeometry;
-use startrack_host::fits::{
+use startrack_sim::fits::{
     FitsError, MapF32, RawFrame, read_map, read_map_shaped, read_raw_frame, write_map,
     write_raw_frame,
 };
