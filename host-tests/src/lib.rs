@@ -1,5 +1,7 @@
-//! Host side of the star tracker: the simulated CCD47-20 and what the `startrack` command
-//! and the tests share. The core runs here unchanged, exactly as on the Cortex-M7.
+//! Host side of the star tracker: the tracker's ports bound on the host (the homes and the
+//! SIL), lab calibration, the analyses and what the `startrack` command and the tests share.
+//! The core runs here unchanged, exactly as on the Cortex-M7; the simulated sensor it runs on
+//! is `startrack-sim`, the ground client `startrack-ground`.
 
 pub mod accuracy;
 pub mod calib_frames;

@@ -10,7 +10,7 @@
 //! each axis depends only on its own phase. Where `m` is strictly increasing it can be
 //! inverted: the table stores `c(m) = p(m) - m`, and the corrected position is `x + c(m)`.
 //! The host builds the table from the exact pixel-integrated Gaussian in f64
-//! (`startrack_host::pixcorr`) for one `(a, box, power, background)` and stores it with the
+//! (`startrack_sim::pixcorr`) for one `(a, box, power, background)` and stores it with the
 //! calibration (table section kind 7): the curve's byte format, its checks and its
 //! evaluation `c(m)` are in [`crate::table::pixcorr`]; this module applies a curve to a
 //! centroid.

@@ -25,7 +25,7 @@
 //! tables are ~1,000 words (4 KB) and up to ~2,100 steps (17 KB) for a full frame.
 //!
 //! The host crate runs the words through a charge-transfer model of the CCD47-20
-//! (`startrack_host::ccd_model`) to prove that they deliver the line layout of
+//! (`startrack_sim::ccd_model`) to prove that they deliver the line layout of
 //! [`crate::geometry`] and exactly the windows' pixels.
 
 /// RAM the firmware sets aside for one compiled frame (word table + program), bytes: 64 KB

@@ -50,7 +50,7 @@
 //! background, knot count, PSF width `a` U8F8 px, largest measured phase U0F16 px) and its
 //! knots (i16, I1F15 px); each curve is checked like any entry, and a bad one is reported as
 //! [`TableError::PixCorrCurve`] with its index. The host builds them
-//! (`startrack_host::pixcorr`); the firmware picks one with [`CalibTable::pixcorr`] and
+//! (`startrack_sim::pixcorr`); the firmware picks one with [`CalibTable::pixcorr`] and
 //! [`pixcorr::PixCorrSet::find`].
 //!
 //! A map covers the active area in square tiles of `2^tile_log2` pixels (0 = one value per

@@ -5,7 +5,7 @@
 //! A curve tabulates `c(m) = p(m) - m` for one `(a, box, power, background)` of the centre of
 //! gravity: `m` the *measured* phase (position inside the central pixel), `p` the true one.
 //! The host builds the curves from the exact pixel-integrated Gaussian in f64
-//! (`startrack_host::pixcorr`) and stores them with the calibration (section kind 7, see
+//! (`startrack_sim::pixcorr`) and stores them with the calibration (section kind 7, see
 //! [`crate::table`]); the firmware picks one with [`PixCorrSet::find`].
 //!
 //! # Format (compact, read in place)
