@@ -4,7 +4,9 @@
 //! [`LinkService`] on 127.0.0.1:P standing in for the UART, optionally with seeded bit
 //! errors on the received bytes (`--link-noise`). With a sky scene ([`SilConfig::sky`]) each
 //! frame's star list also goes through the attitude stage as on the board, and its attitude
-//! report (`TM[134,2]`) goes out on the link.
+//! report (`TM[134,2]`) goes out on the link: the core's frame cycle
+//! ([`startrack_core::cycle`]) runs each frame and serves the link between frames, as on the
+//! board.
 //!
 //! The server runs frames back to back; between two frames it serves the link for up to
 //! [`LINK_PHASE_MS`] (longer while bytes keep arriving, at most [`LINK_PHASE_MAX_MS`]), so
@@ -13,23 +15,23 @@
 //! Cost: the frames' (see [`crate::sil`]); the link adds a few us a packet; a sky scene adds
 //! the attitude stage's per frame and one 76-byte report (a 99-byte packet).
 
-use crate::home::{FrameClock, SimLines, block_on};
+use crate::home::{FrameClock, SimLines, block_on, host_health};
 use crate::sil::{self, SilConfig};
 use crate::sim::{SensorParams, Simulator, Star};
 use crate::sky::scene::committed_catalog;
 use rand::{RngExt, SeedableRng};
 use startrack_core::calib::{FrameCalibration, FrameConditions};
 use startrack_core::catalog::Catalog;
+use startrack_core::cycle::{CyclePorts, FrameCycle};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::{
-    AttitudeReport, LinkService, TableInfo, TableUpload, Targets, UploadRefusal, WindowKind,
-    WindowReader, WindowRequest,
+    LinkService, TableInfo, TableUpload, UploadRefusal, WindowKind, WindowReader, WindowRequest,
 };
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Event, FixedTemperature, FrameSummary, LineSummary, Ports, StarRecord, TableStore,
-    TelemetrySink, Tracker, TrackerBuffers,
+    Event, FixedTemperature, FrameSummary, StarRecord, TableStore, TelemetrySink, Tracker,
+    TrackerBuffers,
 };
 use startrack_core::units::Electrons;
 use startrack_core::window::Rect;
@@ -317,6 +319,10 @@ pub struct FlashConfig {
 
 /// The tables the SIL serves: in memory, or in the flash store.
 trait SilTables: TableUpload + TableStore<'static> {
+    /// The store as the link's upload port.
+    fn as_upload(&mut self) -> &mut dyn TableUpload;
+    /// The store as the tracker's table port.
+    fn as_store(&mut self) -> &mut dyn TableStore<'static>;
     /// The owner's erase step, between frames.
     fn service(&mut self) -> Result<(), String> {
         Ok(())
@@ -335,9 +341,22 @@ trait SilTables: TableUpload + TableStore<'static> {
     }
 }
 
-impl SilTables for MemoryTables {}
+impl SilTables for MemoryTables {
+    fn as_upload(&mut self) -> &mut dyn TableUpload {
+        self
+    }
+    fn as_store(&mut self) -> &mut dyn TableStore<'static> {
+        self
+    }
+}
 
 impl SilTables for crate::flash_home::FlashHome {
+    fn as_upload(&mut self) -> &mut dyn TableUpload {
+        self
+    }
+    fn as_store(&mut self) -> &mut dyn TableStore<'static> {
+        self
+    }
     fn service(&mut self) -> Result<(), String> {
         // An erase that fails drops the upload (the ground then sees "no upload begun").
         let _ = crate::flash_home::FlashHome::service(self);
@@ -422,7 +441,6 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
     };
     let catalog = sky.as_ref().map(|(_, c)| c);
     let stars_of = |k: u32| sil::frame_stars(sc, &base, catalog, k);
-    let mut stars: Vec<StarRecord> = Vec::new();
     let mut tables: Box<dyn SilTables> = match &config.flash {
         None => Box::new(MemoryTables::new(
             params.geometry,
@@ -447,15 +465,15 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
     let start = Instant::now();
 
     'boot: loop {
-        let mut tracker = Box::new(
+        let tracker =
             Tracker::<{ sil::SIL_CAPACITY }>::new(sc.tracker, params.geometry, &mut buffers)
-                .map_err(|e| e.to_string())?,
-        );
+                .map_err(|e| e.to_string())?;
         let mut link = Box::new(LinkService::new());
         // A reset starts the attitude stage afresh (no prior), as the board's does.
-        let mut solver = sky
+        let solver = sky
             .as_ref()
             .map(|(scene, cat)| sil::sky_solver(scene, *cat));
+        let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
         let mut source = SimLines::new(|k| Simulator {
             frame: k,
             ..Simulator::new(params.clone(), stars_of(k))
@@ -504,13 +522,8 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                                     }
                                 }
                             }
-                            link.set_time(start.elapsed().as_micros() as u64);
-                            let mut targets = Targets {
-                                tracker: &mut tracker,
-                                tables: &mut *tables,
-                                windows: &mut windows,
-                            };
-                            link.receive(bytes, &mut targets);
+                            cycle.set_link_time(start.elapsed().as_micros() as u64);
+                            cycle.receive(bytes, tables.as_upload(), &mut windows);
                             // The erase an accepted `begin` asks for, before the next bytes.
                             tables.service()?;
                         }
@@ -522,14 +535,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                         Err(_) => client = None,
                     }
                 }
-                {
-                    let mut targets = Targets {
-                        tracker: &mut tracker,
-                        tables: &mut *tables,
-                        windows: &mut windows,
-                    };
-                    link.poll(&mut targets);
-                }
+                cycle.poll(tables.as_upload(), &mut windows);
                 tables.service()?;
                 tables.persist()?;
                 if tables.power_cut() {
@@ -537,8 +543,8 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                     report.power_cut = true;
                     return Ok(report);
                 }
-                drain(&mut link, &mut client, &mut report);
-                if link.reset_requested() {
+                drain(&mut cycle, &mut client, &mut report);
+                if cycle.reset_requested() {
                     tables.reboot()?;
                     report.resets += 1;
                     frame = 0;
@@ -557,63 +563,42 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                 frame,
                 period_us: sc.period_us,
             };
-            link.set_time(start.elapsed().as_micros() as u64);
-            stars.clear();
-            let mut telemetry = KeepStars {
-                inner: &mut *link,
-                stars: &mut stars,
-            };
-            let mut ports = Ports {
+            cycle.set_link_time(start.elapsed().as_micros() as u64);
+            let table_in_force = tables.active(TABLE_KIND_CALIBRATION);
+            let mut ports = CyclePorts {
                 clock: &mut clock,
                 thermometer: &mut thermometer,
-                tables: &mut *tables,
-                telemetry: &mut telemetry,
+                tables: tables.as_store(),
+                table_in_force,
+                telemetry: &mut NoTelemetry,
             };
-            let Ok(summary) = block_on(tracker.run_frame(&mut source, &mut ports));
-            link.end_of_frame(&*tables);
-            if let Some(solver) = solver.as_mut() {
-                let result = solver.update(&stars, summary.start_us);
-                link.send_attitude(&AttitudeReport::of(summary.frame, &result));
-            }
-            drain(&mut link, &mut client, &mut report);
+            let Ok(_) = block_on(cycle.run_frame(&mut source, &mut ports));
+            drain(&mut cycle, &mut client, &mut report);
             report.frames += 1;
             frame += 1;
         }
     }
 }
 
-/// A telemetry port that passes everything on to the link and keeps the frame's stars for
-/// the attitude stage (the board's own, in firmware/src/app.rs).
-struct KeepStars<'a> {
-    inner: &'a mut dyn TelemetrySink,
-    stars: &'a mut Vec<StarRecord>,
-}
+/// The served SIL keeps no records of its own: the link carries them.
+struct NoTelemetry;
 
-impl TelemetrySink for KeepStars<'_> {
-    fn line(&mut self, summary: &LineSummary) {
-        self.inner.line(summary);
-    }
-
-    fn star(&mut self, frame: u32, star: &StarRecord) {
-        self.stars.push(*star);
-        self.inner.star(frame, star);
-    }
-
-    fn frame(&mut self, summary: &FrameSummary) {
-        self.inner.frame(summary);
-    }
-
-    fn event(&mut self, event: &Event) {
-        self.inner.event(event);
-    }
+impl TelemetrySink for NoTelemetry {
+    fn star(&mut self, _frame: u32, _star: &StarRecord) {}
+    fn frame(&mut self, _summary: &FrameSummary) {}
+    fn event(&mut self, _event: &Event) {}
 }
 
 /// Moves the link's queued telemetry to the client (all of it: TCP is the fast UART here);
 /// without a client it is discarded, as a UART with nobody listening would.
-fn drain(link: &mut LinkService, client: &mut Option<Client>, report: &mut ServeReport) {
+fn drain<const N: usize>(
+    cycle: &mut FrameCycle<'_, '_, '_, '_, N>,
+    client: &mut Option<Client>,
+    report: &mut ServeReport,
+) {
     let mut buf = [0u8; 4096];
     loop {
-        let n = link.transmit(&mut buf);
+        let n = cycle.transmit(&mut buf);
         if n == 0 {
             break;
         }

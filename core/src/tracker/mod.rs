@@ -271,6 +271,12 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.work.watch.confirmed()
     }
 
+    /// The star list of the last frame that ended, in the order the telemetry port got it
+    /// (the attitude stage's input); it holds until the next frame begins.
+    pub fn stars(&self) -> &[StarRecord] {
+        self.work.stars.records()
+    }
+
     /// The in-flight defect watch: its candidates and counters.
     pub fn defect_watch(&self) -> &Watch {
         &self.work.watch
