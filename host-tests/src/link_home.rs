@@ -20,7 +20,7 @@ use crate::sil::{self, SilConfig};
 use crate::sim::{SensorParams, Simulator, Star};
 use crate::sky::scene::committed_catalog;
 use rand::{RngExt, SeedableRng};
-use startrack_core::calib::{FrameCalibration, FrameConditions};
+use startrack_core::calib::{FrameCalibration, LineLevels};
 use startrack_core::catalog::Catalog;
 use startrack_core::cycle::{CyclePorts, FrameCycle};
 use startrack_core::geometry::ReadoutGeometry;
@@ -33,7 +33,6 @@ use startrack_core::tracker::{
     Event, FixedTemperature, FrameSummary, StarRecord, TableStore, TelemetrySink, Tracker,
     TrackerBuffers,
 };
-use startrack_core::units::Electrons;
 use startrack_core::window::Rect;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -181,8 +180,9 @@ impl TableStore<'static> for MemoryTables {
 }
 
 /// Diagnostic windows from the simulated sensor, of the frame after the request: raw, or
-/// calibrated with the table in force as the tracker calibrates a window (the frame's line
-/// levels and dark scale, then the per-pixel formula), in e- x 64.
+/// calibrated as the tracker calibrates a window (each line's bias from its own over-scan,
+/// then the per-pixel formula with the tracker's calibration: its table, dark scale, exposure
+/// and temperature, [`Tracker::calibration`]), in e- x 64.
 pub struct SimWindows {
     /// The sensor.
     pub params: SensorParams,
@@ -190,10 +190,8 @@ pub struct SimWindows {
     pub stars: Vec<Star>,
     /// Its frame number (the noise draw).
     pub frame: u32,
-    /// The table in force (calibrated windows need one).
-    pub table: Option<CalibTable<'static>>,
-    /// Exposure for the hot pixels' dark law, ms.
-    pub exposure_ms: u32,
+    /// The tracker's calibration (calibrated windows need one).
+    pub calibration: Option<FrameCalibration<'static>>,
     rendered: Option<(WindowRequest, Vec<i32>)>,
 }
 
@@ -204,8 +202,7 @@ impl SimWindows {
             params,
             stars: Vec::new(),
             frame: 0,
-            table: None,
-            exposure_ms: 0,
+            calibration: None,
             rendered: None,
         }
     }
@@ -232,10 +229,10 @@ impl WindowReader for SimWindows {
         let px = match r.kind {
             WindowKind::Raw => sim.render_window(rect).into_iter().map(i32::from).collect(),
             WindowKind::Calibrated => {
-                let Some(table) = self.table else {
+                let Some(cal) = self.calibration else {
                     return false;
                 };
-                match calibrated_window(&sim, table, self.exposure_ms, rect) {
+                match calibrated_window(&sim, &cal, rect) {
                     Some(px) => px,
                     None => return false,
                 }
@@ -264,22 +261,21 @@ impl WindowReader for SimWindows {
     }
 }
 
-/// Window `rect` of `sim`'s frame calibrated with `table`, e- x 64 (I26F6 bits).
-fn calibrated_window(
-    sim: &Simulator,
-    table: CalibTable<'static>,
-    exposure_ms: u32,
-    rect: Rect,
-) -> Option<Vec<i32>> {
+/// Window `rect` of `sim`'s frame calibrated with `cal`, e- x 64 (I26F6 bits).
+fn calibrated_window(sim: &Simulator, cal: &FrameCalibration<'_>, rect: Rect) -> Option<Vec<i32>> {
     let raw = crate::demo::render_frame(sim);
-    let levels = crate::home::frame_levels(&table, &raw).ok()?;
-    let conditions = FrameConditions {
-        dark_scale_e: levels.dark_scale_e.unwrap_or(Electrons::ZERO),
-        exposure_ms,
-        temperature_k: table.hot_pixels().reference_temperature_k(),
+    let g = sim.params.geometry;
+    let lines = raw
+        .chunks_exact(g.line_len())
+        .map(|l| LineLevels::measure(&g, l))
+        .collect::<Result<Vec<_>, _>>()
+        .ok()?;
+    let levels = crate::home::FrameLevels {
+        geometry: g,
+        lines,
+        dark_scale_e: None,
     };
-    let cal = FrameCalibration::new(table, conditions);
-    let (e, _, _) = levels.calibrate_window(&cal, &raw, rect).ok()?;
+    let (e, _, _) = levels.calibrate_window(cal, &raw, rect).ok()?;
     Some(e.into_iter().map(|v| v.to_bits()).collect())
 }
 
@@ -492,8 +488,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             let hard_end = Instant::now() + Duration::from_millis(LINK_PHASE_MAX_MS);
             windows.frame = frame;
             windows.stars = stars_of(frame);
-            windows.table = tables.active_table();
-            windows.exposure_ms = sc.tracker.exposure_ms;
+            windows.calibration = cycle.tracker().calibration();
             loop {
                 if client.is_none()
                     && let Ok((s, _)) = listener.accept()

@@ -277,6 +277,19 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.work.stars.records()
     }
 
+    /// The calibration a window read now gets, as the tracker would calibrate it: the last
+    /// frame's table, the last complete dark scale, the configured exposure and the last
+    /// frame's temperature (the link's diagnostic windows use it); `None` before a frame
+    /// with a table has ended.
+    pub fn calibration(&self) -> Option<FrameCalibration<'t>> {
+        let conditions = FrameConditions {
+            dark_scale_e: self.prev_dark_scale?,
+            exposure_ms: self.config.exposure_ms,
+            temperature_k: self.temperature_k,
+        };
+        Some(FrameCalibration::new(self.table?, conditions))
+    }
+
     /// The in-flight defect watch: its candidates and counters.
     pub fn defect_watch(&self) -> &Watch {
         &self.work.watch
