@@ -55,7 +55,7 @@
 //! integrating); after [`MAX_WAIT_US`] without one the last program is replayed unannounced
 //! (its lines are not read), so the image is not left to saturate.
 //!
-//! # Not yet
+//! # What only a board can show
 //! The waveforms have not been seen on a board (docs/hardware.md has the HIL steps), nor
 //! whether the MDMA serves each request within a tick (at 125 ns: the HIL step counts the
 //! ticks on the analyser).
