@@ -29,12 +29,13 @@ use core::convert::Infallible;
 use startrack_core::attitude::Camera;
 use startrack_core::catalog::Catalog;
 use startrack_core::link::AttitudeReport;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::safe::{FallbackThermometer, SetupFaults};
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Clock, Event, FixedTable, FrameSummary, LineSource, LineSummary, Ports, ReadoutRequest,
-    SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
+    Clock, Event, FixedTable, FrameSummary, LineSource, LineSummary, Ports, SourceLine, StarRecord,
+    TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
 };
 
 /// The board's sensor temperature: the CCD board's sensor, else the MCU's.

@@ -13,10 +13,11 @@ use startrack_core::calib::{
     CalibError, DarkScaleEstimator, FrameCalibration, LineLevels, PixelFlags,
 };
 use startrack_core::geometry::{ReadoutGeometry, Segment};
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
     Clock, Event, FixedTable, FixedTemperature, FrameSummary, LineSource, LineSummary, Mode, Ports,
-    ReadoutRequest, SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
+    SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_core::units::Electrons;
 use startrack_core::units::Kelvin;

@@ -7,7 +7,7 @@
 //! # A frame
 //! ```text
 //! begin_frame   the table in force, the sensor temperature, the mode (rules below),
-//!               what to read (ReadoutRequest: full frame, or the tracking windows)
+//!               what to read ([`ReadoutRequest`]: full frame, or the tracking windows)
 //! push_line     per raw line in readout order: bias of each output from its over-scan,
 //!               covered pixels into the frame's dark scale, then by mode:
 //!   acquisition   the raw line into the 16-line ring and the pre-filtered scan
@@ -70,8 +70,8 @@ pub use drift::{DarkDrift, DarkLaw};
 pub use measure::select_curve;
 pub use modes::CommandError;
 pub use ports::{
-    Clock, FixedTable, FixedTemperature, LineSource, Ports, ReadoutRequest, SourceLine, TableStore,
-    TelemetrySink, Thermometer,
+    Clock, FixedTable, FixedTemperature, LineSource, Ports, SourceLine, TableStore, TelemetrySink,
+    Thermometer,
 };
 pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, StarFlags, StarRecord,
@@ -83,6 +83,7 @@ use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLe
 use crate::centroid::raw_cog::RawCogPlan;
 use crate::detect::{LineRing, WindowCapture};
 use crate::geometry::ReadoutGeometry;
+use crate::readout::ReadoutRequest;
 use crate::table::CalibTable;
 use crate::units::{BiasAdu, Electrons, Kelvin};
 use acquire::Acquisition;
