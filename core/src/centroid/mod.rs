@@ -70,6 +70,7 @@ pub mod test_only_math {
 }
 
 use crate::calib::PixelFlags;
+use crate::calib::cti::MeasuredPosition;
 use crate::window::Window;
 
 /// The largest window side any method accepts (31 pixels: the perimeter median's buffer).
@@ -149,6 +150,21 @@ pub struct Centroid {
     pub sigma_y_px: f32,
     /// What the method noticed.
     pub flags: CentroidFlags,
+}
+
+/// The charge-transfer correction moves a centroid (flags, flux and sigmas unchanged).
+impl MeasuredPosition for Centroid {
+    fn position_px(&self) -> (f32, f32) {
+        (self.x_px, self.y_px)
+    }
+
+    fn flux_e(&self) -> f32 {
+        self.flux_e
+    }
+
+    fn at_px(self, x_px: f32, y_px: f32) -> Self {
+        Self { x_px, y_px, ..self }
+    }
 }
 
 /// The input of every method: a window and what calibration and detection know about it.
