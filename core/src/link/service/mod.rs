@@ -20,7 +20,7 @@
 //! port.
 //!
 //! Cost: per received byte a push (and per packet a CRC-16 and the command); per frame one
-//! star list (~0.9 KB for 32 stars) and, every `hk_period` frames, one report.
+//! star list (about 1 KB for 32 stars) and, every `hk_period` frames, one report.
 
 mod amend;
 mod execute;
@@ -42,7 +42,7 @@ use targets::Ctx;
 
 /// Bytes of the urgent queue (verification reports and events: ~20 bytes each framed).
 pub const URGENT_QUEUE_BYTES: usize = 2048;
-/// Bytes of the bulk queue (a 32-star list is ~925 bytes framed).
+/// Bytes of the bulk queue (a 32-star list is about 1 KB framed).
 pub const BULK_QUEUE_BYTES: usize = 8192;
 
 const RX_FRAME: usize = encoded_len_max(p::MAX_TC_LEN);
