@@ -102,10 +102,9 @@ bitflags::bitflags! {
         /// An iterative method did not converge within its iterations, or diverged and fell
         /// back to its starting point.
         const NOT_CONVERGED = 64;
-        /// Set by no method now (it was the removed 3-point peak fit's: the brightest pixel
-        /// lay on the window border, so the fit had no neighbour on one side). The bit stays
-        /// reserved, not reused or renumbered, because telemetry and `stars.csv` carry the
-        /// flag bits.
+        /// Reserved: set by no method (the brightest pixel on the window border, where a
+        /// 3-point peak fit has no neighbour on one side). Telemetry and `stars.csv` carry
+        /// the flag bits, so the bit is neither reused nor renumbered.
         const PEAK_AT_EDGE = 128;
         /// The computed position fell outside the window and was clamped to its edge.
         const CLAMPED = 256;

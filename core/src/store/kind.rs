@@ -7,7 +7,7 @@
 pub enum TableKind {
     /// The calibration table ([`crate::table::CalibTable`]).
     Calibration,
-    /// The star catalog (format not defined yet; the store keeps its bytes like any table).
+    /// The star catalog (the store keeps its bytes like any table's and checks their CRC).
     Catalog,
 }
 
