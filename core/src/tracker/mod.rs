@@ -66,7 +66,7 @@ pub mod record;
 mod track;
 
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
-pub use drift::{DarkDrift, DarkLaw};
+pub use drift::DarkDrift;
 pub use measure::select_curve;
 pub use modes::CommandError;
 pub use ports::{
@@ -84,7 +84,7 @@ use crate::centroid::raw_cog::RawCogPlan;
 use crate::detect::{LineRing, WindowCapture};
 use crate::geometry::ReadoutGeometry;
 use crate::readout::ReadoutRequest;
-use crate::table::CalibTable;
+use crate::table::{CalibTable, DarkLaw};
 use crate::units::{BiasAdu, Electrons, Kelvin};
 use acquire::Acquisition;
 use list::StarList;
