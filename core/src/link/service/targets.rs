@@ -34,6 +34,8 @@ impl WindowReader for NoWindows {
 /// What the link's mode and configuration commands act on: the tracker application
 /// ([`Tracker`] implements it). A trait so that the same service also runs with no tracker
 /// at all (the safe standby, [`LinkService::receive_standby`]).
+///
+/// [`LinkService::receive_standby`]: super::LinkService::receive_standby
 pub trait TrackerControl {
     /// Asks for `mode` from the next frame ([`Tracker::command_mode`]).
     fn command_mode(&mut self, mode: Mode) -> Result<(), CommandError>;

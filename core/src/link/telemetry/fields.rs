@@ -126,7 +126,8 @@ impl<'a> Reader<'a> {
     }
 }
 
-/// Size of a field type of [`HK_FIELDS`] or [`STAR_FIELDS`], bytes.
+/// Size of a field type of [`HK_FIELDS`](super::HK_FIELDS) or
+/// [`STAR_FIELDS`](super::STAR_FIELDS), bytes.
 pub const fn type_len(t: &str) -> usize {
     match t.as_bytes() {
         b"u8" => 1,
