@@ -32,12 +32,12 @@ use startrack_core::catalog::Catalog;
 use startrack_core::cycle::{CyclePorts, FrameCycle};
 use startrack_core::link::TableUpload;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::safe::{FallbackThermometer, SetupFaults};
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Clock, FixedTable, LineSource, ReadoutRequest, SourceLine, Tracker, TrackerBuffers,
-    TrackerConfig,
+    Clock, FixedTable, LineSource, SourceLine, Tracker, TrackerBuffers, TrackerConfig,
 };
 
 /// The board's sensor temperature: the CCD board's sensor, else the MCU's.

@@ -72,11 +72,11 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant};
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, Chain, CompileError, Cost, Limits, LineJob, LineJobs, Link, Links, MAX_WINDOWS,
     PinMap, PlanError, Program, ProgramParts, ReadoutPlan, Step, Ticks, Timing, compile,
 };
-use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 
 use crate::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};

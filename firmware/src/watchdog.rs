@@ -4,10 +4,10 @@
 //!
 //! The tracker task calls [`progress`] after every frame (the safe-standby loop does once a
 //! second); [`watchdog_task`] checks every [`CHECK_PERIOD`] and feeds the IWDG only if
-//! progress was made since the last feed. The longest frame, a full-frame acquisition at the
-//! flight exposure (its exposure and readout times are in docs/sequencer.md), is a fraction of
-//! the 8 s timeout; an upload's sector erase (async, 1-2 s) does not stall the frame loop, so
-//! it never trips the watchdog. The IWDG runs from the LSI
+//! progress was made since the last feed. A frame takes its exposure (frame transfers are
+//! the exposure apart, never closer than a full readout: docs/sequencer.md), so at the
+//! start-up exposure the 8 s timeout spans several frames; an upload's sector erase (async, 1-2 s) does
+//! not stall the frame loop, so it never trips the watchdog. The IWDG runs from the LSI
 //! (32 kHz) and cannot be stopped once started: a debugger that halts the core must freeze
 //! it (DBGMCU), or the board resets under the probe.
 

@@ -15,11 +15,12 @@ use startrack_core::calib::{
 use startrack_core::cycle::{CyclePorts, FrameCycle};
 use startrack_core::geometry::{ReadoutGeometry, Segment};
 use startrack_core::link::LinkService;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::safe::{FaultRecord, Health, SetupFaults};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
     Clock, Event, FixedTable, FixedTemperature, FrameSummary, LineSource, LineSummary, Mode,
-    ReadoutRequest, SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
+    SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_core::units::Electrons;
 use startrack_core::units::Kelvin;

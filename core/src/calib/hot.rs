@@ -3,7 +3,7 @@
 //! own law: `dark_e = rate_ref x exposure x 2^((T - T_ref) / doubling)`.
 //!
 //! Computed in f32 on the M7's FPU when a hot pixel falls inside a read window (rare), with
-//! `libm::exp2f` (correct to about one ulp; micromath's `powf` was tested and is 0.8 % off,
+//! `libm::exp2f` (correct to about one ulp; micromath's `powf` is 0.8 % off,
 //! hundreds of electrons on a bright hot pixel); relative error below [`HOT_DARK_REL_TOL`].
 
 use crate::table::HotPixel;

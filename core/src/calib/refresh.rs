@@ -44,11 +44,10 @@
 //! Per pixel inside the border: its lowest neighbour, which rules most pixels out (the
 //! excess over it bounds `E`); for the others, the distance to the stars near the window
 //! (at most [`MAX_NEAR_STARS`]), one sort of 8 values and the isolation sums; then a pass
-//! over the candidates and confirmed pixels. Measured on the M7: ~8,000 instructions an
-//! 11x11 window (`cargo m7-bench`'s 30-star `tracker_tracking_frame` went from 9,093,389 to
-//! 9,331,946 with the watch). [`DefectWatch::apply`] is a pass over
-//! the confirmed list. Memory: 16 B a candidate and 16 B a confirmed pixel
-//! (`DefectWatch<64, 32>`: 1,600 B with its settings and counters, on a 64-bit host).
+//! over the candidates and confirmed pixels; the M7 count an 11x11 window is in
+//! docs/calibration.md ("In orbit"). [`DefectWatch::apply`] is a pass over the confirmed
+//! list. Memory: 16 B a candidate and 16 B a confirmed pixel, with the settings and
+//! counters (the tracker's `DefectWatch<64, 32>`: docs/calibration.md).
 //! No allocation, no recursion, no panic: a full list evicts its weakest candidate, a full
 //! confirmed list counts what it could not keep.
 

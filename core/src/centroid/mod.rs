@@ -70,6 +70,7 @@ pub mod test_only_math {
 }
 
 use crate::calib::PixelFlags;
+use crate::calib::cti::MeasuredPosition;
 use crate::window::Window;
 
 /// The largest window side any method accepts (31 pixels: the perimeter median's buffer).
@@ -101,10 +102,9 @@ bitflags::bitflags! {
         /// An iterative method did not converge within its iterations, or diverged and fell
         /// back to its starting point.
         const NOT_CONVERGED = 64;
-        /// Set by no method now (it was the removed 3-point peak fit's: the brightest pixel
-        /// lay on the window border, so the fit had no neighbour on one side). The bit stays
-        /// reserved, not reused or renumbered, because telemetry and `stars.csv` carry the
-        /// flag bits.
+        /// Reserved: set by no method (the brightest pixel on the window border, where a
+        /// 3-point peak fit has no neighbour on one side). Telemetry and `stars.csv` carry
+        /// the flag bits, so the bit is neither reused nor renumbered.
         const PEAK_AT_EDGE = 128;
         /// The computed position fell outside the window and was clamped to its edge.
         const CLAMPED = 256;
@@ -149,6 +149,21 @@ pub struct Centroid {
     pub sigma_y_px: f32,
     /// What the method noticed.
     pub flags: CentroidFlags,
+}
+
+/// The charge-transfer correction moves a centroid (flags, flux and sigmas unchanged).
+impl MeasuredPosition for Centroid {
+    fn position_px(&self) -> (f32, f32) {
+        (self.x_px, self.y_px)
+    }
+
+    fn flux_e(&self) -> f32 {
+        self.flux_e
+    }
+
+    fn at_px(self, x_px: f32, y_px: f32) -> Self {
+        Self { x_px, y_px, ..self }
+    }
 }
 
 /// The input of every method: a window and what calibration and detection know about it.

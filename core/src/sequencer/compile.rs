@@ -481,8 +481,8 @@ pub fn compile<'w, 's>(
 mod tests {
     use super::*;
     use crate::geometry::ReadoutGeometry;
+    use crate::readout::ReadoutRequest;
     use crate::sequencer::{Binning, Limits, Timing};
-    use crate::tracker::ReadoutRequest;
 
     #[test]
     fn parts_view_gives_back_the_same_program() {

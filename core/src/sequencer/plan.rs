@@ -11,7 +11,7 @@
 //! Cost: `shift_runs` is O(windows x log windows) a row group; no allocation.
 
 use crate::geometry::ReadoutGeometry;
-use crate::tracker::ReadoutRequest;
+use crate::readout::ReadoutRequest;
 use crate::window::Rect;
 
 /// Largest number of windows a plan accepts.

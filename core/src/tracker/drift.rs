@@ -22,7 +22,7 @@
 //! `r += (x - r) / 16`: an exponentially weighted mean with a 16-frame time constant, so a
 //! single odd frame moves it by at most 1/16 of its excess.
 
-pub use crate::table::DarkLaw;
+use crate::table::DarkLaw;
 use crate::units::{Electrons, Kelvin};
 
 /// A frame whose predicted dark is below this many electrons is not compared (the ratio of

@@ -7,7 +7,7 @@
 //! # A frame
 //! ```text
 //! begin_frame   the table in force, the sensor temperature, the mode (rules below),
-//!               what to read (ReadoutRequest: full frame, or the tracking windows)
+//!               what to read ([`ReadoutRequest`]: full frame, or the tracking windows)
 //! push_line     per raw line in readout order: bias of each output from its over-scan,
 //!               covered pixels into the frame's dark scale, then by mode:
 //!   acquisition   the raw line into the 16-line ring and the pre-filtered scan
@@ -39,21 +39,21 @@
 //! its [`ModeReason`].
 //!
 //! # Memory
-//! [`TrackerBuffers`] (the line ring 34 KB, the tracking windows 19 KB, the fused CoG's
-//! plans 15 KB) lives where the home puts it (`.bss` on the board); the [`Tracker`] itself
-//! holds the scan detector (~13 KB of line buffers plus `N` candidates of 28 B), the
-//! pending windows, the star list (`N` x ~60 B), one window's scratch (~2.8 KB), the
-//! last frame's stars, the in-flight defect watch ([`Watch`], 1.6 KB) and the dark-drift
-//! monitor ([`drift`], under 32 B). `size_of` of
-//! both is printed and bounded by the host test `tracker_memory`.
+//! [`TrackerBuffers`] (the line ring, the tracking windows, the fused CoG's plans) lives
+//! where the home puts it (`.bss` on the board); the [`Tracker`] itself holds the scan
+//! detector (its line buffers and `N` candidates), the pending windows, the star list, one
+//! window's scratch, the last frame's stars, the in-flight defect watch ([`Watch`]) and the
+//! dark-drift monitor ([`drift`]). The sizes of both are tabled in docs/tracker.md
+//! (`## Memory`) and bounded by the host test `tracker_memory`.
 //!
 //! # Cost
-//! Every line: its bias levels and covered pixels (~5,700 M7 instructions). Per acquisition
-//! line, the scan's ~13 a pixel (`scan_detect`), a 2 KB copy into the ring; per tracking
-//! line, a row test per window and the copy of the rows in windows; per star, the window's
-//! calibration, in tracking the window test, and the method (`measure`). Whole frames as the
-//! board runs them (`cargo m7-bench`, 30 stars, QEMU instructions): standby 6.3 M,
-//! acquisition 37.9 M, tracking 9.3 M (`tracker_*_frame`; docs/tracker.md breaks them down).
+//! Every line: its bias levels and covered pixels (the floor of any frame). Per acquisition
+//! line, the pre-filtered scan (`scan_detect`) and a copy into the ring; per tracking line,
+//! a row test per window and the copy of the rows in windows; per star, the window's
+//! calibration, in tracking the window test and the defect watch, and the method
+//! (`measure`). Whole frames as the board runs them are `cargo m7-bench`'s
+//! `tracker_*_frame` stages: docs/speed.md gives the counts, docs/tracker.md breaks them
+//! down.
 
 mod acquire;
 pub mod config;
@@ -66,12 +66,12 @@ pub mod record;
 mod track;
 
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
-pub use drift::{DarkDrift, DarkLaw};
+pub use drift::DarkDrift;
 pub use measure::select_curve;
 pub use modes::CommandError;
 pub use ports::{
-    Clock, FixedTable, FixedTemperature, LineSource, Ports, ReadoutRequest, SourceLine, TableStore,
-    TelemetrySink, Thermometer,
+    Clock, FixedTable, FixedTemperature, LineSource, Ports, SourceLine, TableStore, TelemetrySink,
+    Thermometer,
 };
 pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, StarFlags, StarRecord,
@@ -83,7 +83,8 @@ use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLe
 use crate::centroid::raw_cog::RawCogPlan;
 use crate::detect::{LineRing, WindowCapture};
 use crate::geometry::ReadoutGeometry;
-use crate::table::CalibTable;
+use crate::readout::ReadoutRequest;
+use crate::table::{CalibTable, DarkLaw};
 use crate::units::{BiasAdu, Electrons, Kelvin};
 use acquire::Acquisition;
 use list::StarList;

@@ -1,8 +1,8 @@
 //! What the tracker reports: one [`StarRecord`] per star per frame with one flag layout
 //! ([`StarFlags`]), one [`FrameSummary`] per frame with every loss counted, a
 //! [`LineSummary`] for every `line_summary_every`th line, and [`Event`]s (mode changes,
-//! table changes). These are the telemetry records of every home: the firmware's log (and
-//! later its link), `stars.csv` of `startrack process`, and the software-in-the-loop's CSV.
+//! table changes). These are the telemetry records of every home: the firmware's log and
+//! its link, `stars.csv` of `startrack process`, and the software-in-the-loop's CSV.
 //!
 //! Cost: a record is 36 bytes, a summary under 100; nothing here allocates.
 
