@@ -51,7 +51,7 @@ pub enum SegmentId {
 }
 
 /// Number of segments.
-pub const SEGMENTS: usize = 7;
+pub(crate) const SEGMENTS: usize = 7;
 
 impl SegmentId {
     /// Every segment, in table order.
@@ -251,7 +251,7 @@ pub const REST: LineSet = rest(2);
 /// backward ([`Phases::BACKWARD_FROM_P12`]) so that its packets cross the split into the
 /// left half on the same tick as the left half moves towards its output (the phase relation
 /// at the split: check against datasheet).
-pub const fn rest(outputs: u8) -> LineSet {
+pub(crate) const fn rest(outputs: u8) -> LineSet {
     let right = if outputs == 1 {
         Phases::P12
     } else {
@@ -362,7 +362,7 @@ fn segment_words(
 }
 
 /// Ticks of one play of each segment (without writing words).
-pub fn segment_ticks(id: SegmentId, t: &Ticks, binning: u16) -> u32 {
+pub(crate) fn segment_ticks(id: SegmentId, t: &Ticks, binning: u16) -> u32 {
     match id {
         SegmentId::FrameTransfer => 3 * t.ft_state,
         SegmentId::LineTransfer => 3 * t.line_state,

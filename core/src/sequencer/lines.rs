@@ -47,7 +47,7 @@ pub enum Line {
 }
 
 /// Number of lines.
-pub const LINE_COUNT: usize = 16;
+pub(crate) const LINE_COUNT: usize = 16;
 
 impl Line {
     /// Every line, in bit order.
