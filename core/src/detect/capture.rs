@@ -30,9 +30,9 @@ use crate::window::Rect;
 /// Largest window side [`WindowCapture`] holds.
 pub const CAPTURE_MAX_SIDE: u16 = 15;
 /// Samples per [`WindowCapture`] window buffer.
-pub const CAPTURE_MAX_PX: usize = CAPTURE_MAX_SIDE as usize * CAPTURE_MAX_SIDE as usize;
+pub(crate) const CAPTURE_MAX_PX: usize = CAPTURE_MAX_SIDE as usize * CAPTURE_MAX_SIDE as usize;
 /// Most windows a [`WindowCapture`] tracks (the completion mask is 64 bits).
-pub const CAPTURE_MAX_WINDOWS: usize = 64;
+pub(crate) const CAPTURE_MAX_WINDOWS: usize = 64;
 
 const ZERO_LEVELS: LineLevels = LineLevels {
     bias_adu: [BiasAdu::ZERO; crate::geometry::MAX_OUTPUTS],
@@ -286,7 +286,7 @@ impl Iterator for Completed {
     }
 }
 
-/// Raw pixels of up to `N` (at most [`CAPTURE_MAX_WINDOWS`]) windows, filled line by line.
+/// Raw pixels of up to `N` (at most `CAPTURE_MAX_WINDOWS`, 64) windows, filled line by line.
 #[derive(Clone, Debug)]
 pub struct WindowCapture<const N: usize> {
     slots: heapless::Vec<Slot, N>,

@@ -71,9 +71,9 @@ use crate::calib::PixelFlags;
 use crate::window::Window;
 
 /// Largest window side accepted (the bitmask holds 32 columns; the centroid methods' limit).
-pub const MAX_SIDE: u16 = crate::centroid::MAX_SIDE;
+pub(crate) const MAX_SIDE: u16 = crate::centroid::MAX_SIDE;
 /// Fewest usable border pixels for a background estimate.
-pub const MIN_BORDER_PX: usize = 5;
+pub(crate) const MIN_BORDER_PX: usize = 5;
 /// Largest border: `4 * MAX_SIDE - 4`.
 const MAX_BORDER: usize = 4 * MAX_SIDE as usize - 4;
 
