@@ -1,6 +1,6 @@
 //! The star tracker application: the frame loop, its modes and the rules that change them,
 //! in one piece of `no_std` code that the board, the host tools and the software-in-the-loop
-//! run alike. A home binds its hardware (or files, or the simulator) to the [`ports`] and
+//! run alike. A home binds its hardware (or files, or the simulator) to the ports ([`Ports`]) and
 //! calls [`Tracker::run_frame`] once a frame; everything from a raw line to a reported star
 //! happens here.
 //!
@@ -44,7 +44,7 @@
 //! holds the scan detector (~13 KB of line buffers plus `N` candidates of 28 B), the
 //! pending windows, the star list (`N` x ~60 B), one window's scratch (~2.8 KB), the
 //! last frame's stars, the in-flight defect watch ([`Watch`], 1.6 KB) and the dark-drift
-//! monitor ([`drift`], under 32 B). `size_of` of
+//! monitor ([`DarkDrift`] reports it, under 32 B). `size_of` of
 //! both is printed and bounded by the host test `tracker_memory`.
 //!
 //! # Cost
@@ -56,17 +56,17 @@
 //! acquisition 37.9 M, tracking 9.3 M (`tracker_*_frame`; docs/tracker.md breaks them down).
 
 mod acquire;
-pub mod config;
-pub mod drift;
+mod config;
+mod drift;
 mod list;
 mod measure;
 mod modes;
-pub mod ports;
-pub mod record;
+mod ports;
+mod record;
 mod track;
 
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
-pub use drift::{DarkDrift, DarkLaw};
+pub use drift::DarkDrift;
 pub use measure::select_curve;
 pub use modes::CommandError;
 pub use ports::{
@@ -83,7 +83,7 @@ use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLe
 use crate::centroid::raw_cog::RawCogPlan;
 use crate::detect::{LineRing, WindowCapture};
 use crate::geometry::ReadoutGeometry;
-use crate::table::CalibTable;
+use crate::table::{CalibTable, DarkLaw};
 use crate::units::{BiasAdu, Electrons, Kelvin};
 use acquire::Acquisition;
 use list::StarList;
@@ -93,16 +93,16 @@ use track::Tracking;
 
 /// Raw lines the acquisition ring keeps: a centroid window completes a few rows after its
 /// blob closes, so 16 leaves room for blobs up to ~8 rows below their peak.
-pub const RING_LINES: usize = 16;
+pub(crate) const RING_LINES: usize = 16;
 /// Longest raw line the ring holds (the CCD47-20's 1072 elements).
-pub const RING_LINE_LEN: usize = ReadoutGeometry::CCD47_20_DUAL.line_len();
+pub(crate) const RING_LINE_LEN: usize = ReadoutGeometry::CCD47_20_DUAL.line_len();
 /// Most stars tracked at once (tracking windows, fused CoG plans).
-pub const TRACK_WINDOWS: usize = 32;
+pub(crate) const TRACK_WINDOWS: usize = 32;
 
 /// Candidates the in-flight defect watch keeps.
-pub const WATCH_CANDIDATES: usize = 64;
+pub(crate) const WATCH_CANDIDATES: usize = 64;
 /// Confirmed in-flight defects the overlay holds.
-pub const WATCH_CONFIRMED: usize = 32;
+pub(crate) const WATCH_CONFIRMED: usize = 32;
 /// The in-flight defect watch of tracking ([`crate::calib::refresh`]).
 pub type Watch = DefectWatch<WATCH_CANDIDATES, WATCH_CONFIRMED>;
 
