@@ -21,9 +21,9 @@
 /// Words in the record's RAM image.
 pub const FAULT_RECORD_WORDS: usize = 8;
 /// The record's first word.
-pub const FAULT_MAGIC: u32 = 0x5354_4652;
+pub(crate) const FAULT_MAGIC: u32 = 0x5354_4652;
 /// The record layout version (word 5, bits 8-15).
-pub const FAULT_VERSION: u32 = 1;
+pub(crate) const FAULT_VERSION: u32 = 1;
 
 const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
