@@ -43,7 +43,7 @@
 //! # Cost and memory
 //! Per pixel inside the border: its lowest neighbour, which rules most pixels out (the
 //! excess over it bounds `E`); for the others, the distance to the stars near the window
-//! (at most [`MAX_NEAR_STARS`]), one sort of 8 values and the isolation sums; then a pass
+//! (at most `MAX_NEAR_STARS`), one sort of 8 values and the isolation sums; then a pass
 //! over the candidates and confirmed pixels. Measured on the M7: ~8,000 instructions an
 //! 11x11 window (`cargo m7-bench`'s 30-star `tracker_tracking_frame` went from 9,093,389 to
 //! 9,331,946 with the watch). [`DefectWatch::apply`] is a pass over
@@ -57,7 +57,7 @@ use crate::units::Electrons;
 use crate::window::Rect;
 
 /// Most stars near one window taken into account; a window with more is not watched.
-pub const MAX_NEAR_STARS: usize = 16;
+pub(crate) const MAX_NEAR_STARS: usize = 16;
 /// Most hits kept from one window (a window with more is a scene, not defects: the rest are
 /// ignored).
 const MAX_WINDOW_HITS: usize = 16;
