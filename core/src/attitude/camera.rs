@@ -26,11 +26,11 @@
 //! Everything is f64: the Cortex-M7 of the STM32H743 has a double-precision FPU.
 
 /// Most Newton steps of the undistortion.
-pub const UNDISTORT_ITERATIONS: usize = 10;
+pub(crate) const UNDISTORT_ITERATIONS: usize = 10;
 
 /// The undistortion has converged when the distorted point is matched to this, normalised
 /// units (4e-9 px at a 3,889 px focal length).
-pub const UNDISTORT_TOLERANCE: f64 = 1e-12;
+pub(crate) const UNDISTORT_TOLERANCE: f64 = 1e-12;
 
 /// A camera model.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -113,7 +113,7 @@ pub(super) struct CellConst {
 /// Cells whose constants a plan holds (a 9x9 box over 8-pixel tiles at the output split has
 /// at most 4 column groups x 2 tile rows); a box with more (tiles below 8 pixels) looks its
 /// constants up at every application instead (same values, slower).
-pub const PLAN_CELLS: usize = 8;
+pub(crate) const PLAN_CELLS: usize = 8;
 
 /// Why a [`RawCogPlan`] cannot be built or applied.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
