@@ -36,13 +36,13 @@ impl Quat {
     }
 
     /// The inverse rotation (camera to ICRS).
-    pub fn conj(self) -> Self {
+    pub(crate) fn conj(self) -> Self {
         let [w, x, y, z] = self.0;
         Self([w, -x, -y, -z])
     }
 
     /// The rotation matrix: `v_cam = M v_icrs`, rows are camera axes in ICRS.
-    pub fn matrix(self) -> [[f64; 3]; 3] {
+    pub(crate) fn matrix(self) -> [[f64; 3]; 3] {
         let [w, x, y, z] = self.0;
         [
             [

@@ -560,7 +560,7 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
     /// Retires every confirmed pixel that `table` lists (hot or telegraph), wherever it lies:
     /// once a table update holds them, the overlay has nothing left to do for them. Returns
     /// how many were retired. Cost: a binary search of each list per confirmed pixel.
-    pub fn retire_listed(&mut self, table: &crate::table::CalibTable<'_>) -> usize {
+    pub(crate) fn retire_listed(&mut self, table: &crate::table::CalibTable<'_>) -> usize {
         let before = self.confirmed.len();
         let (hot, tel) = (table.hot_pixels(), table.telegraph_pixels());
         self.confirmed
@@ -574,7 +574,7 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
     }
 
     /// True when a confirmed pixel lies in `rect`.
-    pub fn touches(&self, rect: Rect) -> bool {
+    pub(crate) fn touches(&self, rect: Rect) -> bool {
         self.confirmed.iter().any(|d| {
             d.x_px >= rect.x0
                 && d.y_px >= rect.y0

@@ -97,7 +97,7 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
 
     /// Forgets every line and sets where a raw line's active pixels start (buffers made
     /// with a placeholder, e.g. all-zero statics, are set up in place).
-    pub fn reset_for(&mut self, first_active_col: usize) {
+    pub(crate) fn reset_for(&mut self, first_active_col: usize) {
         self.first_active_col = first_active_col;
         self.clear();
     }
@@ -306,7 +306,7 @@ impl<const N: usize> WindowCapture<N> {
 
     /// Forgets every window and takes lines of `geometry` from now on (a list made with a
     /// placeholder geometry, e.g. an all-zero static, is set up in place).
-    pub fn reset_for(&mut self, geometry: ReadoutGeometry) {
+    pub(crate) fn reset_for(&mut self, geometry: ReadoutGeometry) {
         self.geometry = geometry;
         self.reset();
     }

@@ -77,7 +77,6 @@ pub struct FallbackThermometer<E, M> {
     /// The MCU's sensor.
     pub mcu: M,
     source: ThermoSource,
-    last_k: Option<Kelvin>,
     external_failures: u32,
     mcu_failures: u32,
 }
@@ -89,7 +88,6 @@ impl<E: Thermometer, M: Thermometer> FallbackThermometer<E, M> {
             external,
             mcu,
             source: ThermoSource::None,
-            last_k: None,
             external_failures: 0,
             mcu_failures: 0,
         }
@@ -98,11 +96,6 @@ impl<E: Thermometer, M: Thermometer> FallbackThermometer<E, M> {
     /// Where the last reading came from.
     pub fn source(&self) -> ThermoSource {
         self.source
-    }
-
-    /// The last reading, K.
-    pub fn last_k(&self) -> Option<Kelvin> {
-        self.last_k
     }
 
     /// Readings the external sensor failed to give (absent or implausible).
@@ -137,7 +130,6 @@ impl<E: Thermometer, M: Thermometer> Thermometer for FallbackThermometer<E, M> {
             }
         };
         self.source = source;
-        self.last_k = reading;
         reading
     }
 }

@@ -116,12 +116,12 @@ impl Phases {
     /// Phases 1 and 2 high: the rest state of the image and store sections.
     pub const P12: Self = Self(0b011);
     /// Phases 2 and 3 high.
-    pub const P23: Self = Self(0b110);
+    pub(crate) const P23: Self = Self(0b110);
     /// Phases 3 and 1 high: the rest state of the serial register.
     pub const P31: Self = Self(0b101);
     /// One element forward (towards the output): three states, each sharing a high phase
     /// with the one before (the overlap that keeps the packet whole), from and back to P12.
-    pub const FORWARD_FROM_P12: [Self; 3] = [Self::P23, Self::P31, Self::P12];
+    pub(crate) const FORWARD_FROM_P12: [Self; 3] = [Self::P23, Self::P31, Self::P12];
     /// One element forward from and back to P31 (the packet crosses into the next element
     /// at the first state).
     pub const FORWARD_FROM_P31: [Self; 3] = [Self::P12, Self::P23, Self::P31];
@@ -129,7 +129,7 @@ impl Phases {
     pub const BACKWARD_FROM_P31: [Self; 3] = [Self::P23, Self::P12, Self::P31];
     /// One element backward from and back to P12 (the packet crosses into the next element
     /// at the first state, in step with [`Self::FORWARD_FROM_P31`]).
-    pub const BACKWARD_FROM_P12: [Self; 3] = [Self::P31, Self::P23, Self::P12];
+    pub(crate) const BACKWARD_FROM_P12: [Self; 3] = [Self::P31, Self::P23, Self::P12];
 }
 
 /// The level of every line at one tick: bit `l` is [`Line`] `l`.
@@ -225,7 +225,7 @@ impl PinMap {
     };
 
     /// The pin of `line`.
-    pub fn pin(&self, line: Line) -> u8 {
+    pub(crate) fn pin(&self, line: Line) -> u8 {
         self.pins.get(line as usize).copied().unwrap_or(u8::MAX)
     }
 
