@@ -182,11 +182,6 @@ impl DarkScaleEstimator {
         Ok(())
     }
 
-    /// Number of covered samples averaged so far.
-    pub fn samples(&self) -> u32 {
-        self.count
-    }
-
     /// The mean covered-pixel dark signal so far, clamped to ±[`DARK_SCALE_LIMIT_E`], or
     /// `None` before any covered sample (a geometry without covered columns).
     pub fn estimate(&self) -> Option<Electrons> {

@@ -160,12 +160,12 @@ impl<'t> FrameCalibration<'t> {
     }
 
     /// The table in use.
-    pub fn table(&self) -> &CalibTable<'t> {
+    pub(crate) fn table(&self) -> &CalibTable<'t> {
         &self.table
     }
 
     /// The frame's conditions (the dark scale as given, before clamping).
-    pub fn conditions(&self) -> &FrameConditions {
+    pub(crate) fn conditions(&self) -> &FrameConditions {
         &self.conditions
     }
 

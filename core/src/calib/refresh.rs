@@ -331,11 +331,6 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
         }
     }
 
-    /// The settings.
-    pub fn config(&self) -> &WatchConfig {
-        &self.config
-    }
-
     /// The confirmed pixels (the overlay), oldest first.
     pub fn confirmed(&self) -> &[Defect] {
         &self.confirmed

@@ -109,11 +109,6 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
         self.newest = None;
     }
 
-    /// The newest active row pushed.
-    pub fn newest(&self) -> Option<u16> {
-        self.newest
-    }
-
     /// Stores raw line `raw_line` (at most `W` samples) of active row `y` with its levels,
     /// replacing row `y - R`.
     pub fn push(&mut self, y: u16, raw_line: &[u16], levels: &LineLevels) -> Result<(), RingError> {
@@ -143,7 +138,7 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
     }
 
     /// Whether every row of `rect` is in the ring now.
-    pub fn holds(&self, rect: Rect) -> Result<(), RingError> {
+    pub(crate) fn holds(&self, rect: Rect) -> Result<(), RingError> {
         if R == 0 {
             return Err(RingError::RowGone);
         }
@@ -315,11 +310,6 @@ impl<const N: usize> WindowCapture<N> {
     pub fn reset(&mut self) {
         self.slots.clear();
         self.next_y = 0;
-    }
-
-    /// Windows in the list.
-    pub fn len(&self) -> usize {
-        self.slots.len()
     }
 
     /// True when no window is listed.

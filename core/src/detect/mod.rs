@@ -58,7 +58,7 @@ pub struct DetectConfig {
 impl DetectConfig {
     /// The defaults: join at 2.5 sigma, a peak above 5 sigma, at least 2 pixels, SNR above 3,
     /// low-SNR flag below 5.
-    pub const DEFAULT: Self = Self {
+    pub(crate) const DEFAULT: Self = Self {
         pixel_sigmas: 2.5,
         peak_sigmas: 5.0,
         min_pixels: 2,

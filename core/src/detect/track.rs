@@ -102,7 +102,7 @@ pub struct TrackConfig {
 impl TrackConfig {
     /// The defaults: the line detector's 2.5-sigma aperture, a 3x3 flux box, SNR above 3,
     /// low-SNR flag below 5, spike sharpness 0.07, 3-sigma spike and blend tests.
-    pub const DEFAULT: Self = Self {
+    pub(crate) const DEFAULT: Self = Self {
         pixel_sigmas: 2.5,
         box_side: 3,
         min_snr: 3.0,

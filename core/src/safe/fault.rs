@@ -81,7 +81,7 @@ pub enum ResetCause {
 
 impl ResetCause {
     /// The code in the record (word 5).
-    pub const fn code(self) -> u8 {
+    pub(crate) const fn code(self) -> u8 {
         match self {
             Self::PowerOn => 1,
             Self::Watchdog => 2,
@@ -92,7 +92,7 @@ impl ResetCause {
     }
 
     /// The cause of a code, `None` for an unknown one.
-    pub const fn from_code(code: u8) -> Option<Self> {
+    pub(crate) const fn from_code(code: u8) -> Option<Self> {
         match code {
             1 => Some(Self::PowerOn),
             2 => Some(Self::Watchdog),

@@ -152,7 +152,7 @@ impl<'w, 's> Program<'w, 's> {
 
     /// Where each segment lies in [`Self::words`]: (first word, words), indexed by
     /// `SegmentId as usize`.
-    pub const fn spans(&self) -> [(u32, u32); SEGMENTS] {
+    pub(crate) const fn spans(&self) -> [(u32, u32); SEGMENTS] {
         self.spans
     }
 
@@ -162,18 +162,13 @@ impl<'w, 's> Program<'w, 's> {
     }
 
     /// Outputs digitised by each CONVST.
-    pub const fn outputs(&self) -> u8 {
+    pub(crate) const fn outputs(&self) -> u8 {
         self.outputs
     }
 
     /// The binning factor.
-    pub const fn binning(&self) -> u16 {
+    pub(crate) const fn binning(&self) -> u16 {
         self.binning
-    }
-
-    /// The exposure asked for, us.
-    pub const fn exposure_us(&self) -> u32 {
-        self.exposure_us
     }
 
     /// The same program over a copy of its words (in DMA-reachable RAM, or an edited copy to

@@ -51,7 +51,7 @@ pub(crate) const LINE_COUNT: usize = 16;
 
 impl Line {
     /// Every line, in bit order.
-    pub const ALL: [Self; LINE_COUNT] = [
+    pub(crate) const ALL: [Self; LINE_COUNT] = [
         Self::I1,
         Self::I2,
         Self::I3,
@@ -79,12 +79,12 @@ impl Line {
     pub const REG_RIGHT: [Self; 3] = [Self::R1R, Self::R2R, Self::R3R];
 
     /// The line's bit in a [`LineSet`].
-    pub const fn bit(self) -> u16 {
+    pub(crate) const fn bit(self) -> u16 {
         1 << self as u8
     }
 
     /// The name as the clock-driver board labels it.
-    pub const fn name(self) -> &'static str {
+    pub(crate) const fn name(self) -> &'static str {
         match self {
             Self::I1 => "I1",
             Self::I2 => "I2",
@@ -139,7 +139,7 @@ pub struct LineSet(pub u16);
 
 impl LineSet {
     /// Every line low.
-    pub const EMPTY: Self = Self(0);
+    pub(crate) const EMPTY: Self = Self(0);
 
     /// With `line` high.
     #[must_use]
@@ -149,7 +149,7 @@ impl LineSet {
 
     /// With `line` low.
     #[must_use]
-    pub const fn without(self, line: Line) -> Self {
+    pub(crate) const fn without(self, line: Line) -> Self {
         Self(self.0 & !line.bit())
     }
 
@@ -230,7 +230,7 @@ impl PinMap {
     }
 
     /// Checks that every pin is on the port and no two lines share one.
-    pub fn validate(&self) -> Result<(), PinMapError> {
+    pub(crate) fn validate(&self) -> Result<(), PinMapError> {
         let mut used: [Option<Line>; 16] = [None; 16];
         for line in Line::ALL {
             let pin = self.pin(line);

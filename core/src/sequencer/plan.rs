@@ -35,7 +35,7 @@ pub enum Binning {
 
 impl Binning {
     /// Pixels summed along each axis.
-    pub const fn factor(self) -> u16 {
+    pub(crate) const fn factor(self) -> u16 {
         match self {
             Self::X1 => 1,
             Self::X2 => 2,
@@ -133,22 +133,17 @@ impl<'a> ReadoutPlan<'a> {
     }
 
     /// The geometry.
-    pub const fn geometry(&self) -> &ReadoutGeometry {
+    pub(crate) const fn geometry(&self) -> &ReadoutGeometry {
         &self.geometry
     }
 
-    /// The request.
-    pub const fn request(&self) -> &ReadoutRequest<'a> {
-        &self.request
-    }
-
     /// The binning.
-    pub const fn binning(&self) -> Binning {
+    pub(crate) const fn binning(&self) -> Binning {
         self.binning
     }
 
     /// The exposure, us.
-    pub const fn exposure_us(&self) -> u32 {
+    pub(crate) const fn exposure_us(&self) -> u32 {
         self.exposure_us
     }
 

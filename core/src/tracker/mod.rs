@@ -315,11 +315,6 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         &self.config
     }
 
-    /// The readout geometry.
-    pub fn geometry(&self) -> &ReadoutGeometry {
-        &self.geometry
-    }
-
     /// The current (or last) frame's mode.
     pub fn mode(&self) -> Mode {
         self.modes.mode()

@@ -309,16 +309,6 @@ impl RawCogPlan {
         self.key == key_of(cal, win, anchor, side)
     }
 
-    /// The box side the plan was built for.
-    pub fn box_side(&self) -> u8 {
-        self.key.side
-    }
-
-    /// The anchor the plan was built for.
-    pub fn anchor(&self) -> (u16, u16) {
-        self.key.anchor
-    }
-
     #[inline(never)]
     fn fill(&mut self, cal: &FrameCalibration<'_>, b: BoxAt, clipped: bool) -> Option<()> {
         let t = cal.table();

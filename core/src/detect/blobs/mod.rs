@@ -255,7 +255,7 @@ impl<const N: usize> LineDetector<N> {
     }
 
     /// The configuration.
-    pub fn config(&self) -> &DetectConfig {
+    pub(crate) fn config(&self) -> &DetectConfig {
         &self.config
     }
 

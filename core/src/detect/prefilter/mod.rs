@@ -209,11 +209,6 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         self.cal = cal;
     }
 
-    /// The calibration in use.
-    pub fn calibration(&self) -> &FrameCalibration<'t> {
-        &self.cal
-    }
-
     /// The last line pushed, calibrated (electrons and flags of every active pixel), when it
     /// was calibrated whole: a background row (`y % background_stride == 0`, the first row
     /// and the warm-up rows: [`LineDetector::background_due`]); `None` after any other line, whose quiet pixels were never calibrated.
