@@ -58,11 +58,11 @@ pub const VERSION: u16 = 1;
 /// Size of the header in bytes.
 pub const HEADER_LEN: usize = 64;
 /// Size of one star entry in bytes.
-pub(crate) const STAR_LEN: usize = 16;
+pub const STAR_LEN: usize = 16;
 /// Size of one pair entry in bytes.
-pub(crate) const PAIR_LEN: usize = 8;
+pub const PAIR_LEN: usize = 8;
 /// Size of one k-vector entry in bytes.
-pub(crate) const KVEC_ENTRY_LEN: usize = 4;
+pub const KVEC_ENTRY_LEN: usize = 4;
 /// Most stars a catalog may hold (a pair stores star indices as u16).
 pub const MAX_STARS: u32 = 65_535;
 /// Most k-vector bins.

@@ -215,7 +215,7 @@ impl<'a> Catalog<'a> {
     }
 
     /// Pairs are every pair of pattern stars closer than this, rad.
-    pub(crate) fn max_separation_rad(&self) -> f64 {
+    pub fn max_separation_rad(&self) -> f64 {
         f64::from(self.max_sep_nrad) / NRAD_PER_RAD
     }
 
@@ -225,7 +225,7 @@ impl<'a> Catalog<'a> {
     }
 
     /// Most stars in any cone of [`Self::field_radius_rad`] (an upper bound).
-    pub(crate) fn max_field_stars(&self) -> u32 {
+    pub fn max_field_stars(&self) -> u32 {
         self.max_field_stars
     }
 
