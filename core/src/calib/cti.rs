@@ -26,7 +26,7 @@
 //!
 //! Formats: coefficients as stored (U0F32 px per transfer, U0F16 exponent, u32 e-), the
 //! arithmetic in f32. The signal factor is bounded: `(F + F_0) / F_ref` is clamped to
-//! [`MIN_FLUX_RATIO`]..=[`MAX_FLUX_RATIO`] (a non-finite or non-positive flux gives no
+//! `MIN_FLUX_RATIO`..=`MAX_FLUX_RATIO` (a non-finite or non-positive flux gives no
 //! correction), so a noise-level flux cannot produce a runaway shift.
 //!
 //! Cost: one `powf` and one `erff` (libm), about 15 flops and a few integer operations per
@@ -36,9 +36,9 @@ use crate::geometry::{Output, ReadoutGeometry};
 use crate::table::{CalibTable, CtiCoeffs};
 
 /// Smallest flux ratio `(F + F_0) / F_ref` the signal law is evaluated at.
-pub const MIN_FLUX_RATIO: f32 = 1.0e-3;
+pub(crate) const MIN_FLUX_RATIO: f32 = 1.0e-3;
 /// Largest flux ratio `(F + F_0) / F_ref` the signal law is evaluated at.
-pub const MAX_FLUX_RATIO: f32 = 1.0e6;
+pub(crate) const MAX_FLUX_RATIO: f32 = 1.0e6;
 
 /// A measured star position the correction applies to: its position and flux in, the same
 /// measurement at the corrected position out (the centroid stage's result implements it).

@@ -16,7 +16,8 @@ pub const HOT_DARK_REL_TOL: f32 = 1e-5;
 /// Largest hot-pixel dark signal: 4 x 2^20 e-, the same bound as the regular dark term
 /// (relative dark < 4 times a dark scale of at most 2^20 e-), which the overflow proof of
 /// [`crate::calib::formula`] relies on.
-pub const HOT_DARK_LIMIT_E: Electrons = Electrons::from_bits(DARK_SCALE_LIMIT_E.to_bits() * 4 - 1);
+pub(crate) const HOT_DARK_LIMIT_E: Electrons =
+    Electrons::from_bits(DARK_SCALE_LIMIT_E.to_bits() * 4 - 1);
 
 /// The dark charge of `hot` after `exposure_ms` at `temperature_k`, given the table's reference
 /// temperature; clamped to `0..=HOT_DARK_LIMIT_E`.

@@ -1,6 +1,6 @@
 //! The star tracker application: the frame loop, its modes and the rules that change them,
 //! in one piece of `no_std` code that the board, the host tools and the software-in-the-loop
-//! run alike. A home binds its hardware (or files, or the simulator) to the [`ports`] and
+//! run alike. A home binds its hardware (or files, or the simulator) to the ports ([`Ports`]) and
 //! calls [`Tracker::run_frame`] once a frame; everything from a raw line to a reported star
 //! happens here.
 //!
@@ -43,7 +43,7 @@
 //! where the home puts it (`.bss` on the board); the [`Tracker`] itself holds the scan
 //! detector (its line buffers and `N` candidates), the pending windows, the star list, one
 //! window's scratch, the last frame's stars, the in-flight defect watch ([`Watch`]) and the
-//! dark-drift monitor ([`drift`]). The sizes of both are tabled in docs/tracker.md
+//! dark-drift monitor ([`DarkDrift`] reports it). The sizes of both are tabled in docs/tracker.md
 //! (`## Memory`) and bounded by the host test `tracker_memory`.
 //!
 //! # Cost
@@ -56,13 +56,13 @@
 //! down.
 
 mod acquire;
-pub mod config;
-pub mod drift;
+mod config;
+mod drift;
 mod list;
 mod measure;
 mod modes;
-pub mod ports;
-pub mod record;
+mod ports;
+mod record;
 mod track;
 
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
@@ -94,16 +94,16 @@ use track::Tracking;
 
 /// Raw lines the acquisition ring keeps: a centroid window completes a few rows after its
 /// blob closes, so 16 leaves room for blobs up to ~8 rows below their peak.
-pub const RING_LINES: usize = 16;
+pub(crate) const RING_LINES: usize = 16;
 /// Longest raw line the ring holds (the CCD47-20's 1072 elements).
-pub const RING_LINE_LEN: usize = ReadoutGeometry::CCD47_20_DUAL.line_len();
+pub(crate) const RING_LINE_LEN: usize = ReadoutGeometry::CCD47_20_DUAL.line_len();
 /// Most stars tracked at once (tracking windows, fused CoG plans).
-pub const TRACK_WINDOWS: usize = 32;
+pub(crate) const TRACK_WINDOWS: usize = 32;
 
 /// Candidates the in-flight defect watch keeps.
-pub const WATCH_CANDIDATES: usize = 64;
+pub(crate) const WATCH_CANDIDATES: usize = 64;
 /// Confirmed in-flight defects the overlay holds.
-pub const WATCH_CONFIRMED: usize = 32;
+pub(crate) const WATCH_CONFIRMED: usize = 32;
 /// The in-flight defect watch of tracking ([`crate::calib::refresh`]).
 pub type Watch = DefectWatch<WATCH_CANDIDATES, WATCH_CONFIRMED>;
 
@@ -327,11 +327,6 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
     /// The configuration in force.
     pub fn config(&self) -> &TrackerConfig {
         &self.config
-    }
-
-    /// The readout geometry.
-    pub fn geometry(&self) -> &ReadoutGeometry {
-        &self.geometry
     }
 
     /// The current (or last) frame's mode.

@@ -145,12 +145,12 @@ impl StarFlags {
 
     /// The bits of a tracking window test's flags (its "no background" and "bad input" mean
     /// nothing was detected: such a window reports no star).
-    pub fn from_track(t: TrackFlags) -> Self {
+    pub(crate) fn from_track(t: TrackFlags) -> Self {
         map(&TRACK_BITS, |f| t.contains(f))
     }
 
     /// The bits of a centroid's flags.
-    pub fn from_centroid(c: CentroidFlags) -> Self {
+    pub(crate) fn from_centroid(c: CentroidFlags) -> Self {
         map(&CENTROID_BITS, |f| c.contains(f))
     }
 
@@ -201,7 +201,7 @@ pub struct StarRecord {
 impl StarRecord {
     /// A centroid as a record, with `flags` added to the centroid's own (no PSF measured:
     /// `psf_a_px` and `chi2_dof` 0).
-    pub fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {
+    pub(crate) fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {
         Self {
             x_px: c.x_px,
             y_px: c.y_px,

@@ -119,7 +119,7 @@ mod plan;
 mod sums;
 
 pub use apply::raw_cog;
-pub use plan::{MAX_BOX_SIDE, PLAN_CELLS, PlanError, RawCogPlan};
+pub use plan::{MAX_BOX_SIDE, PlanError, RawCogPlan};
 
 use super::Centroid;
 use crate::calib::LineLevels;
