@@ -104,7 +104,7 @@ pub struct TableRun {
     pub stars: usize,
 }
 
-/// [`table`]'s body, returning what it reached.
+/// One pass of [`table`]'s body over `data` as it is, returning what it reached.
 pub fn table_run(data: &[u8]) -> TableRun {
     if let Ok(t) = CalibTable::parse_prefix(data) {
         assert!(t.len_bytes() <= data.len());
@@ -707,7 +707,9 @@ fn drain_link(link: &mut LinkService, tx: usize, frames: &mut Deframer<{ MAX_TM_
 /// The link with a tracker (the flight configuration, the CCD47-20 read through both
 /// outputs, the board's 32 stars): any bytes into [`LinkService::receive`], then the
 /// telemetry drained. Checked: no panic, every decoded packet gets exactly one verdict
-/// (accepted + rejected = packets), and [`drain_link`]'s checks of every transmit.
+/// (accepted + rejected = packets), and every transmit: never more than its buffer, the
+/// queue shorter by what was sent, and what was sent whole frames of packets with a right
+/// CRC-16.
 pub fn link_receive(data: &[u8]) {
     let _ = link_receive_run(data);
 }
