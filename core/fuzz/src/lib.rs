@@ -386,8 +386,9 @@ fn run_frames(t: CalibTable<'_>) -> (usize, usize) {
 /// parses every star and pair reads, pairs are sorted with in-range indices, and the
 /// identification's queries keep their promises: [`Catalog::pairs_between`] is a range of
 /// pairs whose separations lie in the interval, [`Catalog::cone`] yields stars in index
-/// order that lie within its radius. The query directions and intervals come from the
-/// catalog's own stars and pairs and from the input's last bytes.
+/// order that lie within its radius, and a cone of more than 0.01 rad about a star holds
+/// that star. The query directions come from the catalog's own stars, the radii and
+/// intervals from the input's last bytes.
 pub fn catalog(data: &[u8]) {
     catalog_once(data);
     let mut sealed = data.to_vec();
@@ -458,7 +459,12 @@ fn catalog_once(data: &[u8]) {
             1 => r * core::f64::consts::PI,
             _ => [f64::NAN, -1.0, f64::INFINITY, 0.0][q % 4],
         };
-        check_cone(&cat, dir, radius);
+        let found = check_cone(&cat, dir, radius, star);
+        if q % 4 == 0 && radius > 0.01 {
+            // A star's own direction is within any cone about it (its norm is within 2^-20
+            // of 1, which 0.01 rad of cosine covers).
+            assert!(found, "a cone of {radius} rad about star {star} misses it");
+        }
         let lo = max_sep * r;
         let hi = match q % 3 {
             0 => lo + max_sep / 64.0,
@@ -471,8 +477,10 @@ fn catalog_once(data: &[u8]) {
     check_pairs_between(&cat, max_sep, 0.0);
 }
 
-/// A cone yields distinct stars in increasing index order, each within the radius.
-fn check_cone(cat: &Catalog<'_>, dir: [f64; 3], radius: f64) {
+/// A cone yields distinct stars in increasing index order, each within the radius; returns
+/// whether star `star` was among them.
+fn check_cone(cat: &Catalog<'_>, dir: [f64; 3], radius: f64, star: usize) -> bool {
+    let mut found = false;
     // The cone's own test is `dot >= cos(radius)`; a few ulps of slack for this crate's cos.
     let cos_r = radius.clamp(0.0, core::f64::consts::PI).cos() - 1e-12;
     let mut last = None;
@@ -483,7 +491,9 @@ fn check_cone(cat: &Catalog<'_>, dir: [f64; 3], radius: f64) {
         assert_eq!(cat.dir(i), Some(v));
         let d = v[0] * dir[0] + v[1] * dir[1] + v[2] * dir[2];
         assert!(d >= cos_r || radius.is_nan(), "star {i} outside the cone");
+        found |= i == star;
     }
+    found
 }
 
 /// The pairs in an interval: within the pair list, and every separation inside the interval
