@@ -592,10 +592,9 @@ impl TableUpload for MemoryTables {
     }
 
     fn read_active(&mut self, kind: u8, offset: u32, out: &mut [u8]) -> bool {
-        let Some((info, bytes)) = self.active.as_ref().filter(|a| a.0.kind == kind) else {
+        let Some((_, bytes)) = self.active.as_ref().filter(|a| a.0.kind == kind) else {
             return false;
         };
-        let _ = info;
         let start = offset as usize;
         match bytes.get(start..start.saturating_add(out.len())) {
             Some(src) => {
