@@ -30,9 +30,9 @@ pub struct Output(pub u8);
 /// Largest number of outputs a geometry may describe.
 pub const MAX_OUTPUTS: usize = 2;
 /// Largest raw line length (elements) a geometry may describe.
-pub const MAX_LINE_LEN: u16 = 8192;
+pub(crate) const MAX_LINE_LEN: u16 = 8192;
 /// Largest number of lines a geometry may describe.
-pub const MAX_LINES: u16 = 8192;
+pub(crate) const MAX_LINES: u16 = 8192;
 
 /// The layout of one raw line and of the frame, as data, so other sensors and readout modes
 /// (windowed, binned) can be described.
@@ -125,7 +125,7 @@ impl ReadoutGeometry {
         Ok(())
     }
 
-    /// Elements per raw line. Valid geometries keep this at most [`MAX_LINE_LEN`].
+    /// Elements per raw line. Valid geometries keep this at most `MAX_LINE_LEN` (8192).
     pub const fn line_len(&self) -> usize {
         2 * self.overscan_px as usize + 2 * self.covered_px as usize + self.active_cols as usize
     }

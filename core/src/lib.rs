@@ -6,10 +6,12 @@
 //!
 //! Data flow (each stage a module):
 //! raw readout line/window ([`geometry`]) -> per-line bias and per-frame dark scale
-//! ([`calib::levels`]) -> per-pixel electrons, applied only to the pixels read
-//! ([`calib::pixel`]) with the maps and defect lists of a calibration table ([`table`]) ->
-//! detections ([`detect`]) -> centroids ([`centroid`]) -> the frame's attitude from the
-//! identified stars ([`solver`], with [`catalog`], [`ident`] and [`attitude`]).
+//! ([`calib::LineLevels`], [`calib::DarkScaleEstimator`]) -> per-pixel electrons, applied
+//! only to the pixels read ([`calib::FrameCalibration`]) with the maps and defect lists of a
+//! calibration table ([`table`]) -> detections ([`detect`]) -> centroids ([`centroid`]) -> the frame's attitude from the
+//! identified stars ([`solver`], with [`catalog`], [`ident`] and [`attitude`]). The tracker
+//! application ([`tracker`]) runs these stages frame after frame; the frame cycle ([`cycle`])
+//! adds the link ([`link`]), the attitude stage and housekeeping ([`safe`]) around each frame.
 //!
 //! Every fixed-point quantity has its format and range stated in [`units`].
 #![no_std]
@@ -26,10 +28,12 @@ pub mod attitude;
 pub mod calib;
 pub mod catalog;
 pub mod centroid;
+pub mod cycle;
 pub mod detect;
 pub mod geometry;
 pub mod ident;
 pub mod link;
+pub mod readout;
 pub mod safe;
 pub mod sequencer;
 pub mod solver;

@@ -83,7 +83,7 @@ pub struct Fix {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum SolveError {
-    /// Fewer usable stars than identification needs ([`ident::MIN_MATCHES`]).
+    /// Fewer usable stars than identification needs (`MIN_MATCHES`, 4).
     TooFewStars {
         /// Usable stars in the list.
         usable: u8,

@@ -69,16 +69,6 @@ impl<'a> Window<'a> {
     pub fn new(rect: Rect, pixels_e: &'a [Electrons]) -> Option<Self> {
         (pixels_e.len() == rect.len()).then_some(Self { rect, pixels_e })
     }
-
-    /// The pixel at window-relative (col, row), if inside.
-    pub fn get(&self, col: u16, row: u16) -> Option<Electrons> {
-        if col >= self.rect.width || row >= self.rect.height {
-            return None;
-        }
-        self.pixels_e
-            .get(usize::from(row) * usize::from(self.rect.width) + usize::from(col))
-            .copied()
-    }
 }
 
 #[cfg(test)]

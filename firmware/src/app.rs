@@ -11,10 +11,11 @@
 //! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none; uploads through the link, and the in-flight defect commit (`TC[133,7]`, moved on by `LinkService::poll` between frames), go to the flash store ([`crate::flash_store::with_link_tables`]) and are used from the next start |
 //! | telemetry | the defmt log ([`crate::telemetry`]) |
 //!
-//! After every frame the task gives the frame's star list to the attitude stage
-//! ([`startrack_core::solver`], with the catalog in flash, [`crate::catalog`], and the
-//! table's camera model or the nominal 15 degree camera), sends its attitude report on the
-//! link and logs it, marks the watchdog's progress ([`crate::watchdog`]) and adds the frame to housekeeping ([`crate::safe_state::HEALTH`]).
+//! The frame and what follows it (the link's housekeeping, the attitude stage with the
+//! catalog in flash, [`crate::catalog`], and the table's camera model or the nominal 15
+//! degree camera, its report on the link, housekeeping) are the core's frame cycle
+//! ([`startrack_core::cycle`]); this task logs the attitude, marks the watchdog's progress
+//! ([`crate::watchdog`]) and publishes the cycle's housekeeping ([`crate::safe_state::HEALTH`]).
 //!
 //! Each frame's [`ReadoutRequest`] (full frame, or the tracking windows) and the configured
 //! exposure go to the CCD sequencer ([`crate::sequencer`]), which compiles and plays that
@@ -28,13 +29,15 @@ use crate::{safe_state, watchdog};
 use core::convert::Infallible;
 use startrack_core::attitude::Camera;
 use startrack_core::catalog::Catalog;
-use startrack_core::link::AttitudeReport;
+use startrack_core::cycle::{CyclePorts, FrameCycle};
+use startrack_core::link::TableUpload;
+use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::safe::{FallbackThermometer, SetupFaults};
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Clock, Event, FixedTable, FrameSummary, LineSource, LineSummary, Ports, ReadoutRequest,
-    SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
+    Clock, FixedTable, LineSource, SourceLine, Tracker, TrackerBuffers, TrackerConfig,
 };
 
 /// The board's sensor temperature: the CCD board's sensor, else the MCU's.
@@ -61,33 +64,6 @@ fn nominal_camera() -> Camera {
 
 /// Centroid 1-sigma the identification's tolerances assume, px.
 const IDENT_SIGMA_PX: f64 = 0.2;
-
-/// A telemetry port that passes everything on and keeps the frame's stars for the attitude
-/// stage.
-struct KeepStars<'a> {
-    inner: &'a mut dyn TelemetrySink,
-    stars: &'a mut heapless::Vec<StarRecord, MAX_STARS>,
-}
-
-impl TelemetrySink for KeepStars<'_> {
-    fn line(&mut self, summary: &LineSummary) {
-        self.inner.line(summary);
-    }
-
-    fn star(&mut self, frame: u32, star: &StarRecord) {
-        // The tracker reports at most MAX_STARS a frame: a push never fails.
-        let _ = self.stars.push(*star);
-        self.inner.star(frame, star);
-    }
-
-    fn frame(&mut self, summary: &FrameSummary) {
-        self.inner.frame(summary);
-    }
-
-    fn event(&mut self, event: &Event) {
-        self.inner.event(event);
-    }
-}
 
 /// The sequencer's lines as the tracker's line source. `start_frame` sends the request
 /// (windows copied) and the exposure to the sequencer ([`crate::sequencer::REQUESTS`]),
@@ -222,11 +198,14 @@ impl Clock for BoardClock {
     }
 }
 
-/// The tracker task: the flight configuration with this board's exposure, frame after
-/// frame. A configuration the core refuses (which the constants here cannot produce) is
-/// logged, the safe standby is entered ([`safe_state::enter_standby`]) and the task ends.
-/// (Ending rather than idling keeps the refused tracker out of the task's state: an await in
-/// that branch would hold it there beside the running one.)
+/// The tracker task: the core's frame cycle ([`FrameCycle`]) with the flight configuration
+/// and this board's exposure, frame after frame; between frames the link is served and the
+/// in-flight defect commit moved on, inside the flash store's round
+/// ([`crate::flash_store::with_link_tables`]). A configuration the core refuses (which the
+/// constants here cannot produce) is logged, the safe standby is entered
+/// ([`safe_state::enter_standby`]) and the task ends. (Ending rather than idling keeps the
+/// refused tracker out of the task's state: an await in that branch would hold it there
+/// beside the running one.)
 #[embassy_executor::task]
 pub async fn tracker_task(
     table: Option<CalibTable<'static>>,
@@ -239,7 +218,7 @@ pub async fn tracker_task(
         max_stars: MAX_STARS as u16,
         ..TrackerConfig::FLIGHT
     };
-    let mut tracker = match Tracker::<MAX_STARS>::new(config, GEOMETRY, buffers) {
+    let tracker = match Tracker::<MAX_STARS>::new(config, GEOMETRY, buffers) {
         Ok(t) => t,
         Err(e) => {
             defmt::error!("tracker: configuration refused: {}", e);
@@ -247,16 +226,6 @@ pub async fn tracker_task(
             return;
         }
     };
-    let mut source = ChannelLines::new(EXPOSURE_MS);
-    let mut clock = BoardClock;
-    let mut store = crate::flash_store::HeldTables::new();
-    // The table's fitted camera model (distortion, lateral colour), else the nominal one.
-    let camera = table
-        .as_ref()
-        .and_then(|t| t.camera_model())
-        .unwrap_or_else(nominal_camera);
-    let mut tables = FixedTable(table);
-    let mut log = DefmtTelemetry;
     let Some(link) = crate::link::SERVICE
         .try_uninit()
         .map(|slot| slot.write(startrack_core::link::LinkService::new()))
@@ -264,69 +233,55 @@ pub async fn tracker_task(
         defmt::error!("link service already taken");
         return;
     };
-    // The faults of the set-up steps that did not stop the tracker (no table, no board
-    // thermometer), for housekeeping.
-    link.set_setup_faults(safe_state::setup_faults().bits());
-    let mut solver =
-        catalog.map(|c| Solver::new(c, SolverConfig::for_camera(camera, IDENT_SIGMA_PX)));
-    let mut stars: heapless::Vec<StarRecord, MAX_STARS> = heapless::Vec::new();
+    // The table's fitted camera model (distortion, lateral colour), else the nominal one.
+    let camera = table
+        .as_ref()
+        .and_then(|t| t.camera_model())
+        .unwrap_or_else(nominal_camera);
+    let solver = catalog.map(|c| Solver::new(c, SolverConfig::for_camera(camera, IDENT_SIGMA_PX)));
+    // Housekeeping starts from what set-up recorded (the fault record, the set-up faults that
+    // did not stop the tracker, the tables in force): main has finished set-up before this
+    // task first runs.
+    let mut cycle = FrameCycle::new(tracker, link, solver, safe_state::health());
+    let mut source = ChannelLines::new(EXPOSURE_MS);
+    let mut clock = BoardClock;
+    let mut store = crate::flash_store::HeldTables::new();
+    let mut tables = FixedTable(table);
+    let mut log = DefmtTelemetry;
     loop {
         crate::flash_store::with_link_tables(&mut store, |tables| {
-            crate::link::serve(link, &mut tracker, tables);
-            // An in-flight defect commit (TC[133,7]) goes on between frames as the store's
-            // erase task frees the slot; the new table is used from the next start.
-            link.poll(&mut startrack_core::link::Targets {
-                tracker: &mut tracker,
-                tables,
-                windows: &mut startrack_core::link::NoWindows,
-            });
+            crate::link::serve(&mut cycle, tables);
         });
-        if link.reset_requested() {
+        if cycle.reset_requested() {
             // Let the transmit task send the acceptance, then reset.
             embassy_time::Timer::after_millis(50).await;
             cortex_m::peripheral::SCB::sys_reset();
         }
-        let mut tee = crate::link::Tee {
-            log: &mut log,
-            link: &mut *link,
-        };
-        stars.clear();
-        let mut telemetry = KeepStars {
-            inner: &mut tee,
-            stars: &mut stars,
-        };
-        let mut ports = Ports {
+        source.set_exposure_ms(cycle.tracker().config().exposure_ms);
+        let mut ports = CyclePorts {
             clock: &mut clock,
             thermometer: &mut thermometer,
             tables: &mut tables,
-            telemetry: &mut telemetry,
+            table_in_force: store.active(TABLE_KIND_CALIBRATION),
+            telemetry: &mut log,
         };
-        source.set_exposure_ms(tracker.config().exposure_ms);
-        let Ok(summary) = tracker.run_frame(&mut source, &mut ports).await;
-        link.end_of_frame(&store);
-        if let Some(solver) = solver.as_mut() {
-            let result = solver.update(&stars, summary.start_us);
-            link.send_attitude(&AttitudeReport::of(summary.frame, &result));
-            match result {
-                Ok(fix) => defmt::info!(
-                    "frame {}: attitude {} ({} of {} stars), q = [{}, {}, {}, {}]",
-                    summary.frame,
-                    fix.mode,
-                    fix.matched,
-                    fix.used,
-                    fix.attitude.q.0[0],
-                    fix.attitude.q.0[1],
-                    fix.attitude.q.0[2],
-                    fix.attitude.q.0[3]
-                ),
-                Err(e) => defmt::info!("frame {}: no attitude ({})", summary.frame, e),
-            }
+        let Ok(outcome) = cycle.run_frame(&mut source, &mut ports).await;
+        match outcome.attitude {
+            Some(Ok(fix)) => defmt::info!(
+                "frame {}: attitude {} ({} of {} stars), q = [{}, {}, {}, {}]",
+                outcome.summary.frame,
+                fix.mode,
+                fix.matched,
+                fix.used,
+                fix.attitude.q.0[0],
+                fix.attitude.q.0[1],
+                fix.attitude.q.0[2],
+                fix.attitude.q.0[3]
+            ),
+            Some(Err(e)) => defmt::info!("frame {}: no attitude ({})", outcome.summary.frame, e),
+            None => {}
         }
         watchdog::progress();
-        let (k, source_used) = (thermometer.last_k(), thermometer.source());
-        safe_state::update_health(|h| {
-            h.on_frame(&summary);
-            h.on_temperature(k, source_used);
-        });
+        safe_state::set_health(cycle.health());
     }
 }

@@ -6,7 +6,7 @@
 //! each frame start: ~0.1 ms at 400 kHz, bounded by a 2 ms bus timeout so a missing or stuck
 //! sensor costs at most that and gives no reading (the fallback then reads the MCU). The
 //! sensor converts continuously (its default, 15.5 ms a conversion with 8 averages); the
-//! word's conversion to kelvin is the core's (`startrack_core::safe::temperature::tmp117`),
+//! word's conversion to kelvin is the core's (`startrack_core::safe::tmp117`),
 //! tested on the host for every 16-bit word.
 
 use embassy_stm32::Peri;
@@ -14,7 +14,7 @@ use embassy_stm32::i2c::{self, I2c};
 use embassy_stm32::mode::Blocking;
 use embassy_stm32::peripherals::{I2C1, PB8, PB9};
 use embassy_stm32::time::Hertz;
-use startrack_core::safe::temperature::tmp117;
+use startrack_core::safe::tmp117;
 use startrack_core::tracker::Thermometer;
 use startrack_core::units::Kelvin;
 

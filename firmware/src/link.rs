@@ -21,10 +21,8 @@ use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
-use startrack_core::link::{LinkService, NoWindows, TableUpload, Targets};
-use startrack_core::tracker::{
-    Event, FrameSummary, LineSummary, StarRecord, TelemetrySink, Tracker,
-};
+use startrack_core::cycle::FrameCycle;
+use startrack_core::link::{LinkService, NoWindows, TableUpload};
 
 /// The link's bit rate (the ST-LINK V3 bridge takes it; an RS-422 line up to 10 Mbit/s).
 pub const BAUD: u32 = 921_600;
@@ -89,24 +87,20 @@ pub async fn link_tx_task(mut tx: UartTx<'static, Async>, buf: &'static mut [u8;
     }
 }
 
-/// One link service round between frames: received bytes executed, telemetry moved into
-/// [`TX`] while it has room. Never waits.
+/// One link service round between frames: received bytes executed on the cycle's tracker,
+/// the link's work between frames (window rows, the in-flight defect commit) moved on,
+/// telemetry moved into [`TX`] while it has room. Never waits.
 pub fn serve<const N: usize>(
-    link: &mut LinkService,
-    tracker: &mut Tracker<'static, '_, N>,
+    cycle: &mut FrameCycle<'static, '_, '_, '_, N>,
     tables: &mut dyn TableUpload,
 ) {
     let mut buf = [0u8; 256];
-    link.set_time(embassy_time::Instant::now().as_micros());
+    cycle.set_link_time(embassy_time::Instant::now().as_micros());
     while let Ok(n) = RX.try_read(&mut buf) {
-        let mut targets = Targets {
-            tracker: &mut *tracker,
-            tables: &mut *tables,
-            windows: &mut NoWindows,
-        };
-        link.receive(buf.get(..n).unwrap_or_default(), &mut targets);
+        cycle.receive(buf.get(..n).unwrap_or_default(), tables, &mut NoWindows);
     }
-    send_queued(link, &mut buf);
+    cycle.poll(tables, &mut NoWindows);
+    send_queued(|out| cycle.transmit(out), &mut buf);
 }
 
 /// The service for the safe standby: [`SERVICE`] with the set-up `faults` in its
@@ -133,7 +127,7 @@ pub async fn serve_standby(link: &mut LinkService, held: &mut crate::flash_store
             link.receive_standby(buf.get(..n).unwrap_or_default(), tables);
         });
     }
-    send_queued(link, &mut buf);
+    send_queued(|out| link.transmit(out), &mut buf);
     if link.reset_requested() {
         // Let the transmit task send the acceptance, then reset.
         embassy_time::Timer::after_millis(50).await;
@@ -142,44 +136,14 @@ pub async fn serve_standby(link: &mut LinkService, held: &mut crate::flash_store
 }
 
 /// Moves queued telemetry into [`TX`] while it has room; never waits.
-fn send_queued(link: &mut LinkService, buf: &mut [u8]) {
+fn send_queued(mut transmit: impl FnMut(&mut [u8]) -> usize, buf: &mut [u8]) {
     loop {
         let room = (TX_PIPE_BYTES - TX.len()).min(buf.len());
-        let n = link.transmit(buf.get_mut(..room).unwrap_or_default());
+        let n = transmit(buf.get_mut(..room).unwrap_or_default());
         if n == 0 {
             break;
         }
         // The room was checked; a short write cannot happen with one writer.
         let _ = TX.try_write(buf.get(..n).unwrap_or_default());
-    }
-}
-
-/// The tracker's telemetry to both the defmt log and the link.
-pub struct Tee<'a> {
-    /// The log.
-    pub log: &'a mut dyn TelemetrySink,
-    /// The link.
-    pub link: &'a mut LinkService,
-}
-
-impl TelemetrySink for Tee<'_> {
-    fn line(&mut self, summary: &LineSummary) {
-        self.log.line(summary);
-        self.link.line(summary);
-    }
-
-    fn star(&mut self, frame: u32, star: &StarRecord) {
-        self.log.star(frame, star);
-        self.link.star(frame, star);
-    }
-
-    fn frame(&mut self, summary: &FrameSummary) {
-        self.log.frame(summary);
-        self.link.frame(summary);
-    }
-
-    fn event(&mut self, event: &Event) {
-        self.log.event(event);
-        self.link.event(event);
     }
 }

@@ -8,7 +8,8 @@
 //!   turn into a fresh record. It is written whole, 32-byte aligned (whole 64-bit ECC words
 //!   of the AXI SRAM, so no read-modify-write of a never-written ECC word).
 //! - [`reset_cause`] reads and clears RCC_RSR.
-//! - [`HEALTH`] is the core's [`Health`], updated by the tracker task after every frame.
+//! - [`HEALTH`] is the core's [`Health`]: set-up's fields, then the frame cycle's after every
+//!   frame (the tracker task publishes it).
 //! - [`standby_forever`] is where a set-up failure ends up (through [`enter_standby`] and
 //!   [`standby_task`]): no frame processing, the watchdog fed, housekeeping logged, and the
 //!   link served with no tracker ([`crate::link::serve_standby`]): ping, housekeeping with the
@@ -92,9 +93,14 @@ pub fn update_health(f: impl FnOnce(&mut Health)) {
     });
 }
 
-/// The set-up faults recorded in housekeeping at this boot.
-pub fn setup_faults() -> SetupFaults {
-    HEALTH.lock(Cell::get).setup_faults
+/// Housekeeping now.
+pub fn health() -> Health {
+    HEALTH.lock(Cell::get)
+}
+
+/// Publishes the frame cycle's housekeeping (the tracker task, after every frame).
+pub fn set_health(health: &Health) {
+    HEALTH.lock(|cell| cell.set(*health));
 }
 
 /// How often standby logs housekeeping.

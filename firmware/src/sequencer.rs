@@ -55,7 +55,7 @@
 //! integrating); after [`MAX_WAIT_US`] without one the last program is replayed unannounced
 //! (its lines are not read), so the image is not left to saturate.
 //!
-//! # Not yet
+//! # What only a board can show
 //! The waveforms have not been seen on a board (docs/hardware.md has the HIL steps), nor
 //! whether the MDMA serves each request within a tick (at 125 ns: the HIL step counts the
 //! ticks on the analyser).
@@ -72,11 +72,11 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant};
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, Chain, CompileError, Cost, Limits, LineJob, LineJobs, Link, Links, MAX_WINDOWS,
     PinMap, PlanError, Program, ProgramParts, ReadoutPlan, Step, Ticks, Timing, compile,
 };
-use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 
 use crate::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};

@@ -4,8 +4,9 @@
 //!
 //! The tracker task calls [`progress`] after every frame (the safe-standby loop does once a
 //! second); [`watchdog_task`] checks every [`CHECK_PERIOD`] and feeds the IWDG only if
-//! progress was made since the last feed. A frame takes ~2.1 s here (1033 lines at 2 ms),
-//! so the 8 s timeout is about four frames; an upload's sector erase (async, 1-2 s) does
+//! progress was made since the last feed. A frame takes its exposure (frame transfers are
+//! the exposure apart, never closer than a full readout: docs/sequencer.md), so at the
+//! start-up exposure the 8 s timeout spans several frames; an upload's sector erase (async, 1-2 s) does
 //! not stall the frame loop, so it never trips the watchdog. The IWDG runs from the LSI
 //! (32 kHz) and cannot be stopped once started: a debugger that halts the core must freeze
 //! it (DBGMCU), or the board resets under the probe.

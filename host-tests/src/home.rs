@@ -11,11 +11,15 @@
 use startrack_core::calib::{
     CalibError, DarkScaleEstimator, FrameCalibration, LineLevels, PixelFlags,
 };
+use startrack_core::cycle::{CyclePorts, FrameCycle};
 use startrack_core::geometry::{ReadoutGeometry, Segment};
+use startrack_core::link::LinkService;
+use startrack_core::readout::ReadoutRequest;
+use startrack_core::safe::{FaultRecord, Health, SetupFaults};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Clock, Event, FixedTable, FixedTemperature, FrameSummary, LineSource, LineSummary, Mode, Ports,
-    ReadoutRequest, SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
+    Clock, Event, FixedTable, FixedTemperature, FrameSummary, LineSource, LineSummary, Mode,
+    SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_core::units::Electrons;
 use startrack_core::units::Kelvin;
@@ -38,10 +42,10 @@ pub fn acquire_once<S: LineSource<Error = Infallible>>(
     source: &mut S,
 ) -> Result<FrameRecord, String> {
     let mut buffers = Box::new(TrackerBuffers::new());
-    let mut tracker = Box::new(
-        Tracker::<HOST_CAPACITY>::new(config, *table.geometry(), &mut buffers)
-            .map_err(|e| e.to_string())?,
-    );
+    let tracker = Tracker::<HOST_CAPACITY>::new(config, *table.geometry(), &mut buffers)
+        .map_err(|e| e.to_string())?;
+    let mut link = Box::new(LinkService::new());
+    let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, None, host_health()));
     let mut recorder = Recorder::default();
     let mut clock = FrameClock {
         frame: 0,
@@ -49,20 +53,29 @@ pub fn acquire_once<S: LineSource<Error = Infallible>>(
     };
     let mut tables = FixedTable(Some(table));
     let mut thermometer = FixedTemperature(temperature_k);
-    let mut ports = Ports {
+    let mut ports = CyclePorts {
         clock: &mut clock,
         thermometer: &mut thermometer,
         tables: &mut tables,
+        table_in_force: None,
         telemetry: &mut recorder,
     };
     for mode in [Mode::Standby, Mode::Acquisition] {
-        tracker.command_mode(mode).map_err(|e| e.to_string())?;
-        let Ok(_) = block_on(tracker.run_frame(source, &mut ports));
+        cycle
+            .tracker_mut()
+            .command_mode(mode)
+            .map_err(|e| e.to_string())?;
+        let Ok(_) = block_on(cycle.run_frame(source, &mut ports));
     }
     recorder
         .frames
         .pop()
         .ok_or_else(|| "the tracker reported no frame".to_string())
+}
+
+/// Housekeeping at a host start: a fresh fault record, every set-up step done.
+pub fn host_health() -> Health {
+    Health::new(FaultRecord::FRESH, SetupFaults::empty())
 }
 
 /// Runs a tracker future to completion: the host's sources never wait.

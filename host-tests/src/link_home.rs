@@ -4,7 +4,9 @@
 //! [`LinkService`] on 127.0.0.1:P standing in for the UART, optionally with seeded bit
 //! errors on the received bytes (`--link-noise`). With a sky scene ([`SilConfig::sky`]) each
 //! frame's star list also goes through the attitude stage as on the board, and its attitude
-//! report (`TM[134,2]`) goes out on the link.
+//! report (`TM[134,2]`) goes out on the link: the core's frame cycle
+//! ([`startrack_core::cycle`]) runs each frame and serves the link between frames, as on the
+//! board.
 //!
 //! The server runs frames back to back; between two frames it serves the link for up to
 //! [`LINK_PHASE_MS`] (longer while bytes keep arriving, at most [`LINK_PHASE_MAX_MS`]), so
@@ -13,23 +15,22 @@
 //! Cost: the frames' (see [`crate::sil`]); the link adds a few us a packet; a sky scene adds
 //! the attitude stage's per frame and one 76-byte report (a 99-byte packet).
 
-use crate::home::{FrameClock, SimLines, block_on};
+use crate::home::{FrameClock, SimLines, block_on, host_health};
 use crate::sil::{self, SilConfig};
 use rand::{RngExt, SeedableRng};
-use startrack_core::calib::{FrameCalibration, FrameConditions};
+use startrack_core::calib::{FrameCalibration, LineLevels};
 use startrack_core::catalog::Catalog;
+use startrack_core::cycle::{CyclePorts, FrameCycle};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::{
-    AttitudeReport, LinkService, TableInfo, TableUpload, Targets, UploadRefusal, WindowKind,
-    WindowReader, WindowRequest,
+    LinkService, TableInfo, TableUpload, UploadRefusal, WindowKind, WindowReader, WindowRequest,
 };
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Event, FixedTemperature, FrameSummary, LineSummary, Ports, StarRecord, TableStore,
-    TelemetrySink, Tracker, TrackerBuffers,
+    Event, FixedTemperature, FrameSummary, StarRecord, TableStore, TelemetrySink, Tracker,
+    TrackerBuffers,
 };
-use startrack_core::units::Electrons;
 use startrack_core::window::Rect;
 use startrack_sim::flash_model::CRC32;
 use startrack_sim::sim::{SensorParams, Simulator, Star};
@@ -177,8 +178,9 @@ impl TableStore<'static> for MemoryTables {
 }
 
 /// Diagnostic windows from the simulated sensor, of the frame after the request: raw, or
-/// calibrated with the table in force as the tracker calibrates a window (the frame's line
-/// levels and dark scale, then the per-pixel formula), in e- x 64.
+/// calibrated as the tracker calibrates a window (each line's bias from its own over-scan,
+/// then the per-pixel formula with the tracker's calibration: its table, dark scale, exposure
+/// and temperature, [`Tracker::calibration`]), in e- x 64.
 pub struct SimWindows {
     /// The sensor.
     pub params: SensorParams,
@@ -186,10 +188,8 @@ pub struct SimWindows {
     pub stars: Vec<Star>,
     /// Its frame number (the noise draw).
     pub frame: u32,
-    /// The table in force (calibrated windows need one).
-    pub table: Option<CalibTable<'static>>,
-    /// Exposure for the hot pixels' dark law, ms.
-    pub exposure_ms: u32,
+    /// The tracker's calibration (calibrated windows need one).
+    pub calibration: Option<FrameCalibration<'static>>,
     rendered: Option<(WindowRequest, Vec<i32>)>,
 }
 
@@ -200,8 +200,7 @@ impl SimWindows {
             params,
             stars: Vec::new(),
             frame: 0,
-            table: None,
-            exposure_ms: 0,
+            calibration: None,
             rendered: None,
         }
     }
@@ -228,10 +227,10 @@ impl WindowReader for SimWindows {
         let px = match r.kind {
             WindowKind::Raw => sim.render_window(rect).into_iter().map(i32::from).collect(),
             WindowKind::Calibrated => {
-                let Some(table) = self.table else {
+                let Some(cal) = self.calibration else {
                     return false;
                 };
-                match calibrated_window(&sim, table, self.exposure_ms, rect) {
+                match calibrated_window(&sim, &cal, rect) {
                     Some(px) => px,
                     None => return false,
                 }
@@ -260,22 +259,21 @@ impl WindowReader for SimWindows {
     }
 }
 
-/// Window `rect` of `sim`'s frame calibrated with `table`, e- x 64 (I26F6 bits).
-fn calibrated_window(
-    sim: &Simulator,
-    table: CalibTable<'static>,
-    exposure_ms: u32,
-    rect: Rect,
-) -> Option<Vec<i32>> {
+/// Window `rect` of `sim`'s frame calibrated with `cal`, e- x 64 (I26F6 bits).
+fn calibrated_window(sim: &Simulator, cal: &FrameCalibration<'_>, rect: Rect) -> Option<Vec<i32>> {
     let raw = crate::demo::render_frame(sim);
-    let levels = crate::home::frame_levels(&table, &raw).ok()?;
-    let conditions = FrameConditions {
-        dark_scale_e: levels.dark_scale_e.unwrap_or(Electrons::ZERO),
-        exposure_ms,
-        temperature_k: table.hot_pixels().reference_temperature_k(),
+    let g = sim.params.geometry;
+    let lines = raw
+        .chunks_exact(g.line_len())
+        .map(|l| LineLevels::measure(&g, l))
+        .collect::<Result<Vec<_>, _>>()
+        .ok()?;
+    let levels = crate::home::FrameLevels {
+        geometry: g,
+        lines,
+        dark_scale_e: None,
     };
-    let cal = FrameCalibration::new(table, conditions);
-    let (e, _, _) = levels.calibrate_window(&cal, &raw, rect).ok()?;
+    let (e, _, _) = levels.calibrate_window(cal, &raw, rect).ok()?;
     Some(e.into_iter().map(|v| v.to_bits()).collect())
 }
 
@@ -315,6 +313,10 @@ pub struct FlashConfig {
 
 /// The tables the SIL serves: in memory, or in the flash store.
 trait SilTables: TableUpload + TableStore<'static> {
+    /// The store as the link's upload port.
+    fn as_upload(&mut self) -> &mut dyn TableUpload;
+    /// The store as the tracker's table port.
+    fn as_store(&mut self) -> &mut dyn TableStore<'static>;
     /// The owner's erase step, between frames.
     fn service(&mut self) -> Result<(), String> {
         Ok(())
@@ -333,9 +335,22 @@ trait SilTables: TableUpload + TableStore<'static> {
     }
 }
 
-impl SilTables for MemoryTables {}
+impl SilTables for MemoryTables {
+    fn as_upload(&mut self) -> &mut dyn TableUpload {
+        self
+    }
+    fn as_store(&mut self) -> &mut dyn TableStore<'static> {
+        self
+    }
+}
 
 impl SilTables for crate::flash_home::FlashHome {
+    fn as_upload(&mut self) -> &mut dyn TableUpload {
+        self
+    }
+    fn as_store(&mut self) -> &mut dyn TableStore<'static> {
+        self
+    }
     fn service(&mut self) -> Result<(), String> {
         // An erase that fails drops the upload (the ground then sees "no upload begun").
         let _ = crate::flash_home::FlashHome::service(self);
@@ -420,7 +435,6 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
     };
     let catalog = sky.as_ref().map(|(_, c)| c);
     let stars_of = |k: u32| sil::frame_stars(sc, &base, catalog, k);
-    let mut stars: Vec<StarRecord> = Vec::new();
     let mut tables: Box<dyn SilTables> = match &config.flash {
         None => Box::new(MemoryTables::new(
             params.geometry,
@@ -445,15 +459,15 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
     let start = Instant::now();
 
     'boot: loop {
-        let mut tracker = Box::new(
+        let tracker =
             Tracker::<{ sil::SIL_CAPACITY }>::new(sc.tracker, params.geometry, &mut buffers)
-                .map_err(|e| e.to_string())?,
-        );
+                .map_err(|e| e.to_string())?;
         let mut link = Box::new(LinkService::new());
         // A reset starts the attitude stage afresh (no prior), as the board's does.
-        let mut solver = sky
+        let solver = sky
             .as_ref()
             .map(|(scene, cat)| sil::sky_solver(scene, *cat));
+        let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
         let mut source = SimLines::new(|k| Simulator {
             frame: k,
             ..Simulator::new(params.clone(), stars_of(k))
@@ -472,8 +486,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             let hard_end = Instant::now() + Duration::from_millis(LINK_PHASE_MAX_MS);
             windows.frame = frame;
             windows.stars = stars_of(frame);
-            windows.table = tables.active_table();
-            windows.exposure_ms = sc.tracker.exposure_ms;
+            windows.calibration = cycle.tracker().calibration();
             loop {
                 if client.is_none()
                     && let Ok((s, _)) = listener.accept()
@@ -502,13 +515,8 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                                     }
                                 }
                             }
-                            link.set_time(start.elapsed().as_micros() as u64);
-                            let mut targets = Targets {
-                                tracker: &mut tracker,
-                                tables: &mut *tables,
-                                windows: &mut windows,
-                            };
-                            link.receive(bytes, &mut targets);
+                            cycle.set_link_time(start.elapsed().as_micros() as u64);
+                            cycle.receive(bytes, tables.as_upload(), &mut windows);
                             // The erase an accepted `begin` asks for, before the next bytes.
                             tables.service()?;
                         }
@@ -520,14 +528,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                         Err(_) => client = None,
                     }
                 }
-                {
-                    let mut targets = Targets {
-                        tracker: &mut tracker,
-                        tables: &mut *tables,
-                        windows: &mut windows,
-                    };
-                    link.poll(&mut targets);
-                }
+                cycle.poll(tables.as_upload(), &mut windows);
                 tables.service()?;
                 tables.persist()?;
                 if tables.power_cut() {
@@ -535,8 +536,8 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                     report.power_cut = true;
                     return Ok(report);
                 }
-                drain(&mut link, &mut client, &mut report);
-                if link.reset_requested() {
+                drain(&mut cycle, &mut client, &mut report);
+                if cycle.reset_requested() {
                     tables.reboot()?;
                     report.resets += 1;
                     frame = 0;
@@ -555,63 +556,42 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                 frame,
                 period_us: sc.period_us,
             };
-            link.set_time(start.elapsed().as_micros() as u64);
-            stars.clear();
-            let mut telemetry = KeepStars {
-                inner: &mut *link,
-                stars: &mut stars,
-            };
-            let mut ports = Ports {
+            cycle.set_link_time(start.elapsed().as_micros() as u64);
+            let table_in_force = tables.active(TABLE_KIND_CALIBRATION);
+            let mut ports = CyclePorts {
                 clock: &mut clock,
                 thermometer: &mut thermometer,
-                tables: &mut *tables,
-                telemetry: &mut telemetry,
+                tables: tables.as_store(),
+                table_in_force,
+                telemetry: &mut NoTelemetry,
             };
-            let Ok(summary) = block_on(tracker.run_frame(&mut source, &mut ports));
-            link.end_of_frame(&*tables);
-            if let Some(solver) = solver.as_mut() {
-                let result = solver.update(&stars, summary.start_us);
-                link.send_attitude(&AttitudeReport::of(summary.frame, &result));
-            }
-            drain(&mut link, &mut client, &mut report);
+            let Ok(_) = block_on(cycle.run_frame(&mut source, &mut ports));
+            drain(&mut cycle, &mut client, &mut report);
             report.frames += 1;
             frame += 1;
         }
     }
 }
 
-/// A telemetry port that passes everything on to the link and keeps the frame's stars for
-/// the attitude stage (the board's own, in firmware/src/app.rs).
-struct KeepStars<'a> {
-    inner: &'a mut dyn TelemetrySink,
-    stars: &'a mut Vec<StarRecord>,
-}
+/// The served SIL keeps no records of its own: the link carries them.
+struct NoTelemetry;
 
-impl TelemetrySink for KeepStars<'_> {
-    fn line(&mut self, summary: &LineSummary) {
-        self.inner.line(summary);
-    }
-
-    fn star(&mut self, frame: u32, star: &StarRecord) {
-        self.stars.push(*star);
-        self.inner.star(frame, star);
-    }
-
-    fn frame(&mut self, summary: &FrameSummary) {
-        self.inner.frame(summary);
-    }
-
-    fn event(&mut self, event: &Event) {
-        self.inner.event(event);
-    }
+impl TelemetrySink for NoTelemetry {
+    fn star(&mut self, _frame: u32, _star: &StarRecord) {}
+    fn frame(&mut self, _summary: &FrameSummary) {}
+    fn event(&mut self, _event: &Event) {}
 }
 
 /// Moves the link's queued telemetry to the client (all of it: TCP is the fast UART here);
 /// without a client it is discarded, as a UART with nobody listening would.
-fn drain(link: &mut LinkService, client: &mut Option<Client>, report: &mut ServeReport) {
+fn drain<const N: usize>(
+    cycle: &mut FrameCycle<'_, '_, '_, '_, N>,
+    client: &mut Option<Client>,
+    report: &mut ServeReport,
+) {
     let mut buf = [0u8; 4096];
     loop {
-        let n = link.transmit(&mut buf);
+        let n = cycle.transmit(&mut buf);
         if n == 0 {
             break;
         }

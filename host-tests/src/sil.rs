@@ -19,17 +19,20 @@
 //! over-scan and covered columns plus its windows per star; ~1 s and ~0.02 s in release
 //! (`time startrack sil --frames N` for a few N measures both).
 
-use crate::home::{FrameClock, Recorder, SimLines, block_on};
+use crate::home::{FrameClock, Recorder, SimLines, block_on, host_health};
 use rand::{RngExt, SeedableRng};
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
 use startrack_core::centroid::cog::CogPower;
+use startrack_core::cycle::{CyclePorts, FrameCycle};
+use startrack_core::link::{Housekeeping, LinkService};
+use startrack_core::safe::Health;
 use startrack_core::solver::{Fix, SolveError, SolveMode, Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_core::tracker::{
-    Event, FixedTable, FixedTemperature, FrameSummary, Mode, Ports, StarRecord, Tracker,
-    TrackerBuffers, TrackerConfig,
+    Event, FixedTable, FixedTemperature, FrameSummary, Mode, StarRecord, Tracker, TrackerBuffers,
+    TrackerConfig,
 };
 use startrack_sim::pixcorr::{CurveSpec, build_curves};
 use startrack_sim::sim::truth::TruthSections;
@@ -211,6 +214,10 @@ pub struct SilReport {
     pub frames: Vec<SilFrame>,
     /// Every event, in order.
     pub events: Vec<Event>,
+    /// The frame cycle's housekeeping after the last frame.
+    pub health: Health,
+    /// The link's housekeeping report after the last frame.
+    pub housekeeping: Housekeeping,
 }
 
 impl SilReport {
@@ -332,14 +339,14 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         None => None,
     };
     let stars_of = |frame: u32| frame_stars(config, &base, sky.as_ref().map(|(_, c)| c), frame);
-    let mut solver = sky.as_ref().map(|(scene, cat)| sky_solver(scene, *cat));
+    let solver = sky.as_ref().map(|(scene, cat)| sky_solver(scene, *cat));
     let table_bytes = truth_table(config, &params)?;
     let table = CalibTable::parse(&table_bytes).map_err(|e| e.to_string())?;
     let mut buffers = Box::new(TrackerBuffers::new());
-    let mut tracker = Box::new(
-        Tracker::<SIL_CAPACITY>::new(config.tracker, params.geometry, &mut buffers)
-            .map_err(|e| e.to_string())?,
-    );
+    let tracker = Tracker::<SIL_CAPACITY>::new(config.tracker, params.geometry, &mut buffers)
+        .map_err(|e| e.to_string())?;
+    let mut link = Box::new(LinkService::new());
+    let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
     let mut source = SimLines::new(|frame| Simulator {
         frame,
         ..Simulator::new(params.clone(), stars_of(frame))
@@ -353,31 +360,28 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
             frame: k,
             period_us: config.period_us,
         };
-        let mut ports = Ports {
+        let mut ports = CyclePorts {
             clock: &mut clock,
             thermometer: &mut thermometer,
             tables: &mut tables,
+            table_in_force: None,
             telemetry: &mut recorder,
         };
         let before = source.samples_rendered;
-        let Ok(summary) = block_on(tracker.run_frame(&mut source, &mut ports));
-        let reported = recorder
-            .frames
-            .last()
-            .map(|f| f.stars.clone())
-            .unwrap_or_default();
+        let Ok(outcome) = block_on(cycle.run_frame(&mut source, &mut ports));
+        let summary = outcome.summary;
         let truth = stars_of(summary.frame);
         let mut frame = match_frame(
             summary,
             truth,
-            &reported,
+            cycle.tracker().stars(),
             &params,
             source.samples_rendered - before,
         );
-        if let (Some(solver), Some((scene, _))) = (solver.as_mut(), sky.as_ref()) {
+        if let (Some(fix), Some((scene, _))) = (outcome.attitude, sky.as_ref()) {
             frame.attitude = Some(AttitudeCheck {
                 truth: scene.attitude(summary.frame),
-                fix: solver.update(&reported, summary.start_us),
+                fix,
             });
         }
         frames.push(frame);
@@ -385,6 +389,8 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
     Ok(SilReport {
         frames,
         events: recorder.events,
+        health: *cycle.health(),
+        housekeeping: cycle.housekeeping(None),
     })
 }
 

@@ -26,11 +26,11 @@
 //! Everything is f64: the Cortex-M7 of the STM32H743 has a double-precision FPU.
 
 /// Most Newton steps of the undistortion.
-pub const UNDISTORT_ITERATIONS: usize = 10;
+pub(crate) const UNDISTORT_ITERATIONS: usize = 10;
 
 /// The undistortion has converged when the distorted point is matched to this, normalised
 /// units (4e-9 px at a 3,889 px focal length).
-pub const UNDISTORT_TOLERANCE: f64 = 1e-12;
+pub(crate) const UNDISTORT_TOLERANCE: f64 = 1e-12;
 
 /// A camera model.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -116,7 +116,7 @@ impl Camera {
     }
 
     /// The colour scale `1 + c (B-V - B-V_ref)` of a star of colour `bv_mag`.
-    pub fn colour_scale(&self, bv_mag: f64) -> Result<f64, CameraError> {
+    pub(crate) fn colour_scale(&self, bv_mag: f64) -> Result<f64, CameraError> {
         let s = 1.0 + self.colour_scale_per_mag * (bv_mag - self.colour_ref_bv_mag);
         if !s.is_finite() {
             return Err(CameraError::BadParameter);
@@ -138,7 +138,7 @@ impl Camera {
     }
 
     /// The Jacobian `d(x_d, y_d) / d(x, y)` of [`Self::distort`], rows `x_d`, `y_d`.
-    pub fn distort_jacobian(&self, x: f64, y: f64) -> [[f64; 2]; 2] {
+    pub(crate) fn distort_jacobian(&self, x: f64, y: f64) -> [[f64; 2]; 2] {
         let r2 = x * x + y * y;
         let radial = 1.0 + r2 * (self.k1 + self.k2 * r2);
         // d(radial)/dx = (2 k1 + 4 k2 r^2) x, likewise for y.
@@ -157,7 +157,7 @@ impl Camera {
 
     /// The undistorted normalised point whose distortion is `(xd, yd)`, by Newton's method
     /// from `(xd, yd)`.
-    pub fn undistort(&self, xd: f64, yd: f64) -> Result<[f64; 2], CameraError> {
+    pub(crate) fn undistort(&self, xd: f64, yd: f64) -> Result<[f64; 2], CameraError> {
         if !(xd.is_finite() && yd.is_finite() && self.params_ok()) {
             return Err(CameraError::BadParameter);
         }

@@ -5,7 +5,7 @@
 //! unit vector `r_i` and the 1-sigma angular error of `b_i`, `sigma_i` (rad, isotropic across
 //! the line of sight). The attitude `A` maximises Wahba's gain `sum w_i b_i . A r_i` with
 //! `w_i = 1 / sigma_i^2`: it is the eigenvector of Davenport's 4x4 matrix `K` with the largest
-//! eigenvalue, found here by cyclic Jacobi rotations (at most [`MAX_SWEEPS`] sweeps of six
+//! eigenvalue, found here by cyclic Jacobi rotations (at most `MAX_SWEEPS` (12) sweeps of six
 //! rotations; each sweep about 300 flops).
 //!
 //! Why the q-method with Jacobi: it is exact and has no singular rotation, so it needs no
@@ -27,12 +27,12 @@
 mod camera;
 mod quat;
 
-pub use camera::{Camera, CameraError, UNDISTORT_ITERATIONS, UNDISTORT_TOLERANCE};
-
-pub use quat::{Quat, angle_between, cross, dot, mat_t_vec, mat_vec, norm};
+pub use camera::{Camera, CameraError};
+pub use quat::{Quat, angle_between};
+pub(crate) use quat::{cross, dot, mat_vec, norm};
 
 /// Most Jacobi sweeps; a 4x4 converges to f64 precision in 5-6.
-pub const MAX_SWEEPS: usize = 12;
+pub(crate) const MAX_SWEEPS: usize = 12;
 
 /// Speed of light, m/s.
 pub const C_M_PER_S: f64 = 299_792_458.0;
@@ -253,7 +253,7 @@ fn jacobi4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
 }
 
 /// Inverse of a 3x3 by its adjugate; `None` when it is singular to f64 precision.
-pub fn inverse3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+pub(crate) fn inverse3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     let [[a, b, c], [d, e, f], [g, h, i]] = *m;
     let co = [
         [e * i - f * h, c * h - b * i, b * f - c * e],

@@ -36,13 +36,13 @@ impl Quat {
     }
 
     /// The inverse rotation (camera to ICRS).
-    pub fn conj(self) -> Self {
+    pub(crate) fn conj(self) -> Self {
         let [w, x, y, z] = self.0;
         Self([w, -x, -y, -z])
     }
 
     /// The rotation matrix: `v_cam = M v_icrs`, rows are camera axes in ICRS.
-    pub fn matrix(self) -> [[f64; 3]; 3] {
+    pub(crate) fn matrix(self) -> [[f64; 3]; 3] {
         let [w, x, y, z] = self.0;
         [
             [
@@ -105,12 +105,12 @@ impl core::ops::Mul for Quat {
 }
 
 /// Dot product.
-pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// Cross product.
-pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
@@ -119,7 +119,7 @@ pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 }
 
 /// Euclidean norm.
-pub fn norm(a: [f64; 3]) -> f64 {
+pub(crate) fn norm(a: [f64; 3]) -> f64 {
     libm::sqrt(dot(a, a))
 }
 
@@ -129,12 +129,12 @@ pub fn angle_between(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 /// `m v`.
-pub fn mat_vec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
+pub(crate) fn mat_vec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
 }
 
 /// `m^T v`.
-pub fn mat_t_vec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
+pub(crate) fn mat_t_vec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [
         m[0][0] * v[0] + m[1][0] * v[1] + m[2][0] * v[2],
         m[0][1] * v[0] + m[1][1] * v[1] + m[2][1] * v[2],

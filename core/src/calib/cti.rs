@@ -26,20 +26,30 @@
 //!
 //! Formats: coefficients as stored (U0F32 px per transfer, U0F16 exponent, u32 e-), the
 //! arithmetic in f32. The signal factor is bounded: `(F + F_0) / F_ref` is clamped to
-//! [`MIN_FLUX_RATIO`]..=[`MAX_FLUX_RATIO`] (a non-finite or non-positive flux gives no
+//! `MIN_FLUX_RATIO`..=`MAX_FLUX_RATIO` (a non-finite or non-positive flux gives no
 //! correction), so a noise-level flux cannot produce a runaway shift.
 //!
 //! Cost: one `powf` and one `erff` (libm), about 15 flops and a few integer operations per
 //! star.
 
-use crate::centroid::Centroid;
 use crate::geometry::{Output, ReadoutGeometry};
 use crate::table::{CalibTable, CtiCoeffs};
 
 /// Smallest flux ratio `(F + F_0) / F_ref` the signal law is evaluated at.
-pub const MIN_FLUX_RATIO: f32 = 1.0e-3;
+pub(crate) const MIN_FLUX_RATIO: f32 = 1.0e-3;
 /// Largest flux ratio `(F + F_0) / F_ref` the signal law is evaluated at.
-pub const MAX_FLUX_RATIO: f32 = 1.0e6;
+pub(crate) const MAX_FLUX_RATIO: f32 = 1.0e6;
+
+/// A measured star position the correction applies to: its position and flux in, the same
+/// measurement at the corrected position out (the centroid stage's result implements it).
+pub trait MeasuredPosition: Copy {
+    /// Column and row coordinates, px.
+    fn position_px(&self) -> (f32, f32);
+    /// The measured flux, e-.
+    fn flux_e(&self) -> f32;
+    /// The same measurement at (`x_px`, `y_px`).
+    fn at_px(self, x_px: f32, y_px: f32) -> Self;
+}
 
 /// The CTI correction of a table, for its geometry.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -134,12 +144,9 @@ impl CtiCorrection {
 
     /// `c` with the trap shift of its flux and position removed (flags, flux and sigmas
     /// unchanged).
-    pub fn corrected(&self, c: Centroid) -> Centroid {
-        let (dx, dy) = self.shift_px(c.flux_e, c.x_px, c.y_px);
-        Centroid {
-            x_px: c.x_px - dx,
-            y_px: c.y_px - dy,
-            ..c
-        }
+    pub fn corrected<P: MeasuredPosition>(&self, c: P) -> P {
+        let (x_px, y_px) = c.position_px();
+        let (dx, dy) = self.shift_px(c.flux_e(), x_px, y_px);
+        c.at_px(x_px - dx, y_px - dy)
     }
 }

@@ -1,5 +1,5 @@
 //! The calibration formula on fixed-point bits, shared by the per-pixel calibration
-//! ([`super::pixel`]), the dark-scale estimate ([`super::levels`]), the raw pre-filter of the
+//! (`pixel.rs`), the dark-scale estimate (`levels.rs`), the raw pre-filter of the
 //! scan and the fused raw centre of gravity, so that all of them compute the same bits.
 //!
 //! ```text

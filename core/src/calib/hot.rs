@@ -3,7 +3,7 @@
 //! own law: `dark_e = rate_ref x exposure x 2^((T - T_ref) / doubling)`.
 //!
 //! Computed in f32 on the M7's FPU when a hot pixel falls inside a read window (rare), with
-//! `libm::exp2f` (correct to about one ulp; micromath's `powf` was tested and is 0.8 % off,
+//! `libm::exp2f` (correct to about one ulp; micromath's `powf` is 0.8 % off,
 //! hundreds of electrons on a bright hot pixel); relative error below [`HOT_DARK_REL_TOL`].
 
 use crate::table::HotPixel;
@@ -16,7 +16,8 @@ pub const HOT_DARK_REL_TOL: f32 = 1e-5;
 /// Largest hot-pixel dark signal: 4 x 2^20 e-, the same bound as the regular dark term
 /// (relative dark < 4 times a dark scale of at most 2^20 e-), which the overflow proof of
 /// [`crate::calib::formula`] relies on.
-pub const HOT_DARK_LIMIT_E: Electrons = Electrons::from_bits(DARK_SCALE_LIMIT_E.to_bits() * 4 - 1);
+pub(crate) const HOT_DARK_LIMIT_E: Electrons =
+    Electrons::from_bits(DARK_SCALE_LIMIT_E.to_bits() * 4 - 1);
 
 /// The dark charge of `hot` after `exposure_ms` at `temperature_k`, given the table's reference
 /// temperature; clamped to `0..=HOT_DARK_LIMIT_E`.

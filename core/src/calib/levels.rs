@@ -22,7 +22,7 @@ use crate::units::{BiasAdu, DARK_SCALE_LIMIT_E, Electrons};
 
 /// Most over-scan or covered elements one line may contribute per side (geometries with
 /// wider strips use the first this many of each).
-pub const MAX_STRIP_PX: usize = 64;
+pub(crate) const MAX_STRIP_PX: usize = 64;
 
 /// Why a line cannot be used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -123,7 +123,7 @@ impl LineLevels {
 
 /// Covered samples further than this many robust sigmas from their line's median are not
 /// averaged.
-pub const REJECT_SIGMAS: i64 = 5;
+pub(crate) const REJECT_SIGMAS: i64 = 5;
 
 /// Accumulates the covered columns of the lines of a frame into the frame's dark scale.
 ///
@@ -180,11 +180,6 @@ impl DarkScaleEstimator {
             }
         }
         Ok(())
-    }
-
-    /// Number of covered samples averaged so far.
-    pub fn samples(&self) -> u32 {
-        self.count
     }
 
     /// The mean covered-pixel dark signal so far, clamped to ±[`DARK_SCALE_LIMIT_E`], or

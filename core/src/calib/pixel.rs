@@ -140,7 +140,7 @@ fn run_end(x: u32, end: u32, dark_log2: Option<u8>, flat_log2: Option<u8>, split
 
 /// Widest window [`FrameCalibration::calibrate_window`] calibrates with per-window set-up
 /// (wider ones go row by row through the span path; both give the same bits).
-pub const WINDOW_SETUP_COLS: usize = 16;
+pub(crate) const WINDOW_SETUP_COLS: usize = 16;
 
 impl<'t> FrameCalibration<'t> {
     /// Binds `table` to one frame's conditions.
@@ -160,12 +160,12 @@ impl<'t> FrameCalibration<'t> {
     }
 
     /// The table in use.
-    pub fn table(&self) -> &CalibTable<'t> {
+    pub(crate) fn table(&self) -> &CalibTable<'t> {
         &self.table
     }
 
     /// The frame's conditions (the dark scale as given, before clamping).
-    pub fn conditions(&self) -> &FrameConditions {
+    pub(crate) fn conditions(&self) -> &FrameConditions {
         &self.conditions
     }
 

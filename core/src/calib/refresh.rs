@@ -43,12 +43,11 @@
 //! # Cost and memory
 //! Per pixel inside the border: its lowest neighbour, which rules most pixels out (the
 //! excess over it bounds `E`); for the others, the distance to the stars near the window
-//! (at most [`MAX_NEAR_STARS`]), one sort of 8 values and the isolation sums; then a pass
-//! over the candidates and confirmed pixels. Measured on the M7: ~8,000 instructions an
-//! 11x11 window (`cargo m7-bench`'s 30-star `tracker_tracking_frame` went from 9,093,389 to
-//! 9,331,946 with the watch). [`DefectWatch::apply`] is a pass over
-//! the confirmed list. Memory: 16 B a candidate and 16 B a confirmed pixel
-//! (`DefectWatch<64, 32>`: 1,600 B with its settings and counters, on a 64-bit host).
+//! (at most `MAX_NEAR_STARS`), one sort of 8 values and the isolation sums; then a pass
+//! over the candidates and confirmed pixels; the M7 count an 11x11 window is in
+//! docs/calibration.md ("In orbit"). [`DefectWatch::apply`] is a pass over the confirmed
+//! list. Memory: 16 B a candidate and 16 B a confirmed pixel, with the settings and
+//! counters (the tracker's `DefectWatch<64, 32>`: docs/calibration.md).
 //! No allocation, no recursion, no panic: a full list evicts its weakest candidate, a full
 //! confirmed list counts what it could not keep.
 
@@ -57,7 +56,7 @@ use crate::units::Electrons;
 use crate::window::Rect;
 
 /// Most stars near one window taken into account; a window with more is not watched.
-pub const MAX_NEAR_STARS: usize = 16;
+pub(crate) const MAX_NEAR_STARS: usize = 16;
 /// Most hits kept from one window (a window with more is a scene, not defects: the rest are
 /// ignored).
 const MAX_WINDOW_HITS: usize = 16;
@@ -331,11 +330,6 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
         }
     }
 
-    /// The settings.
-    pub fn config(&self) -> &WatchConfig {
-        &self.config
-    }
-
     /// The confirmed pixels (the overlay), oldest first.
     pub fn confirmed(&self) -> &[Defect] {
         &self.confirmed
@@ -560,7 +554,7 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
     /// Retires every confirmed pixel that `table` lists (hot or telegraph), wherever it lies:
     /// once a table update holds them, the overlay has nothing left to do for them. Returns
     /// how many were retired. Cost: a binary search of each list per confirmed pixel.
-    pub fn retire_listed(&mut self, table: &crate::table::CalibTable<'_>) -> usize {
+    pub(crate) fn retire_listed(&mut self, table: &crate::table::CalibTable<'_>) -> usize {
         let before = self.confirmed.len();
         let (hot, tel) = (table.hot_pixels(), table.telegraph_pixels());
         self.confirmed
@@ -574,7 +568,7 @@ impl<const C: usize, const D: usize> DefectWatch<C, D> {
     }
 
     /// True when a confirmed pixel lies in `rect`.
-    pub fn touches(&self, rect: Rect) -> bool {
+    pub(crate) fn touches(&self, rect: Rect) -> bool {
         self.confirmed.iter().any(|d| {
             d.x_px >= rect.x0
                 && d.y_px >= rect.y0

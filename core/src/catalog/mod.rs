@@ -66,11 +66,11 @@ pub const KVEC_ENTRY_LEN: usize = 4;
 /// Most stars a catalog may hold (a pair stores star indices as u16).
 pub const MAX_STARS: u32 = 65_535;
 /// Most k-vector bins.
-pub const MAX_KVEC_BINS: u32 = 65_536;
+pub(crate) const MAX_KVEC_BINS: u32 = 65_536;
 /// Scale of the Q1.30 unit-vector components: value = bits / 2^30.
 pub const UNIT_SCALE: f64 = 1_073_741_824.0;
 /// Tolerance on a stored unit vector's norm: | |v| - 1 | below 2^-20.
-pub const UNIT_NORM_TOLERANCE: f64 = 1.0 / 1_048_576.0;
+pub(crate) const UNIT_NORM_TOLERANCE: f64 = 1.0 / 1_048_576.0;
 /// Nanoradians per radian (the unit of stored angles).
 pub const NRAD_PER_RAD: f64 = 1e9;
 

@@ -41,7 +41,7 @@ pub struct BackgroundEstimate {
 
 impl BackgroundEstimate {
     /// Level in e-.
-    pub fn level_e(&self) -> f32 {
+    pub(crate) fn level_e(&self) -> f32 {
         self.level_bits as f32 / 64.0
     }
 }

@@ -47,7 +47,7 @@
 //! so `F` can leave i32 only when a pixel and the level are of opposite signs and beyond
 //! ±16.7 M e- each: such a box is detected by the subtraction's overflow
 //! flag and handed to the f32 path. No sum overflows: `|F| <= 2^31`, `|d| <= 15` (box side
-//! <= [`super::MAX_SIDE`]), `d^2 < 2^8`, at most 961 < 2^10 pixels: every sum is below
+//! <= `MAX_SIDE`), `d^2 < 2^8`, at most 961 < 2^10 pixels: every sum is below
 //! `2^31 * 2^8 * 2^10 = 2^49`.
 //! The sums are exact, so the path is at least as accurate as the f32 one; the host tests
 //! compare both against f64 references.

@@ -19,11 +19,11 @@
 //! would lose information is `pixel - background` for large equal values, so that difference
 //! is taken on the `I26F6` bits in `i64` (exact: |difference| < 2^33 LSB) and converted to f32
 //! once per pixel. Positions are accumulated relative to an anchor pixel inside the window
-//! (offsets below [`MAX_SIDE`]), so sums such as `sum(dx * F)` keep their relative precision.
+//! (offsets below `MAX_SIDE`), so sums such as `sum(dx * F)` keep their relative precision.
 //!
 //! Range: a background-subtracted value is below 2^26 e- in magnitude (pixels within ±2^25 e-,
 //! the calibrated bound); its square below 2^52; a sum of squares over the largest window
-//! ([`MAX_SIDE`]^2 = 961 pixels) below 2^62, and the error propagation divides by the weight
+//! (`MAX_SIDE`^2 = 961 pixels) below 2^62, and the error propagation divides by the weight
 //! sum twice rather than by its square, so no f32 intermediate exceeds ~2^100 (f32 holds
 //! 2^127). A fixed-point power-2 sum would need more than 64 bits; f32 needs no care.
 //!
@@ -41,7 +41,7 @@
 //!
 //! # Flags and degenerate windows
 //! Every method returns a [`Centroid`], never an error and never a NaN. A window it cannot
-//! measure (empty, bigger than [`MAX_SIDE`], a pixel slice of the wrong length, flat, negative
+//! measure (empty, bigger than `MAX_SIDE` (31), a pixel slice of the wrong length, flat, negative
 //! after background subtraction, all pixels excluded, no usable perimeter) gives
 //! [`CentroidFlags::DEGENERATE`], the position of the window's centre pixel, zero flux and SNR,
 //! and a position error of half the window size. Any computed position is clamped to the
@@ -70,14 +70,15 @@ pub mod test_only_math {
 }
 
 use crate::calib::PixelFlags;
+use crate::calib::cti::MeasuredPosition;
 use crate::window::Window;
 
 /// The largest window side any method accepts (31 pixels: the perimeter median's buffer).
-pub const MAX_SIDE: u16 = 31;
+pub(crate) const MAX_SIDE: u16 = 31;
 
 /// Below this SNR (paper eq. 8) a centroid gets [`CentroidFlags::LOW_SNR`]: the paper's
 /// detection threshold.
-pub const LOW_SNR_LIMIT: f32 = 3.0;
+pub(crate) const LOW_SNR_LIMIT: f32 = 3.0;
 
 bitflags::bitflags! {
     /// What a centroid method noticed; several may be set.
@@ -101,10 +102,9 @@ bitflags::bitflags! {
         /// An iterative method did not converge within its iterations, or diverged and fell
         /// back to its starting point.
         const NOT_CONVERGED = 64;
-        /// Set by no method now (it was the removed 3-point peak fit's: the brightest pixel
-        /// lay on the window border, so the fit had no neighbour on one side). The bit stays
-        /// reserved, not reused or renumbered, because telemetry and `stars.csv` carry the
-        /// flag bits.
+        /// Reserved: set by no method (the brightest pixel on the window border, where a
+        /// 3-point peak fit has no neighbour on one side). Telemetry and `stars.csv` carry
+        /// the flag bits, so the bit is neither reused nor renumbered.
         const PEAK_AT_EDGE = 128;
         /// The computed position fell outside the window and was clamped to its edge.
         const CLAMPED = 256;
@@ -149,6 +149,21 @@ pub struct Centroid {
     pub sigma_y_px: f32,
     /// What the method noticed.
     pub flags: CentroidFlags,
+}
+
+/// The charge-transfer correction moves a centroid (flags, flux and sigmas unchanged).
+impl MeasuredPosition for Centroid {
+    fn position_px(&self) -> (f32, f32) {
+        (self.x_px, self.y_px)
+    }
+
+    fn flux_e(&self) -> f32 {
+        self.flux_e
+    }
+
+    fn at_px(self, x_px: f32, y_px: f32) -> Self {
+        Self { x_px, y_px, ..self }
+    }
 }
 
 /// The input of every method: a window and what calibration and detection know about it.

@@ -12,15 +12,15 @@ use crate::calib::PixelFlags;
 use crate::units::Electrons;
 
 /// Columns per background block.
-pub const BLOCK_PX: usize = 64;
+pub(crate) const BLOCK_PX: usize = 64;
 /// Most blocks (columns / 64, rounded up): lines up to 4096 pixels.
-pub const MAX_BLOCKS: usize = 64;
+pub(crate) const MAX_BLOCKS: usize = 64;
 /// Exponential smoothing length, lines.
-pub const SMOOTH_LINES: i64 = 8;
+pub(crate) const SMOOTH_LINES: i64 = 8;
 
 /// Background and noise of one block.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct BlockLevel {
+pub(crate) struct BlockLevel {
     /// Background, e- per pixel.
     pub background_e: Electrons,
     /// Noise sigma, e- (at least 1/64 e-).
@@ -36,7 +36,7 @@ pub(crate) fn threshold_bits(l: BlockLevel, k: f32) -> i64 {
 
 /// The running per-block background and noise estimate of the lines seen so far.
 #[derive(Clone, Debug)]
-pub struct BlockBackground {
+pub(crate) struct BlockBackground {
     blocks: [BlockLevel; MAX_BLOCKS],
     n_blocks: usize,
     primed: bool,

@@ -30,9 +30,9 @@ use crate::window::Rect;
 /// Largest window side [`WindowCapture`] holds.
 pub const CAPTURE_MAX_SIDE: u16 = 15;
 /// Samples per [`WindowCapture`] window buffer.
-pub const CAPTURE_MAX_PX: usize = CAPTURE_MAX_SIDE as usize * CAPTURE_MAX_SIDE as usize;
+pub(crate) const CAPTURE_MAX_PX: usize = CAPTURE_MAX_SIDE as usize * CAPTURE_MAX_SIDE as usize;
 /// Most windows a [`WindowCapture`] tracks (the completion mask is 64 bits).
-pub const CAPTURE_MAX_WINDOWS: usize = 64;
+pub(crate) const CAPTURE_MAX_WINDOWS: usize = 64;
 
 const ZERO_LEVELS: LineLevels = LineLevels {
     bias_adu: [BiasAdu::ZERO; crate::geometry::MAX_OUTPUTS],
@@ -97,7 +97,7 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
 
     /// Forgets every line and sets where a raw line's active pixels start (buffers made
     /// with a placeholder, e.g. all-zero statics, are set up in place).
-    pub fn reset_for(&mut self, first_active_col: usize) {
+    pub(crate) fn reset_for(&mut self, first_active_col: usize) {
         self.first_active_col = first_active_col;
         self.clear();
     }
@@ -107,11 +107,6 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
         self.rows = [None; R];
         self.lens = [0; R];
         self.newest = None;
-    }
-
-    /// The newest active row pushed.
-    pub fn newest(&self) -> Option<u16> {
-        self.newest
     }
 
     /// Stores raw line `raw_line` (at most `W` samples) of active row `y` with its levels,
@@ -143,7 +138,7 @@ impl<const R: usize, const W: usize> LineRing<R, W> {
     }
 
     /// Whether every row of `rect` is in the ring now.
-    pub fn holds(&self, rect: Rect) -> Result<(), RingError> {
+    pub(crate) fn holds(&self, rect: Rect) -> Result<(), RingError> {
         if R == 0 {
             return Err(RingError::RowGone);
         }
@@ -286,7 +281,7 @@ impl Iterator for Completed {
     }
 }
 
-/// Raw pixels of up to `N` (at most [`CAPTURE_MAX_WINDOWS`]) windows, filled line by line.
+/// Raw pixels of up to `N` (at most `CAPTURE_MAX_WINDOWS`, 64) windows, filled line by line.
 #[derive(Clone, Debug)]
 pub struct WindowCapture<const N: usize> {
     slots: heapless::Vec<Slot, N>,
@@ -306,7 +301,7 @@ impl<const N: usize> WindowCapture<N> {
 
     /// Forgets every window and takes lines of `geometry` from now on (a list made with a
     /// placeholder geometry, e.g. an all-zero static, is set up in place).
-    pub fn reset_for(&mut self, geometry: ReadoutGeometry) {
+    pub(crate) fn reset_for(&mut self, geometry: ReadoutGeometry) {
         self.geometry = geometry;
         self.reset();
     }
@@ -315,11 +310,6 @@ impl<const N: usize> WindowCapture<N> {
     pub fn reset(&mut self) {
         self.slots.clear();
         self.next_y = 0;
-    }
-
-    /// Windows in the list.
-    pub fn len(&self) -> usize {
-        self.slots.len()
     }
 
     /// True when no window is listed.

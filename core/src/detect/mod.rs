@@ -2,17 +2,19 @@
 //! readout order, and keeps only the previous line's runs and the blobs still open, a few KB
 //! for a 1024-pixel line, never a frame.
 //!
-//! - [`background`]: local background and noise per block of columns, measured on the lines
+//! - `background.rs`: local background and noise per block of columns, measured on the lines
 //!   already seen (robust to stars: lower-half quantiles).
-//! - [`blobs`]: connected above-threshold pixels (8-connectivity) grouped into blobs, and
+//! - `blobs/`: connected above-threshold pixels (8-connectivity) grouped into blobs, and
 //!   the candidate list with its overflow policy.
-//! - [`track`]: tracking mode, one window predicted from the last frame: is the star there?
-//!   Background and noise from the window's border, the same eq. 8 SNR test.
-//! - [`prefilter`]: the raw-domain pre-filtered scan ([`ScanDetector`]): quiet pixels are
+//! - `track.rs` ([`track_detect`]): tracking mode, one window predicted from the last
+//!   frame: is the star there? Background and noise from the window's border, the same
+//!   eq. 8 SNR test.
+//! - `prefilter/`: the raw-domain pre-filtered scan ([`ScanDetector`]): quiet pixels are
 //!   compared in raw ADU against a per-tile level and never calibrated.
-//! - [`capture`]: copies the raw pixels of a list of windows (tracking) out of the streamed
-//!   lines, and keeps a ring of the last raw lines (acquisition) so that a blob's window can
-//!   be calibrated and centroided when the blob closes.
+//! - `capture.rs`: copies the raw pixels of a list of windows (tracking, [`WindowCapture`])
+//!   out of the streamed lines, and keeps a ring of the last raw lines (acquisition,
+//!   [`LineRing`]) so that a blob's window can be calibrated and centroided when the blob
+//!   closes.
 //!
 //! Thresholds work with hysteresis: pixels above 2.5 local sigmas form blobs, and a blob
 //! counts only with a peak above 5 sigmas and at least 2 pixels (see [`DetectConfig`]).
@@ -22,14 +24,14 @@
 //! (corrected or excluded) or telegraph never exceed the threshold, so they never create a
 //! detection; a saturated pixel always does.
 
-pub mod background;
-pub mod blobs;
-pub mod capture;
-pub mod prefilter;
-pub mod track;
+mod background;
+mod blobs;
+pub(crate) mod capture;
+mod prefilter;
+pub(crate) mod track;
 
 pub use blobs::{Detection, DetectionFlags, LineDetector};
-pub use capture::{CaptureError, LineRing, RingError, WindowCapture};
+pub use capture::{CAPTURE_MAX_SIDE, CaptureError, LineRing, RingError, WindowCapture};
 pub use prefilter::{ScanDetector, ScanError};
 pub use track::{TrackConfig, TrackFlags, TrackResult, track_detect};
 
@@ -56,7 +58,7 @@ pub struct DetectConfig {
 impl DetectConfig {
     /// The defaults: join at 2.5 sigma, a peak above 5 sigma, at least 2 pixels, SNR above 3,
     /// low-SNR flag below 5.
-    pub const DEFAULT: Self = Self {
+    pub(crate) const DEFAULT: Self = Self {
         pixel_sigmas: 2.5,
         peak_sigmas: 5.0,
         min_pixels: 2,

@@ -71,9 +71,9 @@ use crate::calib::PixelFlags;
 use crate::window::Window;
 
 /// Largest window side accepted (the bitmask holds 32 columns; the centroid methods' limit).
-pub const MAX_SIDE: u16 = crate::centroid::MAX_SIDE;
+pub(crate) const MAX_SIDE: u16 = crate::centroid::MAX_SIDE;
 /// Fewest usable border pixels for a background estimate.
-pub const MIN_BORDER_PX: usize = 5;
+pub(crate) const MIN_BORDER_PX: usize = 5;
 /// Largest border: `4 * MAX_SIDE - 4`.
 const MAX_BORDER: usize = 4 * MAX_SIDE as usize - 4;
 
@@ -102,7 +102,7 @@ pub struct TrackConfig {
 impl TrackConfig {
     /// The defaults: the line detector's 2.5-sigma aperture, a 3x3 flux box, SNR above 3,
     /// low-SNR flag below 5, spike sharpness 0.07, 3-sigma spike and blend tests.
-    pub const DEFAULT: Self = Self {
+    pub(crate) const DEFAULT: Self = Self {
         pixel_sigmas: 2.5,
         box_side: 3,
         min_snr: 3.0,

@@ -1,7 +1,7 @@
 //! Star identification: which catalog star each measured star is, lost in space (no prior)
 //! or tracking (from a prior attitude several degrees off), with a bounded false-match
 //! probability. No allocation: the work lives on the stack (lost in space about 12 KB, 8 KB
-//! of it the sorted pairs of one separation window, [`IK_CAPACITY`]; tracking about 5 KB:
+//! of it the sorted pairs of one separation window, `IK_CAPACITY`; tracking about 5 KB:
 //! the high-water marks `cargo m7-bench` prints).
 //!
 //! # Lost in space: triangles from the pair database, then statistical verification
@@ -20,9 +20,9 @@
 //!
 //! # Verification and the false-match bound
 //! A hypothesis attitude maps each measured star to the sky; it matches when a catalog star
-//! lies within [`IdentConfig::match_radius_rad`]. In rounds (at most [`MAX_REFITS`], until
+//! lies within [`IdentConfig::match_radius_rad`]. In rounds (at most `MAX_REFITS`, until
 //! the matches stop changing) the attitude is refit from the matches, every star matched
-//! again, the attitude refit, and a match whose residual exceeds [`TIGHT_SIGMAS`] of its own
+//! again, the attitude refit, and a match whose residual exceeds `TIGHT_SIGMAS` of its own
 //! sigma dropped (an attitude pulled by a false star or a wrong neighbour loses it here).
 //! If the hypothesis is wrong, each of the `n - 3` non-basis stars
 //! matches by chance with probability at most `p = N_max (1 - cos r) / (1 - cos R)`, `N_max`
@@ -35,7 +35,7 @@
 //! # Tracking
 //! The prior attitude maps each pattern star to the sky; its candidates are the catalog
 //! stars within the prior error plus the pair tolerance (a rotation by `theta` moves any
-//! direction by at most `theta`), at most [`MAX_CANDIDATES`] each. Triangles are formed from
+//! direction by at most `theta`), at most `MAX_CANDIDATES` each. Triangles are formed from
 //! candidates only and verified as above.
 //!
 //! Cost: a lost-in-space triangle costs a sort of `2 P_ik` entries and `2 P_ij` binary
@@ -50,16 +50,16 @@ use crate::catalog::Catalog;
 /// Most measured stars looked at (the brightest; the rest are ignored).
 pub const MAX_STARS: usize = 32;
 /// Most pattern stars (triangle vertices).
-pub const MAX_PATTERN: usize = 16;
+pub(crate) const MAX_PATTERN: usize = 16;
 /// Most catalog candidates kept per pattern star in tracking.
-pub const MAX_CANDIDATES: usize = 16;
+pub(crate) const MAX_CANDIDATES: usize = 16;
 /// A final match's residual is at most this many of its sigmas (a 2-D Gaussian passes
 /// 5 sigma with probability 1 - 4e-6).
-pub const TIGHT_SIGMAS: f64 = 5.0;
+pub(crate) const TIGHT_SIGMAS: f64 = 5.0;
 /// Most match-and-refit rounds of a hypothesis (they stop when the matches stop changing).
-pub const MAX_REFITS: usize = 6;
+pub(crate) const MAX_REFITS: usize = 6;
 /// Fewest matched stars in a solution (three for the triangle and one more).
-pub const MIN_MATCHES: usize = 4;
+pub(crate) const MIN_MATCHES: usize = 4;
 
 /// Identification settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,7 +70,7 @@ pub struct IdentConfig {
     pub match_radius_rad: f64,
     /// Largest accepted false-match probability bound.
     pub max_false_probability: f64,
-    /// Brightest measured stars used as triangle vertices (at most [`MAX_PATTERN`]).
+    /// Brightest measured stars used as triangle vertices (at most `MAX_PATTERN`, 16).
     pub pattern_stars: usize,
     /// Most hypotheses verified in one identification (the union bound's count).
     pub max_hypotheses: u32,
@@ -128,7 +128,7 @@ pub struct Solution {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum IdentError {
-    /// Fewer than [`MIN_MATCHES`] measured stars.
+    /// Fewer than `MIN_MATCHES` (4) measured stars.
     TooFewStars,
     /// A measured star is not a finite unit vector with a positive sigma, or the settings
     /// are out of range.
@@ -155,7 +155,7 @@ impl core::fmt::Display for IdentError {
 impl core::error::Error for IdentError {}
 
 /// Entries of the (star, partner) scratch of one triangle's `d_ik` pairs (8 KB).
-pub const IK_CAPACITY: usize = 2048;
+pub(crate) const IK_CAPACITY: usize = 2048;
 
 /// The pyramid order of triangles over `n` stars (Mortari): (i, i+dj, i+dj+dk).
 struct Triangles {
@@ -411,7 +411,7 @@ pub fn track(
 }
 
 /// Probability that `Binomial(n, p)` is at least `m`.
-pub fn binomial_tail(n: usize, m: usize, p: f64) -> f64 {
+pub(crate) fn binomial_tail(n: usize, m: usize, p: f64) -> f64 {
     if m == 0 {
         return 1.0;
     }
@@ -496,7 +496,12 @@ fn hypothesis(
 }
 
 /// `H_max T(n - 3, matched - 3, p)`: the bound in the module documentation.
-pub fn false_match_bound(cat: &Catalog<'_>, n: usize, matched: usize, cfg: &IdentConfig) -> f64 {
+pub(crate) fn false_match_bound(
+    cat: &Catalog<'_>,
+    n: usize,
+    matched: usize,
+    cfg: &IdentConfig,
+) -> f64 {
     let cap = 1.0 - libm::cos(cfg.match_radius_rad);
     let field = 1.0 - libm::cos(cat.field_radius_rad());
     let p = (f64::from(cat.max_field_stars()) * cap / field).min(1.0);

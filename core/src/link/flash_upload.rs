@@ -19,8 +19,8 @@
 //! A calibration table is committed with [`FlashStore::commit_checked`] and the home's
 //! `check(device, data_offset_b, len_b)`: the home parses the table where it lies (the board
 //! through the memory-mapped bank, the host through the model's bytes) and compares its
-//! geometry with the sensor's. A table of another kind (the catalog, no format yet) is
-//! committed on its CRC alone.
+//! geometry with the sensor's. A table of another kind (the catalog) is committed on
+//! its CRC alone.
 
 use super::upload::{TableInfo, TableUpload, UploadRefusal};
 use crate::store::{EraseProgress, FlashStore, StoreError, TableKind};

@@ -18,10 +18,9 @@
 //! Packets are read and written with the `spacepackets` crate (no std, no alloc): the
 //! standard's header fields and CRC are not hand-coded here.
 //!
-//! Memory: [`LinkService`] is ~17 KB (15,856 bytes on the board before the in-flight defect
-//! commit's plan, ~1.2 KB, was added; 17,352 on a 64-bit host: the two queues 10 KB, a
-//! receive frame and three packet buffers of ~1.1 KB, the plan; the host test
-//! `link_decoder` bounds it). Cost: see [`service`].
+//! Memory: [`LinkService`] holds the two telemetry queues, a receive frame, three packet
+//! buffers and the in-flight defect commit's plan, all fixed; its size is in
+//! `docs/protocol.md` and bounded by the host test `link_decoder`. Cost: see [`service`].
 
 pub mod command;
 pub mod flash_upload;

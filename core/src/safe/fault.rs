@@ -21,9 +21,9 @@
 /// Words in the record's RAM image.
 pub const FAULT_RECORD_WORDS: usize = 8;
 /// The record's first word.
-pub const FAULT_MAGIC: u32 = 0x5354_4652;
+pub(crate) const FAULT_MAGIC: u32 = 0x5354_4652;
 /// The record layout version (word 5, bits 8-15).
-pub const FAULT_VERSION: u32 = 1;
+pub(crate) const FAULT_VERSION: u32 = 1;
 
 const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
@@ -81,7 +81,7 @@ pub enum ResetCause {
 
 impl ResetCause {
     /// The code in the record (word 5).
-    pub const fn code(self) -> u8 {
+    pub(crate) const fn code(self) -> u8 {
         match self {
             Self::PowerOn => 1,
             Self::Watchdog => 2,
@@ -92,7 +92,7 @@ impl ResetCause {
     }
 
     /// The cause of a code, `None` for an unknown one.
-    pub const fn from_code(code: u8) -> Option<Self> {
+    pub(crate) const fn from_code(code: u8) -> Option<Self> {
         match code {
             1 => Some(Self::PowerOn),
             2 => Some(Self::Watchdog),

@@ -105,7 +105,7 @@ impl Health {
     }
 
     /// Notes the thermometer's last reading and source.
-    pub fn on_temperature(&mut self, k: Option<Kelvin>, source: ThermoSource) {
+    pub(crate) fn on_temperature(&mut self, k: Option<Kelvin>, source: ThermoSource) {
         self.temperature_k = k;
         self.temperature_source = source;
     }

@@ -8,16 +8,17 @@
 //! uptime in one struct for the link. What it costs: a 32-byte RAM record (one CRC-32 per
 //! boot and per update), a few counters per frame.
 //!
-//! - [`fault`]: the reset-surviving [`FaultRecord`] and the set-up fault flags.
-//! - [`health`]: the [`Health`] housekeeping the link reports.
-//! - [`temperature`]: the [`FallbackThermometer`] (CCD-board sensor, else the MCU's).
+//! - `fault.rs`: the reset-surviving [`FaultRecord`] and the set-up fault flags.
+//! - `health.rs`: the [`Health`] housekeeping the link reports.
+//! - `temperature.rs`: the [`FallbackThermometer`] (CCD-board sensor, else the MCU's) and
+//!   the board sensor's registers ([`tmp117`]).
 //!
 //! The rules (which fault leads where) are in `docs/storage.md#safe-states`.
 
-pub mod fault;
-pub mod health;
-pub mod temperature;
+mod fault;
+mod health;
+mod temperature;
 
 pub use fault::{FAULT_RECORD_WORDS, FaultRecord, ResetCause, SetupFaults};
 pub use health::{Health, TableId};
-pub use temperature::{FallbackThermometer, ThermoSource};
+pub use temperature::{FallbackThermometer, ThermoSource, tmp117};

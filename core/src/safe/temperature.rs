@@ -14,7 +14,7 @@ use crate::units::Kelvin;
 
 /// Readings outside this range are faults (a disconnected sensor reads 0 or full scale):
 /// 150 K ..= 400 K, wider than any CCD47-20 operating point.
-pub const PLAUSIBLE_K: (Kelvin, Kelvin) =
+pub(crate) const PLAUSIBLE_K: (Kelvin, Kelvin) =
     (Kelvin::const_from_int(150), Kelvin::const_from_int(400));
 
 /// The CCD board's sensor as this design specifies it: a TI TMP117 (I2C, +-0.1 degC from
@@ -26,10 +26,10 @@ pub mod tmp117 {
 
     /// The result register (signed 16-bit, 7.8125 mdegC a count).
     pub const REG_TEMP_RESULT: u8 = 0x00;
-    /// The device-id register; [`DEVICE_ID`] in its low 12 bits.
+    /// The device-id register; `DEVICE_ID` in its low 12 bits.
     pub const REG_DEVICE_ID: u8 = 0x0F;
     /// The TMP117's device id.
-    pub const DEVICE_ID: u16 = 0x0117;
+    pub(crate) const DEVICE_ID: u16 = 0x0117;
     /// What the result register holds after reset until the first conversion ends
     /// (-256 degC): no reading.
     pub const RESET_VALUE: u16 = 0x8000;
@@ -41,7 +41,7 @@ pub mod tmp117 {
     /// reset value. Every word converts without overflow: counts of 1/128 degC are 512
     /// U16F16 bits, so -32,767 .. 32,767 counts give 1.1 M .. 34.7 M bits (8 .. 529 K), inside
     /// the format's 0 .. 65,536 K. Range checks against the CCD's are the caller's
-    /// ([`super::PLAUSIBLE_K`]).
+    /// (`PLAUSIBLE_K`).
     pub fn kelvin(raw: u16) -> Option<Kelvin> {
         if raw == RESET_VALUE {
             return None;
@@ -77,7 +77,6 @@ pub struct FallbackThermometer<E, M> {
     /// The MCU's sensor.
     pub mcu: M,
     source: ThermoSource,
-    last_k: Option<Kelvin>,
     external_failures: u32,
     mcu_failures: u32,
 }
@@ -89,7 +88,6 @@ impl<E: Thermometer, M: Thermometer> FallbackThermometer<E, M> {
             external,
             mcu,
             source: ThermoSource::None,
-            last_k: None,
             external_failures: 0,
             mcu_failures: 0,
         }
@@ -98,11 +96,6 @@ impl<E: Thermometer, M: Thermometer> FallbackThermometer<E, M> {
     /// Where the last reading came from.
     pub fn source(&self) -> ThermoSource {
         self.source
-    }
-
-    /// The last reading, K.
-    pub fn last_k(&self) -> Option<Kelvin> {
-        self.last_k
     }
 
     /// Readings the external sensor failed to give (absent or implausible).
@@ -137,7 +130,6 @@ impl<E: Thermometer, M: Thermometer> Thermometer for FallbackThermometer<E, M> {
             }
         };
         self.source = source;
-        self.last_k = reading;
         reading
     }
 }

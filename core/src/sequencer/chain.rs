@@ -1,5 +1,5 @@
 //! The program as a DMA's linked list ([`Chain`]): what the board's DMA descriptors are made
-//! from, so that a DMA repeats each segment itself and the CPU no longer writes every tick's
+//! from, so that a DMA repeats each segment itself and the CPU does not write every tick's
 //! word.
 //!
 //! A [`Link`] is one descriptor: play `len_words` words of the chain's word table from

@@ -51,7 +51,7 @@ pub enum SegmentId {
 }
 
 /// Number of segments.
-pub const SEGMENTS: usize = 7;
+pub(crate) const SEGMENTS: usize = 7;
 
 impl SegmentId {
     /// Every segment, in table order.
@@ -152,7 +152,7 @@ impl<'w, 's> Program<'w, 's> {
 
     /// Where each segment lies in [`Self::words`]: (first word, words), indexed by
     /// `SegmentId as usize`.
-    pub const fn spans(&self) -> [(u32, u32); SEGMENTS] {
+    pub(crate) const fn spans(&self) -> [(u32, u32); SEGMENTS] {
         self.spans
     }
 
@@ -162,18 +162,13 @@ impl<'w, 's> Program<'w, 's> {
     }
 
     /// Outputs digitised by each CONVST.
-    pub const fn outputs(&self) -> u8 {
+    pub(crate) const fn outputs(&self) -> u8 {
         self.outputs
     }
 
     /// The binning factor.
-    pub const fn binning(&self) -> u16 {
+    pub(crate) const fn binning(&self) -> u16 {
         self.binning
-    }
-
-    /// The exposure asked for, us.
-    pub const fn exposure_us(&self) -> u32 {
-        self.exposure_us
     }
 
     /// The same program over a copy of its words (in DMA-reachable RAM, or an edited copy to
@@ -251,7 +246,7 @@ pub const REST: LineSet = rest(2);
 /// backward ([`Phases::BACKWARD_FROM_P12`]) so that its packets cross the split into the
 /// left half on the same tick as the left half moves towards its output (the phase relation
 /// at the split: check against datasheet).
-pub const fn rest(outputs: u8) -> LineSet {
+pub(crate) const fn rest(outputs: u8) -> LineSet {
     let right = if outputs == 1 {
         Phases::P12
     } else {
@@ -362,7 +357,7 @@ fn segment_words(
 }
 
 /// Ticks of one play of each segment (without writing words).
-pub fn segment_ticks(id: SegmentId, t: &Ticks, binning: u16) -> u32 {
+pub(crate) fn segment_ticks(id: SegmentId, t: &Ticks, binning: u16) -> u32 {
     match id {
         SegmentId::FrameTransfer => 3 * t.ft_state,
         SegmentId::LineTransfer => 3 * t.line_state,
@@ -481,8 +476,8 @@ pub fn compile<'w, 's>(
 mod tests {
     use super::*;
     use crate::geometry::ReadoutGeometry;
+    use crate::readout::ReadoutRequest;
     use crate::sequencer::{Binning, Limits, Timing};
-    use crate::tracker::ReadoutRequest;
 
     #[test]
     fn parts_view_gives_back_the_same_program() {

@@ -76,9 +76,4 @@ impl Cursor {
         }
         n
     }
-
-    /// The index of the step the next word belongs to (the program's length at its end).
-    pub const fn step(&self) -> usize {
-        self.step
-    }
 }

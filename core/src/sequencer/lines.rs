@@ -47,11 +47,11 @@ pub enum Line {
 }
 
 /// Number of lines.
-pub const LINE_COUNT: usize = 16;
+pub(crate) const LINE_COUNT: usize = 16;
 
 impl Line {
     /// Every line, in bit order.
-    pub const ALL: [Self; LINE_COUNT] = [
+    pub(crate) const ALL: [Self; LINE_COUNT] = [
         Self::I1,
         Self::I2,
         Self::I3,
@@ -79,12 +79,12 @@ impl Line {
     pub const REG_RIGHT: [Self; 3] = [Self::R1R, Self::R2R, Self::R3R];
 
     /// The line's bit in a [`LineSet`].
-    pub const fn bit(self) -> u16 {
+    pub(crate) const fn bit(self) -> u16 {
         1 << self as u8
     }
 
     /// The name as the clock-driver board labels it.
-    pub const fn name(self) -> &'static str {
+    pub(crate) const fn name(self) -> &'static str {
         match self {
             Self::I1 => "I1",
             Self::I2 => "I2",
@@ -116,12 +116,12 @@ impl Phases {
     /// Phases 1 and 2 high: the rest state of the image and store sections.
     pub const P12: Self = Self(0b011);
     /// Phases 2 and 3 high.
-    pub const P23: Self = Self(0b110);
+    pub(crate) const P23: Self = Self(0b110);
     /// Phases 3 and 1 high: the rest state of the serial register.
     pub const P31: Self = Self(0b101);
     /// One element forward (towards the output): three states, each sharing a high phase
     /// with the one before (the overlap that keeps the packet whole), from and back to P12.
-    pub const FORWARD_FROM_P12: [Self; 3] = [Self::P23, Self::P31, Self::P12];
+    pub(crate) const FORWARD_FROM_P12: [Self; 3] = [Self::P23, Self::P31, Self::P12];
     /// One element forward from and back to P31 (the packet crosses into the next element
     /// at the first state).
     pub const FORWARD_FROM_P31: [Self; 3] = [Self::P12, Self::P23, Self::P31];
@@ -129,7 +129,7 @@ impl Phases {
     pub const BACKWARD_FROM_P31: [Self; 3] = [Self::P23, Self::P12, Self::P31];
     /// One element backward from and back to P12 (the packet crosses into the next element
     /// at the first state, in step with [`Self::FORWARD_FROM_P31`]).
-    pub const BACKWARD_FROM_P12: [Self; 3] = [Self::P31, Self::P23, Self::P12];
+    pub(crate) const BACKWARD_FROM_P12: [Self; 3] = [Self::P31, Self::P23, Self::P12];
 }
 
 /// The level of every line at one tick: bit `l` is [`Line`] `l`.
@@ -139,7 +139,7 @@ pub struct LineSet(pub u16);
 
 impl LineSet {
     /// Every line low.
-    pub const EMPTY: Self = Self(0);
+    pub(crate) const EMPTY: Self = Self(0);
 
     /// With `line` high.
     #[must_use]
@@ -149,7 +149,7 @@ impl LineSet {
 
     /// With `line` low.
     #[must_use]
-    pub const fn without(self, line: Line) -> Self {
+    pub(crate) const fn without(self, line: Line) -> Self {
         Self(self.0 & !line.bit())
     }
 
@@ -225,12 +225,12 @@ impl PinMap {
     };
 
     /// The pin of `line`.
-    pub fn pin(&self, line: Line) -> u8 {
+    pub(crate) fn pin(&self, line: Line) -> u8 {
         self.pins.get(line as usize).copied().unwrap_or(u8::MAX)
     }
 
     /// Checks that every pin is on the port and no two lines share one.
-    pub fn validate(&self) -> Result<(), PinMapError> {
+    pub(crate) fn validate(&self) -> Result<(), PinMapError> {
         let mut used: [Option<Line>; 16] = [None; 16];
         for line in Line::ALL {
             let pin = self.pin(line);

@@ -18,7 +18,7 @@
 //! program --LineJobs--> per line: rows, read runs, ADC words, last tick   (lines_out.rs)
 //! ADC words --LineJob::unpack--> the raw line in the core's layout         (lines_out.rs)
 //! ```
-//! Each tick is one `u32` BSRR word for the clock port ([`lines::PinMap`]); the firmware's
+//! Each tick is one `u32` BSRR word for the clock port ([`PinMap`]); the firmware's
 //! timer-paced DMA writes the words of each step `repeat` times. The compiler writes into
 //! buffers the caller owns (no allocation) and says how large they must be when they are
 //! not. Costs: compiling a tracking frame with 30 windows is O(row groups x windows); the
@@ -34,21 +34,19 @@
 /// they fit.
 pub const TABLE_RAM_BYTES: usize = 64 * 1024;
 
-pub mod chain;
-pub mod check;
-pub mod compile;
-pub mod cost;
-pub mod expand;
-pub mod lines;
-pub mod lines_out;
-pub mod plan;
-pub mod timing;
+mod chain;
+mod check;
+mod compile;
+mod cost;
+mod expand;
+mod lines;
+mod lines_out;
+mod plan;
+mod timing;
 
 pub use chain::{Chain, ChainError, Link, Links, MAX_BLOCK_WORDS, MAX_BLOCKS};
 pub use check::{SequenceError, check_program};
-pub use compile::{
-    CompileError, Program, ProgramParts, REST, SEGMENTS, SegmentId, Step, compile, rest,
-};
+pub use compile::{CompileError, Program, ProgramParts, REST, SegmentId, Step, compile};
 pub use cost::Cost;
 pub use expand::Cursor;
 pub use lines::{Line, LineSet, Phases, PinMap, PinMapError};

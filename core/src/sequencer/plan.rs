@@ -11,7 +11,7 @@
 //! Cost: `shift_runs` is O(windows x log windows) a row group; no allocation.
 
 use crate::geometry::ReadoutGeometry;
-use crate::tracker::ReadoutRequest;
+use crate::readout::ReadoutRequest;
 use crate::window::Rect;
 
 /// Largest number of windows a plan accepts.
@@ -35,7 +35,7 @@ pub enum Binning {
 
 impl Binning {
     /// Pixels summed along each axis.
-    pub const fn factor(self) -> u16 {
+    pub(crate) const fn factor(self) -> u16 {
         match self {
             Self::X1 => 1,
             Self::X2 => 2,
@@ -133,22 +133,17 @@ impl<'a> ReadoutPlan<'a> {
     }
 
     /// The geometry.
-    pub const fn geometry(&self) -> &ReadoutGeometry {
+    pub(crate) const fn geometry(&self) -> &ReadoutGeometry {
         &self.geometry
     }
 
-    /// The request.
-    pub const fn request(&self) -> &ReadoutRequest<'a> {
-        &self.request
-    }
-
     /// The binning.
-    pub const fn binning(&self) -> Binning {
+    pub(crate) const fn binning(&self) -> Binning {
         self.binning
     }
 
     /// The exposure, us.
-    pub const fn exposure_us(&self) -> u32 {
+    pub(crate) const fn exposure_us(&self) -> u32 {
         self.exposure_us
     }
 
@@ -163,30 +158,30 @@ impl<'a> ReadoutPlan<'a> {
     }
 
     /// Binned shifts that empty the register (per output).
-    pub const fn shifts_per_line(&self) -> u16 {
+    pub(crate) const fn shifts_per_line(&self) -> u16 {
         self.register_len() / self.binning.factor()
     }
 
     /// Row groups of a full frame (`lines / binning`; a last partial group is left in the
     /// store and flushed by the next frame transfer).
-    pub const fn row_groups(&self) -> u16 {
+    pub(crate) const fn row_groups(&self) -> u16 {
         self.geometry.lines / self.binning.factor()
     }
 
     /// Rows the frame transfer moves: the store's depth, so the first active row ends next
     /// to the register.
-    pub const fn frame_transfer_rows(&self) -> u16 {
+    pub(crate) const fn frame_transfer_rows(&self) -> u16 {
         self.geometry.lines
     }
 
     /// Raw rows `[start, end)` of row group `g`.
-    pub const fn group_rows(&self, g: u16) -> (u16, u16) {
+    pub(crate) const fn group_rows(&self, g: u16) -> (u16, u16) {
         let b = self.binning.factor();
         (g * b, g * b + b)
     }
 
     /// Whether row group `g` is digitised.
-    pub fn group_read(&self, g: u16) -> bool {
+    pub(crate) fn group_read(&self, g: u16) -> bool {
         let (r0, r1) = self.group_rows(g);
         match self.request {
             ReadoutRequest::FullFrame => r1 <= self.geometry.lines,
@@ -198,7 +193,7 @@ impl<'a> ReadoutPlan<'a> {
 
     /// The shift distances row group `g` digitises, as sorted disjoint runs `[start, end)`
     /// (binned elements from the output); empty when the group is not read.
-    pub fn shift_runs(&self, g: u16, runs: &mut ShiftRuns) {
+    pub(crate) fn shift_runs(&self, g: u16, runs: &mut ShiftRuns) {
         runs.clear();
         if !self.group_read(g) {
             return;

@@ -97,7 +97,7 @@ impl Timing {
     }
 
     /// Ticks of an unbinned read pixel.
-    pub const fn read_px_ticks(&self) -> u32 {
+    pub(crate) const fn read_px_ticks(&self) -> u32 {
         3 * self.serial_state_ticks as u32
             + self.reset_settle_ticks as u32
             + 1
@@ -314,7 +314,7 @@ pub struct Ticks {
 
 impl Ticks {
     /// Ticks of a read pixel of `binning` register elements.
-    pub const fn read_px_ticks(&self, binning: u32) -> u32 {
+    pub(crate) const fn read_px_ticks(&self, binning: u32) -> u32 {
         3 * self.serial_state * binning + self.reset_settle + 1 + self.signal_settle + 1
     }
 }

@@ -1,6 +1,6 @@
 //! The store's one error type: every refused operation and every flash failure, typed.
 
-use super::layout::TableKind;
+use super::kind::TableKind;
 use embedded_storage::nor_flash::NorFlashErrorKind;
 
 /// A flash operation that failed, as the `embedded-storage` error kinds say.

@@ -14,7 +14,7 @@
 //! 28     4     CRC-32/ISO-HDLC of bytes 0..28
 //! ```
 
-use super::layout::TableKind;
+use super::kind::TableKind;
 
 /// Size of the header, bytes: one STM32H7 program unit.
 pub const HEADER_LEN: usize = 32;

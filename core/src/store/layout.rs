@@ -3,48 +3,7 @@
 
 use super::error::StoreError;
 use super::header::HEADER_LEN;
-
-/// What a table is for. The code is the byte the slot header carries.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum TableKind {
-    /// The calibration table ([`crate::table::CalibTable`]).
-    Calibration,
-    /// The star catalog (format not defined yet; the store keeps its bytes like any table).
-    Catalog,
-}
-
-impl TableKind {
-    /// Number of kinds.
-    pub const COUNT: usize = 2;
-    /// Every kind, in index order.
-    pub const ALL: [TableKind; Self::COUNT] = [TableKind::Calibration, TableKind::Catalog];
-
-    /// The code in a slot header (1 calibration, 2 catalog).
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::Calibration => 1,
-            Self::Catalog => 2,
-        }
-    }
-
-    /// The kind of a header code, `None` for an unknown one.
-    pub const fn from_code(code: u8) -> Option<Self> {
-        match code {
-            1 => Some(Self::Calibration),
-            2 => Some(Self::Catalog),
-            _ => None,
-        }
-    }
-
-    /// Position in [`TableKind::ALL`] and in the store's per-kind arrays.
-    pub const fn index(self) -> usize {
-        match self {
-            Self::Calibration => 0,
-            Self::Catalog => 1,
-        }
-    }
-}
+use super::kind::TableKind;
 
 /// One slot: a byte range of the flash device, a whole number of erase sectors. Its first
 /// [`HEADER_LEN`] bytes are the header, the table's bytes follow.

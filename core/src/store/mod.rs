@@ -55,14 +55,15 @@
 
 mod error;
 mod header;
+mod kind;
 mod layout;
 mod slots;
 
 pub use error::{FlashFault, StoreError};
 pub use header::{HEADER_LEN, HeaderError, SLOT_MAGIC, SLOT_VERSION, SlotHeader};
+pub use kind::TableKind;
 pub use layout::{
     H743_BANK_B, H743_BANK2, H743_BANK2_ADDRESS, H743_PROGRAM_UNIT_B, H743_SECTOR_B, Layout, Slot,
-    TableKind,
 };
 pub use slots::{
     ActiveTable, CommitInfo, EraseProgress, FlashStore, MountError, SlotState, UploadStatus,

@@ -3,7 +3,8 @@
 
 use super::error::{FlashFault, StoreError};
 use super::header::{CRC, HEADER_LEN, HeaderError, SlotHeader};
-use super::layout::{Layout, Slot, TableKind};
+use super::kind::TableKind;
+use super::layout::{Layout, Slot};
 use embedded_storage::nor_flash::{NorFlash, NorFlashError};
 
 /// Bytes read at a time when a slot's CRC is checked (a stack buffer).

@@ -22,8 +22,8 @@
 //! degree field one step of `k1` moves a star by 3e-8 px, one step of the colour scale by
 //! 3e-7 px per magnitude.
 
+use super::bytes::{u16_at, u32_at};
 use super::error::{SectionKind, TableError};
-use super::parse::{u16_at, u32_at};
 use crate::attitude::{Camera, CameraError};
 use fixed::types::{I1F31, I4F28, I16F16, U16F16};
 

@@ -15,7 +15,7 @@
 //! ```
 //! Cost: read once per frame ([`super::CalibTable::cti`]), 12 + 8 x outputs bytes.
 
-use super::parse::{u16_at, u32_at};
+use super::bytes::{u16_at, u32_at};
 use crate::geometry::MAX_OUTPUTS;
 use fixed::types::{U0F16, U0F32};
 

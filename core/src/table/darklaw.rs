@@ -19,8 +19,8 @@
 //! 0 rate (zero), 1 reference temperature, 2 doubling temperature, 3 band (low not below
 //! high).
 
+use super::bytes::{u16_at, u32_at};
 use super::error::{SectionKind, TableError};
-use super::parse::{u16_at, u32_at};
 use crate::units::{ERatePerS, Kelvin};
 use fixed::types::U8F8;
 

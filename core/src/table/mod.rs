@@ -69,6 +69,8 @@
 //! every this many kelvin, the pixel's own law), `policy u8` (0 correct, 1 exclude),
 //! `reserved u8`. Hot and telegraph entries are sorted by (y, x) with no repeats.
 
+mod amend;
+mod bytes;
 pub mod camera;
 pub mod cti;
 pub mod darklaw;
@@ -78,12 +80,12 @@ pub mod pixcorr;
 pub mod psfmodel;
 mod write;
 
+pub use amend::{AmendError, AmendPlan, MAX_AMEND_PIXELS, TableReader};
 pub use cti::{CtiCoeffs, CtiOutput};
 pub use darklaw::DarkLaw;
 pub use error::{SectionKind, TableError, WriteError};
 pub use parse::{CalibTable, DefectList, HotList, MapView};
 pub use psfmodel::PsfModel;
-pub use write::{AmendError, AmendPlan, MAX_AMEND_PIXELS, TableReader};
 pub use write::{MapSpec, TableSpec, write_table, write_table_with_pixcorr};
 
 use crate::units::{ERatePerS, Kelvin};

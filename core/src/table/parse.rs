@@ -1,5 +1,6 @@
 //! Reading and checking a calibration table in place.
 
+use super::bytes::{u16_at, u32_at};
 use super::cti::{CtiCoeffs, CtiFormatError};
 use super::error::{SectionKind, TableError};
 use super::pixcorr::PixCorrSet;
@@ -15,18 +16,6 @@ use fixed::types::U8F8;
 
 /// Most sections a table may list.
 pub const MAX_SECTIONS: usize = 16;
-
-pub(crate) fn u16_at(b: &[u8], off: usize) -> Option<u16> {
-    let s = b.get(off..off.checked_add(2)?)?;
-    Some(u16::from_le_bytes([*s.first()?, *s.get(1)?]))
-}
-
-pub(crate) fn u32_at(b: &[u8], off: usize) -> Option<u32> {
-    let s = b.get(off..off.checked_add(4)?)?;
-    let mut a = [0u8; 4];
-    a.copy_from_slice(s);
-    Some(u32::from_le_bytes(a))
-}
 
 /// A checked table, borrowing the bytes it was read from. All accessors are total: the
 /// checks in [`CalibTable::parse`] guarantee that every index they compute is in range, and

@@ -25,7 +25,7 @@
 //!
 //! Cost of [`PsfModel::a_px`]: two divisions, at most 10 multiply-adds and 4 products (f32).
 
-use super::parse::{u16_at, u32_at};
+use super::bytes::{u16_at, u32_at};
 use fixed::types::{I16F16, U8F8};
 
 /// Highest polynomial degree of the model.

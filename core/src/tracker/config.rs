@@ -104,7 +104,7 @@ pub struct TrackerConfig {
     /// Most stars reported per frame (the brightest are kept), at most the tracker's
     /// capacity `N`.
     pub max_stars: u16,
-    /// Most stars tracked, at most [`super::TRACK_WINDOWS`].
+    /// Most stars tracked, at most `TRACK_WINDOWS` (32).
     pub max_tracked: u16,
     /// Fewest usable centroids for the next frame to be a tracking frame.
     pub min_track_stars: u16,

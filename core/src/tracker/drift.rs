@@ -22,14 +22,14 @@
 //! `r += (x - r) / 16`: an exponentially weighted mean with a 16-frame time constant, so a
 //! single odd frame moves it by at most 1/16 of its excess.
 
-pub use crate::table::DarkLaw;
+use crate::table::DarkLaw;
 use crate::units::{Electrons, Kelvin};
 
 /// A frame whose predicted dark is below this many electrons is not compared (the ratio of
 /// two small numbers is noise), e-.
-pub const MIN_PREDICTED_E: f32 = 1.0;
+pub(crate) const MIN_PREDICTED_E: f32 = 1.0;
 /// Weight of a new frame in the running ratio: 1 / 2^this.
-pub const DRIFT_WEIGHT_LOG2: u32 = 4;
+pub(crate) const DRIFT_WEIGHT_LOG2: u32 = 4;
 
 /// The running ratio as housekeeping reports it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]

@@ -1,13 +1,13 @@
 //! The star tracker application: the frame loop, its modes and the rules that change them,
 //! in one piece of `no_std` code that the board, the host tools and the software-in-the-loop
-//! run alike. A home binds its hardware (or files, or the simulator) to the [`ports`] and
+//! run alike. A home binds its hardware (or files, or the simulator) to the ports ([`Ports`]) and
 //! calls [`Tracker::run_frame`] once a frame; everything from a raw line to a reported star
 //! happens here.
 //!
 //! # A frame
 //! ```text
 //! begin_frame   the table in force, the sensor temperature, the mode (rules below),
-//!               what to read (ReadoutRequest: full frame, or the tracking windows)
+//!               what to read ([`ReadoutRequest`]: full frame, or the tracking windows)
 //! push_line     per raw line in readout order: bias of each output from its over-scan,
 //!               covered pixels into the frame's dark scale, then by mode:
 //!   acquisition   the raw line into the 16-line ring and the pre-filtered scan
@@ -39,39 +39,39 @@
 //! its [`ModeReason`].
 //!
 //! # Memory
-//! [`TrackerBuffers`] (the line ring 34 KB, the tracking windows 19 KB, the fused CoG's
-//! plans 15 KB) lives where the home puts it (`.bss` on the board); the [`Tracker`] itself
-//! holds the scan detector (~13 KB of line buffers plus `N` candidates of 28 B), the
-//! pending windows, the star list (`N` x ~60 B), one window's scratch (~2.8 KB), the
-//! last frame's stars, the in-flight defect watch ([`Watch`], 1.6 KB) and the dark-drift
-//! monitor ([`drift`], under 32 B). `size_of` of
-//! both is printed and bounded by the host test `tracker_memory`.
+//! [`TrackerBuffers`] (the line ring, the tracking windows, the fused CoG's plans) lives
+//! where the home puts it (`.bss` on the board); the [`Tracker`] itself holds the scan
+//! detector (its line buffers and `N` candidates), the pending windows, the star list, one
+//! window's scratch, the last frame's stars, the in-flight defect watch ([`Watch`]) and the
+//! dark-drift monitor ([`DarkDrift`] reports it). The sizes of both are tabled in docs/tracker.md
+//! (`## Memory`) and bounded by the host test `tracker_memory`.
 //!
 //! # Cost
-//! Every line: its bias levels and covered pixels (~5,700 M7 instructions). Per acquisition
-//! line, the scan's ~13 a pixel (`scan_detect`), a 2 KB copy into the ring; per tracking
-//! line, a row test per window and the copy of the rows in windows; per star, the window's
-//! calibration, in tracking the window test, and the method (`measure`). Whole frames as the
-//! board runs them (`cargo m7-bench`, 30 stars, QEMU instructions): standby 6.3 M,
-//! acquisition 37.9 M, tracking 9.3 M (`tracker_*_frame`; docs/tracker.md breaks them down).
+//! Every line: its bias levels and covered pixels (the floor of any frame). Per acquisition
+//! line, the pre-filtered scan (`scan_detect`) and a copy into the ring; per tracking line,
+//! a row test per window and the copy of the rows in windows; per star, the window's
+//! calibration, in tracking the window test and the defect watch, and the method
+//! (`measure`). Whole frames as the board runs them are `cargo m7-bench`'s
+//! `tracker_*_frame` stages: docs/speed.md gives the counts, docs/tracker.md breaks them
+//! down.
 
 mod acquire;
-pub mod config;
-pub mod drift;
+mod config;
+mod drift;
 mod list;
 mod measure;
 mod modes;
-pub mod ports;
-pub mod record;
+mod ports;
+mod record;
 mod track;
 
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
-pub use drift::{DarkDrift, DarkLaw};
+pub use drift::DarkDrift;
 pub use measure::select_curve;
 pub use modes::CommandError;
 pub use ports::{
-    Clock, FixedTable, FixedTemperature, LineSource, Ports, ReadoutRequest, SourceLine, TableStore,
-    TelemetrySink, Thermometer,
+    Clock, FixedTable, FixedTemperature, LineSource, Ports, SourceLine, TableStore, TelemetrySink,
+    Thermometer,
 };
 pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, StarFlags, StarRecord,
@@ -83,7 +83,8 @@ use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLe
 use crate::centroid::raw_cog::RawCogPlan;
 use crate::detect::{LineRing, WindowCapture};
 use crate::geometry::ReadoutGeometry;
-use crate::table::CalibTable;
+use crate::readout::ReadoutRequest;
+use crate::table::{CalibTable, DarkLaw};
 use crate::units::{BiasAdu, Electrons, Kelvin};
 use acquire::Acquisition;
 use list::StarList;
@@ -93,16 +94,16 @@ use track::Tracking;
 
 /// Raw lines the acquisition ring keeps: a centroid window completes a few rows after its
 /// blob closes, so 16 leaves room for blobs up to ~8 rows below their peak.
-pub const RING_LINES: usize = 16;
+pub(crate) const RING_LINES: usize = 16;
 /// Longest raw line the ring holds (the CCD47-20's 1072 elements).
-pub const RING_LINE_LEN: usize = ReadoutGeometry::CCD47_20_DUAL.line_len();
+pub(crate) const RING_LINE_LEN: usize = ReadoutGeometry::CCD47_20_DUAL.line_len();
 /// Most stars tracked at once (tracking windows, fused CoG plans).
-pub const TRACK_WINDOWS: usize = 32;
+pub(crate) const TRACK_WINDOWS: usize = 32;
 
 /// Candidates the in-flight defect watch keeps.
-pub const WATCH_CANDIDATES: usize = 64;
+pub(crate) const WATCH_CANDIDATES: usize = 64;
 /// Confirmed in-flight defects the overlay holds.
-pub const WATCH_CONFIRMED: usize = 32;
+pub(crate) const WATCH_CONFIRMED: usize = 32;
 /// The in-flight defect watch of tracking ([`crate::calib::refresh`]).
 pub type Watch = DefectWatch<WATCH_CANDIDATES, WATCH_CONFIRMED>;
 
@@ -271,6 +272,25 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.work.watch.confirmed()
     }
 
+    /// The star list of the last frame that ended, in the order the telemetry port got it
+    /// (the attitude stage's input); it holds until the next frame begins.
+    pub fn stars(&self) -> &[StarRecord] {
+        self.work.stars.records()
+    }
+
+    /// The calibration a window read now gets, as the tracker would calibrate it: the last
+    /// frame's table, the last complete dark scale, the configured exposure and the last
+    /// frame's temperature (the link's diagnostic windows use it); `None` before a frame
+    /// with a table has ended.
+    pub fn calibration(&self) -> Option<FrameCalibration<'t>> {
+        let conditions = FrameConditions {
+            dark_scale_e: self.prev_dark_scale?,
+            exposure_ms: self.config.exposure_ms,
+            temperature_k: self.temperature_k,
+        };
+        Some(FrameCalibration::new(self.table?, conditions))
+    }
+
     /// The in-flight defect watch: its candidates and counters.
     pub fn defect_watch(&self) -> &Watch {
         &self.work.watch
@@ -307,11 +327,6 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
     /// The configuration in force.
     pub fn config(&self) -> &TrackerConfig {
         &self.config
-    }
-
-    /// The readout geometry.
-    pub fn geometry(&self) -> &ReadoutGeometry {
-        &self.geometry
     }
 
     /// The current (or last) frame's mode.

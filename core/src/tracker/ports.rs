@@ -1,14 +1,14 @@
 //! The ports: what a home (the board, the host tools, the software-in-the-loop) supplies to
-//! the tracker application, as small traits, and what the application asks of the sensor
-//! ([`ReadoutRequest`]).
+//! the tracker application, as small traits. What the application asks of the sensor each
+//! frame is a [`ReadoutRequest`].
 //!
 //! | port | the board | the host (`process`, `sil`) |
 //! |---|---|---|
-//! | [`LineSource`] | ADC lines by DMA (later: the CCD sequencer's windowed readout) | a FITS frame, or the simulated CCD47-20 rendering only what the request reads |
+//! | [`LineSource`] | the CCD sequencer's readout of what the request reads, ADC lines by DMA | a FITS frame, or the simulated CCD47-20 rendering only what the request reads |
 //! | [`Clock`] | the MCU timer | frame number x frame period |
 //! | [`Thermometer`] | the CCD board's sensor | a fixed value or the FITS keyword |
 //! | [`TableStore`] | the flash slot in force | a table file |
-//! | [`TelemetrySink`] | the log (later: the link, rate-limited) | CSV rows |
+//! | [`TelemetrySink`] | the log and the link's telemetry queues (dropped and counted when full) | CSV rows |
 //!
 //! The line source is async so that the same frame loop ([`super::Tracker::run_frame`])
 //! awaits DMA on the board and runs to completion at once on the host. Everything else is
@@ -16,43 +16,9 @@
 //! record counts it as lost rather than wait.
 
 use super::record::{Event, FrameSummary, LineSummary, StarRecord};
-use crate::geometry::ReadoutGeometry;
+use crate::readout::ReadoutRequest;
 use crate::table::CalibTable;
 use crate::units::Kelvin;
-use crate::window::Rect;
-
-/// What the tracker wants read in a frame.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ReadoutRequest<'a> {
-    /// Every line, every element (standby and acquisition).
-    FullFrame,
-    /// Only the lines that cross these windows (active-area coordinates, increasing
-    /// `y0`), and of those only the windows' pixels plus the line's over-scan and covered
-    /// columns (the bias and the dark scale). Other lines may be skipped; other samples
-    /// of a line are not looked at.
-    Windows(&'a [Rect]),
-}
-
-impl ReadoutRequest<'_> {
-    /// Whether raw line `line` of `geometry` is needed.
-    pub fn reads_line(&self, geometry: &ReadoutGeometry, line: u16) -> bool {
-        match self {
-            Self::FullFrame => true,
-            Self::Windows(rects) => {
-                line < geometry.active_rows && rects.iter().any(|r| r.contains(r.x0, line))
-            }
-        }
-    }
-
-    /// Whether active pixel (`x`, `y`) is needed (over-scan and covered columns always
-    /// are, on every line read).
-    pub fn reads_pixel(&self, x: u16, y: u16) -> bool {
-        match self {
-            Self::FullFrame => true,
-            Self::Windows(rects) => rects.iter().any(|r| r.contains(x, y)),
-        }
-    }
-}
 
 /// One raw line as a source delivers it.
 #[derive(Clone, Copy, Debug)]

@@ -1,8 +1,8 @@
 //! What the tracker reports: one [`StarRecord`] per star per frame with one flag layout
 //! ([`StarFlags`]), one [`FrameSummary`] per frame with every loss counted, a
 //! [`LineSummary`] for every `line_summary_every`th line, and [`Event`]s (mode changes,
-//! table changes). These are the telemetry records of every home: the firmware's log (and
-//! later its link), `stars.csv` of `startrack process`, and the software-in-the-loop's CSV.
+//! table changes). These are the telemetry records of every home: the firmware's log and
+//! its link, `stars.csv` of `startrack process`, and the software-in-the-loop's CSV.
 //!
 //! Cost: a record is 36 bytes, a summary under 100; nothing here allocates.
 
@@ -145,12 +145,12 @@ impl StarFlags {
 
     /// The bits of a tracking window test's flags (its "no background" and "bad input" mean
     /// nothing was detected: such a window reports no star).
-    pub fn from_track(t: TrackFlags) -> Self {
+    pub(crate) fn from_track(t: TrackFlags) -> Self {
         map(&TRACK_BITS, |f| t.contains(f))
     }
 
     /// The bits of a centroid's flags.
-    pub fn from_centroid(c: CentroidFlags) -> Self {
+    pub(crate) fn from_centroid(c: CentroidFlags) -> Self {
         map(&CENTROID_BITS, |f| c.contains(f))
     }
 
@@ -201,7 +201,7 @@ pub struct StarRecord {
 impl StarRecord {
     /// A centroid as a record, with `flags` added to the centroid's own (no PSF measured:
     /// `psf_a_px` and `chi2_dof` 0).
-    pub fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {
+    pub(crate) fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {
         Self {
             x_px: c.x_px,
             y_px: c.y_px,

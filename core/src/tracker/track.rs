@@ -6,9 +6,8 @@
 //! the star is there, and the centroid window around its peak is measured
 //! ([`super::measure`]). Right after calibration the pixels found in flight are excluded
 //! ([`crate::calib::refresh`], the overlay), and after the window test the window feeds the
-//! defect watch with its border noise and the frame's predicted star positions (~8,000
-//! M7 instructions a window: `cargo m7-bench`'s 30-star `tracker_tracking_frame` went from
-//! 9,093,389 to 9,331,946 with it). With [`CentroidMethod::FusedCog1`] the raw window first goes
+//! defect watch with its border noise and the frame's predicted star positions (its cost
+//! a window: docs/calibration.md, "In orbit"). With [`CentroidMethod::FusedCog1`] the raw window first goes
 //! through the fused CoG with the star's carried background (a plan per star, rebuilt only
 //! when the star moves to another pixel or the table or dark scale changes); a result it
 //! flags goes through the full path; so does a window holding a pixel found in flight (the

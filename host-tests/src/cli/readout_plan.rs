@@ -11,10 +11,10 @@
 use super::CliError;
 use rand::{RngExt, SeedableRng};
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, CompileError, Cost, Limits, PinMap, ReadoutPlan, SegmentId, Step, Timing, compile,
 };
-use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 
 /// Full frame or windows.

@@ -1,4 +1,5 @@
-//! Analyses and figures: the accuracy tables and their frame Monte Carlo, the paper's figures, and the trade-off.
+//! Analyses and figures: the accuracy tables and their frame Monte Carlo, the paper's figures,
+//! and the trade-off.
 //!
 //! One module per subject, each with its own module docs; the shared f64 references and table
 //! fixtures come from `startrack-test-support`.

@@ -1,4 +1,5 @@
-//! Calibration: electrons from ADU, the lab-frame calibration, charge traps, the defect watch and table amendments, and the calibration-table format.
+//! Calibration: electrons from ADU, the lab-frame calibration, charge traps, the defect watch
+//! and table amendments, and the calibration-table format.
 //!
 //! One module per subject, each with its own module docs; the shared f64 references and table
 //! fixtures come from `startrack-test-support`.

@@ -1,11 +1,11 @@
-//! Window capture from the line stream (`startrack_core::detect::capture`): the raw-line
+//! Window capture from the line stream (`startrack_core::detect::WindowCapture`): the raw-line
 //! ring of acquisition mode and the window list of tracking mode. The firmware fills both
 //! from the DMA'd line buffers, so their logic is checked here against a plain model (a
 //! whole frame in a `Vec`) on random line sequences, gaps included.
 
 use proptest::prelude::*;
 use startrack_core::calib::LineLevels;
-use startrack_core::detect::capture::{CAPTURE_MAX_SIDE, CaptureError, RingError};
+use startrack_core::detect::{CAPTURE_MAX_SIDE, CaptureError, RingError};
 use startrack_core::detect::{LineRing, WindowCapture};
 use startrack_core::geometry::{MAX_OUTPUTS, ReadoutGeometry};
 use startrack_core::units::BiasAdu;

@@ -1,4 +1,5 @@
-//! Detection and centroids: streaming detection, window capture, the scans, tracking windows and every centroid method against f64 references.
+//! Detection and centroids: streaming detection, window capture, the scans, tracking windows
+//! and every centroid method against f64 references.
 //!
 //! One module per subject, each with its own module docs; the shared f64 references and table
 //! fixtures come from `startrack-test-support`.

@@ -1,4 +1,4 @@
-//! The raw pre-filtered scan (`detect::prefilter::ScanDetector`) against the calibrated path
+//! The raw pre-filtered scan (`detect::ScanDetector`) against the calibrated path
 //! (`LineDetector` fed every calibrated line, same background stride): the candidates must be
 //! identical, bit for bit, on simulated CCD47-20 frames, including maps with a large spread
 //! of dark, flat and column bias; and the scan must calibrate only a small part of a quiet

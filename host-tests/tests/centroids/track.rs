@@ -1,4 +1,4 @@
-//! Tracking-mode detection (`startrack_core::detect::track`): simulated 9x9 windows with and
+//! Tracking-mode detection (`startrack_core::detect::track_detect`): simulated 9x9 windows with and
 //! without a star, the detection rate against SNR, hot and telegraph pixels, the flags, and
 //! a property test on arbitrary windows and flags.
 //!

@@ -1,4 +1,5 @@
-//! Identification, attitude and optics: lost-in-space and tracking identification, the on-board catalog, the q-method, and the camera model and its fit.
+//! Identification, attitude and optics: lost-in-space and tracking identification, the on-board
+//! catalog, the q-method, and the camera model and its fit.
 //!
 //! One module per subject, each with its own module docs; the shared f64 references and table
 //! fixtures come from `startrack-test-support`.

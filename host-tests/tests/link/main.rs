@@ -1,4 +1,5 @@
-//! The link and the table store: the receive side, the protocol document, the served SIL with its ground clients, and the store on the H7 flash model.
+//! The link and the table store: the receive side, the protocol document, the served SIL with
+//! its ground clients, and the store on the H7 flash model.
 //!
 //! One module per subject, each with its own module docs; the shared f64 references and table
 //! fixtures come from `startrack-test-support`.

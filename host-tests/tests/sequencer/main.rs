@@ -1,4 +1,5 @@
-//! The CCD sequencer: compiled programs, their DMA lists, limits, routing, the charge-transfer model and the readout targets.
+//! The CCD sequencer: compiled programs, their DMA lists, limits, routing, the charge-transfer
+//! model and the readout targets.
 //!
 //! One module per subject, each with its own module docs; the shared f64 references and table
 //! fixtures come from `startrack-test-support`.

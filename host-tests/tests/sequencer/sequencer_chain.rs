@@ -7,11 +7,11 @@
 
 use proptest::prelude::*;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, Chain, ChainError, Cursor, Limits, Link, MAX_BLOCK_WORDS, MAX_BLOCKS, PinMap, Program,
     ReadoutPlan, Step, Ticks, Timing, compile,
 };
-use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 use startrack_sim::ccd_model::CcdModel;
 

@@ -2,11 +2,11 @@
 //! (with the exact size needed), bad pin maps and bad plans.
 
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, CompileError, Limit, Limits, MAX_WINDOWS, PinMap, PinMapError, PlanError, ReadoutPlan,
     Step, Timing, TimingError, compile,
 };
-use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 
 const BASE: Limits = Limits::CCD47_20;

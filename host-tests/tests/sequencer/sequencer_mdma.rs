@@ -20,10 +20,10 @@ mod mdma_list;
 use mdma_list::{Appended, CTCR, MdmaChannel, Node, NodeConfig, NodeRing};
 use proptest::prelude::*;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, Chain, Cursor, Limits, PinMap, Program, ReadoutPlan, Step, Ticks, Timing, compile,
 };
-use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 
 /// Where the model places the chain table, the node list and the registers.

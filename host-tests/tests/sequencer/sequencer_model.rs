@@ -4,11 +4,11 @@
 
 use proptest::prelude::*;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, Limits, Line, LineSet, Phases, PinMap, Program, ReadoutPlan, SegmentId, SequenceError,
     Step, Ticks, Timing, check_program, compile,
 };
-use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 use startrack_sim::ccd_model::CcdModel;
 

@@ -5,13 +5,13 @@
 //! of them, `firmware/src/sequencer.rs`) hold every plan the board compiles.
 
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, Limits, LineJobs, PinMap, ReadoutPlan, Step, Ticks, Timing, compile,
 };
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    FixedTable, FixedTemperature, LineSource, Mode, Ports, ReadoutRequest, SourceLine, Tracker,
-    TrackerBuffers,
+    FixedTable, FixedTemperature, LineSource, Mode, Ports, SourceLine, Tracker, TrackerBuffers,
 };
 use startrack_host::cli::readout_plan::{self, ReadoutPlanArgs, plan_cost};
 use startrack_host::home::{FrameClock, FrameLines, Recorder, block_on};

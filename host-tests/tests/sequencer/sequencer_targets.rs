@@ -3,11 +3,11 @@
 //! program against the ticks the CCD model actually ran.
 
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, Cost, Cursor, Limits, PinMap, ReadoutPlan, SegmentId, Step, TABLE_RAM_BYTES, Timing,
     compile,
 };
-use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 use startrack_host::cli::readout_plan::{
     HEADER, Mode, PlanCost, ReadoutPlanArgs, plan_cost, run, segment_name,

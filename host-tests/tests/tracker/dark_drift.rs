@@ -9,10 +9,10 @@ use fixed::types::U8F8;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::LinkService;
 use startrack_core::link::telemetry::{Housekeeping, status};
-use startrack_core::table::CalibTable;
+use startrack_core::table::{CalibTable, DarkLaw};
 use startrack_core::tracker::{
-    DarkLaw, FixedTable, FixedTemperature, FrameSummary, LineSource, Ports, Tracker,
-    TrackerBuffers, TrackerConfig,
+    FixedTable, FixedTemperature, FrameSummary, LineSource, Ports, Tracker, TrackerBuffers,
+    TrackerConfig,
 };
 use startrack_core::units::{ERatePerS, Kelvin};
 use startrack_host::home::{FrameClock, SimLines, block_on};

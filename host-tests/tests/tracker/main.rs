@@ -1,10 +1,12 @@
-//! The tracker and the SIL: the core's application through its host homes, its mode rules, safe states, the dark drift, the attitude stage and the demo.
+//! The tracker and the SIL: the core's application through its host homes, its mode rules, the
+//! frame cycle, safe states, the dark drift, the attitude stage and the demo.
 //!
 //! One module per subject, each with its own module docs; the shared f64 references and table
 //! fixtures come from `startrack-test-support`.
 
 mod dark_drift;
 mod demo;
+mod frame_cycle;
 mod safe_states;
 mod sil_sky;
 mod tracker;

@@ -170,7 +170,7 @@ fn housekeeping_sums_the_frames_losses() {
 
 #[test]
 fn tmp117_words_convert_to_kelvin_against_an_f64_reference() {
-    use startrack_core::safe::temperature::tmp117;
+    use startrack_core::safe::tmp117;
     // The datasheet's examples (TMP117, table 7-1): 0x6400 = 200 degC, 0x0080 = 1 degC,
     // 0xFF80 = -1 degC, 0xE480 = -55 degC.
     for (raw, celsius) in [

@@ -6,10 +6,11 @@ use startrack_test_support::field as common_field;
 
 use common_field::field;
 use startrack_core::detect::LineDetector;
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
     CentroidMethod, CommandError, ConfigError, Event, FrameInputs, LineOutcome, Mode, ModeReason,
-    ReadoutRequest, Tracker, TrackerBuffers, TrackerConfig,
+    Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_host::home::Recorder;
 use startrack_sim::sim::SensorParams;

@@ -113,7 +113,7 @@ pub(super) struct CellConst {
 /// Cells whose constants a plan holds (a 9x9 box over 8-pixel tiles at the output split has
 /// at most 4 column groups x 2 tile rows); a box with more (tiles below 8 pixels) looks its
 /// constants up at every application instead (same values, slower).
-pub const PLAN_CELLS: usize = 8;
+pub(crate) const PLAN_CELLS: usize = 8;
 
 /// Why a [`RawCogPlan`] cannot be built or applied.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -307,16 +307,6 @@ impl RawCogPlan {
     ) -> bool {
         let side = (box_side / 2).saturating_mul(2).saturating_add(1);
         self.key == key_of(cal, win, anchor, side)
-    }
-
-    /// The box side the plan was built for.
-    pub fn box_side(&self) -> u8 {
-        self.key.side
-    }
-
-    /// The anchor the plan was built for.
-    pub fn anchor(&self) -> (u16, u16) {
-        self.key.anchor
     }
 
     #[inline(never)]

@@ -31,9 +31,9 @@ use crate::calib::PixelFlags;
 use crate::units::Electrons;
 
 /// Most runs kept per line.
-pub const MAX_RUNS: usize = 256;
+pub(crate) const MAX_RUNS: usize = 256;
 /// Most blobs open at once.
-pub const MAX_OPEN: usize = 128;
+pub(crate) const MAX_OPEN: usize = 128;
 
 bitflags::bitflags! {
     /// What detection noticed about a candidate.
@@ -235,7 +235,7 @@ impl<const N: usize> LineDetector<N> {
     }
 
     /// With a background stride, also updates the background on every row `y < rows`, so
-    /// that the estimate is smoothed over [`super::background::SMOOTH_LINES`]-scale many
+    /// that the estimate is smoothed over `SMOOTH_LINES`-scale many
     /// lines before the stride starts: without it, the first line's own noise estimate
     /// (32 lower-half samples a block) dominates the first few hundred rows at stride 64,
     /// and a block whose sigma it underestimates fills with noise candidates.
@@ -250,12 +250,12 @@ impl<const N: usize> LineDetector<N> {
     }
 
     /// The running background and noise estimate.
-    pub fn background(&self) -> &BlockBackground {
+    pub(crate) fn background(&self) -> &BlockBackground {
         &self.background
     }
 
     /// The configuration.
-    pub fn config(&self) -> &DetectConfig {
+    pub(crate) fn config(&self) -> &DetectConfig {
         &self.config
     }
 

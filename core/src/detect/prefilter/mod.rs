@@ -64,9 +64,9 @@ use crate::units::Electrons;
 use bounds::{ChunkBound, NO_FILTER};
 
 /// Samples tested together by the pre-filter.
-pub const CHUNK_PX: usize = 16;
+pub(crate) const CHUNK_PX: usize = 16;
 /// Widest active line the scan filters (wider lines are rejected with an error).
-pub const MAX_SCAN_PX: usize = 2048;
+pub(crate) const MAX_SCAN_PX: usize = 2048;
 
 /// Why a raw line was not taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -77,7 +77,7 @@ pub enum ScanError {
     Detect(DetectError),
     /// Calibration failed (line length, row outside the active area).
     Calib(CalibError),
-    /// The active line is wider than [`MAX_SCAN_PX`].
+    /// The active line is wider than `MAX_SCAN_PX` (2048).
     TooWide,
 }
 
@@ -207,11 +207,6 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
             self.bounds_key = None;
         }
         self.cal = cal;
-    }
-
-    /// The calibration in use.
-    pub fn calibration(&self) -> &FrameCalibration<'t> {
-        &self.cal
     }
 
     /// The last line pushed, calibrated (electrons and flags of every active pixel), when it

@@ -15,10 +15,10 @@
 use crate::harness::{Bench, Out};
 use crate::inputs::G;
 use crate::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, Chain, Cost, Cursor, Limits, LineJobs, PinMap, ReadoutPlan, Step, Timing, compile,
 };
-use startrack_core::tracker::ReadoutRequest;
 use startrack_core::window::Rect;
 
 /// Windows of the tracking frame.

@@ -22,10 +22,11 @@
 
 use crate::harness::{Bench, Out};
 use crate::inputs::{G, Lcg, PSF_SIGMA_PX, RAW_COLS, raw_line_noisy};
+use startrack_core::readout::ReadoutRequest;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Event, FrameInputs, FrameSummary, LineSummary, Mode, ReadoutRequest, StarFlags, StarRecord,
-    TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
+    Event, FrameInputs, FrameSummary, LineSummary, Mode, StarFlags, StarRecord, TelemetrySink,
+    Tracker, TrackerBuffers, TrackerConfig,
 };
 
 /// Stars in the frame (the tracking frame's design load).

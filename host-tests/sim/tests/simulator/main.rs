@@ -1,4 +1,5 @@
-//! The simulator: its optional physics and measured maps, its truth tables, and FITS frame files.
+//! The simulator: its optional physics and measured maps, its truth tables, and FITS frame
+//! files.
 //!
 //! One module per subject, each with its own module docs.
 

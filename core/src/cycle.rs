@@ -1,0 +1,294 @@
+//! The frame cycle: one frame of the tracker application and everything a home runs around
+//! it, written once for the board, `startrack process`, the SIL and the served SIL.
+//!
+//! ```text
+//! between frames   link bytes in (commands act on the tracker here, never mid-frame),
+//!                  the link's work (diagnostic window rows, the in-flight defect commit),
+//!                  telemetry out as the home's link can take it
+//! run_frame        the tracker's frame (its records to the link and to the home's own sink)
+//!                  -> the link's periodic housekeeping
+//!                  -> the attitude stage on the frame's star list, its report on the link
+//!                  -> housekeeping (Health): the frame's counters, the temperature and its
+//!                     source, the uptime
+//! ```
+//!
+//! A home binds its hardware to the ports ([`CyclePorts`], the line source, the link's
+//! table store and window reader) and calls [`FrameCycle::run_frame`] once a frame, with
+//! [`FrameCycle::receive`], [`FrameCycle::poll`] and [`FrameCycle::transmit`] between frames
+//! as its link allows; it decides nothing about a frame itself.
+//!
+//! Cost: the tracker's frame ([`crate::tracker`]), the link's star list and report encoding
+//! ([`crate::link`]), the attitude stage when a catalog is given ([`crate::solver`]), and a
+//! few additions for housekeeping. Memory: the tracker (owned), a borrowed
+//! [`LinkService`], the solver (a catalog reference and a prior).
+
+use crate::link::{
+    Housekeeping, LinkService, TableInfo, TableUpload, Targets, UploadRefusal, WindowReader,
+};
+use crate::safe::{Health, ThermoSource};
+use crate::solver::{Fix, SolveError, Solver};
+use crate::tracker::{
+    Clock, Event, FrameSummary, LineSource, LineSummary, Ports, StarRecord, TableStore,
+    TelemetrySink, Thermometer, Tracker,
+};
+use crate::units::Kelvin;
+
+/// A thermometer that says which sensor gave its last reading, for housekeeping.
+pub trait SourcedThermometer: Thermometer {
+    /// The sensor of the last reading ([`ThermoSource::None`] when it gave none).
+    fn source(&self) -> ThermoSource;
+}
+
+impl SourcedThermometer for crate::tracker::FixedTemperature {
+    fn source(&self) -> ThermoSource {
+        match self.0 {
+            Some(_) => ThermoSource::External,
+            None => ThermoSource::None,
+        }
+    }
+}
+
+impl<E: Thermometer, M: Thermometer> SourcedThermometer for crate::safe::FallbackThermometer<E, M> {
+    fn source(&self) -> ThermoSource {
+        crate::safe::FallbackThermometer::source(self)
+    }
+}
+
+/// What a home provides to a frame besides its lines.
+pub struct CyclePorts<'p, 't> {
+    /// Time.
+    pub clock: &'p mut dyn Clock,
+    /// Sensor temperature.
+    pub thermometer: &'p mut dyn SourcedThermometer,
+    /// The calibration table the frame uses.
+    pub tables: &'p mut dyn TableStore<'t>,
+    /// The calibration table the link's store holds in force, as housekeeping reports it
+    /// (the store changes only between frames).
+    pub table_in_force: Option<TableInfo>,
+    /// The home's own sink for the tracker's records (a log, a recorder), besides the link.
+    pub telemetry: &'p mut dyn TelemetrySink,
+}
+
+/// What a frame gave: the tracker's summary and the attitude stage's result (`None`
+/// without a catalog).
+#[derive(Clone, Copy, Debug)]
+pub struct FrameOutcome {
+    /// The tracker's summary of the frame.
+    pub summary: FrameSummary,
+    /// The frame's attitude, or why it has none.
+    pub attitude: Option<Result<Fix, SolveError>>,
+}
+
+/// The tracker application with its link, its attitude stage and its housekeeping, for up
+/// to `N` stars a frame.
+pub struct FrameCycle<'t, 'b, 'c, 'l, const N: usize> {
+    tracker: Tracker<'t, 'b, N>,
+    link: &'l mut LinkService,
+    solver: Option<Solver<'c>>,
+    health: Health,
+}
+
+/// The home's sink and the link, each given every record.
+struct Both<'a> {
+    home: &'a mut dyn TelemetrySink,
+    link: &'a mut LinkService,
+}
+
+impl TelemetrySink for Both<'_> {
+    fn line(&mut self, summary: &LineSummary) {
+        self.home.line(summary);
+        self.link.line(summary);
+    }
+
+    fn star(&mut self, frame: u32, star: &StarRecord) {
+        self.home.star(frame, star);
+        self.link.star(frame, star);
+    }
+
+    fn frame(&mut self, summary: &FrameSummary) {
+        self.home.frame(summary);
+        self.link.frame(summary);
+    }
+
+    fn event(&mut self, event: &Event) {
+        self.home.event(event);
+        self.link.event(event);
+    }
+}
+
+impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
+    /// The cycle of `tracker`, serving `link`, with the attitude stage `solver` (none: no
+    /// attitude), starting from the housekeeping `health` (its boot fields: the fault record,
+    /// the set-up faults, the tables in force).
+    pub fn new(
+        tracker: Tracker<'t, 'b, N>,
+        link: &'l mut LinkService,
+        solver: Option<Solver<'c>>,
+        health: Health,
+    ) -> Self {
+        link.set_setup_faults(health.setup_faults.bits());
+        Self {
+            tracker,
+            link,
+            solver,
+            health,
+        }
+    }
+
+    /// The tracker application.
+    pub fn tracker(&self) -> &Tracker<'t, 'b, N> {
+        &self.tracker
+    }
+
+    /// The tracker application, for a home's direct commands (its set-up, the host tools'
+    /// mode sequence).
+    pub fn tracker_mut(&mut self) -> &mut Tracker<'t, 'b, N> {
+        &mut self.tracker
+    }
+
+    /// The link service.
+    pub fn link(&self) -> &LinkService {
+        self.link
+    }
+
+    /// The link's housekeeping report now, with `table_in_force` the calibration table the
+    /// link's store holds in force.
+    pub fn housekeeping(&self, table_in_force: Option<TableInfo>) -> Housekeeping {
+        self.link.housekeeping(&InForce(table_in_force))
+    }
+
+    /// Housekeeping as of the last frame.
+    pub fn health(&self) -> &Health {
+        &self.health
+    }
+
+    /// The attitude stage (none without a catalog).
+    pub fn solver(&self) -> Option<&Solver<'c>> {
+        self.solver.as_ref()
+    }
+
+    /// Sets the time the link stamps telemetry with (the home's clock, us).
+    pub fn set_link_time(&mut self, now_us: u64) {
+        self.link.set_time(now_us);
+    }
+
+    /// Takes bytes the link received, executing every telecommand they complete on the
+    /// tracker, `tables` and `windows`.
+    pub fn receive(
+        &mut self,
+        bytes: &[u8],
+        tables: &mut dyn TableUpload,
+        windows: &mut dyn WindowReader,
+    ) {
+        let mut targets = Targets {
+            tracker: &mut self.tracker,
+            tables,
+            windows,
+        };
+        self.link.receive(bytes, &mut targets);
+    }
+
+    /// The link's work between frames: diagnostic window rows as its queue has room, the
+    /// in-flight defect commit's next step.
+    pub fn poll(&mut self, tables: &mut dyn TableUpload, windows: &mut dyn WindowReader) {
+        let mut targets = Targets {
+            tracker: &mut self.tracker,
+            tables,
+            windows,
+        };
+        self.link.poll(&mut targets);
+    }
+
+    /// Copies queued telemetry into `out` (urgent first); returns the bytes written.
+    pub fn transmit(&mut self, out: &mut [u8]) -> usize {
+        self.link.transmit(out)
+    }
+
+    /// A reset was commanded and acknowledged: the home resets once the queues are sent.
+    pub fn reset_requested(&self) -> bool {
+        self.link.reset_requested()
+    }
+
+    /// Runs one frame from `source` and everything after it: the link's housekeeping, the
+    /// attitude stage (its report on the link), the frame's housekeeping. A source error ends
+    /// the frame early, as [`Tracker::run_frame`] does, and skips the rest.
+    pub async fn run_frame<S: LineSource>(
+        &mut self,
+        source: &mut S,
+        ports: &mut CyclePorts<'_, 't>,
+    ) -> Result<FrameOutcome, S::Error> {
+        let mut noted = Noted {
+            inner: &mut *ports.thermometer,
+            last_k: None,
+        };
+        let mut telemetry = Both {
+            home: &mut *ports.telemetry,
+            link: &mut *self.link,
+        };
+        let mut tracker_ports = Ports {
+            clock: &mut *ports.clock,
+            thermometer: &mut noted,
+            tables: &mut *ports.tables,
+            telemetry: &mut telemetry,
+        };
+        let summary = self.tracker.run_frame(source, &mut tracker_ports).await?;
+        let (last_k, source_used) = (noted.last_k, noted.source());
+        self.link.end_of_frame(&InForce(ports.table_in_force));
+        let attitude = self.solver.as_mut().map(|solver| {
+            let result = solver.update(self.tracker.stars(), summary.start_us);
+            self.link
+                .send_attitude(&crate::link::AttitudeReport::of(summary.frame, &result));
+            result
+        });
+        self.health.on_frame(&summary);
+        self.health.on_temperature(last_k, source_used);
+        self.health.uptime_ms = ports.clock.now_us() / 1000;
+        Ok(FrameOutcome { summary, attitude })
+    }
+}
+
+/// The home's thermometer, its last reading kept for housekeeping.
+struct Noted<'a> {
+    inner: &'a mut dyn SourcedThermometer,
+    last_k: Option<Kelvin>,
+}
+
+impl Noted<'_> {
+    fn source(&self) -> ThermoSource {
+        match self.last_k {
+            Some(_) => self.inner.source(),
+            None => ThermoSource::None,
+        }
+    }
+}
+
+impl Thermometer for Noted<'_> {
+    fn sensor_temperature_k(&mut self) -> Option<Kelvin> {
+        self.last_k = self.inner.sensor_temperature_k();
+        self.last_k
+    }
+}
+
+/// The table in force as the link's housekeeping asks for it; refuses every upload step (the
+/// link's uploads go through [`FrameCycle::receive`] between frames).
+struct InForce(Option<TableInfo>);
+
+impl TableUpload for InForce {
+    fn begin(&mut self, _kind: u8, _total_len: u32, _crc32: u32) -> Result<(), UploadRefusal> {
+        Err(UploadRefusal::Busy)
+    }
+
+    fn chunk(&mut self, _offset: u32, _data: &[u8]) -> Result<(), UploadRefusal> {
+        Err(UploadRefusal::Busy)
+    }
+
+    fn commit(&mut self) -> Result<TableInfo, UploadRefusal> {
+        Err(UploadRefusal::Busy)
+    }
+
+    fn abort(&mut self) {}
+
+    fn active(&self, kind: u8) -> Option<TableInfo> {
+        self.0.filter(|i| i.kind == kind)
+    }
+}

@@ -1,0 +1,174 @@
+//! The ground's decoders: each telemetry layout read back into its type, with the same
+//! field tables as the encoders (the host ground tool and the tests use them; the board
+//! only encodes). `None` for a report of the wrong length or an unknown code. A bounds
+//! check and a load a field.
+
+use super::super::command::mode_of;
+use super::super::protocol::STAR_BYTES;
+use super::super::upload::TableInfo;
+use super::attitude::{ATTITUDE_LEN, AttitudeMissing, AttitudeReport};
+use super::fields::Reader;
+use super::housekeeping::{FrameTotals, HK_LEN, Housekeeping, LinkCounters};
+use super::stars::{CHI2_DOF_UNIT, PSF_A_UNIT_PX};
+use crate::tracker::{Mode, StarFlags, StarRecord, TemperatureSource};
+
+const fn source_of(n: u8) -> Option<TemperatureSource> {
+    match n {
+        0 => Some(TemperatureSource::Sensor),
+        1 => Some(TemperatureSource::TableReference),
+        2 => Some(TemperatureSource::None),
+        _ => None,
+    }
+}
+
+impl Housekeeping {
+    /// Reads a report written by [`Self::encode`].
+    pub fn decode(d: &[u8]) -> Option<Self> {
+        if d.len() != HK_LEN {
+            return None;
+        }
+        let mut r = Reader::new(d);
+        if r.u16()? != 1 {
+            return None;
+        }
+        let mode = mode_of(r.u8()?)?;
+        let next_mode = mode_of(r.u8()?)?;
+        let calibrated = r.u8()? != 0;
+        let temperature_source = source_of(r.u8()?)?;
+        let temperature_k_bits = r.u32()?;
+        let frame = r.u32()?;
+        let stars = r.u16()?;
+        let centroids = r.u16()?;
+        let totals = FrameTotals {
+            frames: r.u32()?,
+            lines_refused: r.u32()?,
+            candidates_dropped: r.u32()?,
+            windows_dropped: r.u32()?,
+            ring_lost: r.u32()?,
+            calib_failed: r.u32()?,
+            track_refused: r.u32()?,
+            track_lost: r.u32()?,
+            stars_dropped: r.u32()?,
+        };
+        let link = LinkCounters {
+            rx_bytes: r.u32()?,
+            packets: r.u32()?,
+            framing_errors: r.u32()?,
+            crc_errors: r.u32()?,
+            accepted: r.u32()?,
+            rejected: r.u32()?,
+            tm_queued: r.u32()?,
+            tm_dropped: r.u32()?,
+            stars_not_sent: r.u32()?,
+        };
+        let kind = r.u8()?;
+        let present = r.u8()? != 0;
+        let info = TableInfo {
+            kind,
+            len_bytes: r.u32()?,
+            crc32: r.u32()?,
+            sequence: r.u32()?,
+        };
+        let uptime_us = r.u64()?;
+        let setup_faults = r.u16()?;
+        let dark_ratio_u8f8 = r.u16()?;
+        let status = r.u8()?;
+        let defects_pending = r.u16()?;
+        Some(Self {
+            mode,
+            next_mode,
+            calibrated,
+            temperature_source,
+            temperature_k_bits,
+            frame,
+            stars,
+            centroids,
+            totals,
+            link,
+            table: present.then_some(info),
+            uptime_us,
+            setup_faults,
+            dark_ratio_u8f8,
+            status,
+            defects_pending,
+        })
+    }
+}
+
+/// A star list read back: frame, mode, and the stars in `out` (their count returned).
+pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usize)> {
+    let mut r = Reader::new(d);
+    let frame = r.u32()?;
+    let mode = mode_of(r.u8()?)?;
+    let count = usize::from(r.u8()?);
+    if r.rest().len() != count * STAR_BYTES || count > out.len() {
+        return None;
+    }
+    for slot in out.iter_mut().take(count) {
+        *slot = StarRecord {
+            x_px: r.f32()?,
+            y_px: r.f32()?,
+            flux_e: r.f32()?,
+            snr: r.f32()?,
+            sigma_x_px: r.f32()?,
+            sigma_y_px: r.f32()?,
+            flags: StarFlags::from_bits_retain(r.u32()?),
+            psf_a_px: f32::from(r.u16()?) * PSF_A_UNIT_PX,
+            chi2_dof: f32::from(r.u16()?) * CHI2_DOF_UNIT,
+        };
+    }
+    Some((frame, mode, count))
+}
+
+impl AttitudeReport {
+    /// Reads a report back (`None`: wrong length or an unknown status).
+    pub fn decode(d: &[u8]) -> Option<Self> {
+        use crate::attitude::{Attitude, Quat};
+        use crate::solver::{Fix, SolveMode};
+        if d.len() != ATTITUDE_LEN {
+            return None;
+        }
+        let mut r = Reader::new(d);
+        let frame = r.u32()?;
+        let (status, used, matched, _) = (r.u8()?, r.u8()?, r.u8()?, r.u8()?);
+        let q = Quat([r.f64()?, r.f64()?, r.f64()?, r.f64()?]);
+        let mut c = [0f32; 6];
+        for v in &mut c {
+            *v = r.f32()?;
+        }
+        let false_probability = f64::from(r.f32()?);
+        let time_us = r.u64()?;
+        let [xx, xy, xz, yy, yz, zz] = c.map(f64::from);
+        let mode = match status {
+            0 => {
+                return Some(Self {
+                    frame,
+                    fix: Err(AttitudeMissing::TooFewStars { used }),
+                });
+            }
+            1 => {
+                return Some(Self {
+                    frame,
+                    fix: Err(AttitudeMissing::NotIdentified { used }),
+                });
+            }
+            2 => SolveMode::Tracking,
+            3 => SolveMode::LostInSpace,
+            _ => return None,
+        };
+        Some(Self {
+            frame,
+            fix: Ok(Fix {
+                attitude: Attitude {
+                    q,
+                    cov_rad2: [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]],
+                },
+                mode,
+                used,
+                matched,
+                false_probability,
+                time_us,
+            }),
+        })
+    }
+}
