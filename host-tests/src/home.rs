@@ -296,12 +296,13 @@ impl TelemetrySink for Recorder {
 
 /// The `stars.csv` header: one star a line, active-area pixels (0-based, pixel centres at
 /// integers), `flags` the [`startrack_core::tracker::StarFlags`] bits.
-pub const CSV_HEADER: &str = "x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags,psf_a_px,chi2_dof";
+pub const CSV_HEADER: &str =
+    "x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags,provenance,psf_a_px,chi2_dof";
 
 /// One star as a `stars.csv` line (no newline).
 pub fn csv_row(s: &StarRecord) -> String {
     format!(
-        "{:.4},{:.4},{:.1},{:.2},{:.4},{:.4},{},{:.3},{:.3}",
+        "{:.4},{:.4},{:.1},{:.2},{:.4},{:.4},{},{},{:.3},{:.3}",
         s.x_px,
         s.y_px,
         s.flux_e,
@@ -309,6 +310,7 @@ pub fn csv_row(s: &StarRecord) -> String {
         s.sigma_x_px,
         s.sigma_y_px,
         s.flags.bits(),
+        s.provenance.bits(),
         s.psf_a_px,
         s.chi2_dof
     )

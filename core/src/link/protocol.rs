@@ -39,7 +39,10 @@ pub const MAX_TM_LEN: usize = 1100;
 /// Most stars in one star-list packet (the board's capacity; more are counted as not sent).
 pub const MAX_LINK_STARS: usize = 32;
 /// Bytes of one star in a star list.
-pub const STAR_BYTES: usize = 32;
+pub const STAR_BYTES: usize = 33;
+/// The star list's format, its fourth byte: 2 has quality (`flags`) and provenance apart
+/// (format 1 had no format byte and carried provenance in `flags` bits 18-19).
+pub const STAR_LIST_FORMAT: u8 = 2;
 /// Side of the largest diagnostic window, px.
 pub const MAX_WINDOW_PX: u16 = 64;
 /// Table kind of the calibration table (the only kind so far).
@@ -232,7 +235,7 @@ pub const MESSAGES: [MessageDef; 24] = [
         "stars",
         APID_STARS,
         TM_STARS,
-        "frame u32, mode u8, count u8, count x star (32 bytes)",
+        "frame u32, mode u8, format u8 (2), count u8, count x star (33 bytes)",
     ),
     tm(
         "window-row",

@@ -14,7 +14,7 @@
 use super::config::{CentroidMethod, TrackerConfig};
 use super::list::Carry;
 use super::measure::{Policy, measure};
-use super::record::{FrameSummary, LineOutcome, StarFlags, StarRecord};
+use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord};
 use super::{Ring, Shared};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::detect::{Detection, ScanDetector};
@@ -212,6 +212,7 @@ fn measure_pending<const N: usize>(
             sigma_x_px: half,
             sigma_y_px: half,
             flags: detected | lost,
+            provenance: Provenance::empty(),
             psf_a_px: 0.0,
             chi2_dof: 0.0,
         },

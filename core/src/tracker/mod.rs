@@ -74,8 +74,8 @@ pub use ports::{
     Thermometer,
 };
 pub use record::{
-    Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, StarFlags, StarRecord,
-    TemperatureSource,
+    Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Provenance, StarFlags,
+    StarRecord, TemperatureSource,
 };
 
 use crate::calib::refresh::{Defect, DefectWatch};

@@ -36,12 +36,14 @@ impl Mode {
 }
 
 bitflags::bitflags! {
-    /// Everything known about a reported star, one bit a fact. The bit numbers are stable:
+    /// The quality of a reported star, one bit a fact: 0 is a clean measurement. How the
+    /// star was found and measured is its [`Provenance`], apart. The bit numbers are stable:
     /// telemetry, `stars.csv` and the SIL's CSV carry them as a `u32`.
     ///
     /// Bits 0-5 come from the detector that found the star (the line detector in
-    /// acquisition, the window test in tracking), 8-15 and 22-23 from the centroid method,
-    /// 16 from calibration, 17-21 from the tracker itself.
+    /// acquisition, the window test in tracking), 8-15 and 22-24 from the centroid method,
+    /// 16 from calibration, 17, 20 and 21 from the tracker itself; 6-7, 14 and 18-19 are
+    /// unused.
     #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
     pub struct StarFlags: u32 {
         /// Detection: a saturated pixel in the blob (acquisition) or the window's interior
@@ -77,11 +79,6 @@ bitflags::bitflags! {
         /// A CoG without a pixel-phase curve for its power, box and the PSF width: the
         /// position carries the CoG's pixelisation bias.
         const UNCORRECTED = 1 << 17;
-        /// Found in tracking mode.
-        const TRACKED = 1 << 18;
-        /// Measured by the fused raw-window CoG (tracking), background carried from the
-        /// star's last full measurement.
-        const FUSED = 1 << 19;
         /// The window's top rows had left the line ring: position and flux are the
         /// detector's, not a centroid.
         const RING_LOST = 1 << 20;
@@ -98,6 +95,28 @@ bitflags::bitflags! {
         /// beyond the model's scatter and the fit's width error; the position is the
         /// width-free fit's.
         const PSF_MISMATCH = 1 << 24;
+    }
+}
+
+bitflags::bitflags! {
+    /// How a reported star was found and measured: provenance, saying nothing of its
+    /// quality (that is [`StarFlags`]). The bit numbers are stable: telemetry, `stars.csv`
+    /// and the SIL's CSV carry them as a `u8`.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub struct Provenance: u8 {
+        /// Found in a tracking frame, in a window placed on the last frame's star (else by
+        /// acquisition's scan of the whole frame).
+        const TRACKED = 1 << 0;
+        /// Measured by the fused raw-window CoG (tracking), background carried from the
+        /// star's last full measurement.
+        const FUSED = 1 << 1;
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for Provenance {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(f, "Provenance({=u8:#x})", self.bits())
     }
 }
 
@@ -188,8 +207,10 @@ pub struct StarRecord {
     pub sigma_x_px: f32,
     /// Estimated 1-sigma error of `y_px`, px.
     pub sigma_y_px: f32,
-    /// What is known about the star.
+    /// Its quality (0: a clean measurement).
     pub flags: StarFlags,
+    /// How it was found and measured.
+    pub provenance: Provenance,
     /// The star's own PSF 80 %-energy radius from the width-free fit, px; 0 when the
     /// method does not measure it (the CoG, the fit of a given width) or the fit failed.
     pub psf_a_px: f32,
@@ -200,7 +221,7 @@ pub struct StarRecord {
 
 impl StarRecord {
     /// A centroid as a record, with `flags` added to the centroid's own (no PSF measured:
-    /// `psf_a_px` and `chi2_dof` 0).
+    /// `psf_a_px` and `chi2_dof` 0; found by acquisition: no provenance bit).
     pub(crate) fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {
         Self {
             x_px: c.x_px,
@@ -210,6 +231,7 @@ impl StarRecord {
             sigma_x_px: c.sigma_x_px,
             sigma_y_px: c.sigma_y_px,
             flags: flags | StarFlags::from_centroid(c.flags),
+            provenance: Provenance::empty(),
             psf_a_px: 0.0,
             chi2_dof: 0.0,
         }

@@ -22,7 +22,7 @@ use super::Shared;
 use super::config::{CentroidMethod, TrackerConfig};
 use super::list::{Carry, StarList};
 use super::measure::{Policy, StarBackground, measure};
-use super::record::{FrameSummary, LineOutcome, StarFlags, StarRecord};
+use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord};
 use super::{Capture, TRACK_WINDOWS, Watch};
 use crate::calib::refresh::WatchedWindow;
 use crate::calib::{FrameCalibration, LineLevels};
@@ -316,12 +316,13 @@ impl Tracking {
         };
         let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;
         let want_background = config.tracking_method == CentroidMethod::FusedCog1;
-        let flags = StarFlags::TRACKED | StarFlags::from_track(verdict.flags);
+        let flags = StarFlags::from_track(verdict.flags);
         let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) else {
             sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
             return;
         };
-        let m = measure(policy, &input, flags, want_background);
+        let mut m = measure(policy, &input, flags, want_background);
+        m.record.provenance = Provenance::TRACKED;
         let v = velocity(&m.record);
         sh.stars.push(
             m.record,
@@ -412,7 +413,10 @@ fn fused<const N: usize>(
         return None;
     }
     Some((
-        StarRecord::from_centroid(&c, StarFlags::TRACKED | StarFlags::FUSED),
+        StarRecord {
+            provenance: Provenance::TRACKED | Provenance::FUSED,
+            ..StarRecord::from_centroid(&c, StarFlags::empty())
+        },
         bg,
     ))
 }

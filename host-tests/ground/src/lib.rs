@@ -540,6 +540,7 @@ impl Ground {
                     sigma_x_px: 0.0,
                     sigma_y_px: 0.0,
                     flags: Default::default(),
+                    provenance: Default::default(),
                     psf_a_px: 0.0,
                     chi2_dof: 0.0,
                 };

@@ -3,7 +3,7 @@
 //! frame) and the truth (one row per true star per frame) as CSV, the mode changes and a
 //! closing summary on standard error.
 //!
-//! - `--telemetry FILE`: `frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags,psf_a_px,chi2_dof`
+//! - `--telemetry FILE`: `frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags,provenance,psf_a_px,chi2_dof`
 //!   (`flags`: the `StarFlags` bits, docs/formats.md);
 //! - `--truth FILE`: `frame,x_px,y_px,signal_e,a_px`;
 //! - with `--sky`, `--attitude FILE`: one row per frame,

@@ -10,7 +10,7 @@
 //! and anchor of the pages resolves, the pages speak of the product only, and the README
 //! stays short.
 
-use startrack_core::tracker::{StarFlags, Tracker, TrackerBuffers, TrackerConfig};
+use startrack_core::tracker::{Provenance, StarFlags, Tracker, TrackerBuffers, TrackerConfig};
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
@@ -176,7 +176,7 @@ fn table(page: &str, name: &str) -> (Vec<String>, Vec<Vec<String>>) {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 17] = [
+const CHECKED: [&str; 18] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -187,6 +187,7 @@ const CHECKED: [&str; 17] = [
     "fig-minima",
     "fig5-fig6",
     "star-flags",
+    "star-provenance",
     "tracker-config",
     "tracker-memory",
     "readout-plan",
@@ -854,6 +855,20 @@ fn star_flag_table_is_star_flags() {
     let flags: Vec<(&str, StarFlags)> = StarFlags::all().iter_names().collect();
     assert_eq!(body.len(), flags.len(), "one row per StarFlags flag");
     for (r, (name, f)) in body.iter().zip(flags) {
+        let bit = f.bits().trailing_zeros();
+        assert_eq!(r[0], bit.to_string(), "{name}'s bit");
+        assert_eq!(r[1], f.bits().to_string(), "{name}'s value");
+        assert_eq!(r[2].replace('`', ""), name, "bit {bit}'s name");
+    }
+}
+
+#[test]
+fn star_provenance_table_is_the_provenance_bits() {
+    let (header, body) = table("docs/formats.md", "star-provenance");
+    assert_eq!(header, ["bit", "value", "flag", "meaning"]);
+    let bits: Vec<(&str, Provenance)> = Provenance::all().iter_names().collect();
+    assert_eq!(body.len(), bits.len(), "one row per Provenance bit");
+    for (r, (name, f)) in body.iter().zip(bits) {
         let bit = f.bits().trailing_zeros();
         assert_eq!(r[0], bit.to_string(), "{name}'s bit");
         assert_eq!(r[1], f.bits().to_string(), "{name}'s value");

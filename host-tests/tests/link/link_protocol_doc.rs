@@ -151,7 +151,7 @@ fn layouts_add_up() {
     let attitude: usize = ATTITUDE_FIELDS.iter().map(|f| type_len(f.1)).sum();
     assert_eq!(attitude, ATTITUDE_LEN);
     // The busiest packet, a full star list, fits the packet and the queue.
-    let list = 6 + p::MAX_LINK_STARS * p::STAR_BYTES;
+    let list = 7 + p::MAX_LINK_STARS * p::STAR_BYTES;
     assert!(6 + 7 + p::TIMESTAMP_LEN + list + 2 <= p::MAX_TM_LEN);
     // Every telecommand type is distinct.
     for (i, a) in p::MESSAGES.iter().enumerate() {

@@ -23,16 +23,18 @@ def main() -> int:
         data = tm.source_data
         assert data.hex() == want["data"], want
         if "stars" in want:
-            frame, mode, count = struct.unpack(">IBB", data[:6])
-            assert (frame, mode, count) == (want["frame"], want["mode"], len(want["stars"]))
+            # Star list format 2: frame, mode, format, count, then 33 bytes a star.
+            frame, mode, fmt, count = struct.unpack(">IBBB", data[:7])
+            assert (frame, mode, fmt, count) == (want["frame"], want["mode"], 2, len(want["stars"]))
             for k, star in enumerate(want["stars"]):
-                fields = struct.unpack(">6fIHH", data[6 + 32 * k : 6 + 32 * (k + 1)])
+                fields = struct.unpack(">6fIBHH", data[7 + 33 * k : 7 + 33 * (k + 1)])
                 for a, b in zip(fields[:6], star[:6]):
                     assert abs(a - b) <= 1e-6 * max(1.0, abs(b)), (fields, star)
-                assert fields[6] == star[6]
+                # flags (quality) and provenance, apart.
+                assert fields[6:8] == tuple(star[6:8]), (fields, star)
                 # psf_a in 0.001 px, chi2_dof in 0.01, rounded.
-                assert fields[7] == round(star[7] * 1000), (fields, star)
-                assert fields[8] == round(star[8] * 100), (fields, star)
+                assert fields[8] == round(star[8] * 1000), (fields, star)
+                assert fields[9] == round(star[9] * 100), (fields, star)
         if "attitude" in want:
             a = want["attitude"]
             fields = struct.unpack(">IBBBB4d7fQ", data)

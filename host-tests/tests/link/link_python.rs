@@ -8,8 +8,8 @@ use startrack_core::link::framing::{Deframer, Pushed, encoded_len_max};
 use startrack_core::link::protocol as p;
 use startrack_core::link::{LinkService, NoWindows, Targets};
 use startrack_core::tracker::{
-    Event, FrameSummary, Mode, ModeReason, StarFlags, StarRecord, TelemetrySink, Tracker,
-    TrackerBuffers, TrackerConfig,
+    Event, FrameSummary, Mode, ModeReason, Provenance, StarFlags, StarRecord, TelemetrySink,
+    Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_ground::{decode_tm, frame_telecommand};
 use startrack_host::link_home::MemoryTables;
@@ -70,6 +70,7 @@ fn spacepackets_decodes_the_telemetry() {
             sigma_x_px: 0.01,
             sigma_y_px: 0.02,
             flags: StarFlags::from_bits_retain(1 << k),
+            provenance: Provenance::from_bits_retain(k as u8 & 3),
             psf_a_px: 1.25 + k as f32 * 0.1,
             chi2_dof: 0.97 + k as f32 * 0.01,
         })
@@ -148,6 +149,7 @@ fn spacepackets_decodes_the_telemetry() {
                         s.sigma_x_px,
                         s.sigma_y_px,
                         s.flags.bits(),
+                        s.provenance.bits(),
                         s.psf_a_px,
                         s.chi2_dof
                     ])

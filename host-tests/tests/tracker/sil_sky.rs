@@ -6,7 +6,7 @@ use rand::SeedableRng;
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
 use startrack_core::solver::{SolveError, SolveMode, Solver, SolverConfig};
-use startrack_core::tracker::{StarFlags, StarRecord};
+use startrack_core::tracker::{Provenance, StarFlags, StarRecord};
 use startrack_host::sil::{self, SilConfig};
 use startrack_sim::sky::field::{FieldSpec, random_attitude, render};
 use startrack_sim::sky::scene::{SkyScene, committed_catalog};
@@ -24,6 +24,7 @@ fn records(q: Quat, cat: &Catalog<'_>, seed: u64) -> Vec<StarRecord> {
             sigma_x_px: 0.1,
             sigma_y_px: 0.1,
             flags: StarFlags::empty(),
+            provenance: Provenance::empty(),
             psf_a_px: 1.0,
             chi2_dof: 1.0,
         })

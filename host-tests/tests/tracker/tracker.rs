@@ -21,7 +21,7 @@ use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::detect::LineDetector;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    CentroidMethod, Event, Mode, ModeReason, StarFlags, StarRecord, TrackerConfig,
+    CentroidMethod, Event, Mode, ModeReason, Provenance, StarFlags, StarRecord, TrackerConfig,
 };
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
@@ -100,7 +100,7 @@ fn sil_tracks_every_star_in_the_field_within_its_sigmas() {
             assert!(
                 f.stars
                     .iter()
-                    .all(|m| m.star.flags.contains(StarFlags::TRACKED))
+                    .all(|m| m.star.provenance.contains(Provenance::TRACKED))
             );
             assert!(
                 f.stars.iter().all(|m| m.truth.is_some()),
@@ -162,9 +162,9 @@ fn sil_fused_cog_tracking_follows_the_drift() {
             f.missed
         );
         for m in &f.stars {
-            if m.star.flags.contains(StarFlags::TRACKED) {
+            if m.star.provenance.contains(Provenance::TRACKED) {
                 tracked += 1;
-                fused += usize::from(m.star.flags.contains(StarFlags::FUSED));
+                fused += usize::from(m.star.provenance.contains(Provenance::FUSED));
             }
         }
     }

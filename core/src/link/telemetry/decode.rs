@@ -4,13 +4,13 @@
 //! check and a load a field.
 
 use super::super::command::mode_of;
-use super::super::protocol::STAR_BYTES;
+use super::super::protocol::{STAR_BYTES, STAR_LIST_FORMAT};
 use super::super::upload::TableInfo;
 use super::attitude::{ATTITUDE_LEN, AttitudeMissing, AttitudeReport};
 use super::fields::Reader;
 use super::housekeeping::{FrameTotals, HK_LEN, Housekeeping, LinkCounters};
 use super::stars::{CHI2_DOF_UNIT, PSF_A_UNIT_PX};
-use crate::tracker::{Mode, StarFlags, StarRecord, TemperatureSource};
+use crate::tracker::{Mode, Provenance, StarFlags, StarRecord, TemperatureSource};
 
 const fn source_of(n: u8) -> Option<TemperatureSource> {
     match n {
@@ -95,11 +95,15 @@ impl Housekeeping {
     }
 }
 
-/// A star list read back: frame, mode, and the stars in `out` (their count returned).
+/// A star list read back: frame, mode, and the stars in `out` (their count returned);
+/// `None` for another format than [`STAR_LIST_FORMAT`] or a length that does not match.
 pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usize)> {
     let mut r = Reader::new(d);
     let frame = r.u32()?;
     let mode = mode_of(r.u8()?)?;
+    if r.u8()? != STAR_LIST_FORMAT {
+        return None;
+    }
     let count = usize::from(r.u8()?);
     if r.rest().len() != count * STAR_BYTES || count > out.len() {
         return None;
@@ -113,6 +117,7 @@ pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usiz
             sigma_x_px: r.f32()?,
             sigma_y_px: r.f32()?,
             flags: StarFlags::from_bits_retain(r.u32()?),
+            provenance: Provenance::from_bits_retain(r.u8()?),
             psf_a_px: f32::from(r.u16()?) * PSF_A_UNIT_PX,
             chi2_dof: f32::from(r.u16()?) * CHI2_DOF_UNIT,
         };

@@ -25,7 +25,7 @@ use crate::inputs::{G, Lcg, PSF_SIGMA_PX, RAW_COLS, raw_line_noisy};
 use startrack_core::readout::ReadoutRequest;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Event, FrameInputs, FrameSummary, LineSummary, Mode, StarFlags, StarRecord, TelemetrySink,
+    Event, FrameInputs, FrameSummary, LineSummary, Mode, Provenance, StarRecord, TelemetrySink,
     Tracker, TrackerBuffers, TrackerConfig,
 };
 
@@ -42,7 +42,7 @@ impl TelemetrySink for Count {
     fn line(&mut self, _summary: &LineSummary) {}
     fn star(&mut self, _frame: u32, star: &StarRecord) {
         self.stars += 1;
-        self.tracked += usize::from(star.flags.contains(StarFlags::TRACKED));
+        self.tracked += usize::from(star.provenance.contains(Provenance::TRACKED));
     }
     fn frame(&mut self, _summary: &FrameSummary) {}
     fn event(&mut self, _event: &Event) {}
