@@ -848,32 +848,44 @@ fn figure_5_and_6_table_is_their_csvs() {
     }
 }
 
-#[test]
-fn star_flag_table_is_star_flags() {
-    let (header, body) = table("docs/formats.md", "star-flags");
-    assert_eq!(header, ["bit", "value", "flag", "from", "meaning"]);
-    let flags: Vec<(&str, StarFlags)> = StarFlags::all().iter_names().collect();
-    assert_eq!(body.len(), flags.len(), "one row per StarFlags flag");
-    for (r, (name, f)) in body.iter().zip(flags) {
-        let bit = f.bits().trailing_zeros();
+/// The bit table under `marker` in docs/formats.md against `bits` (name, value), in order:
+/// one row each, its bit, value and name.
+fn check_bit_table(marker: &str, columns: &[&str], bits: &[(&str, u32)]) {
+    let (header, body) = table("docs/formats.md", marker);
+    assert_eq!(header, columns, "{marker}: columns");
+    assert_eq!(body.len(), bits.len(), "{marker}: one row per bit");
+    for (r, (name, value)) in body.iter().zip(bits) {
+        let bit = value.trailing_zeros();
         assert_eq!(r[0], bit.to_string(), "{name}'s bit");
-        assert_eq!(r[1], f.bits().to_string(), "{name}'s value");
-        assert_eq!(r[2].replace('`', ""), name, "bit {bit}'s name");
+        assert_eq!(r[1], value.to_string(), "{name}'s value");
+        assert_eq!(r[2].replace('`', ""), *name, "bit {bit}'s name");
     }
 }
 
 #[test]
+fn star_flag_table_is_star_flags() {
+    let flags: Vec<(&str, u32)> = StarFlags::all()
+        .iter_names()
+        .map(|(n, f)| (n, f.bits()))
+        .collect();
+    check_bit_table(
+        "star-flags",
+        &["bit", "value", "flag", "from", "meaning"],
+        &flags,
+    );
+}
+
+#[test]
 fn star_provenance_table_is_the_provenance_bits() {
-    let (header, body) = table("docs/formats.md", "star-provenance");
-    assert_eq!(header, ["bit", "value", "flag", "meaning"]);
-    let bits: Vec<(&str, Provenance)> = Provenance::all().iter_names().collect();
-    assert_eq!(body.len(), bits.len(), "one row per Provenance bit");
-    for (r, (name, f)) in body.iter().zip(bits) {
-        let bit = f.bits().trailing_zeros();
-        assert_eq!(r[0], bit.to_string(), "{name}'s bit");
-        assert_eq!(r[1], f.bits().to_string(), "{name}'s value");
-        assert_eq!(r[2].replace('`', ""), name, "bit {bit}'s name");
-    }
+    let bits: Vec<(&str, u32)> = Provenance::all()
+        .iter_names()
+        .map(|(n, f)| (n, u32::from(f.bits())))
+        .collect();
+    check_bit_table(
+        "star-provenance",
+        &["bit", "value", "flag", "meaning"],
+        &bits,
+    );
 }
 
 #[test]
