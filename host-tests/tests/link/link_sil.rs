@@ -235,7 +235,7 @@ fn gse_command_prints_json_and_exits_by_error_kind() {
     .expect("stars");
     let csv = String::from_utf8(csv).expect("utf-8");
     assert!(csv.starts_with(
-        "frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags,psf_a_px,chi2_dof\n"
+        "frame,mode,x_px,y_px,flux_e,snr,sigma_x_px,sigma_y_px,flags,provenance,psf_a_px,chi2_dof\n"
     ));
 
     // The SIL's table lists every defect of its sensor: nothing to commit, the tracker says
