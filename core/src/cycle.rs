@@ -22,9 +22,7 @@
 //! few additions for housekeeping. Memory: the tracker (owned), a borrowed
 //! [`LinkService`], the solver (a catalog reference and a prior).
 
-use crate::link::{
-    Housekeeping, LinkService, TableInfo, TableUpload, Targets, UploadRefusal, WindowReader,
-};
+use crate::link::{Housekeeping, LinkService, TableInfo, TableUpload, Targets, WindowReader};
 use crate::safe::{Health, ThermoSource};
 use crate::solver::{Fix, SolveError, Solver};
 use crate::tracker::{
@@ -154,7 +152,7 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
     /// The link's housekeeping report now, with `table_in_force` the calibration table the
     /// link's store holds in force.
     pub fn housekeeping(&self, table_in_force: Option<TableInfo>) -> Housekeeping {
-        self.link.housekeeping(&InForce(table_in_force))
+        self.link.housekeeping(table_in_force)
     }
 
     /// Housekeeping as of the last frame.
@@ -233,7 +231,7 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         };
         let summary = self.tracker.run_frame(source, &mut tracker_ports).await?;
         let (last_k, source_used) = (noted.last_k, noted.source());
-        self.link.end_of_frame(&InForce(ports.table_in_force));
+        self.link.end_of_frame(ports.table_in_force);
         let attitude = self.solver.as_mut().map(|solver| {
             let result = solver.update(self.tracker.stars(), summary.start_us);
             self.link
@@ -266,29 +264,5 @@ impl Thermometer for Noted<'_> {
     fn sensor_temperature_k(&mut self) -> Option<Kelvin> {
         self.last_k = self.inner.sensor_temperature_k();
         self.last_k
-    }
-}
-
-/// The table in force as the link's housekeeping asks for it; refuses every upload step (the
-/// link's uploads go through [`FrameCycle::receive`] between frames).
-struct InForce(Option<TableInfo>);
-
-impl TableUpload for InForce {
-    fn begin(&mut self, _kind: u8, _total_len: u32, _crc32: u32) -> Result<(), UploadRefusal> {
-        Err(UploadRefusal::Busy)
-    }
-
-    fn chunk(&mut self, _offset: u32, _data: &[u8]) -> Result<(), UploadRefusal> {
-        Err(UploadRefusal::Busy)
-    }
-
-    fn commit(&mut self) -> Result<TableInfo, UploadRefusal> {
-        Err(UploadRefusal::Busy)
-    }
-
-    fn abort(&mut self) {}
-
-    fn active(&self, kind: u8) -> Option<TableInfo> {
-        self.0.filter(|i| i.kind == kind)
     }
 }

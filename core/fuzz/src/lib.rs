@@ -18,7 +18,7 @@
 use startrack_core::catalog::{Catalog, NRAD_PER_RAD};
 use startrack_core::geometry::{Output, ReadoutGeometry};
 use startrack_core::link::framing::{Deframer, Pushed, encode, encoded_len_max};
-use startrack_core::link::protocol::{MAX_TC_LEN, MAX_TM_LEN};
+use startrack_core::link::protocol::{MAX_TC_LEN, MAX_TM_LEN, TABLE_KIND_CALIBRATION};
 use startrack_core::link::{
     LinkCounters, LinkService, NoWindows, TableInfo, TableUpload, Targets, UploadRefusal,
 };
@@ -776,7 +776,7 @@ pub fn link_standby_run(data: &[u8]) -> LinkRun {
     for piece in &pieces {
         link.receive_standby(piece, &mut tables);
         link.poll_standby(&mut tables);
-        link.send_housekeeping(&tables);
+        link.send_housekeeping(tables.active(TABLE_KIND_CALIBRATION));
         drain_link(&mut link, tx, &mut frames);
     }
     let c = *link.counters();

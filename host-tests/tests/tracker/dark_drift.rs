@@ -7,8 +7,9 @@
 
 use fixed::types::U8F8;
 use startrack_core::geometry::ReadoutGeometry;
-use startrack_core::link::LinkService;
+use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::telemetry::{Housekeeping, status};
+use startrack_core::link::{LinkService, TableUpload};
 use startrack_core::table::{CalibTable, DarkLaw};
 use startrack_core::tracker::{
     FixedTable, FixedTemperature, FrameSummary, LineSource, Ports, Tracker, TrackerBuffers,
@@ -125,7 +126,9 @@ fn run(dark_e: f64, sensor_k: Option<f64>, frames: u32) -> Housekeeping {
         assert_eq!(summary.dark_drift, tracker.dark_drift());
     }
     let store = MemoryTables::new(params.geometry, Some(table_bytes.clone()));
-    let hk = bench.link.housekeeping(&store);
+    let hk = bench
+        .link
+        .housekeeping(TableUpload::active(&store, TABLE_KIND_CALIBRATION));
     // Through the wire and back.
     let mut buf = [0u8; startrack_core::link::telemetry::HK_LEN];
     let n = hk.encode(&mut buf).unwrap();

@@ -54,7 +54,9 @@ impl LinkService {
         match core::mem::replace(&mut self.answer, Answer::None) {
             Answer::None => {}
             Answer::Pong => self.send(p::APID_CONTROL, p::TM_PONG, 0, Queue::Urgent),
-            Answer::Housekeeping => self.send_housekeeping(&*targets.tables),
+            Answer::Housekeeping => {
+                self.send_housekeeping(targets.tables.active(p::TABLE_KIND_CALIBRATION))
+            }
             Answer::Table(kind) => {
                 let info = targets.tables.active(kind);
                 let i = info.unwrap_or(TableInfo {

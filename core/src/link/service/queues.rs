@@ -9,7 +9,7 @@ use super::super::protocol::{self as p, MessageType};
 use super::super::telemetry::{
     AttitudeReport, EVENT_DATA_LEN, Housekeeping, Writer, encode_stars, status, tracker_event,
 };
-use super::super::upload::TableUpload;
+use super::super::upload::TableInfo;
 use super::{LinkService, Queue};
 use crate::tracker::{Event, FrameSummary, Mode, StarRecord, TelemetrySink, TemperatureSource};
 use arbitrary_int::{u11, u14};
@@ -35,8 +35,9 @@ impl LinkService {
         n
     }
 
-    /// A housekeeping report of the state now.
-    pub fn housekeeping(&self, tables: &dyn TableUpload) -> Housekeeping {
+    /// A housekeeping report of the state now, with `table_in_force` the calibration table
+    /// the store holds in force (`TableUpload::active` of the calibration kind).
+    pub fn housekeeping(&self, table_in_force: Option<TableInfo>) -> Housekeeping {
         let s = self.last;
         Housekeeping {
             mode: s.map_or(Mode::Standby, |s| s.mode),
@@ -49,7 +50,7 @@ impl LinkService {
             centroids: s.map_or(0, |s| s.centroids),
             totals: self.totals,
             link: self.counters,
-            table: tables.active(p::TABLE_KIND_CALIBRATION),
+            table: table_in_force,
             uptime_us: self.now_us,
             setup_faults: self.setup_faults,
             dark_ratio_u8f8: s.map_or(0, |s| s.dark_drift.ratio_u8f8),
@@ -63,8 +64,8 @@ impl LinkService {
     }
 
     /// Queues a housekeeping report (the home may also call this on its own schedule).
-    pub fn send_housekeeping(&mut self, tables: &dyn TableUpload) {
-        let hk = self.housekeeping(tables);
+    pub fn send_housekeeping(&mut self, table_in_force: Option<TableInfo>) {
+        let hk = self.housekeeping(table_in_force);
         let len = hk.encode(&mut self.data).unwrap_or(0);
         self.send(p::APID_HOUSEKEEPING, p::TM_HOUSEKEEPING, len, Queue::Bulk);
     }
@@ -77,8 +78,8 @@ impl LinkService {
     }
 
     /// Called by the home after each frame (after the tracker reported it to this sink):
-    /// periodic housekeeping.
-    pub fn end_of_frame(&mut self, tables: &dyn TableUpload) {
+    /// periodic housekeeping, reporting `table_in_force` as [`Self::housekeeping`] does.
+    pub fn end_of_frame(&mut self, table_in_force: Option<TableInfo>) {
         let period = self.hk_period.unwrap_or(Self::DEFAULT_HK_PERIOD);
         if period == 0 {
             return;
@@ -86,7 +87,7 @@ impl LinkService {
         self.frames_since_hk = self.frames_since_hk.saturating_add(1);
         if self.frames_since_hk >= period {
             self.frames_since_hk = 0;
-            self.send_housekeeping(tables);
+            self.send_housekeeping(table_in_force);
         }
     }
 
