@@ -313,10 +313,6 @@ pub struct FlashConfig {
 
 /// The tables the SIL serves: in memory, or in the flash store.
 trait SilTables: TableUpload + TableStore<'static> {
-    /// The store as the link's upload port.
-    fn as_upload(&mut self) -> &mut dyn TableUpload;
-    /// The store as the tracker's table port.
-    fn as_store(&mut self) -> &mut dyn TableStore<'static>;
     /// The owner's erase step, between frames.
     fn service(&mut self) -> Result<(), String> {
         Ok(())
@@ -335,22 +331,9 @@ trait SilTables: TableUpload + TableStore<'static> {
     }
 }
 
-impl SilTables for MemoryTables {
-    fn as_upload(&mut self) -> &mut dyn TableUpload {
-        self
-    }
-    fn as_store(&mut self) -> &mut dyn TableStore<'static> {
-        self
-    }
-}
+impl SilTables for MemoryTables {}
 
 impl SilTables for crate::flash_home::FlashHome {
-    fn as_upload(&mut self) -> &mut dyn TableUpload {
-        self
-    }
-    fn as_store(&mut self) -> &mut dyn TableStore<'static> {
-        self
-    }
     fn service(&mut self) -> Result<(), String> {
         // An erase that fails drops the upload (the ground then sees "no upload begun").
         let _ = crate::flash_home::FlashHome::service(self);
@@ -516,7 +499,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                                 }
                             }
                             cycle.set_link_time(start.elapsed().as_micros() as u64);
-                            cycle.receive(bytes, tables.as_upload(), &mut windows);
+                            cycle.receive(bytes, &mut *tables, &mut windows);
                             // The erase an accepted `begin` asks for, before the next bytes.
                             tables.service()?;
                         }
@@ -528,7 +511,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                         Err(_) => client = None,
                     }
                 }
-                cycle.poll(tables.as_upload(), &mut windows);
+                cycle.poll(&mut *tables, &mut windows);
                 tables.service()?;
                 tables.persist()?;
                 if tables.power_cut() {
@@ -561,7 +544,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             let mut ports = CyclePorts {
                 clock: &mut clock,
                 thermometer: &mut thermometer,
-                tables: tables.as_store(),
+                tables: &mut *tables,
                 table_in_force,
                 telemetry: &mut NoTelemetry,
             };
