@@ -249,8 +249,8 @@ pub async fn tracker_task(
     let mut tables = FixedTable(table);
     let mut log = DefmtTelemetry;
     loop {
-        crate::flash_store::with_link_tables(&mut store, |tables| {
-            crate::link::serve(&mut cycle, tables);
+        crate::flash_store::with_link_tables(&mut store, |uploads| {
+            crate::link::serve(&mut cycle, uploads);
         });
         if cycle.reset_requested() {
             // Let the transmit task send the acceptance, then reset.
