@@ -18,7 +18,7 @@ use crate::centroid::pixel_box::PixelBox;
 use crate::centroid::prepared::{Measured, Prepared};
 use crate::centroid::{Centroid, CentroidFlags, MAX_SIDE};
 
-type Mat4 = [[f32; 4]; 4];
+pub(in crate::centroid) type Mat4 = [[f32; 4]; 4];
 
 fn at(m: &Mat4, i: usize, j: usize) -> f32 {
     m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
@@ -78,9 +78,9 @@ const N: usize = 2;
 const B: usize = 3;
 
 /// The fit state: parameters, normal matrix and right-hand side at those parameters.
-struct Normal {
-    a: Mat4,
-    b: [f32; 4],
+pub(in crate::centroid) struct Normal {
+    pub(in crate::centroid) a: Mat4,
+    pub(in crate::centroid) b: [f32; 4],
 }
 
 /// Fills the normal equations at (x, y, flux, bg).
@@ -229,7 +229,7 @@ type Profiles<'r> = (
 );
 
 /// Jacobi-scales, factors and solves; returns the step and the scaled factor.
-fn solve(n: &Normal) -> Option<([f32; 4], [f32; 4], Mat4)> {
+pub(in crate::centroid) fn solve(n: &Normal) -> Option<([f32; 4], [f32; 4], Mat4)> {
     let mut d = [0.0f32; 4];
     for (i, di) in d.iter_mut().enumerate() {
         let aii = at(&n.a, i, i);
@@ -252,7 +252,7 @@ fn solve(n: &Normal) -> Option<([f32; 4], [f32; 4], Mat4)> {
 }
 
 /// The variance of parameter `i` from the scaled factor: `d_i^2 [(D A D)^-1]_ii`.
-fn variance(l: &Mat4, d: &[f32; 4], i: usize) -> f32 {
+pub(in crate::centroid) fn variance(l: &Mat4, d: &[f32; 4], i: usize) -> f32 {
     let e = [0, 1, 2, 3].map(|k| if k == i { 1.0 } else { 0.0 });
     let z = chol_solve(l, &e);
     vget(&z, i) * vget(d, i) * vget(d, i)
