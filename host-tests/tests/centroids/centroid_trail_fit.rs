@@ -243,3 +243,72 @@ fn the_plain_gaussian_fit_is_biased_or_flagged_on_long_trails() {
         assert!(trail_worst < 5.0, "L {l}: trail fit worst {trail_worst}");
     }
 }
+
+/// The trailed bound of docs/accuracy.md ("Trailed stars").
+const BOUND_CSV: &str = "host-tests/figures/trail-bound.csv";
+
+/// The bound of the standard star (sigma 1 px, 20,000 e-, background 100 e-, read noise
+/// 5 e-) at the centre of a pixel, trailed along the columns, over trail lengths 0-20 px.
+fn bound_rows() -> Vec<String> {
+    [0.0, 1.0, 2.0, 5.0, 10.0, 20.0]
+        .into_iter()
+        .map(|l| {
+            let (w, h, star) = scene(l, 0.0, (0.0, 0.0));
+            let held = crlb(w, h, &star, BACKGROUND_E, READ_NOISE_E, false);
+            format!(
+                "{l},{w},{h},{:.6},{:.6}",
+                held.sigma_along_px, held.sigma_across_px
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn the_trailed_bound_is_the_committed_csv() {
+    const HEADER: &str = "trail_px,window_w_px,window_h_px,along_px,across_px";
+    let rows = bound_rows();
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("figures/trail-bound.csv");
+    if std::env::var_os("UPDATE_DOCS").is_some() {
+        let text = format!(
+            "# Cramer-Rao bound of a trailed star (sigma 1 px, 20000 e-, background 100 e-/px, read noise 5 e-), trail along the columns, background known.\n\
+             # UPDATE_DOCS=1 cargo test -p startrack-host --test centroids centroid_trail_fit::the_trailed_bound\n{HEADER}\n{}\n",
+            rows.join("\n")
+        );
+        std::fs::write(&path, text).expect("write the bound CSV");
+    }
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{BOUND_CSV}: {e}"));
+    let committed: Vec<&str> = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .collect();
+    assert_eq!(committed.len(), rows.len(), "{BOUND_CSV}: rows");
+    for (c, r) in committed.iter().zip(&rows) {
+        let parse =
+            |s: &str| -> Vec<f64> { s.split(',').map(|v| v.parse().expect("number")).collect() };
+        for (a, b) in parse(c).iter().zip(parse(r)) {
+            assert!(
+                (a - b).abs() <= 1e-6 + 1e-6 * b.abs(),
+                "{BOUND_CSV}: {c} vs computed {r}"
+            );
+        }
+    }
+    // Along the trail the bound grows with the length, across it far less (docs/accuracy.md).
+    let col = |i: usize| -> Vec<f64> {
+        rows.iter()
+            .map(|r| {
+                r.split(',')
+                    .nth(i)
+                    .expect("column")
+                    .parse()
+                    .expect("number")
+            })
+            .collect()
+    };
+    let (along, across) = (col(3), col(4));
+    assert!(along.windows(2).all(|p| p[1] > p[0]), "along {along:?}");
+    assert!(
+        across.iter().all(|&a| (a / across[0] - 1.0).abs() < 0.5),
+        "across {across:?}"
+    );
+}

@@ -176,7 +176,7 @@ fn table(page: &str, name: &str) -> (Vec<String>, Vec<Vec<String>>) {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 18] = [
+const CHECKED: [&str; 19] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -195,6 +195,7 @@ const CHECKED: [&str; 18] = [
     "psf-shapes",
     "accuracy-frames",
     "accuracy-frames-field",
+    "trail-bound",
 ];
 
 #[test]
@@ -1282,4 +1283,23 @@ fn field_frames_table_is_its_csv() {
         want[2..],
         "docs/accuracy.md accuracy-frames-field: not the CSV's table"
     );
+}
+
+const TRAIL_BOUND: &str = "host-tests/figures/trail-bound.csv";
+
+#[test]
+fn trail_bound_table_is_the_trail_bound_csv() {
+    let csv = Csv::read(TRAIL_BOUND);
+    let recs = csv.records();
+    let (_, body) = table("docs/accuracy.md", "trail-bound");
+    assert_eq!(
+        body.len(),
+        recs.len(),
+        "{TRAIL_BOUND}: one row a trail length"
+    );
+    for (row, rec) in body.iter().zip(&recs) {
+        assert!(matches(&row[0], rec["trail_px"]), "{row:?} vs {rec:?}");
+        assert!(matches(&row[1], rec["along_px"]), "{row:?} vs {rec:?}");
+        assert!(matches(&row[2], rec["across_px"]), "{row:?} vs {rec:?}");
+    }
 }
