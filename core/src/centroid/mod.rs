@@ -7,7 +7,7 @@
 //! | the same, power 1 fused with calibration on the raw window | [`raw_cog`] | ~2,600 a frame with its plan (`centroid_cog1c_raw_planned_7x7`) | as the corrected CoG | as the CoG |
 //! | pixel-integrated Gaussian fit | [`gauss_fit`] | ~7,000 held background (`centroid_gauss_fit_given_bg_7x7`), ~22,000 fitted | < 1e-5 px (model exact) | efficiency 0.97..1.00 |
 //! | the same with the PSF width free, reporting `psf_a_px` and `chi2_dof` ([`gauss_fit::gauss_fit_width`]) | [`gauss_fit`] | ~13,700 held background (`centroid_gauss_fit_width_7x7`; ~7,400 on 5x5) | < 1e-5 px (model exact) | pull RMS 0.99..1.08 (host test `centroid_gauss_fit_width`) |
-//! | Gaussian convolved with the motion segment, trail held ([`trail_fit`]) | [`trail_fit`] | not yet benched (a few hundred a pixel and step) | model error of the pixel's 1/12 px^2 (host test `centroid_trail_fit`) | within 1.2x the trailed CRLB, trails 0-20 px |
+//! | Gaussian convolved with the motion segment, trail held ([`trail_fit`]) | [`trail_fit`] | ~24,000 and ~47,000 held background, 5x5 and 7x7 (`centroid_trail_fit_5x5`, `centroid_trail_fit_7x7`) | model error of the pixel's 1/12 px^2 (host test `centroid_trail_fit`) | within 1.2x the trailed CRLB, trails 0-20 px |
 //!
 //! (a = the paper's 80 %-energy radius, s = sqrt(0.31) a; the errors from the host tests
 //! `centroid_cog`, `centroid_cog_noise`, `centroid_gauss_fit` run with `--nocapture`; the

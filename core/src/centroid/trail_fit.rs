@@ -39,9 +39,12 @@
 //! # Cost
 //! Per step and pixel: two `erfc`-and-density evaluations (one exponential and one divide
 //! each), one exponential for the cross-trail density, the weight's divide and the ten
-//! normal-equation sums (no separable shortcut: the trail is at any angle). Not yet in the
-//! M7 bench: budget it as a few hundred instructions per pixel and step, i.e. ~10x the
-//! held-background Gaussian fit on the same window.
+//! normal-equation sums (no separable shortcut: the trail is at any angle). Measured on the
+//! Cortex-M7 (`cargo m7-bench`, QEMU instructions per star, background given and held, the
+//! bench's untrailed star with a (1.0, 0.5) px trail held): ~24,000 on 5x5
+//! (`centroid_trail_fit_5x5`), ~47,000 on 7x7 (`centroid_trail_fit_7x7`), about 6.6x the
+//! held Gaussian fit on the same window; the exact counts are in docs/speed.md. The cost
+//! grows with the window's pixels (a 20 px trail needs a ~29 x 9 window, ~5x the 7x7's).
 //!
 //! # Where it fails
 //! - A wrong trail (rate error): the position along the trail stays nearly unbiased for a

@@ -3,7 +3,7 @@
 //! pixel-phase curve; the fused CoG replaces it in tracking) and each of [`METHOD_NAMES`] on
 //! the 7x7 window and on its central 5x5, the box filling the window
 //! (`centroid_<method>_<n>x<n>`). The windows come from [`crate::window`]'s
-//! `calibrate_window`. Cost: fifteen centroids a window.
+//! `calibrate_window`. Cost: seventeen centroids a window.
 
 use crate::harness::{Bench, Out};
 use crate::inputs::PSF_SIGMA_PX;
@@ -14,12 +14,13 @@ use startrack_core::centroid::cog::{CogParams, CogPower, cog};
 use startrack_core::centroid::gauss_fit::{
     GaussFitParams, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width, gauss_fit_width_prior,
 };
+use startrack_core::centroid::trail_fit::{TrailFitParams, trail_fit};
 use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::table::pixcorr::PixCorr;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 
-const METHODS: usize = 7;
+const METHODS: usize = 8;
 /// The methods timed on both window sizes, as they appear in the stage names.
 pub const METHOD_NAMES: [&str; METHODS] = [
     "cog1",
@@ -29,6 +30,7 @@ pub const METHOD_NAMES: [&str; METHODS] = [
     "gauss_fit_given_bg",
     "gauss_fit_width",
     "gauss_fit_width_model",
+    "trail_fit",
 ];
 
 /// Ticks summed over the windows: the corrected CoG, and every method on 5x5 and 7x7.
@@ -166,6 +168,16 @@ fn run_method(m: usize, side: u8, input: &CentroidInput<'_>) -> f32 {
             )
             .centroid
         }
+        // The trailed-star fit, background given and held, a trail of (1.0, 0.5) px held (the
+        // bench's star is not trailed: the cost per pixel and step does not depend on it).
+        7 => trail_fit(
+            input,
+            &TrailFitParams {
+                fit_background: false,
+                background: given,
+                ..TrailFitParams::new(PSF_SIGMA_PX, 1.0, 0.5)
+            },
+        ),
         // The near-CRLB method as `startrack accuracy` runs it: background given and held
         // (not fitted), start box the window's side capped at 5.
         _ => gauss_fit(
