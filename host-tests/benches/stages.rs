@@ -20,12 +20,13 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use startrack_core::calib::{
     DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
 };
-use startrack_core::centroid::cog::{CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{CogParams, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::raw_cog::{RawCogParams, RawCogPlan, RawWindow, raw_cog};
 use startrack_core::centroid::{Background, CentroidInput};
 use startrack_core::detect::{DetectConfig, LineDetector, ScanDetector};
 use startrack_core::table::CalibTable;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::units::{Electrons, Kelvin};
 use startrack_core::window::{Rect, Window};
@@ -47,7 +48,7 @@ fn frame() -> Frame {
         seed: 21,
         ..SensorParams::default()
     };
-    let stars = startrack_host::demo::star_field(21, 60, &params);
+    let stars = startrack_homes::demo::star_field(21, 60, &params);
     let sim = Simulator::new(params.clone(), stars.clone());
     let g = params.geometry;
     let table = sim.truth_table_tiled(TruthSections::ALL, 3).unwrap();

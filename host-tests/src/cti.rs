@@ -21,11 +21,11 @@
 //! Cost: a window is `side^2 (1 + trail)^2` evaluations of the trap-free expected charge; a
 //! Monte Carlo cell `trials` x 2 centroids.
 
-use crate::accuracy::{Method, PreparedMethod, flux_for_snr};
 use fixed::types::{U0F16, U0F32};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
+use startrack_analysis::accuracy::{Method, PreparedMethod, flux_for_snr};
 use startrack_core::calib::cti::CtiCorrection;
 use startrack_core::centroid::{Centroid, CentroidFlags, CentroidInput};
 use startrack_core::geometry::{MAX_OUTPUTS, ReadoutGeometry};

@@ -24,7 +24,7 @@
 
 use crate::sim::psf::{pixel_fraction, sigma_of_a};
 use fixed::types::{I1F15, U0F16, U8F8};
-use startrack_core::centroid::cog::CogPower;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::{
     CurveHeader, MAX_KNOTS, MIN_KNOTS, PixCorr, PixCorrBackground,
 };

@@ -273,16 +273,16 @@ fn main() -> ExitCode {
             }
             Err(e) => fail("readout-plan", &e),
         },
-        Command::Demo { seed, stars, sky } => match startrack_host::demo::run_scene(
+        Command::Demo { seed, stars, sky } => match startrack_homes::demo::run_scene(
             seed,
             if sky {
-                startrack_host::demo::DemoScene::Sky
+                startrack_homes::demo::DemoScene::Sky
             } else {
-                startrack_host::demo::DemoScene::Random(stars)
+                startrack_homes::demo::DemoScene::Random(stars)
             },
         ) {
             Ok(report) => {
-                startrack_host::demo::print(&report);
+                startrack_homes::demo::print(&report);
                 ExitCode::SUCCESS
             }
             Err(e) => {

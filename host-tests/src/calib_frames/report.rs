@@ -9,13 +9,13 @@
 //! | `master_bias.fits`, `dark_rel.fits`, `flat.fits` | the maps for DS9 (full readout, full readout, active area) |
 //! | `ptc.png`, `dark_temperature.png` | photon transfer per output with its full well marked (where the mean stops rising) and its linearity error (LE) in the legend; dark rate against temperature (covered pixels and hot pixels) |
 //!
-//! The PNGs are drawn by the figures' chart code ([`crate::figures::plot`]); without a font
+//! The PNGs are drawn by the figures' chart code ([`startrack_analysis::figures::plot`]); without a font
 //! they are skipped with a reason. Cost: writing the maps, a few kilobytes else.
 
 use super::Products;
 use crate::cli::{CliError, write_file};
-use crate::figures::Written;
-use crate::figures::plot::{Chart, Series, lines};
+use startrack_analysis::figures::Written;
+use startrack_analysis::figures::plot::{Chart, Series, lines};
 use startrack_sim::fits::write_map;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -111,7 +111,7 @@ pub fn write(p: &Products, dir: &Path) -> Result<Written, CliError> {
 
 /// The report's PNGs.
 fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
-    let fig = |e: crate::figures::FigureError| CliError::Io {
+    let fig = |e: startrack_analysis::figures::FigureError| CliError::Io {
         path: e.path,
         msg: e.message,
     };

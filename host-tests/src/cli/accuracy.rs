@@ -1,12 +1,12 @@
 //! `startrack accuracy`: the table of every centroid method's RMS error over the Cramer-Rao
 //! bound, and of its error estimate over its measured scatter, from the seeded Monte Carlo of
-//! [`crate::accuracy`], printed as markdown.
+//! [`startrack_analysis::accuracy`], printed as markdown.
 
-use crate::accuracy::{
+use clap::Args;
+use startrack_analysis::accuracy::{
     Method, Noise, markdown, run as run_table, width_unknown_csv, width_unknown_markdown,
     width_unknown_methods,
 };
-use clap::Args;
 
 /// Options of `startrack accuracy`.
 #[derive(Args, Clone, Debug)]

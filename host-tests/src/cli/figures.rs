@@ -1,7 +1,7 @@
 //! `startrack figures --out DIR [--quick]`: the founding paper's Figures 1-6 as CSV and PNG
-//! (see [`crate::figures`]).
+//! (see [`startrack_analysis::figures`]).
 
-use crate::figures::{Effort, run_all};
+use startrack_analysis::figures::{Effort, run_all};
 use std::io::IsTerminal;
 use std::process::ExitCode;
 

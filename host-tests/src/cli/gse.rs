@@ -16,11 +16,12 @@
 //!
 //! Errors are one line on standard error; the exit code says which kind ([`GseError::exit_code`]).
 
-use crate::home::{CSV_HEADER, csv_row};
-use startrack_core::link::{AttitudeMissing, AttitudeReport, Housekeeping, WindowKind};
+use startrack_core::link::WindowKind;
+use startrack_core::link::telemetry::{AttitudeMissing, AttitudeReport, Housekeeping};
 use startrack_core::solver::SolveMode;
 use startrack_core::tracker::Mode;
 use startrack_ground::{Ground, GroundError};
+use startrack_homes::home::{CSV_HEADER, csv_row};
 use startrack_sim::fits::{MapF32, write_map};
 use std::io::Write;
 use std::path::PathBuf;

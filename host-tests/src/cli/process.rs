@@ -18,18 +18,13 @@
 //! `PSFA` keyword (px, written by `startrack simulate`), else the flight configuration's.
 
 use super::{CliError, read_file};
-use crate::home::{FrameLines, acquire_once, write_csv};
 use clap::builder::TypedValueParser as _;
 use startrack_core::table::CalibTable;
-use startrack_core::table::pixcorr::{CurveHeader, PixCorrBackground};
-use startrack_core::tracker::{
-    CentroidMethod, FrameSummary, StarRecord, TrackerConfig, select_curve,
-};
+use startrack_core::tracker::{CentroidMethod, TrackerConfig};
 use startrack_core::units::Kelvin;
+use startrack_homes::home::{HOST_CAPACITY, Processed, process_frame, write_csv};
 use startrack_sim::fits::{read_keys, read_raw_frame};
 use std::path::PathBuf;
-
-pub use crate::home::HOST_CAPACITY;
 
 /// The acquisition methods `process` offers, by their names.
 const METHODS: [CentroidMethod; 4] = [
@@ -90,19 +85,6 @@ pub struct ProcessArgs {
     pub out: Option<PathBuf>,
 }
 
-/// What `process` measured.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Processed {
-    /// The acquisition frame's stars, as reported.
-    pub stars: Vec<StarRecord>,
-    /// Its summary.
-    pub summary: FrameSummary,
-    /// The configuration the tracker ran with.
-    pub config: TrackerConfig,
-    /// The pixel-phase curve a CoG method used (`None`: the Gauss fit, or no curve matched).
-    pub curve: Option<CurveHeader>,
-}
-
 /// The tracker's configuration and the sensor temperature for `args` and the frame's
 /// keywords `key`.
 pub fn config_of(
@@ -152,45 +134,6 @@ pub fn config_of(
     Ok((config, temperature.map(Kelvin::saturating_from_num)))
 }
 
-/// Runs the tracker on one recorded frame `raw` (row-major, the table's geometry): a
-/// standby frame for the dark scale, then an acquisition frame. Returns the acquisition
-/// frame's stars and summary.
-pub fn process_frame(
-    table: CalibTable<'_>,
-    raw: &[u16],
-    config: TrackerConfig,
-    temperature_k: Option<Kelvin>,
-) -> Result<Processed, CliError> {
-    let geometry = *table.geometry();
-    let mut source = FrameLines::new(geometry, raw).ok_or_else(|| {
-        CliError::Usage(format!(
-            "frame has {} samples, the table's geometry needs {}",
-            raw.len(),
-            usize::from(geometry.lines) * geometry.line_len()
-        ))
-    })?;
-    let frame = acquire_once(config, table, temperature_k, &mut source).map_err(CliError::Usage)?;
-    let curve = config
-        .acquisition_method
-        .cog_power()
-        .and_then(|p| {
-            select_curve(
-                &table,
-                &config,
-                p,
-                config.box_px(),
-                PixCorrBackground::PerimeterMedian,
-            )
-        })
-        .map(|c| c.header());
-    Ok(Processed {
-        stars: frame.stars,
-        summary: frame.summary,
-        config,
-        curve,
-    })
-}
-
 /// Runs the tracker on the frame and returns what it found (nothing written).
 pub fn measure(args: &ProcessArgs) -> Result<Processed, CliError> {
     let bytes = read_file(&args.calib)?;
@@ -202,7 +145,7 @@ pub fn measure(args: &ProcessArgs) -> Result<Processed, CliError> {
     let keys = read_keys(&args.frame, &["EXPTIME", "CCDTEMP", "PSFA"])?;
     let key = |k: &str| keys.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
     let (config, temperature_k) = config_of(args, &key)?;
-    process_frame(table, &frame.data_adu, config, temperature_k)
+    process_frame(table, &frame.data_adu, config, temperature_k).map_err(CliError::Usage)
 }
 
 /// Runs `startrack process`: the CSV to `--out` or standard output, a one-line summary on

@@ -1,4 +1,4 @@
-//! `startrack sil`: the tracker application live on the simulated CCD47-20 ([`crate::sil`]),
+//! `startrack sil`: the tracker application live on the simulated CCD47-20 ([`startrack_homes::sil`]),
 //! frame after frame over a drifting scene. Writes the telemetry (one row per star per
 //! frame) and the truth (one row per true star per frame) as CSV, the mode changes and a
 //! closing summary on standard error.
@@ -10,13 +10,13 @@
 //!   `frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability`
 //!   (the quaternion takes ICRS to the camera, scalar first; errors against the truth).
 //!
-//! With `--port P` it serves the link instead ([`crate::link_home::serve`]); with `--sky` too,
+//! With `--port P` it serves the link instead ([`startrack_homes::link_home::serve`]); with `--sky` too,
 //! each frame's attitude report (`TM[134,2]`) is sent as the board sends it.
 
 use super::CliError;
-use crate::home::csv_row;
-use crate::sil::{self, SilConfig, SilReport};
 use startrack_core::tracker::{Event, Mode, TrackerConfig};
+use startrack_homes::home::csv_row;
+use startrack_homes::sil::{self, SilConfig, SilReport};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -130,7 +130,7 @@ fn io_error(path: &Path, e: &std::io::Error) -> CliError {
 
 /// Writes the telemetry CSV of `report`.
 pub fn write_telemetry(out: &mut dyn Write, report: &SilReport) -> std::io::Result<()> {
-    writeln!(out, "frame,mode,{}", crate::home::CSV_HEADER)?;
+    writeln!(out, "frame,mode,{}", startrack_homes::home::CSV_HEADER)?;
     for f in &report.frames {
         for m in &f.stars {
             writeln!(
@@ -197,7 +197,7 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
 }
 
 /// Runs `startrack sil --port P`: the SIL with its link on TCP, until stopped.
-pub fn serve(args: &SilArgs) -> Result<crate::link_home::ServeReport, CliError> {
+pub fn serve(args: &SilArgs) -> Result<startrack_homes::link_home::ServeReport, CliError> {
     let Some(port) = args.port else {
         return Err(CliError::Usage("--port is needed to serve the link".into()));
     };
@@ -206,7 +206,7 @@ pub fn serve(args: &SilArgs) -> Result<crate::link_home::ServeReport, CliError> 
             "--link-noise: a probability, 0 to 1".into(),
         ));
     }
-    let config = crate::link_home::ServeConfig {
+    let config = startrack_homes::link_home::ServeConfig {
         sil: config_of(args)?,
         port,
         link_noise: args.link_noise,
@@ -215,7 +215,7 @@ pub fn serve(args: &SilArgs) -> Result<crate::link_home::ServeReport, CliError> 
         flash: args
             .flash
             .clone()
-            .map(|path| crate::link_home::FlashConfig {
+            .map(|path| startrack_homes::link_home::FlashConfig {
                 path,
                 power_cut_at_write: args.power_cut_at_write,
             }),
@@ -225,7 +225,7 @@ pub fn serve(args: &SilArgs) -> Result<crate::link_home::ServeReport, CliError> 
             "--power-cut-at-write: N counts from 1".into(),
         ));
     }
-    crate::link_home::serve(&config, &mut |p| {
+    startrack_homes::link_home::serve(&config, &mut |p| {
         eprintln!("startrack sil: link on 127.0.0.1:{p}");
     })
     .map_err(CliError::Usage)

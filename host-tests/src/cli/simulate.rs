@@ -16,7 +16,7 @@
 //! builds the pixel-phase curves that `startrack process --method cog1` picks for it.
 //!
 //! The scene options ([`SceneMix`]) make the frames of the accuracy Monte Carlo on whole
-//! frames ([`crate::frame_accuracy`]): `--psf-a-list 0.6,1,2` draws each star's width from a
+//! frames ([`crate::cli::accuracy_frames::monte_carlo`]): `--psf-a-list 0.6,1,2` draws each star's width from a
 //! list (no `PSFA` keyword: the width is for the pipeline to find), `--psf-a-field 0.6,2` as
 //! a smooth function of the star's place (field curvature), `--snr-range 10,200` each
 //! star's eq. 8 SNR (5 x 5 box, the mean dark and read noise as the noise) log-uniformly in
@@ -25,11 +25,11 @@
 //! every one with its true dark in `hot.csv`, as a ground calibration would.
 
 use super::{CliError, write_file};
-use crate::accuracy::flux_for_snr;
-use crate::demo::{render_frame, star_field};
 use rand::{RngExt as _, SeedableRng as _};
+use startrack_analysis::accuracy::flux_for_snr;
 use startrack_core::geometry::Segment;
 use startrack_core::window::Rect;
+use startrack_homes::demo::{render_frame, star_field};
 use startrack_sim::fits::{MapF32, RawFrame, write_map, write_raw_frame};
 use startrack_sim::sim::effects::HotPixels;
 use startrack_sim::sim::{SensorParams, Simulator};

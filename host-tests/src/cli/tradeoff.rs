@@ -1,8 +1,8 @@
 //! `startrack tradeoff --out DIR [--quick] [--m7 FILE] [--psf-shapes]`: every centroid
 //! method's cost against its accuracy with the Pareto frontier, its failure maps and its
-//! position bias on non-Gaussian PSFs (see [`crate::tradeoff`]).
+//! position bias on non-Gaussian PSFs (see [`startrack_analysis::tradeoff`]).
 
-use crate::tradeoff::{Options, cost::M7Table, run_all};
+use startrack_analysis::tradeoff::{Options, cost::M7Table, run_all};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;

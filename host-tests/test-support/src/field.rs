@@ -1,7 +1,7 @@
 //! The tracker tests' scene: the default sensor with a seed, a seeded star field and the
 //! sensor's true calibration table.
 
-use startrack_host::demo::star_field;
+use startrack_homes::demo::star_field;
 use startrack_sim::sim::truth::TruthSections;
 use startrack_sim::sim::{SensorParams, Simulator};
 

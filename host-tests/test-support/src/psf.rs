@@ -178,9 +178,9 @@ pub fn ref_cog(
 }
 
 /// Cramer-Rao bound on x for the pixelated Gaussian in `win` (accuracy-theory.md), px: the
-/// library's [`startrack_host::accuracy::crlb_x_px`] in active-area coordinates.
+/// library's [`startrack_analysis::accuracy::crlb_x_px`] in active-area coordinates.
 pub fn crlb_x(win: Win, star: Star, background: f64, read_noise: f64) -> f64 {
-    startrack_host::accuracy::crlb_x_px(
+    startrack_analysis::accuracy::crlb_x_px(
         win.w,
         win.h,
         star.x - f64::from(win.x0),
@@ -237,7 +237,7 @@ pub fn mean_std(v: &[f64]) -> (f64, f64) {
 
 /// Flux in an n x n box giving `snr` by eq. 8 with per-pixel background variance `var_bg`.
 #[allow(unused_imports)]
-pub use startrack_host::accuracy::flux_for_snr;
+pub use startrack_analysis::accuracy::flux_for_snr;
 
 // ---------------------------------------------------------------------------------------------
 // The two loops every centroid test runs: a noise-free sweep over pixel phases and a seeded

@@ -9,10 +9,10 @@
 //! Statistics: 2000 stars per cell, x and y pooled, so an RMS has a relative standard error of
 //! 1/sqrt(4000) = 1.6 % ([`rms_relative_se`]); the ratio tests hold by many standard errors.
 
-use startrack_core::centroid::cog::CogPower;
-use startrack_host::accuracy::{
+use startrack_analysis::accuracy::{
     Cell, Method, Noise, crlb_x_px, flux_for_snr, markdown, rms_relative_se, run,
 };
+use startrack_core::table::pixcorr::CogPower;
 use std::sync::OnceLock;
 
 const WIDTHS_A: [f64; 4] = [0.7, 1.0, 1.5, 2.0];

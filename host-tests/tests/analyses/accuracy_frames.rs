@@ -1,5 +1,5 @@
 //! Accuracy end to end on whole simulated frames of mixed PSF widths
-//! ([`startrack_host::frame_accuracy`]): `simulate --psf-a-list --snr-range --hot-fraction`,
+//! ([`startrack_host::cli::accuracy_frames::monte_carlo`]): `simulate --psf-a-list --snr-range --hot-fraction`,
 //! `calib build` of the true maps and hot list, `process` with its defaults (the flight
 //! method, the width not told), matched to the truth.
 //!
@@ -11,11 +11,11 @@
 //! configuration with the table's field PSF model to the known-width bound.
 
 use startrack_core::tracker::StarFlags;
-use startrack_host::cli::calib_build::build;
-use startrack_host::cli::simulate::{HOT_RATES_E_PER_S, SceneMix, SimulateArgs};
-use startrack_host::frame_accuracy::{
+use startrack_host::cli::accuracy_frames::monte_carlo::{
     BinStats, FrameMc, FrameMcRun, SNR_EDGES, build_args, csv, run, snr_of, stats,
 };
+use startrack_host::cli::calib_build::build;
+use startrack_host::cli::simulate::{HOT_RATES_E_PER_S, SceneMix, SimulateArgs};
 use std::sync::OnceLock;
 
 /// The target: RMS error / CRLB at most this, from a = 0.8 px against the known-width bound
@@ -34,7 +34,10 @@ fn mc_run() -> &'static FrameMcRun {
         };
         let r = run(&mc).expect("the Monte Carlo runs");
         eprintln!("{}", r.model_note);
-        eprintln!("{}", startrack_host::frame_accuracy::markdown(&r.bins));
+        eprintln!(
+            "{}",
+            startrack_host::cli::accuracy_frames::monte_carlo::markdown(&r.bins)
+        );
         r
     })
 }
@@ -92,7 +95,8 @@ fn default_process_is_within_the_target_of_the_bound_for_every_width() {
             .collect();
         let n = stars.len();
         assert!(n >= 100, "a {a}: {n} stars");
-        let bound = |o: &&startrack_host::frame_accuracy::StarOutcome, k: usize| {
+        let bound = |o: &&startrack_host::cli::accuracy_frames::monte_carlo::StarOutcome,
+                     k: usize| {
             if a < 0.8 {
                 o.crlb_width_free_px[k]
             } else {
@@ -318,7 +322,7 @@ fn simulate_draws_widths_snrs_and_hot_pixels_as_asked() {
 /// The flags the harness counts as no clean position include the fit's own verdicts.
 #[test]
 fn poor_fit_and_exclusion_are_not_clean_positions() {
-    use startrack_host::frame_accuracy::BAD_POSITION;
+    use startrack_host::cli::accuracy_frames::monte_carlo::BAD_POSITION;
     for f in [
         StarFlags::POOR_FIT,
         StarFlags::EXCLUDED_PIXEL,
@@ -342,8 +346,8 @@ fn poor_fit_and_exclusion_are_not_clean_positions() {
 /// `accuracy-frames --field-a` runs on it).
 #[test]
 fn a_field_of_widths_is_measured_and_modelled() {
+    use startrack_host::cli::accuracy_frames::monte_carlo::process_args;
     use startrack_host::cli::calib_models::{PsfModelArgs, run_psf_model};
-    use startrack_host::frame_accuracy::process_args;
     let dir = tempfile::tempdir().unwrap();
     let args = scene(
         dir.path(),
@@ -379,7 +383,7 @@ fn a_field_of_widths_is_measured_and_modelled() {
         .stars;
     let csv_path = dir.path().join("stars.csv");
     let mut buf = Vec::new();
-    startrack_host::home::write_csv(&mut buf, &stars).unwrap();
+    startrack_homes::home::write_csv(&mut buf, &stars).unwrap();
     std::fs::write(&csv_path, buf).unwrap();
     let m = run_psf_model(&PsfModelArgs {
         stars: vec![csv_path],
@@ -413,7 +417,10 @@ fn field_run() -> &'static FrameMcRun {
         };
         let r = run(&mc).expect("the Monte Carlo runs");
         eprintln!("{}", r.model_note);
-        eprintln!("{}", startrack_host::frame_accuracy::markdown(&r.bins));
+        eprintln!(
+            "{}",
+            startrack_host::cli::accuracy_frames::monte_carlo::markdown(&r.bins)
+        );
         r
     })
 }

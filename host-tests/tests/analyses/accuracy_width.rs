@@ -16,7 +16,7 @@
 //! documented table (docs/accuracy.md) uses 2000 stars a cell: `startrack accuracy
 //! --width-unknown`. `-- --nocapture` prints the cells.
 
-use startrack_host::accuracy::{MODEL_SCATTER_A_PX, Method, Noise, rms_relative_se, run_cell};
+use startrack_analysis::accuracy::{MODEL_SCATTER_A_PX, Method, Noise, rms_relative_se, run_cell};
 
 const WIDTHS: [f64; 5] = [0.6, 0.8, 1.0, 1.5, 2.0];
 const SNRS: [f64; 3] = [10.0, 30.0, 100.0];
@@ -210,7 +210,7 @@ fn sigmas_hold_or_are_flagged() {
     // The CoG rule: the plain 3x3 CoG of power 1 (pulls up to 18) is always flagged, the
     // corrected 7x7 one on an a = 1 star never.
     let plain = Method::Cog {
-        power: startrack_core::centroid::cog::CogPower::One,
+        power: startrack_core::table::pixcorr::CogPower::One,
         box_side: 3,
         corrected: false,
     };
@@ -222,7 +222,7 @@ fn sigmas_hold_or_are_flagged() {
     assert!(c.pull_rms > 5.0);
     assert_eq!(c.sigma_flagged, c.trials - c.failures);
     let corrected = Method::Cog {
-        power: startrack_core::centroid::cog::CogPower::One,
+        power: startrack_core::table::pixcorr::CogPower::One,
         box_side: 7,
         corrected: true,
     };

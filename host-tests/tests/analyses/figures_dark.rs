@@ -10,7 +10,7 @@
 //!   points. The required bound (<= 1.1) sits 3 of those above the expected ratio (~1.01:
 //!   the measured map adds (250 + 25) / 32 e-^2 to 275 e-^2 per pixel), so a pass is not luck.
 
-use startrack_host::figures::fig5::{DarkMethod, Fig5Params, Fig5Point, run};
+use startrack_analysis::figures::fig5::{DarkMethod, Fig5Params, Fig5Point, run};
 
 const TRIALS: usize = 1000;
 

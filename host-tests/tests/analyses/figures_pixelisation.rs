@@ -16,8 +16,8 @@
 
 use startrack_test_support::psf;
 
-use startrack_host::figures::{Effort, Written};
-use startrack_host::figures::{csv, fig1, fig2, fig3, log_space, phases, systematic};
+use startrack_analysis::figures::{Effort, Written};
+use startrack_analysis::figures::{csv, fig1, fig2, fig3, log_space, phases, systematic};
 
 /// Reference shift (estimate - truth) of a noise-free CoG, 1-D.
 fn ref_shift(a_px: f64, n: u8, power: u8, p: f64) -> f64 {
@@ -199,7 +199,7 @@ fn csv_files_have_the_required_columns_and_a_parameter_header() {
     fig1::write(&dir, Effort::Quick, &mut w).unwrap();
     fig2::write(&dir, Effort::Quick, &mut w).unwrap();
     fig3::write(&dir, Effort::Quick, &mut w).unwrap();
-    startrack_host::figures::fig4::write(&dir, Effort::Quick, &mut w).unwrap();
+    startrack_analysis::figures::fig4::write(&dir, Effort::Quick, &mut w).unwrap();
     for (name, cols) in [
         ("fig1.csv", "a_px,window,rms_px"),
         ("fig2.csv", "a_px,true_x_px,shift_px"),
@@ -225,7 +225,7 @@ fn csv_files_have_the_required_columns_and_a_parameter_header() {
         .collect();
     assert!(a.len() >= 20 && (a[0] - 0.25).abs() < 1e-9 && (a[a.len() - 1] - 8.0).abs() < 1e-9);
     // A PNG per figure where a font is installed (.ci/run installs one).
-    if startrack_host::figures::plot::ensure_font().is_ok() {
+    if startrack_analysis::figures::plot::ensure_font().is_ok() {
         for f in ["fig1.png", "fig2.png", "fig3.png", "fig4.png"] {
             let bytes = std::fs::read(dir.join(f)).unwrap();
             assert!(bytes.starts_with(b"\x89PNG") && bytes.len() > 10_000, "{f}");

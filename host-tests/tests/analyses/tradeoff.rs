@@ -4,13 +4,13 @@
 use crate::common_cli;
 
 use common_cli::startrack;
-use startrack_core::centroid::cog::CogPower;
-use startrack_host::accuracy::{Method, Noise};
-use startrack_host::figures::Written;
-use startrack_host::tradeoff::cost::{M7Table, m7_cost};
-use startrack_host::tradeoff::failures::{self, MapSpec, Perturb};
-use startrack_host::tradeoff::pareto::frontier;
-use startrack_host::tradeoff::{chart, write_chart, write_failures};
+use startrack_analysis::accuracy::{Method, Noise};
+use startrack_analysis::figures::Written;
+use startrack_analysis::tradeoff::cost::{M7Table, m7_cost};
+use startrack_analysis::tradeoff::failures::{self, MapSpec, Perturb};
+use startrack_analysis::tradeoff::pareto::frontier;
+use startrack_analysis::tradeoff::{chart, write_chart, write_failures};
+use startrack_core::table::pixcorr::CogPower;
 
 #[test]
 fn pareto_keeps_exactly_the_undominated_points() {
@@ -121,7 +121,7 @@ fn committed_m7_costs_cover_every_method() {
     let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/m7-costs.csv"))
         .expect("host-tests/m7-costs.csv (cargo m7-bench > host-tests/m7-costs.csv)");
     let t = M7Table::parse(&text).unwrap();
-    for m in startrack_host::tradeoff::methods() {
+    for m in startrack_analysis::tradeoff::methods() {
         let (c, _) = m7_cost(&m, &t).unwrap_or_else(|| panic!("{} has no M7 cost", m.name()));
         assert!(c > 0.0, "{}: {c}", m.name());
     }
@@ -315,7 +315,10 @@ fn psf_shapes_flag_writes_only_the_shapes_csv_the_same_twice() {
     let mut lines = texts[0].lines().filter(|l| !l.starts_with('#'));
     let fields = lines.next().unwrap().split(',').count();
     let rows: Vec<&str> = lines.collect();
-    assert_eq!(rows.len(), 6 * startrack_host::tradeoff::methods().len());
+    assert_eq!(
+        rows.len(),
+        6 * startrack_analysis::tradeoff::methods().len()
+    );
     for l in rows {
         assert_eq!(l.split(',').count(), fields, "{l}");
     }

@@ -1,4 +1,4 @@
-//! Failure-map cells pinned on each side of a boundary (host-tests/src/tradeoff/failures.rs
+//! Failure-map cells pinned on each side of a boundary (host-tests/analysis/src/tradeoff/failures.rs
 //! defines the cells): the plain power-2 CoG 5x5 (pixelisation) is biased below a ~ 1 px
 //! and not at 2 px; every method fails at SNR 1; the Gauss fit passes at SNR 30, a = 1 px; an
 //! uncorrected hot pixel and a close pair break it, their absence does not; a PSF-width
@@ -10,12 +10,12 @@
 //! error is a bounded function of the uniform pixel phase, whose RMS varies less between
 //! samples than a Gaussian's: the same RMS margin is conservative for it.
 
-use startrack_core::centroid::cog::CogPower;
-use startrack_host::accuracy::{Method, rms_relative_se};
-use startrack_host::tradeoff::failures::{
+use startrack_analysis::accuracy::{Method, rms_relative_se};
+use startrack_analysis::tradeoff::failures::{
     BIAS_LIMIT_PX, DETECT_LIMIT, FailCell, Perturb, RMS_OVER_CRLB_LIMIT, Scene, Stats, run_scene,
 };
-use startrack_host::tradeoff::methods;
+use startrack_analysis::tradeoff::methods;
+use startrack_core::table::pixcorr::CogPower;
 
 const N: usize = 400;
 

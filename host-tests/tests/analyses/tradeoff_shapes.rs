@@ -1,4 +1,4 @@
-//! Position bias on non-Gaussian PSFs (host-tests/src/tradeoff/shapes.rs): the simulator's
+//! Position bias on non-Gaussian PSFs (host-tests/analysis/src/tradeoff/shapes.rs): the simulator's
 //! PSF centroid is where it places the star; a power-1 CoG in a box that covers the PSF is
 //! unbiased within its noise and is not once the coma's tail leaves the box; the width-free
 //! fit 7x7 stays within 0.06 px of the centroid on a 1 px coma and flags POOR_FIT on the
@@ -8,12 +8,12 @@
 //! measures; "unbiased" is |mean| below 4 of those. Noise-free numbers are exact functions
 //! of the phases (no tolerance beyond the stated limit).
 
-use startrack_core::centroid::cog::CogPower;
-use startrack_host::accuracy::Method;
-use startrack_host::tradeoff::failures::BACKGROUND_E;
-use startrack_host::tradeoff::shapes::{
+use startrack_analysis::accuracy::Method;
+use startrack_analysis::tradeoff::failures::BACKGROUND_E;
+use startrack_analysis::tradeoff::shapes::{
     CANVAS, ShapeCell, ShapeSpec, flux_e, render, run_shape, shapes,
 };
+use startrack_core::table::pixcorr::CogPower;
 use startrack_sim::sim::effects::PsfShape;
 use startrack_sim::sim::{Effects, SensorParams, Simulator, Star};
 

@@ -534,8 +534,8 @@ const STAR_E: f64 = 3000.0;
 /// of 6 stars of [`STAR_E`]) processed by the tracker with `table`; and the stars matched.
 fn centroid_rms_px(r: &Run, table: &[u8], frames: u32) -> (f64, usize) {
     use startrack_core::tracker::StarFlags;
-    use startrack_host::cli::process::process_frame;
-    use startrack_host::demo::{MATCH_PX, render_frame, star_field, tracker_config};
+    use startrack_homes::demo::{MATCH_PX, render_frame, star_field, tracker_config};
+    use startrack_homes::home::process_frame;
     let t = startrack_core::table::CalibTable::parse(table).unwrap();
     let (mut ss, mut n) = (0.0, 0usize);
     for k in 0..frames {

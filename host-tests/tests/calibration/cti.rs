@@ -160,8 +160,8 @@ fn the_tracker_applies_the_table_coefficients() {
     use startrack_core::calib::cti::CtiCorrection;
     use startrack_core::table::{CalibTable, SectionKind};
     use startrack_core::tracker::TrackerConfig;
-    use startrack_host::cli::process::{HOST_CAPACITY, process_frame};
-    use startrack_host::demo::render_frame;
+    use startrack_homes::demo::render_frame;
+    use startrack_homes::home::{HOST_CAPACITY, process_frame};
     use table_fixtures::{RawSection, RawTable, cti_coeffs, enc_cti};
 
     let (sim, plain) = common_field::field(5, 30);

@@ -15,9 +15,9 @@ use startrack_core::tracker::{
     FixedTemperature, Mode, Ports, TableStore, Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_ground::{decode_tm, frame_telecommand};
-use startrack_host::flash_home::{FLASH_TILE_LOG2, FlashHome};
-use startrack_host::home::{FrameClock, SimLines, block_on};
-use startrack_host::sil::stars_at;
+use startrack_homes::flash_home::{FLASH_TILE_LOG2, FlashHome};
+use startrack_homes::home::{FrameClock, SimLines, block_on};
+use startrack_homes::sil::stars_at;
 use startrack_sim::sim::effects::{Effects, HotPixels};
 use startrack_sim::sim::truth::TruthSections;
 use startrack_sim::sim::{SensorParams, Simulator, Star};

@@ -327,8 +327,8 @@ fn sil_unlisted_hot_pixels_are_confirmed_and_excluded() {
     use startrack_core::tracker::{
         FixedTable, FixedTemperature, Mode, Ports, Tracker, TrackerBuffers, TrackerConfig,
     };
-    use startrack_host::home::{FrameClock, Recorder, SimLines, block_on};
-    use startrack_host::sil::{SilConfig, scene, stars_at};
+    use startrack_homes::home::{FrameClock, Recorder, SimLines, block_on};
+    use startrack_homes::sil::{SilConfig, scene, stars_at};
     use startrack_sim::sim::effects::{Effects, HotPixels};
     use startrack_sim::sim::truth::TruthSections;
     use startrack_sim::sim::{SensorParams, Simulator};

@@ -6,8 +6,8 @@ use startrack_test_support::table_fixtures;
 
 use fixed::types::{I16F16, U0F16, U0F32, U8F8};
 use proptest::prelude::*;
-use startrack_core::centroid::cog::CogPower;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_core::table::{
     CalibTable, CtiCoeffs, CtiOutput, DIR_ENTRY_LEN, HEADER_LEN, HotPixel, HotPolicy, PsfModel,

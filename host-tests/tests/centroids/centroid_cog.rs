@@ -9,8 +9,9 @@
 use startrack_test_support::psf;
 
 use psf::{Star, Sweep, WIDTHS_A, Win, phases, ref_cog, render, sigma_of_a, to_electrons, to_f64};
-use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{Anchor, CogParams, cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::units::Electrons;
 use startrack_core::window::Window;
 

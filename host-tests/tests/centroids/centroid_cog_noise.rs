@@ -10,8 +10,9 @@ use startrack_test_support::psf;
 use psf::{
     McResult, MonteCarlo, Star, Win, crlb_x, flux_for_snr, mean_std, ref_cog, render, sigma_of_a,
 };
-use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{Anchor, CogParams, cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
+use startrack_core::table::pixcorr::CogPower;
 
 const BG_E: f64 = 100.0;
 const READ_E: f64 = 5.0;

@@ -6,9 +6,10 @@ use startrack_test_support::psf;
 use proptest::prelude::*;
 use psf::{Star, Win, render, sigma_of_a, to_electrons};
 use startrack_core::calib::PixelFlags;
-use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{Anchor, CogParams, cog};
 use startrack_core::centroid::gauss_fit::{GaussFitParams, gauss_fit};
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 

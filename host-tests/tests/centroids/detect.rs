@@ -255,13 +255,13 @@ fn simulated_frame_end_to_end() {
         seed: 11,
         ..SensorParams::default()
     };
-    let stars = startrack_host::demo::star_field(11, 25, &params);
+    let stars = startrack_homes::demo::star_field(11, 25, &params);
     let sim = Simulator::new(params.clone(), stars.clone());
     let g = params.geometry;
     let table = sim.truth_table(TruthSections::ALL).unwrap();
     let table = CalibTable::parse(&table).unwrap();
-    let raw = startrack_host::demo::render_frame(&sim);
-    let levels = startrack_host::home::frame_levels(&table, &raw).unwrap();
+    let raw = startrack_homes::demo::render_frame(&sim);
+    let levels = startrack_homes::home::frame_levels(&table, &raw).unwrap();
     let lines: Vec<_> = raw.chunks_exact(g.line_len()).zip(&levels.lines).collect();
     let cal = FrameCalibration::new(
         table,

@@ -11,8 +11,9 @@
 use startrack_test_support::psf;
 
 use psf::{Star, Win, render, sigma_of_a, to_electrons};
-use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{Anchor, CogParams, cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground, PixCorrError, PixCorrSet};
 use startrack_core::window::Window;
 use startrack_sim::pixcorr::{BuildError, CurveSpec, build_curve, measured_phase};

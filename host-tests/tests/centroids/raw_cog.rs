@@ -11,14 +11,16 @@ use startrack_test_support::psf;
 use fixed::types::U8F8;
 use proptest::prelude::*;
 use psf::{Rng, Star, Win, add_noise, render, sigma_of_a};
+use startrack_analysis::accuracy::flux_for_snr;
 use startrack_core::calib::formula::QUANTISATION_E;
 use startrack_core::calib::{FrameCalibration, FrameConditions, LineLevels, PixelFlags};
-use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{Anchor, CogParams, cog};
 use startrack_core::centroid::raw_cog::{
     MAX_BOX_SIDE, PlanError, RawCog, RawCogParams, RawCogPlan, RawWindow, raw_cog,
 };
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::{
     CalibTable, HotPixel, HotPolicy, MapHeader, MapSpec, TableSpec, write_table,
 };
@@ -26,7 +28,6 @@ use startrack_core::units::{
     ColumnBiasAdu, DARK_SCALE_LIMIT_E, DarkRel, ERatePerS, Electrons, FlatInv, GainEPerAdu,
 };
 use startrack_core::window::{Rect, Window};
-use startrack_host::accuracy::flux_for_snr;
 
 /// 40 x 24 active pixels on two outputs (the split at active column 20).
 const G: ReadoutGeometry = ReadoutGeometry {

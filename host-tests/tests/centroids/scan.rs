@@ -20,15 +20,15 @@ struct Frame {
 }
 
 fn frame(params: SensorParams, n_stars: usize, tile_log2: u8) -> Frame {
-    let stars = startrack_host::demo::star_field(params.seed, n_stars, &params);
+    let stars = startrack_homes::demo::star_field(params.seed, n_stars, &params);
     let sim = Simulator::new(params.clone(), stars);
     let g = params.geometry;
     let table = sim
         .truth_table_tiled(TruthSections::ALL, tile_log2)
         .unwrap();
     let parsed = CalibTable::parse(&table).unwrap();
-    let raw = startrack_host::demo::render_frame(&sim);
-    let levels = startrack_host::home::frame_levels(&parsed, &raw).unwrap();
+    let raw = startrack_homes::demo::render_frame(&sim);
+    let levels = startrack_homes::home::frame_levels(&parsed, &raw).unwrap();
     let lines = raw
         .chunks_exact(g.line_len())
         .map(<[u16]>::to_vec)
@@ -190,7 +190,7 @@ fn scan_noise_candidates_no_more_than_with_every_row_background() {
             25,
             3,
         );
-        let stars = startrack_host::demo::star_field(seed, 25, &f.params);
+        let stars = startrack_homes::demo::star_field(seed, 25, &f.params);
         let g = f.params.geometry;
         let table = CalibTable::parse(&f.table).unwrap();
         let cal = FrameCalibration::new(

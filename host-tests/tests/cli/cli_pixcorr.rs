@@ -8,8 +8,9 @@ use crate::common_cli;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::CentroidMethod;
 use startrack_core::tracker::{StarFlags, StarRecord};
+use startrack_homes::home::Processed;
 use startrack_host::cli::calib_build::{CalibBuildArgs, build};
-use startrack_host::cli::process::{ProcessArgs, Processed, measure};
+use startrack_host::cli::process::{ProcessArgs, measure};
 use startrack_host::cli::simulate::{SimFiles, SimulateArgs};
 use std::path::{Path, PathBuf};
 
@@ -181,7 +182,7 @@ fn calib_build_adds_the_curves_and_reports_them() {
     // The tracker's CoG with the flight window (power 1, box 5, median perimeter) finds
     // its curve in a table built with the default boxes.
     let fw = t.pixcorr().find(
-        startrack_core::centroid::cog::CogPower::One,
+        startrack_core::table::pixcorr::CogPower::One,
         startrack_core::tracker::TrackerConfig::FLIGHT.box_px(),
         startrack_core::table::pixcorr::PixCorrBackground::PerimeterMedian,
         1.2,

@@ -7,9 +7,9 @@
 
 use startrack_core::link::TableUpload;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
+use startrack_homes::flash_home::{FlashHome, flash_table};
+use startrack_homes::sil::SilConfig;
 use startrack_host::cli::sil::POWER_CUT_EXIT_CODE;
-use startrack_host::flash_home::{FlashHome, flash_table};
-use startrack_host::sil::SilConfig;
 use startrack_sim::flash_model::CRC32;
 use startrack_sim::sim::truth::TruthSections;
 use startrack_sim::sim::{SensorParams, Simulator};

@@ -7,7 +7,7 @@ use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::{FlashTables, TableUpload, UploadRefusal, refusal_of};
 use startrack_core::store::{FlashStore, H743_BANK2, StoreError, TableKind};
 use startrack_core::table::CalibTable;
-use startrack_host::sil::SilConfig;
+use startrack_homes::sil::SilConfig;
 use startrack_sim::flash_model::CRC32;
 use startrack_sim::flash_model::{BANK_B, MockFlash};
 use startrack_sim::sim::SensorParams;
@@ -26,7 +26,7 @@ fn table() -> Vec<u8> {
         seed: sc.seed,
         ..SensorParams::default()
     };
-    startrack_host::flash_home::flash_table(&sc, &params).expect("truth table")
+    startrack_homes::flash_home::flash_table(&sc, &params).expect("truth table")
 }
 
 fn store() -> FlashStore<MockFlash> {

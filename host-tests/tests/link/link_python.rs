@@ -12,7 +12,7 @@ use startrack_core::tracker::{
     Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_ground::{decode_tm, frame_telecommand};
-use startrack_host::link_home::MemoryTables;
+use startrack_homes::link_home::MemoryTables;
 use std::process::Command;
 
 fn python_ready() -> Result<(), String> {
@@ -100,7 +100,7 @@ fn spacepackets_decodes_the_telemetry() {
         false_probability: 1e-40,
         time_us: 987_654,
     };
-    link.send_attitude(&startrack_core::link::AttitudeReport {
+    link.send_attitude(&startrack_core::link::telemetry::AttitudeReport {
         frame: 7,
         fix: Ok(fix),
     });

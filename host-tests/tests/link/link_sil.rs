@@ -5,9 +5,9 @@
 use startrack_core::link::WindowKind;
 use startrack_core::tracker::Mode;
 use startrack_ground::{Ground, GroundError};
+use startrack_homes::link_home::{ServeConfig, ServeReport, serve};
+use startrack_homes::sil::SilConfig;
 use startrack_host::cli::gse::{self, GseArgs, GseCommand};
-use startrack_host::link_home::{ServeConfig, ServeReport, serve};
-use startrack_host::sil::SilConfig;
 use startrack_sim::sim::truth::TruthSections;
 use startrack_sim::sim::{SensorParams, Simulator};
 use std::sync::Arc;

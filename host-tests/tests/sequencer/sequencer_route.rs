@@ -13,9 +13,9 @@ use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
     FixedTable, FixedTemperature, LineSource, Mode, Ports, SourceLine, Tracker, TrackerBuffers,
 };
+use startrack_homes::home::{FrameClock, FrameLines, Recorder, block_on};
+use startrack_homes::sil::{self, SIL_CAPACITY, SilConfig};
 use startrack_host::cli::readout_plan::{self, ReadoutPlanArgs, plan_cost};
-use startrack_host::home::{FrameClock, FrameLines, Recorder, block_on};
-use startrack_host::sil::{self, SIL_CAPACITY, SilConfig};
 use startrack_sim::ccd_model::CcdModel;
 use startrack_sim::sim::{SensorParams, Simulator};
 use std::convert::Infallible;

@@ -16,8 +16,8 @@ use startrack_core::tracker::{
     TrackerConfig,
 };
 use startrack_core::units::{ERatePerS, Kelvin};
-use startrack_host::home::{FrameClock, SimLines, block_on};
-use startrack_host::link_home::MemoryTables;
+use startrack_homes::home::{FrameClock, SimLines, block_on};
+use startrack_homes::link_home::MemoryTables;
 use startrack_sim::sim::effects::{DarkLaw as SimDarkLaw, Effects};
 use startrack_sim::sim::truth::TruthSections;
 use startrack_sim::sim::{SensorParams, Simulator};

@@ -4,7 +4,7 @@
 
 #[test]
 fn full_calibration_leaves_only_noise() {
-    let r = startrack_host::demo::run(7, 40).expect("demo runs");
+    let r = startrack_homes::demo::run(7, 40).expect("demo runs");
     // Every star of the field is bright enough to be found, and nothing else is: one pair
     // of this field, 5.2 px apart, is found as one detection flagged blended.
     assert_eq!(
@@ -39,8 +39,8 @@ fn full_calibration_leaves_only_noise() {
 
 #[test]
 fn reruns_print_identical_numbers() {
-    let a = startrack_host::demo::run(3, 4).unwrap();
-    let b = startrack_host::demo::run(3, 4).unwrap();
+    let a = startrack_homes::demo::run(3, 4).unwrap();
+    let b = startrack_homes::demo::run(3, 4).unwrap();
     for (x, y) in a.stars.iter().zip(&b.stars) {
         assert_eq!((x.flux_e, x.chi2), (y.flux_e, y.chi2));
     }
@@ -53,7 +53,7 @@ fn reruns_print_identical_numbers() {
 /// reported (a bias, a wrong window, a lost pixel offset) or sigmas far too large both fail.
 #[test]
 fn centroid_errors_match_the_reported_sigmas() {
-    let r = startrack_host::demo::run(7, 40).expect("demo runs");
+    let r = startrack_homes::demo::run(7, 40).expect("demo runs");
     let (chi2, k) = r.centroid_chi2();
     // Blends and flagged windows are left out; most of the field must remain.
     assert!(k >= 2 * 30, "only {} unflagged stars", k / 2);
@@ -76,7 +76,8 @@ fn centroid_errors_match_the_reported_sigmas() {
 /// of its sigmas on each axis, with most stars identified.
 #[test]
 fn demo_over_the_sky_ends_in_an_attitude_within_its_covariance() {
-    let report = startrack_host::demo::run_scene(1, startrack_host::demo::DemoScene::Sky).unwrap();
+    let report =
+        startrack_homes::demo::run_scene(1, startrack_homes::demo::DemoScene::Sky).unwrap();
     let check = report.attitude.expect("a sky demo checks the attitude");
     let fix = check.fix.expect("an attitude");
     assert!(fix.matched >= 20, "{fix:?}");
@@ -89,5 +90,5 @@ fn demo_over_the_sky_ends_in_an_attitude_within_its_covariance() {
         );
     }
     // The random-star demo has no attitude to check.
-    assert!(startrack_host::demo::run(1, 3).unwrap().attitude.is_none());
+    assert!(startrack_homes::demo::run(1, 3).unwrap().attitude.is_none());
 }

@@ -5,7 +5,7 @@
 use rand::SeedableRng;
 use startrack_core::safe::ThermoSource;
 use startrack_core::tracker::{Mode, TrackerConfig};
-use startrack_host::sil::{self, SilConfig};
+use startrack_homes::sil::{self, SilConfig};
 use startrack_sim::sky::field::{FieldSpec, random_attitude};
 use startrack_sim::sky::scene::SkyScene;
 

@@ -7,7 +7,7 @@ use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
 use startrack_core::solver::{SolveError, SolveMode, Solver, SolverConfig};
 use startrack_core::tracker::{Provenance, StarFlags, StarRecord};
-use startrack_host::sil::{self, SilConfig};
+use startrack_homes::sil::{self, SilConfig};
 use startrack_sim::sky::field::{FieldSpec, random_attitude, render};
 use startrack_sim::sky::scene::{SkyScene, committed_catalog};
 
@@ -157,7 +157,7 @@ fn sil_over_the_sky_solves_every_frame_within_its_covariance() {
 #[test]
 fn attitude_report_round_trips_and_refuses_garbage() {
     use startrack_core::link::telemetry::ATTITUDE_LEN;
-    use startrack_core::link::{AttitudeMissing, AttitudeReport};
+    use startrack_core::link::telemetry::{AttitudeMissing, AttitudeReport};
     let bytes = committed_catalog().unwrap();
     let cat = Catalog::parse(&bytes).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);

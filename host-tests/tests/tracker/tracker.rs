@@ -25,10 +25,10 @@ use startrack_core::tracker::{
 };
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
-use startrack_host::cli::process::{HOST_CAPACITY, process_frame};
-use startrack_host::demo::render_frame;
-use startrack_host::home::{SimLines, acquire_once, frame_levels};
-use startrack_host::sil::{self, SilConfig};
+use startrack_homes::demo::render_frame;
+use startrack_homes::home::{HOST_CAPACITY, process_frame};
+use startrack_homes::home::{SimLines, acquire_once, frame_levels};
+use startrack_homes::sil::{self, SilConfig};
 use startrack_sim::sim::SensorParams;
 
 /// The default SIL run: what `startrack sil --frames 20` does.

@@ -12,7 +12,7 @@ use startrack_core::tracker::{
     CentroidMethod, CommandError, ConfigError, Event, FrameInputs, LineOutcome, Mode, ModeReason,
     Tracker, TrackerBuffers, TrackerConfig,
 };
-use startrack_host::home::Recorder;
+use startrack_homes::home::Recorder;
 use startrack_sim::sim::SensorParams;
 
 /// A tracker on the default sensor with its true table, and a recorder.

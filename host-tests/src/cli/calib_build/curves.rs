@@ -7,7 +7,7 @@
 
 use super::args::{CalibBuildArgs, parse_list};
 use crate::cli::CliError;
-use startrack_core::centroid::cog::CogPower;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_sim::pixcorr::{Curve, CurveSpec, build_curve};
 

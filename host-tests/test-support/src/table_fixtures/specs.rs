@@ -3,8 +3,8 @@
 //! two hand-encoded pixel-phase curves), and the full and gains-only specs built from them.
 //! Cost: one value per tile, column or list entry.
 
-use startrack_core::centroid::cog::CogPower;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::table::{
     CtiCoeffs, CtiOutput, HotPixel, HotPolicy, MapSpec, PsfModel, TableSpec, write_table,

@@ -106,7 +106,7 @@ fn pixcorr_write_checks_the_curve_count() {
 
 #[test]
 fn pixcorr_curve_from_the_host_builder_round_trips_and_corrects() {
-    use startrack_core::centroid::cog::CogPower;
+    use startrack_core::table::pixcorr::CogPower;
     use startrack_core::table::pixcorr::PixCorrBackground;
     use startrack_sim::pixcorr::{CurveSpec, build_curve, measured_phase};
     let spec = CurveSpec {

@@ -541,7 +541,7 @@ fn psf_shape_table_is_its_csv() {
 /// `host-tests/figures/accuracy-frames.csv` (its `--csv`), cell for cell.
 #[test]
 fn frames_table_is_its_csv() {
-    use startrack_host::frame_accuracy::{from_csv, markdown};
+    use startrack_host::cli::accuracy_frames::monte_carlo::{from_csv, markdown};
     let bins = from_csv(&read("host-tests/figures/accuracy-frames.csv"))
         .expect("host-tests/figures/accuracy-frames.csv: rows of accuracy-frames --csv");
     assert_eq!(bins.len(), 30, "two configurations, 5 widths, 3 SNR bins");
@@ -559,7 +559,7 @@ fn frames_table_is_its_csv() {
 /// markdown of `host-tests/figures/accuracy-frames-field.csv` (its `--csv`), cell for cell.
 #[test]
 fn field_frames_table_is_its_csv() {
-    use startrack_host::frame_accuracy::{from_csv, markdown};
+    use startrack_host::cli::accuracy_frames::monte_carlo::{from_csv, markdown};
     let bins = from_csv(&read("host-tests/figures/accuracy-frames-field.csv")).expect(
         "host-tests/figures/accuracy-frames-field.csv: rows of accuracy-frames --field-a --csv",
     );

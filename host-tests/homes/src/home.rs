@@ -17,9 +17,10 @@ use startrack_core::link::LinkService;
 use startrack_core::readout::ReadoutRequest;
 use startrack_core::safe::{FaultRecord, Health, SetupFaults};
 use startrack_core::table::CalibTable;
+use startrack_core::table::pixcorr::{CurveHeader, PixCorrBackground};
 use startrack_core::tracker::{
     Clock, Event, FixedTable, FixedTemperature, FrameSummary, LineSource, LineSummary, Mode,
-    SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
+    SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig, select_curve,
 };
 use startrack_core::units::Electrons;
 use startrack_core::units::Kelvin;
@@ -30,6 +31,58 @@ use std::convert::Infallible;
 /// Stars a frame the host's tracker keeps (the board: 32): room for any field, so that a
 /// miss is a detection miss, not a full list; losses are still counted.
 pub const HOST_CAPACITY: usize = 1024;
+
+/// What the tracker measured on one recorded frame ([`process_frame`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Processed {
+    /// The acquisition frame's stars, as reported.
+    pub stars: Vec<StarRecord>,
+    /// Its summary.
+    pub summary: FrameSummary,
+    /// The configuration the tracker ran with.
+    pub config: TrackerConfig,
+    /// The pixel-phase curve a CoG method used (`None`: the Gauss fit, or no curve matched).
+    pub curve: Option<CurveHeader>,
+}
+
+/// Runs the tracker on one recorded frame `raw` (row-major, the table's geometry): a
+/// standby frame for the dark scale, then an acquisition frame. Returns the acquisition
+/// frame's stars and summary.
+pub fn process_frame(
+    table: CalibTable<'_>,
+    raw: &[u16],
+    config: TrackerConfig,
+    temperature_k: Option<Kelvin>,
+) -> Result<Processed, String> {
+    let geometry = *table.geometry();
+    let mut source = FrameLines::new(geometry, raw).ok_or_else(|| {
+        format!(
+            "frame has {} samples, the table's geometry needs {}",
+            raw.len(),
+            usize::from(geometry.lines) * geometry.line_len()
+        )
+    })?;
+    let frame = acquire_once(config, table, temperature_k, &mut source)?;
+    let curve = config
+        .acquisition_method
+        .cog_power()
+        .and_then(|p| {
+            select_curve(
+                &table,
+                &config,
+                p,
+                config.box_px(),
+                PixCorrBackground::PerimeterMedian,
+            )
+        })
+        .map(|c| c.header());
+    Ok(Processed {
+        stars: frame.stars,
+        summary: frame.summary,
+        config,
+        curve,
+    })
+}
 
 /// A fresh host tracker run on one frame as the board runs after start-up: a standby frame
 /// (the dark scale from the covered columns), then an acquisition frame calibrated with

@@ -353,7 +353,7 @@ pub fn write(
     w: &mut Written,
 ) -> Result<(), FigureError> {
     let header = vec![
-        "Position bias of every centroid method on non-Gaussian PSFs (startrack tradeoff --psf-shapes); definitions in host-tests/src/tradeoff/shapes.rs".to_string(),
+        "Position bias of every centroid method on non-Gaussian PSFs (startrack tradeoff --psf-shapes); definitions in host-tests/analysis/src/tradeoff/shapes.rs".to_string(),
         format!(
             "true centre: the PSF's centroid (first moment); core a = {A_PX} px per Gaussian part; defocus: ring of radius size_px; coma: tail of length size_px along +x; background {BACKGROUND_E} e-/px, read noise {READ_NOISE_E} e-"
         ),

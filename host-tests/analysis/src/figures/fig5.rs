@@ -42,9 +42,10 @@ use rand::{RngExt, SeedableRng};
 use startrack_core::calib::{
     DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels, PixelFlags,
 };
-use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{Anchor, CogParams, cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::table::CalibTable;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::units::{Electrons, Kelvin};
 use startrack_core::window::{Rect, Window};
 use startrack_sim::sim::{SensorParams, Simulator, Star};

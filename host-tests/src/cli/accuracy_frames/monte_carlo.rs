@@ -36,14 +36,14 @@
 //! four 9 x 9 Fisher sums per star. The files of each frame (18 MB) are deleted once the
 //! frame is measured.
 
-use crate::accuracy::{crlb_x_px, crlb_x_width_free_px, rms_relative_se};
 use crate::cli::CliError;
 use crate::cli::calib_build::{CalibBuildArgs, build};
 use crate::cli::calib_models::{PsfModelArgs, run_psf_model};
 use crate::cli::process::{ProcessArgs, measure};
 use crate::cli::simulate::{SceneMix, SimFiles, SimulateArgs, params};
-use crate::home::write_csv;
+use startrack_analysis::accuracy::{crlb_x_px, crlb_x_width_free_px, rms_relative_se};
 use startrack_core::tracker::{StarFlags, StarRecord};
+use startrack_homes::home::write_csv;
 use startrack_sim::sim::Simulator;
 use startrack_sim::sim::psf::sigma_of_a;
 use std::fmt::Write as _;
@@ -312,7 +312,7 @@ fn read_truth(path: &Path) -> Result<Vec<[f64; 4]>, CliError> {
 }
 
 /// The eq. 8 SNR (5 x 5 box, all the signal in it) of `signal_e` on per-pixel variance
-/// `var_e2`: the inverse of [`crate::accuracy::flux_for_snr`].
+/// `var_e2`: the inverse of [`startrack_analysis::accuracy::flux_for_snr`].
 pub fn snr_of(signal_e: f64, var_e2: f64) -> f64 {
     signal_e / (signal_e + 25.0 * var_e2).sqrt()
 }

@@ -140,7 +140,7 @@ pub fn write_failures(
     w: &mut Written,
 ) -> Result<(), FigureError> {
     let header = vec![
-        "Failure maps of every centroid method (startrack tradeoff); definitions in host-tests/src/tradeoff/failures.rs".to_string(),
+        "Failure maps of every centroid method (startrack tradeoff); definitions in host-tests/analysis/src/tradeoff/failures.rs".to_string(),
         format!(
             "{} stars per scene, uniform pixel phase, background {} e-/px, read noise {} e-, seed {}; SNR by eq. 8 in 5x5; sweeps at a = {} px, SNR {}",
             spec.trials,

@@ -41,7 +41,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson, Uniform};
 use startrack_core::centroid::CentroidInput;
-use startrack_core::centroid::cog::CogPower;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 use startrack_sim::sim::psf::{pixel_fraction, sigma_of_a};

@@ -8,8 +8,9 @@
 //! (positions near x = 100 px, where an f32 step is 7.6e-6 px) leaves up to ~1e-5 px, the
 //! tolerance `figures_pixelisation` checks every shift to against an exact f64 computation.
 
-use startrack_core::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{Anchor, CogParams, cog};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 use startrack_sim::sim::psf::{pixel_fraction, sigma_of_a};

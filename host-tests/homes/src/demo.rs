@@ -9,8 +9,8 @@
 //! also goes through the core's attitude stage: the printout ends with the attitude's error
 //! against the truth.
 
-use crate::cli::process::{HOST_CAPACITY, process_frame};
 use crate::home::frame_levels;
+use crate::home::{HOST_CAPACITY, process_frame};
 use rand::{RngExt, SeedableRng};
 use startrack_core::calib::{FrameCalibration, FrameConditions, PixelFlags};
 use startrack_core::table::CalibTable;
@@ -239,7 +239,7 @@ pub fn run_scene(seed: u64, scene: DemoScene) -> Result<DemoReport, String> {
     let raw = render_frame(&sim);
 
     let config = tracker_config();
-    let result = process_frame(full, &raw, config, None).map_err(|e| e.to_string())?;
+    let result = process_frame(full, &raw, config, None)?;
     // The windows calibrated again, with every correction and with gains and over-scan
     // only, to show what the maps are worth.
     let levels_full = frame_levels(&full, &raw).map_err(|e| e.to_string())?;

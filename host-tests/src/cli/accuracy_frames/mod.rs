@@ -1,11 +1,13 @@
 //! `startrack accuracy-frames`: the end-to-end accuracy Monte Carlo on whole simulated frames
-//! of mixed PSF widths ([`crate::frame_accuracy`]): simulate, `calib build`, `process` with
+//! of mixed PSF widths ([`monte_carlo`]): simulate, `calib build`, `process` with
 //! defaults, without and with a field PSF model in the table; prints the markdown table and
 //! optionally writes its CSV. Cost: about 3 s of CPU per frame in the dev profile (the full
 //! table, 20 frames: a minute of CPU).
 
+pub mod monte_carlo;
+
 use super::CliError;
-use crate::frame_accuracy::{FrameMc, FrameMcRun, csv, markdown, run as run_mc};
+use monte_carlo::{FrameMc, FrameMcRun, csv, markdown, run as run_mc};
 use std::path::PathBuf;
 
 /// Options of `startrack accuracy-frames`.

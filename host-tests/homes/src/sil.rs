@@ -23,12 +23,13 @@ use crate::home::{FrameClock, Recorder, SimLines, block_on, host_health};
 use rand::{RngExt, SeedableRng};
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
-use startrack_core::centroid::cog::CogPower;
 use startrack_core::cycle::{CyclePorts, FrameCycle};
-use startrack_core::link::{Housekeeping, LinkService};
+use startrack_core::link::LinkService;
+use startrack_core::link::telemetry::Housekeeping;
 use startrack_core::safe::Health;
 use startrack_core::solver::{Fix, SolveError, SolveMode, Solver, SolverConfig};
 use startrack_core::table::CalibTable;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_core::tracker::{
     Event, FixedTable, FixedTemperature, FrameSummary, Mode, StarRecord, Tracker, TrackerBuffers,

@@ -31,12 +31,13 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal, Poisson};
 use startrack_core::centroid::cog::{
-    Anchor, CogParams, CogPower, cog, sigma_unreliable as cog_sigma_unreliable,
+    Anchor, CogParams, cog, sigma_unreliable as cog_sigma_unreliable,
 };
 use startrack_core::centroid::gauss_fit::{
     GaussFitParams, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width, gauss_fit_width_prior,
 };
 use startrack_core::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::{PixCorr, PixCorrBackground};
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};

@@ -1,0 +1,15 @@
+//! The host's homes of the core's frame cycle ([`startrack_core::cycle`]): each binds the
+//! cycle's ports (lines, clock, temperature, telemetry, link, health) to the simulated sensor
+//! and holds no processing of its own, so what runs here is what runs on the board.
+//!
+//! - [`home`]: the ports every host home shares, and one recorded frame through the tracker;
+//! - [`sil`]: software in the loop, frame after frame on the simulated sky;
+//! - [`link_home`]: the SIL serving its command and telemetry link on TCP;
+//! - [`flash_home`]: the served SIL's table store over the H7 flash model;
+//! - [`demo`]: `cargo demo`'s frame, compared with the simulator's truth.
+
+pub mod demo;
+pub mod flash_home;
+pub mod home;
+pub mod link_home;
+pub mod sil;
