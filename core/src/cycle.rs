@@ -22,7 +22,8 @@
 //! few additions for housekeeping. Memory: the tracker (owned), a borrowed
 //! [`LinkService`], the solver (a catalog reference and a prior).
 
-use crate::link::{Housekeeping, LinkService, TableInfo, TableUpload, Targets, WindowReader};
+use crate::link::telemetry::Housekeeping;
+use crate::link::{LinkService, TableInfo, TableUpload, Targets, WindowReader};
 use crate::safe::{Health, ThermoSource};
 use crate::solver::{Fix, SolveError, Solver};
 use crate::tracker::{
@@ -235,7 +236,10 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         let attitude = self.solver.as_mut().map(|solver| {
             let result = solver.update(self.tracker.stars(), summary.start_us);
             self.link
-                .send_attitude(&crate::link::AttitudeReport::of(summary.frame, &result));
+                .send_attitude(&crate::link::telemetry::AttitudeReport::of(
+                    summary.frame,
+                    &result,
+                ));
             result
         });
         self.health.on_frame(&summary);

@@ -1,4 +1,4 @@
-//! The field PSF model (table section 9, [`startrack_core::table::psfmodel`]) fitted to the
+//! The field PSF model (table section 9, [`startrack_core::table::PsfModel`]) fitted to the
 //! stars of processed frames: each star's position and measured width `psf_a_px` (the
 //! `stars.csv` of `startrack process`), a 2-D polynomial of total degree 0..=3 in the core's
 //! normalised coordinates, by least squares (nalgebra's SVD: the design matrix of a low
@@ -15,7 +15,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use startrack_core::table::PsfModel;
-use startrack_core::table::psfmodel::{MAX_PSF_DEGREE, MAX_PSF_TERMS, psf_terms};
+use startrack_core::table::{MAX_PSF_DEGREE, MAX_PSF_TERMS, psf_terms};
 
 /// Stars further than this many scatters from the model are left out of the next round.
 pub const CLIP_SIGMA: f64 = 3.0;

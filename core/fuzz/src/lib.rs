@@ -19,8 +19,9 @@ use startrack_core::catalog::{Catalog, NRAD_PER_RAD};
 use startrack_core::geometry::{Output, ReadoutGeometry};
 use startrack_core::link::framing::{Deframer, Pushed, encode, encoded_len_max};
 use startrack_core::link::protocol::{MAX_TC_LEN, MAX_TM_LEN, TABLE_KIND_CALIBRATION};
+use startrack_core::link::telemetry::LinkCounters;
 use startrack_core::link::{
-    LinkCounters, LinkService, NoWindows, TableInfo, TableUpload, Targets, UploadRefusal,
+    LinkService, NoWindows, TableInfo, TableUpload, Targets, UploadRefusal,
 };
 use startrack_core::table::CalibTable;
 use startrack_core::table::camera::COLOUR_RANGE_BV_MAG;

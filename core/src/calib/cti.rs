@@ -3,7 +3,7 @@
 //! later, so a star's centroid moves away from the output amplifier along both axes. The
 //! shift grows with the number of transfers and shrinks with the signal (a faint star
 //! loses a larger fraction of its charge). This module removes that shift from a measured
-//! centroid, from the coefficients of table section 8 ([`crate::table::cti`]).
+//! centroid, from the coefficients of table section 8 ([`crate::table::CtiCoeffs`]).
 //!
 //! # Model
 //! For a star of measured flux `F` (e-) at active pixel (`x`, `y`), read by output `o`:

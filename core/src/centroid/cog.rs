@@ -72,7 +72,7 @@ use super::prepared::{Measured, Prepared};
 use super::{Background, Centroid, CentroidFlags, CentroidInput};
 /// Weights of the centre of gravity (defined with the pixel-phase curve format, which records
 /// the power a curve was made for).
-pub use crate::table::pixcorr::CogPower;
+use crate::table::pixcorr::CogPower;
 
 /// Where the box is centred.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

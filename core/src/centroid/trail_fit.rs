@@ -53,12 +53,13 @@
 //! - A trail longer than the window: the fit sees a truncated segment, the position along
 //!   the trail is set by the window's edges (choose the window from the predicted trail).
 
-use super::cog::{CogPower, cog_in_box, usable_sigma_px};
+use super::cog::{cog_in_box, usable_sigma_px};
 use super::gauss_fit::{Normal, solve, variance};
 use super::math::{self, pos};
 use super::pixel_box::PixelBox;
 use super::prepared::{Measured, Prepared};
 use super::{Background, Centroid, CentroidFlags, CentroidInput};
+use crate::table::pixcorr::CogPower;
 
 /// Parameters of [`trail_fit`].
 #[derive(Clone, Copy, Debug, PartialEq)]

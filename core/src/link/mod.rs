@@ -10,28 +10,27 @@
 //! ```
 //!
 //! One job a module: [`protocol`] (every number, and the table `docs/protocol.md` is made
-//! from), [`framing`], [`command`] (reading a command; its rejection reasons),
-//! [`telemetry`] (the reports' layouts), [`upload`] (the table-store port),
-//! [`flash_upload`] (that port over the flash table store), [`service`]
-//! (the state that ties them together, and the tracker's telemetry port).
+//! from), [`framing`], `command` (reading a command: [`Command`], its [`Rejection`]s),
+//! [`telemetry`] (the reports' layouts), `upload` (the table-store port, [`TableUpload`]),
+//! `flash_upload` (that port over the flash table store, [`FlashTables`]), `service`
+//! (the state that ties them together, [`LinkService`], and the tracker's telemetry port).
 //!
 //! Packets are read and written with the `spacepackets` crate (no std, no alloc): the
 //! standard's header fields and CRC are not hand-coded here.
 //!
 //! Memory: [`LinkService`] holds the two telemetry queues, a receive frame, three packet
 //! buffers and the in-flight defect commit's plan, all fixed; its size is in
-//! `docs/protocol.md` and bounded by the host test `link_decoder`. Cost: see [`service`].
+//! `docs/protocol.md` and bounded by the host test `link_decoder`. Cost: see [`LinkService`].
 
-pub mod command;
-pub mod flash_upload;
+pub(crate) mod command;
+pub(crate) mod flash_upload;
 pub mod framing;
 pub mod protocol;
-pub mod service;
+pub(crate) mod service;
 pub mod telemetry;
-pub mod upload;
+pub(crate) mod upload;
 
-pub use command::{Command, Rejection, WindowKind, WindowRequest};
+pub use command::{Command, Rejection, WindowKind, WindowRequest, mode_number};
 pub use flash_upload::{FlashTables, active_info, read_active_at, refusal_of};
 pub use service::{LinkService, NoWindows, Targets, TrackerControl, WindowReader};
-pub use telemetry::{AttitudeMissing, AttitudeReport, FrameTotals, Housekeeping, LinkCounters};
 pub use upload::{TableInfo, TableUpload, UploadRefusal};

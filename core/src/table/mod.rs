@@ -35,10 +35,10 @@
 //! | 5 | hot pixels | u32 reference temperature U16F16 K, u32 count, entries | see [`HotPixel`] |
 //! | 6 | telegraph pixels | u32 count, entries x u16, y u16 | active coordinates |
 //! | 7 | pixel-phase correction | u16 count (1..=16), u16 reserved 0, curves back to back | see [`pixcorr`] |
-//! | 8 | CTI coefficients | reference flux, exponent, per output parallel and serial shift per transfer | see [`cti`] |
-//! | 9 | field PSF model | degree, scatter, star count, polynomial coefficients of `a(x, y)` | see [`psfmodel`] |
+//! | 8 | CTI coefficients | reference flux, exponent, per output parallel and serial shift per transfer | see [`CtiCoeffs`] |
+//! | 9 | field PSF model | degree, scatter, star count, polynomial coefficients of `a(x, y)` | see [`PsfModel`] |
 //! | 10 | camera model | 36 bytes, below | see [`camera`] |
-//! | 11 | dark law | 16 bytes: covered dark rate at `T_ref`, `T_ref`, doubling, band | see [`darklaw`] |
+//! | 11 | dark law | 16 bytes: covered dark rate at `T_ref`, `T_ref`, doubling, band | see [`DarkLaw`] |
 //!
 //! Gains are required; every other section is optional and its absence means "no
 //! correction": column bias 0, relative dark 1 (the covered columns' dark subtracted
@@ -72,20 +72,20 @@
 mod amend;
 mod bytes;
 pub mod camera;
-pub mod cti;
-pub mod darklaw;
+pub(crate) mod cti;
+pub(crate) mod darklaw;
 mod error;
 mod parse;
 pub mod pixcorr;
-pub mod psfmodel;
+pub(crate) mod psfmodel;
 mod write;
 
 pub use amend::{AmendError, AmendPlan, MAX_AMEND_PIXELS, TableReader};
 pub use cti::{CtiCoeffs, CtiOutput};
-pub use darklaw::DarkLaw;
+pub use darklaw::{DARK_LAW_SECTION_LEN, DarkLaw};
 pub use error::{SectionKind, TableError, WriteError};
 pub use parse::{CalibTable, DefectList, HotList, MapView};
-pub use psfmodel::PsfModel;
+pub use psfmodel::{MAX_PSF_DEGREE, MAX_PSF_TERMS, PsfModel, psf_terms};
 pub use write::{MapSpec, TableSpec, write_table, write_table_with_pixcorr};
 
 use crate::units::{ERatePerS, Kelvin};

@@ -42,8 +42,8 @@ use fixed::types::{U0F16, U8F8};
 /// (`centroid::MAX_SIDE`, which the centroid module checks equal at compile time).
 pub const MAX_CURVE_BOX_SIDE: u8 = 31;
 
-/// Weights of the centre of gravity, which a curve records as its power (the centroid
-/// methods use it as [`crate::centroid::cog::CogPower`]).
+/// Weights of the centre of gravity, which a curve records as its power (the CoG of
+/// [`crate::centroid::cog`] takes it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum CogPower {

@@ -3,10 +3,10 @@
 //! host option that fails them gets a [`ConfigError`], never a half-applied setting).
 
 use crate::centroid::MAX_SIDE;
-use crate::centroid::cog::CogPower;
 use crate::centroid::raw_cog::MAX_BOX_SIDE;
 use crate::detect::capture::CAPTURE_MAX_SIDE;
 use crate::detect::{DetectConfig, TrackConfig};
+use crate::table::pixcorr::CogPower;
 
 /// How a star's position is measured in its window.
 ///

@@ -17,13 +17,14 @@
 use super::config::{CentroidMethod, TrackerConfig};
 use super::record::{StarFlags, StarRecord};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
-use crate::centroid::cog::{CogParams, CogPower, cog, sigma_unreliable as cog_sigma_unreliable};
+use crate::centroid::cog::{CogParams, cog, sigma_unreliable as cog_sigma_unreliable};
 use crate::centroid::gauss_fit::{
     GaussFitParams, PsfFit, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width,
     gauss_fit_width_prior,
 };
 use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
 use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
+use crate::table::pixcorr::CogPower;
 use crate::table::pixcorr::{PixCorr, PixCorrBackground};
 use crate::table::{CalibTable, PsfModel};
 use crate::units::{BiasAdu, Electrons};

@@ -12,11 +12,12 @@
 //! on the M7 (`centroid_gauss_fit_*` of `cargo m7-bench`, 2 steps).
 
 use super::{GaussFitParams, Grid, profile, step_usable};
-use crate::centroid::cog::{CogPower, cog_in_box, usable_sigma_px};
+use crate::centroid::cog::{cog_in_box, usable_sigma_px};
 use crate::centroid::math::{self, pos};
 use crate::centroid::pixel_box::PixelBox;
 use crate::centroid::prepared::{Measured, Prepared};
 use crate::centroid::{Centroid, CentroidFlags, MAX_SIDE};
+use crate::table::pixcorr::CogPower;
 
 pub(in crate::centroid) type Mat4 = [[f32; 4]; 4];
 

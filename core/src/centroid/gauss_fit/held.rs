@@ -11,10 +11,11 @@
 //! whole breakdown).
 
 use super::{GaussFitParams, Grid, general, profile, step_usable};
-use crate::centroid::cog::{CogPower, cog_in_box, usable_sigma_px};
+use crate::centroid::cog::{cog_in_box, usable_sigma_px};
 use crate::centroid::math;
 use crate::centroid::prepared::{Measured, Prepared};
 use crate::centroid::{Centroid, CentroidFlags};
+use crate::table::pixcorr::CogPower;
 
 /// Largest window side of this path (its profile buffers are zeroed per fit, so they
 /// are sized for star windows, not for [`crate::centroid::MAX_SIDE`]); larger windows take the

@@ -15,9 +15,10 @@ use super::sums::{Meas, fused_cog};
 use super::{RawCog, RawCogParams, RawWindow};
 use crate::calib::{FrameCalibration, PixelFlags};
 use crate::centroid::background::{level_to_bits, sanitize_var};
-use crate::centroid::cog::{Anchor, CogParams, CogPower, cog};
+use crate::centroid::cog::{Anchor, CogParams, cog};
 use crate::centroid::prepared::{Measured, finish_in};
 use crate::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
+use crate::table::pixcorr::CogPower;
 use crate::units::Electrons;
 use crate::window::{Rect, Window};
 

@@ -27,7 +27,6 @@ mod execute;
 mod queues;
 mod targets;
 
-pub use amend::{AMEND_BYTES_PER_ROUND, AMEND_READ_ROUNDS};
 pub use targets::{NoWindows, Targets, TrackerControl, WindowReader};
 
 use super::command::WindowRequest;

@@ -10,12 +10,13 @@ use crate::inputs::PSF_SIGMA_PX;
 use core::fmt::Write;
 use core::hint::black_box;
 use startrack_core::calib::PixelFlags;
-use startrack_core::centroid::cog::{CogParams, CogPower, cog};
+use startrack_core::centroid::cog::{CogParams, cog};
 use startrack_core::centroid::gauss_fit::{
     GaussFitParams, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width, gauss_fit_width_prior,
 };
 use startrack_core::centroid::trail_fit::{TrailFitParams, trail_fit};
 use startrack_core::centroid::{Background, CentroidInput};
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::PixCorr;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};

@@ -6,8 +6,8 @@
 
 use fixed::types::{U0F16, U8F8, U16F16};
 use startrack_core::calib::LineLevels;
-use startrack_core::centroid::cog::CogPower;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::{CurveHeader, PixCorrBackground};
 use startrack_core::table::{HotPixel, HotPolicy, MapHeader, MapSpec, TableSpec, write_table};
 use startrack_core::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu};

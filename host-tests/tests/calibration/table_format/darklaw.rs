@@ -4,7 +4,7 @@
 
 use super::{parse_unit, with_section};
 use fixed::types::U8F8;
-use startrack_core::table::darklaw::DARK_LAW_SECTION_LEN;
+use startrack_core::table::DARK_LAW_SECTION_LEN;
 use startrack_core::table::{CalibTable, DarkLaw, SectionKind, TableError, WriteError};
 use startrack_core::units::{ERatePerS, Kelvin};
 use startrack_test_support::table_fixtures::*;

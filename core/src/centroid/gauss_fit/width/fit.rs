@@ -13,10 +13,11 @@ use super::params::{
 use super::start::{Start, start};
 use crate::centroid::Background;
 use crate::centroid::CentroidFlags;
-use crate::centroid::cog::{CogPower, cog_in_box};
+use crate::centroid::cog::cog_in_box;
 use crate::centroid::gauss_fit::step_usable;
 use crate::centroid::math;
 use crate::centroid::prepared::{Measured, Prepared};
+use crate::table::pixcorr::CogPower;
 
 /// The width fit of a prepared window (see the module docs), free or with a prior.
 pub(super) fn fit<const CLEAN: bool>(
