@@ -110,6 +110,9 @@ bitflags::bitflags! {
         /// Measured by the fused raw-window CoG (tracking), background carried from the
         /// star's last full measurement.
         const FUSED = 1 << 1;
+        /// Measured by the trailed-star fit (tracking), on the whole tracking window, the
+        /// trail taken from the star's last motion: the position is at mid-exposure.
+        const TRAILED = 1 << 2;
     }
 }
 
