@@ -16,4 +16,5 @@ pub mod link_home;
 pub mod optics;
 pub mod psf_model;
 pub mod sil;
+pub mod sil_rates;
 pub mod tradeoff;

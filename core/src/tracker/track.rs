@@ -21,7 +21,10 @@
 //! integrates while the last frame is read; a shorter exposure makes the trail held too
 //! long, which leaves the position along it nearly unbiased), reported
 //! [`Provenance::TRAILED`] at mid-exposure. A slower star is measured by the configured
-//! method, whose fit flags a smear it cannot follow.
+//! method, whose fit flags a smear it cannot follow. A star that moved at least
+//! [`TRAIL_MIN_PX`] before [`TRAIL_SETTLE_FRAMES`] tracking frames measured its motion is
+//! flagged [`StarFlags::TRAIL_UNKNOWN`]: it places the next window, the attitude stage skips
+//! it.
 //!
 //! Cost per line: a row test per window and the copy of the rows inside windows; per
 //! star, the window's calibration (121 pixels for 11x11), the window test (~2-4 k
@@ -81,6 +84,26 @@ const FULL_PATH: CentroidFlags = CentroidFlags::LOW_SNR
 
 /// A star that moved at least this far in the last frame, px, is measured as trailed.
 pub const TRAIL_MIN_PX: f32 = 1.0;
+
+/// Tracking frames in a row a moving star needs before its trail is trusted: its motion
+/// comes from the last two positions, the first of which (acquisition's, or the first
+/// tracking frame's, the trail then unknown) is a smeared star's.
+pub const TRAIL_SETTLE_FRAMES: u8 = 2;
+
+/// Flags `record` [`StarFlags::TRAIL_UNKNOWN`] when its star moved at least
+/// [`TRAIL_MIN_PX`] from `prior` before its motion settled; returns its tracked-frame count.
+fn settle(record: &mut StarRecord, prior: &Prior) -> u8 {
+    let (dx, dy) = (record.x_px - prior.x_px, record.y_px - prior.y_px);
+    let moved = libm::sqrtf(dx * dx + dy * dy);
+    // A non-finite move is no evidence of motion; the record's own flags say what it is.
+    if moved.is_finite()
+        && moved >= TRAIL_MIN_PX
+        && prior.carry.tracked_frames < TRAIL_SETTLE_FRAMES
+    {
+        record.flags |= StarFlags::TRAIL_UNKNOWN;
+    }
+    prior.carry.tracked_frames.saturating_add(1)
+}
 
 /// The trail of a star whose last motion was `velocity_px`, if it is trailed.
 fn trail_of(velocity_px: Option<(f32, f32)>) -> Option<(f32, f32)> {
@@ -288,15 +311,17 @@ impl Tracking {
         if policy.method == CentroidMethod::FusedCog1
             && !found
             && trail.is_none()
-            && let Some((record, background)) = fused(cal, policy, placed, i, sh)
+            && let Some((mut record, background)) = fused(cal, policy, placed, i, sh)
         {
             let v = velocity(&record);
+            let tracked_frames = settle(&mut record, &placed.prior);
             sh.stars.push(
                 record,
                 Carry {
                     background: Some(background),
                     plan_slot: Some(placed.slot),
                     velocity_px: v,
+                    tracked_frames,
                 },
             );
             return;
@@ -351,12 +376,14 @@ impl Tracking {
                 policy.trailed_record(&input, StarFlags::from_track(verdict.flags), trail);
             record.provenance = Provenance::TRACKED | Provenance::TRAILED;
             let v = velocity(&record);
+            let tracked_frames = settle(&mut record, &placed.prior);
             sh.stars.push(
                 record,
                 Carry {
                     background: None,
                     plan_slot: None,
                     velocity_px: v,
+                    tracked_frames,
                 },
             );
             return;
@@ -384,12 +411,14 @@ impl Tracking {
         let mut m = measure(policy, &input, flags, want_background);
         m.record.provenance = Provenance::TRACKED;
         let v = velocity(&m.record);
+        let tracked_frames = settle(&mut m.record, &placed.prior);
         sh.stars.push(
             m.record,
             Carry {
                 background: m.background,
                 plan_slot: None,
                 velocity_px: v,
+                tracked_frames,
             },
         );
     }
