@@ -95,10 +95,11 @@ bitflags::bitflags! {
         /// beyond the model's scatter and the fit's width error; the position is the
         /// width-free fit's.
         const PSF_MISMATCH = 1 << 24;
-        /// Tracking: the star moved at least `TRAIL_MIN_PX` since the last frame and its
-        /// motion was not yet measured over two tracking frames, so its trail during the
-        /// exposure was unknown or guessed: the position is a smeared star's, kept to place
-        /// the next window but not used for the attitude.
+        /// Its trail during the exposure is unknown or guessed, so the position is a smeared
+        /// star's, kept to place the next window but not used for the attitude. Tracking:
+        /// the star moved at least `TRAIL_MIN_PX` since the last frame before two tracking
+        /// frames measured its motion; acquisition: its fitted width exceeds the configured
+        /// PSF's by `SMEARED_WIDTH_RATIO`.
         const TRAIL_UNKNOWN = 1 << 25;
     }
 }
