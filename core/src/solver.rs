@@ -1,7 +1,8 @@
 //! The attitude stage of the frame loop: a frame's star list in, an identified attitude with
 //! its covariance out, and the prior it keeps from one frame to the next.
 //!
-//! Each frame, the usable stars ([`StarRecord::is_centroid`], not saturated, with a finite
+//! Each frame, the usable stars ([`StarRecord::is_centroid`], not saturated, their trail
+//! not unknown ([`StarFlags::TRAIL_UNKNOWN`]), with a finite
 //! positive sigma) are turned into camera-frame directions by the [`Camera`], brightest
 //! first, at most [`ident::MAX_STARS`]. With a prior no older than
 //! [`SolverConfig::max_prior_age_us`], [`ident::track`] identifies them near it; without one,
@@ -214,13 +215,13 @@ impl<'c> Solver<'c> {
     }
 }
 
-/// A star whose position identification may use: a centroid, not saturated, with a finite
-/// position and a finite positive sigma.
+/// A star whose position identification may use: a centroid, not saturated, its trail not
+/// unknown, with a finite position and a finite positive sigma.
 fn usable(s: &StarRecord) -> bool {
     s.is_centroid()
-        && !s
-            .flags
-            .intersects(StarFlags::SATURATED | StarFlags::DETECT_SATURATED)
+        && !s.flags.intersects(
+            StarFlags::SATURATED | StarFlags::DETECT_SATURATED | StarFlags::TRAIL_UNKNOWN,
+        )
         && s.x_px.is_finite()
         && s.y_px.is_finite()
         && s.flux_e.is_finite()

@@ -10,3 +10,4 @@ pub mod cli;
 pub mod cti;
 pub mod optics;
 pub mod psf_model;
+pub mod sil_rates;

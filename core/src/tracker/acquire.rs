@@ -167,6 +167,13 @@ impl<'t, const N: usize> Acquisition<'t, N> {
     }
 }
 
+/// An acquired star whose fitted width (the width-free fit's `psf_a_px`) exceeds the
+/// configured PSF's by this factor is a smeared star, its trail unknown: flagged
+/// [`StarFlags::TRAIL_UNKNOWN`] (kept for tracking, not used for the attitude). On the SIL's
+/// sky a still star fits within 3 % of the PSF's width, one trailed 3.4 px a frame (0.5
+/// deg/s in 100 ms) at 1.4-1.5 times it, 6.8 px at 1.9-2.4 times.
+pub const SMEARED_WIDTH_RATIO: f32 = 1.5;
+
 /// Measures one pending window, or reports the detector's position with the reason.
 fn measure_pending<const N: usize>(
     cal: &FrameCalibration<'_>,
@@ -188,7 +195,10 @@ fn measure_pending<const N: usize>(
     } else if sh.scratch.calibrate(cal, rect).is_ok()
         && let Some(input) = sh.scratch.window(rect, p.clipped)
     {
-        let m = measure(policy, &input, detected, want_background);
+        let mut m = measure(policy, &input, detected, want_background);
+        if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {
+            m.record.flags |= StarFlags::TRAIL_UNKNOWN;
+        }
         sh.stars.push(
             m.record,
             Carry {

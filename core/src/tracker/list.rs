@@ -16,6 +16,8 @@ pub(crate) struct Carry {
     pub(crate) plan_slot: Option<u8>,
     /// Its motion between the last two frames, px per frame (tracked stars).
     pub(crate) velocity_px: Option<(f32, f32)>,
+    /// Tracking frames in a row that measured it (0 from acquisition), saturating.
+    pub(crate) tracked_frames: u8,
 }
 
 /// Up to `N` stars, of which at most `limit` are kept.

@@ -22,6 +22,7 @@ use crate::centroid::gauss_fit::{
     GaussFitParams, PsfFit, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width,
     gauss_fit_width_prior,
 };
+use crate::centroid::trail_fit::{TrailFitParams, trail_fit};
 use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
 use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
 use crate::table::pixcorr::CogPower;
@@ -158,6 +159,28 @@ impl<'t> Policy<'t> {
         let (c, uncorrected) = self.centroid(input);
         let c = self.cti.map_or(c, |k| k.corrected(c));
         StarRecord::from_centroid(&c, flags | uncorrected)
+    }
+
+    /// The star's record from the trailed-star fit of `input` (the trail `trail_px`, px
+    /// from exposure start to end; the PSF at rest of the configured width; residual
+    /// background fitted over the border median), CTI-corrected, `flags` and the window's
+    /// pixel flags added. Its `psf_a_px` and `chi2_dof` are 0 (not fitted).
+    pub(crate) fn trailed_record(
+        &self,
+        input: &CentroidInput<'_>,
+        flags: StarFlags,
+        trail_px: (f32, f32),
+    ) -> StarRecord {
+        let pixel_flags = input
+            .pixel_flags
+            .iter()
+            .fold(PixelFlags::empty(), |m, f| m | *f);
+        let c = trail_fit(
+            input,
+            &TrailFitParams::new(self.sigma_px, trail_px.0, trail_px.1),
+        );
+        let c = self.cti.map_or(c, |k| k.corrected(c));
+        StarRecord::from_centroid(&c, flags | StarFlags::from_pixels(pixel_flags))
     }
 
     /// The centroid of `input` by a method of a given width (the fused CoG's general path

@@ -95,6 +95,12 @@ bitflags::bitflags! {
         /// beyond the model's scatter and the fit's width error; the position is the
         /// width-free fit's.
         const PSF_MISMATCH = 1 << 24;
+        /// Its trail during the exposure is unknown or guessed, so the position is a smeared
+        /// star's, kept to place the next window but not used for the attitude. Tracking:
+        /// the star moved at least `TRAIL_MIN_PX` since the last frame before two tracking
+        /// frames measured its motion; acquisition: its fitted width exceeds the configured
+        /// PSF's by `SMEARED_WIDTH_RATIO`.
+        const TRAIL_UNKNOWN = 1 << 25;
     }
 }
 
@@ -110,6 +116,9 @@ bitflags::bitflags! {
         /// Measured by the fused raw-window CoG (tracking), background carried from the
         /// star's last full measurement.
         const FUSED = 1 << 1;
+        /// Measured by the trailed-star fit (tracking), on the whole tracking window, the
+        /// trail taken from the star's last motion: the position is at mid-exposure.
+        const TRAILED = 1 << 2;
     }
 }
 

@@ -13,10 +13,25 @@
 //! flags goes through the full path; so does a window holding a pixel found in flight (the
 //! fused CoG reads raw samples and would not exclude it). The fused path feeds no watch.
 //!
+//!
+//! A star whose last motion is at least [`TRAIL_MIN_PX`] a frame is trailed: its window is
+//! widened by that motion (up to [`CAPTURE_MAX_SIDE`]), and it is measured with the
+//! trailed-star fit ([`crate::centroid::trail_fit`]) on the whole window, its trail taken as
+//! that motion (the exposure taken to span the frame period, as a frame-transfer sensor
+//! integrates while the last frame is read; a shorter exposure makes the trail held too
+//! long, which leaves the position along it nearly unbiased), reported
+//! [`Provenance::TRAILED`] at mid-exposure. A slower star is measured by the configured
+//! method, whose fit flags a smear it cannot follow. A star that moved at least
+//! [`TRAIL_MIN_PX`] before [`TRAIL_SETTLE_FRAMES`] tracking frames measured its motion is
+//! flagged [`StarFlags::TRAIL_UNKNOWN`]: it places the next window, the attitude stage skips
+//! it.
+//!
 //! Cost per line: a row test per window and the copy of the rows inside windows; per
 //! star, the window's calibration (121 pixels for 11x11), the window test (~2-4 k
 //! operations) and the method; the fused CoG instead ~2,600 M7 instructions a 7x7 box
-//! (`cargo m7-bench`, `centroid_cog1c_raw_planned_7x7`).
+//! (`cargo m7-bench`, `centroid_cog1c_raw_planned_7x7`); a trailed star's fit on its
+//! 11x11 to 15x15 window, about 2.5 to 4.6 times the trailed fit's 7x7 cost (~47,000
+//! instructions, docs/speed.md) by its pixels.
 
 use super::Shared;
 use super::config::{CentroidMethod, TrackerConfig};
@@ -29,6 +44,7 @@ use crate::calib::{FrameCalibration, LineLevels};
 use crate::centroid::CentroidFlags;
 use crate::centroid::CentroidInput;
 use crate::centroid::raw_cog::{PlanError, RawCogParams, RawWindow};
+use crate::detect::capture::CAPTURE_MAX_SIDE;
 use crate::detect::track::TrackResult;
 use crate::detect::track_detect;
 use crate::geometry::ReadoutGeometry;
@@ -65,6 +81,51 @@ const FULL_PATH: CentroidFlags = CentroidFlags::LOW_SNR
     .union(CentroidFlags::DEGENERATE)
     .union(CentroidFlags::NOT_CONVERGED)
     .union(CentroidFlags::CLAMPED);
+
+/// A star that moved at least this far in the last frame, px, is measured as trailed.
+pub const TRAIL_MIN_PX: f32 = 1.0;
+
+/// Tracking frames in a row a moving star needs before its trail is trusted: its motion
+/// comes from the last two positions, the first of which (acquisition's, or the first
+/// tracking frame's, the trail then unknown) is a smeared star's.
+pub const TRAIL_SETTLE_FRAMES: u8 = 2;
+
+/// Flags `record` [`StarFlags::TRAIL_UNKNOWN`] when its star moved at least
+/// [`TRAIL_MIN_PX`] from `prior` before its motion settled; returns its tracked-frame count.
+fn settle(record: &mut StarRecord, prior: &Prior) -> u8 {
+    let (dx, dy) = (record.x_px - prior.x_px, record.y_px - prior.y_px);
+    let moved = libm::sqrtf(dx * dx + dy * dy);
+    // A non-finite move is no evidence of motion; the record's own flags say what it is.
+    if moved.is_finite()
+        && moved >= TRAIL_MIN_PX
+        && prior.carry.tracked_frames < TRAIL_SETTLE_FRAMES
+    {
+        record.flags |= StarFlags::TRAIL_UNKNOWN;
+    }
+    prior.carry.tracked_frames.saturating_add(1)
+}
+
+/// The trail of a star whose last motion was `velocity_px`, if it is trailed.
+fn trail_of(velocity_px: Option<(f32, f32)>) -> Option<(f32, f32)> {
+    velocity_px.filter(|(vx, vy)| {
+        let l = libm::sqrtf(vx * vx + vy * vy);
+        l.is_finite() && l >= TRAIL_MIN_PX
+    })
+}
+
+/// The side of a trailed star's tracking window: `side` widened by the trail's larger
+/// component (rounded up, kept odd), at most [`CAPTURE_MAX_SIDE`].
+fn trailed_side(side: u16, trail_px: (f32, f32)) -> u16 {
+    let extent = trail_px.0.abs().max(trail_px.1.abs());
+    let widen = if extent.is_finite() {
+        (libm::ceilf(extent).min(f32::from(CAPTURE_MAX_SIDE))) as u16
+    } else {
+        0
+    };
+    (side.saturating_add(widen) | 1)
+        .min(CAPTURE_MAX_SIDE)
+        .max(side)
+}
 
 /// Nearest pixel of a position, inside `0..size`.
 fn pixel_of(v: f32, size: u16) -> u16 {
@@ -146,6 +207,7 @@ impl Tracking {
                 pixel_of(p.x_px + vx, geometry.active_cols),
                 pixel_of(p.y_px + vy, geometry.active_rows),
             );
+            let side = trail_of(p.carry.velocity_px).map_or(side, |t| trailed_side(side, t));
             let (rect, clipped) = Rect::centred_clipped(
                 anchor.0,
                 anchor.1,
@@ -245,17 +307,21 @@ impl Tracking {
             .capture
             .window(i)
             .is_some_and(|w| sh.watch.touches(w.rect));
+        let trail = trail_of(placed.prior.carry.velocity_px);
         if policy.method == CentroidMethod::FusedCog1
             && !found
-            && let Some((record, background)) = fused(cal, policy, placed, i, sh)
+            && trail.is_none()
+            && let Some((mut record, background)) = fused(cal, policy, placed, i, sh)
         {
             let v = velocity(&record);
+            let tracked_frames = settle(&mut record, &placed.prior);
             sh.stars.push(
                 record,
                 Carry {
                     background: Some(background),
                     plan_slot: Some(placed.slot),
                     velocity_px: v,
+                    tracked_frames,
                 },
             );
             return;
@@ -301,6 +367,27 @@ impl Tracking {
             sh.summary.track_lost = sh.summary.track_lost.saturating_add(1);
             return;
         }
+        if let Some(trail) = trail {
+            let Some(input) = sh.scratch.window(rect, clipped) else {
+                sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+                return;
+            };
+            let mut record =
+                policy.trailed_record(&input, StarFlags::from_track(verdict.flags), trail);
+            record.provenance = Provenance::TRACKED | Provenance::TRAILED;
+            let v = velocity(&record);
+            let tracked_frames = settle(&mut record, &placed.prior);
+            sh.stars.push(
+                record,
+                Carry {
+                    background: None,
+                    plan_slot: None,
+                    velocity_px: v,
+                    tracked_frames,
+                },
+            );
+            return;
+        }
         // The centroid window around the peak, inside the tracking window.
         let (rel, _) = Rect::centred_clipped(
             verdict.peak_x.saturating_sub(rect.x0),
@@ -324,12 +411,14 @@ impl Tracking {
         let mut m = measure(policy, &input, flags, want_background);
         m.record.provenance = Provenance::TRACKED;
         let v = velocity(&m.record);
+        let tracked_frames = settle(&mut m.record, &placed.prior);
         sh.stars.push(
             m.record,
             Carry {
                 background: m.background,
                 plan_slot: None,
                 velocity_px: v,
+                tracked_frames,
             },
         );
     }

@@ -342,7 +342,9 @@ pub fn run_scene(seed: u64, scene: DemoScene) -> Result<DemoReport, String> {
                 SolverConfig::for_camera(sc.camera, crate::sil::SOLVER_SIGMA_PX),
             );
             crate::sil::AttitudeCheck {
+                t_mid_s: 0.0,
                 truth: sc.attitude(0),
+                true_rate_rad_s: [0.0; 3],
                 fix: solver.update(&result.stars, 0),
             }
         }),

@@ -186,6 +186,8 @@ pub struct SimWindows {
     pub params: SensorParams,
     /// The stars of the frame to render.
     pub stars: Vec<Star>,
+    /// Its stars that move during the exposure ([`Simulator::trails`]).
+    pub trails: Vec<startrack_sim::trail::TrailedImage>,
     /// Its frame number (the noise draw).
     pub frame: u32,
     /// The tracker's calibration (calibrated windows need one).
@@ -199,6 +201,7 @@ impl SimWindows {
         Self {
             params,
             stars: Vec::new(),
+            trails: Vec::new(),
             frame: 0,
             calibration: None,
             rendered: None,
@@ -216,6 +219,7 @@ impl WindowReader for SimWindows {
         }
         let sim = Simulator {
             frame: self.frame,
+            trails: self.trails.clone(),
             ..Simulator::new(self.params.clone(), self.stars.clone())
         };
         let rect = Rect {
@@ -417,7 +421,6 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
         None => None,
     };
     let catalog = sky.as_ref().map(|(_, c)| c);
-    let stars_of = |k: u32| sil::frame_stars(sc, &base, catalog, k);
     let mut tables: Box<dyn SilTables> = match &config.flash {
         None => Box::new(MemoryTables::new(
             params.geometry,
@@ -451,10 +454,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             .as_ref()
             .map(|(scene, cat)| sil::sky_solver(scene, *cat));
         let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
-        let mut source = SimLines::new(|k| Simulator {
-            frame: k,
-            ..Simulator::new(params.clone(), stars_of(k))
-        });
+        let mut source = SimLines::new(|k| sil::frame_simulator(sc, &params, &base, catalog, k));
         let mut thermometer = FixedTemperature(None);
         loop {
             let stopped = config
@@ -468,7 +468,8 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             let phase_end = Instant::now() + Duration::from_millis(LINK_PHASE_MS);
             let hard_end = Instant::now() + Duration::from_millis(LINK_PHASE_MAX_MS);
             windows.frame = frame;
-            windows.stars = stars_of(frame);
+            let sensor = sil::frame_simulator(sc, &params, &base, catalog, frame);
+            (windows.stars, windows.trails) = (sensor.stars, sensor.trails);
             windows.calibration = cycle.tracker().calibration();
             loop {
                 if client.is_none()

@@ -162,8 +162,12 @@ pub struct SilFrame {
 /// A frame's attitude against the truth.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AttitudeCheck {
-    /// The true attitude (ICRS to camera).
+    /// The frame's mid-exposure, s from the run's start ([`SkyScene::mid_exposure_s`]).
+    pub t_mid_s: f64,
+    /// The true attitude at mid-exposure (ICRS to camera).
     pub truth: Quat,
+    /// The true rate at mid-exposure, camera frame, rad/s ([`SkyScene::rate_rad_s`]).
+    pub true_rate_rad_s: [f64; 3],
     /// What the attitude stage gave.
     pub fix: Result<Fix, SolveError>,
 }
@@ -339,7 +343,17 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         )),
         None => None,
     };
-    let stars_of = |frame: u32| frame_stars(config, &base, sky.as_ref().map(|(_, c)| c), frame);
+    let catalog = sky.as_ref().map(|(_, c)| c);
+    let stars_of = |frame: u32| frame_stars(config, &base, catalog, frame);
+    let period_s = config.period_us as f64 * 1e-6;
+    if let Some(m) = config.sky.as_ref().and_then(|s| s.motion)
+        && (m.period_s - period_s).abs() > 1e-9
+    {
+        return Err(format!(
+            "the scene's frame period ({} s) is not the SIL's ({period_s} s)",
+            m.period_s
+        ));
+    }
     let solver = sky.as_ref().map(|(scene, cat)| sky_solver(scene, *cat));
     let table_bytes = truth_table(config, &params)?;
     let table = CalibTable::parse(&table_bytes).map_err(|e| e.to_string())?;
@@ -348,10 +362,7 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         .map_err(|e| e.to_string())?;
     let mut link = Box::new(LinkService::new());
     let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
-    let mut source = SimLines::new(|frame| Simulator {
-        frame,
-        ..Simulator::new(params.clone(), stars_of(frame))
-    });
+    let mut source = SimLines::new(|frame| frame_simulator(config, &params, &base, catalog, frame));
     let mut recorder = Recorder::default();
     let mut tables = FixedTable(Some(table));
     let mut thermometer = FixedTemperature(None);
@@ -381,7 +392,9 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         );
         if let (Some(fix), Some((scene, _))) = (outcome.attitude, sky.as_ref()) {
             frame.attitude = Some(AttitudeCheck {
+                t_mid_s: scene.mid_exposure_s(summary.frame, period_s),
                 truth: scene.attitude(summary.frame),
+                true_rate_rad_s: scene.rate_rad_s(summary.frame, period_s),
                 fix,
             });
         }
@@ -395,7 +408,7 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
     })
 }
 
-/// The stars of frame `frame` of `config`'s scene: the sky's when it has one and its
+/// The true stars (at mid-exposure) of frame `frame` of `config`'s scene: the sky's when it has one and its
 /// `catalog` is given, else those of the drifting random scene `base` ([`scene`]).
 pub fn frame_stars(
     config: &SilConfig,
@@ -406,6 +419,30 @@ pub fn frame_stars(
     match (&config.sky, catalog) {
         (Some(sky), Some(cat)) => sky.stars(cat, frame, f64::from(config.tracker.psf_a_px)),
         _ => stars_at(base, config.drift_px, frame),
+    }
+}
+
+/// The simulated sensor of frame `frame`: [`frame_stars`] still, or with a sky scene that
+/// turns during the exposure its stars along their paths ([`SkyScene::trails`]).
+pub fn frame_simulator(
+    config: &SilConfig,
+    params: &SensorParams,
+    base: &[Star],
+    catalog: Option<&Catalog<'_>>,
+    frame: u32,
+) -> Simulator {
+    if let (Some(sky), Some(cat)) = (&config.sky, catalog)
+        && sky.motion.is_some()
+    {
+        return Simulator {
+            frame,
+            trails: sky.trails(cat, frame, f64::from(config.tracker.psf_a_px)),
+            ..Simulator::new(params.clone(), Vec::new())
+        };
+    }
+    Simulator {
+        frame,
+        ..Simulator::new(params.clone(), frame_stars(config, base, catalog, frame))
     }
 }
 

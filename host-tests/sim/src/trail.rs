@@ -1,6 +1,7 @@
 //! Trailed stars: a star that moves in a straight line during the exposure, its window
 //! integrated along the path, with Poisson and read noise, and the Cramer-Rao bound of its
-//! position.
+//! position; and [`TrailedImage`], the same integration along any sampled path (a roll's
+//! curved trail, a slew's accelerating one) on the sensor's active area, for the simulator.
 //!
 //! # Model
 //! The star's PSF is a Gaussian of sigma `psf_sigma_px`, pixel-integrated exactly
@@ -61,36 +62,158 @@ fn pixel_frac(i: usize, c: f64, s: f64) -> f64 {
     }
 }
 
+/// Adds `per_step_e` times the pixel-integrated Gaussian of sigma `sigma_px` centred at each
+/// of `centres` to the patch `out` (row-major, `width` columns) whose pixel (0, 0) is the
+/// pixel centred at `origin`: the midpoint rule along a path, one separable product per
+/// step.
+fn accumulate_path(
+    out: &mut [f64],
+    width: usize,
+    origin: (f64, f64),
+    centres: impl Iterator<Item = (f64, f64)>,
+    per_step_e: f64,
+    sigma_px: f64,
+) {
+    let height = out.len() / width.max(1);
+    let (mut fx, mut fy) = (vec![0.0; width], vec![0.0; height]);
+    for (cx, cy) in centres {
+        for (i, f) in fx.iter_mut().enumerate() {
+            *f = pixel_frac(i, cx - origin.0, sigma_px);
+        }
+        for (j, f) in fy.iter_mut().enumerate() {
+            *f = pixel_frac(j, cy - origin.1, sigma_px);
+        }
+        for (row, &gy) in out.chunks_exact_mut(width).zip(fy.iter()) {
+            for (o, &gx) in row.iter_mut().zip(fx.iter()) {
+                *o += per_step_e * gx * gy;
+            }
+        }
+    }
+}
+
 /// The mean signal of each pixel of a `width` x `height` window (row-major, e-), star plus a
 /// flat `background_e`.
 pub fn mean_window(width: usize, height: usize, star: &TrailedStar, background_e: f64) -> Vec<f64> {
     let l = star.trail_dx_px.hypot(star.trail_dy_px);
     let k = ((l / PATH_STEP_PX).ceil() as usize).max(1);
     let mut out = vec![0.0; width * height];
-    let (mut fx, mut fy) = (vec![0.0; width], vec![0.0; height]);
-    let per_step = star.flux_e / k as f64;
-    for step in 0..k {
+    let centres = (0..k).map(|step| {
         let t = (step as f64 + 0.5) / k as f64 - 0.5;
-        let (cx, cy) = (
+        (
             star.x_px + t * star.trail_dx_px,
             star.y_px + t * star.trail_dy_px,
-        );
-        for (i, f) in fx.iter_mut().enumerate() {
-            *f = pixel_frac(i, cx, star.psf_sigma_px);
-        }
-        for (j, f) in fy.iter_mut().enumerate() {
-            *f = pixel_frac(j, cy, star.psf_sigma_px);
-        }
-        for (row, &gy) in out.chunks_exact_mut(width).zip(fy.iter()) {
-            for (o, &gx) in row.iter_mut().zip(fx.iter()) {
-                *o += per_step * gx * gy;
-            }
-        }
-    }
+        )
+    });
+    accumulate_path(
+        &mut out,
+        width,
+        (0.0, 0.0),
+        centres,
+        star.flux_e / k as f64,
+        star.psf_sigma_px,
+    );
     for o in &mut out {
         *o += background_e;
     }
     out
+}
+
+/// Sub-steps of a path of `length_px` at [`PATH_STEP_PX`] (at least one).
+pub fn path_steps(length_px: f64) -> usize {
+    if length_px.is_finite() && length_px > 0.0 {
+        ((length_px / PATH_STEP_PX).ceil() as usize).max(1)
+    } else {
+        1
+    }
+}
+
+/// A star's mean image over an exposure along any path (straight, curved, accelerating), on
+/// the patch of active-area pixels it reaches: what the simulated sensor adds for a star
+/// that moves during the exposure ([`crate::sim::Simulator::trails`]).
+///
+/// Built from the star's centre at the midpoints of equal time steps (each step carries an
+/// equal share of the signal: the midpoint rule in time, as [`mean_window`] is in path
+/// length for a uniform motion). The patch spans the path's extent plus `8 sigma + 1` px each
+/// side (the still star's reach in the simulator), clipped to the active area. Cost: per step
+/// `width + height` erf differences and `width x height` products.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrailedImage {
+    /// Active column of the patch's first pixel.
+    pub x0: usize,
+    /// Active row of the patch's first pixel.
+    pub y0: usize,
+    /// Patch columns.
+    pub width: usize,
+    /// Patch rows.
+    pub height: usize,
+    /// Mean star electrons of each patch pixel, row-major, before the flat.
+    pub mean_e: Vec<f64>,
+}
+
+impl TrailedImage {
+    /// The image of `flux_e` electrons spread evenly over the centres `path_px` (px, active
+    /// area, one per equal time step), PSF sigma `psf_sigma_px`, on an active area of
+    /// `active` columns and rows. `None` when the path is empty, not finite, or reaches no
+    /// active pixel.
+    pub fn along(
+        path_px: &[[f64; 2]],
+        flux_e: f64,
+        psf_sigma_px: f64,
+        active: [usize; 2],
+    ) -> Option<Self> {
+        if path_px.is_empty()
+            || !(flux_e.is_finite() && psf_sigma_px.is_finite() && psf_sigma_px > 0.0)
+            || path_px.iter().flatten().any(|c| !c.is_finite())
+        {
+            return None;
+        }
+        let reach = 8.0 * psf_sigma_px + 1.0;
+        let lo = |a: usize| path_px.iter().map(|p| p[a]).fold(f64::INFINITY, f64::min);
+        let hi = |a: usize| {
+            path_px
+                .iter()
+                .map(|p| p[a])
+                .fold(f64::NEG_INFINITY, f64::max)
+        };
+        let span = |a: usize| -> Option<(usize, usize)> {
+            let first = (lo(a) - reach).ceil().max(0.0);
+            let last = (hi(a) + reach).floor().min(active[a] as f64 - 1.0);
+            (last >= first).then(|| (first as usize, (last - first) as usize + 1))
+        };
+        let ((x0, width), (y0, height)) = (span(0)?, span(1)?);
+        let mut mean_e = vec![0.0; width * height];
+        accumulate_path(
+            &mut mean_e,
+            width,
+            (x0 as f64, y0 as f64),
+            path_px.iter().map(|p| (p[0], p[1])),
+            flux_e / path_px.len() as f64,
+            psf_sigma_px,
+        );
+        Some(Self {
+            x0,
+            y0,
+            width,
+            height,
+            mean_e,
+        })
+    }
+
+    /// The mean star electrons of active pixel (`x`, `y`) (0 off the patch).
+    pub fn at(&self, x: usize, y: usize) -> f64 {
+        match (x.checked_sub(self.x0), y.checked_sub(self.y0)) {
+            (Some(i), Some(j)) if i < self.width && j < self.height => {
+                self.mean_e.get(j * self.width + i).copied().unwrap_or(0.0)
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// The total signal on the patch, e- (the star's flux less what falls off the active
+    /// area or beyond the reach).
+    pub fn total_e(&self) -> f64 {
+        self.mean_e.iter().sum()
+    }
 }
 
 /// One noisy realisation of `mean` (e-): Poisson photons and dark plus Gaussian read noise of

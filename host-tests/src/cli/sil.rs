@@ -7,8 +7,12 @@
 //!   (`flags`: the `StarFlags` bits, docs/formats.md);
 //! - `--truth FILE`: `frame,x_px,y_px,signal_e,a_px`;
 //! - with `--sky`, `--attitude FILE`: one row per frame,
-//!   `frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability`
-//!   (the quaternion takes ICRS to the camera, scalar first; errors against the truth).
+//!   `frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability,t_mid_s,true_qw,true_qx,true_qy,true_qz,true_wx_deg_s,true_wy_deg_s,true_wz_deg_s`
+//!   (the quaternions take ICRS to the camera, scalar first; errors against the truth; the
+//!   truth at mid-exposure, its rate the camera's angular velocity in the camera frame).
+//! - with `--sky`, `--rate-deg-s WX,WY,WZ`, `--exposure-ms MS` and `--slew-accel-deg-s2 A`:
+//!   the camera turns during each exposure ([`startrack_sim::sky::motion`]) and the stars
+//!   trail.
 //!
 //! With `--port P` it serves the link instead ([`startrack_homes::link_home::serve`]); with `--sky` too,
 //! each frame's attitude report (`TM[134,2]`) is sent as the board sends it.
@@ -52,6 +56,26 @@ pub struct SilArgs {
     /// With `--sky`: attitude CSV (one row per frame).
     #[arg(long, requires = "sky")]
     pub attitude: Option<PathBuf>,
+    /// With `--sky`: the camera's angular velocity during the exposures, camera frame,
+    /// deg/s: WX,WY,WZ (x, y across the boresight, z roll), each within -10 to 10; the stars
+    /// trail (instead of `--drift-px`'s steps between still exposures).
+    #[arg(
+        long,
+        requires = "sky",
+        conflicts_with = "drift_px",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub rate_deg_s: Option<Vec<f64>>,
+    /// With `--sky`: the exposure, ms (0 to 10,000; default the 100 ms frame period); a
+    /// longer exposure lengthens the period to it. Alone it gives a still sky (rate 0) with
+    /// this timing.
+    #[arg(long, requires = "sky")]
+    pub exposure_ms: Option<f64>,
+    /// With `--rate-deg-s`: reach the rate from rest at the start of the run with this
+    /// acceleration, deg/s^2 (above 0; default: at the rate from the start).
+    #[arg(long, requires = "rate_deg_s")]
+    pub slew_accel_deg_s2: Option<f64>,
     /// Serve the tracker's command and telemetry link on TCP 127.0.0.1:PORT (standing in
     /// for the UART) and run until stopped; `--frames`, `--telemetry` and `--truth` are then
     /// not used (drive it with `startrack gse --port PORT`). With `--sky` the attitude stage
@@ -104,7 +128,7 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
         // A turn about +y moves the field along +x, about +x along -y.
         startrack_sim::sky::scene::SkyScene::ccd47_15deg(q0, [-dy / f, dx / f, 0.0])
     });
-    Ok(SilConfig {
+    let mut config = SilConfig {
         frames: args.frames,
         seed: args.seed,
         stars: args.stars,
@@ -112,7 +136,72 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
         tracker,
         sky,
         ..SilConfig::default()
-    })
+    };
+    if let (Some(sky), Some(motion)) = (config.sky.as_mut(), motion_of(args, config.period_us)?) {
+        config.period_us = (motion.period_s * 1e6).round() as u64;
+        sky.motion = Some(motion);
+        sky.rate_rad_per_frame = [0.0; 3];
+    }
+    Ok(config)
+}
+
+/// Largest rate component of `--rate-deg-s`, deg/s.
+pub const MAX_RATE_DEG_S: f64 = 10.0;
+
+/// Longest `--exposure-ms`.
+pub const MAX_EXPOSURE_MS: f64 = 10_000.0;
+
+/// The turn during the exposures that `args` asks for (`None`: neither `--rate-deg-s` nor
+/// `--exposure-ms`), with the frame period `period_us` lengthened to a longer exposure.
+fn motion_of(
+    args: &SilArgs,
+    period_us: u64,
+) -> Result<Option<startrack_sim::sky::motion::ExposureMotion>, CliError> {
+    use startrack_sim::sky::motion::{ExposureMotion, RateProfile};
+    if args.rate_deg_s.is_none() && args.exposure_ms.is_none() {
+        return Ok(None);
+    }
+    let rate = match args.rate_deg_s.as_deref() {
+        None => [0.0; 3],
+        Some(&[x, y, z])
+            if [x, y, z]
+                .iter()
+                .all(|c| c.is_finite() && c.abs() <= MAX_RATE_DEG_S) =>
+        {
+            [x, y, z].map(f64::to_radians)
+        }
+        Some(_) => {
+            return Err(CliError::Usage(format!(
+                "--rate-deg-s takes WX,WY,WZ, each within -{MAX_RATE_DEG_S} to {MAX_RATE_DEG_S} deg/s"
+            )));
+        }
+    };
+    let accel = match args.slew_accel_deg_s2 {
+        None => 0.0,
+        Some(a) if a.is_finite() && a > 0.0 => a.to_radians(),
+        Some(_) => {
+            return Err(CliError::Usage(
+                "--slew-accel-deg-s2: an acceleration above 0 deg/s^2".into(),
+            ));
+        }
+    };
+    let period_s = period_us as f64 * 1e-6;
+    let exposure_s = match args.exposure_ms {
+        None => period_s,
+        Some(ms) if ms.is_finite() && ms > 0.0 && ms <= MAX_EXPOSURE_MS => ms * 1e-3,
+        Some(_) => {
+            return Err(CliError::Usage(format!(
+                "--exposure-ms: above 0, at most {MAX_EXPOSURE_MS} ms"
+            )));
+        }
+    };
+    let profile = RateProfile {
+        rate_rad_s: rate,
+        accel_rad_s2: accel,
+    };
+    ExposureMotion::new(profile, period_s.max(exposure_s), exposure_s)
+        .map(Some)
+        .map_err(|e| CliError::Usage(e.to_string()))
 }
 
 fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>, CliError> {
@@ -165,17 +254,24 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
     const ARCSEC: f64 = 206_264.806;
     writeln!(
         out,
-        "frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability"
+        "frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability,t_mid_s,true_qw,true_qx,true_qy,true_qz,true_wx_deg_s,true_wy_deg_s,true_wz_deg_s"
     )?;
     for f in &report.frames {
         let Some(c) = &f.attitude else { continue };
+        let [tw, tx, ty, tz] = c.truth.normalized().unwrap_or(c.truth).0;
+        // `+ 0.0` writes a negative zero as 0.
+        let [wx, wy, wz] = c.true_rate_rad_s.map(|w| w.to_degrees() + 0.0);
+        let truth = format!(
+            "{:.6},{tw:.9},{tx:.9},{ty:.9},{tz:.9},{wx:.6},{wy:.6},{wz:.6}",
+            c.t_mid_s
+        );
         match (&c.fix, c.error_rad()) {
             (Ok(fix), Some(e)) => {
                 let a = &fix.attitude;
                 let [w, x, y, z] = a.q.0;
                 writeln!(
                     out,
-                    "{},1,{},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.3},{:.3},{:.2e}",
+                    "{},1,{},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.3},{:.3},{:.2e},{truth}",
                     f.summary.frame,
                     match fix.mode {
                         startrack_core::solver::SolveMode::Tracking => "tracking",
@@ -190,7 +286,7 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
                     fix.false_probability
                 )?;
             }
-            _ => writeln!(out, "{},0,,,,,,,,,,,,", f.summary.frame)?,
+            _ => writeln!(out, "{},0,,,,,,,,,,,,,{truth}", f.summary.frame)?,
         }
     }
     Ok(())

@@ -1,5 +1,6 @@
 //! The tracker and the SIL: the core's application through its host homes, its mode rules, the
-//! frame cycle, safe states, the dark drift, the attitude stage and the demo.
+//! frame cycle, safe states, the dark drift, the attitude stage, the sky turning during the
+//! exposure and the demo.
 //!
 //! One module per subject, each with its own module docs; the shared f64 references and table
 //! fixtures come from `startrack-test-support`.
@@ -8,6 +9,7 @@ mod dark_drift;
 mod demo;
 mod frame_cycle;
 mod safe_states;
+mod sil_motion;
 mod sil_sky;
 mod tracker;
 mod tracker_rules;

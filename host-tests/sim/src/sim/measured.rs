@@ -147,6 +147,7 @@ impl Simulator {
                 params: self.params.clone(),
                 stars: Vec::new(),
                 frame: first_frame.wrapping_add(k),
+                trails: Vec::new(),
             };
             for y in covered_lines.clone() {
                 if y >= usize::from(g.lines) {

@@ -31,6 +31,10 @@ pub struct Simulator {
     pub stars: Vec<Star>,
     /// The frame number: noise differs from frame to frame, fixed patterns do not.
     pub frame: u32,
+    /// Stars that move during the exposure, each its mean image along its path
+    /// ([`crate::trail::TrailedImage`], Gaussian whatever [`super::effects::PsfShape`] the
+    /// still stars have), added to the still `stars`' light. Empty by default.
+    pub trails: Vec<crate::trail::TrailedImage>,
 }
 
 fn normal(r: &mut rand_chacha::ChaCha8Rng) -> f64 {
@@ -52,6 +56,7 @@ impl Simulator {
             params,
             stars,
             frame: 0,
+            trails: Vec::new(),
         }
     }
 
@@ -104,8 +109,18 @@ impl Simulator {
         (1.0 + p.prnu * normal(&mut stream(p.seed, FIXED, col, y, Purpose::Prnu))).max(0.05)
     }
 
-    /// Expected star electrons in active pixel (`x`, `y`) before the flat.
+    /// Expected star electrons in active pixel (`x`, `y`) before the flat: the still stars'
+    /// and the trailed stars'.
     pub fn star_e(&self, x: usize, y: usize) -> f64 {
+        let still = self.still_star_e(x, y);
+        if self.trails.is_empty() {
+            return still;
+        }
+        still + self.trails.iter().map(|t| t.at(x, y)).sum::<f64>()
+    }
+
+    /// Expected electrons of the still stars in active pixel (`x`, `y`) before the flat.
+    fn still_star_e(&self, x: usize, y: usize) -> f64 {
         let (xf, yf) = (x as f64, y as f64);
         let shape = self.params.effects.psf;
         if shape != PsfShape::Gaussian {

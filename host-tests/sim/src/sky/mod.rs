@@ -1,9 +1,11 @@
 //! The sky on the host: the Hipparcos star list the repo carries, the on-board catalog built
 //! from it (`startrack catalog build`), and star fields rendered from it at a known attitude
-//! for the identification and attitude tests.
+//! for the identification and attitude tests, and the spacecraft's turn during the exposure
+//! (`motion`).
 
 pub mod build;
 pub mod field;
+pub mod motion;
 pub mod scene;
 
 use std::path::{Path, PathBuf};

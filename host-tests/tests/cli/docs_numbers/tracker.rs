@@ -57,3 +57,50 @@ fn tracker_memory_table_is_size_of() {
         assert_eq!(r[1], size.to_string(), "{name}");
     }
 }
+
+const SIL_RATES: &str = "host-tests/figures/sil-rates.csv";
+
+/// The "At body rate" table of docs/tracker.md is `host-tests/figures/sil-rates.csv`, row
+/// for row.
+#[test]
+fn rate_table_is_the_sil_rates_csv() {
+    use super::helpers::{Csv, matches, matches_value, num};
+    let csv = Csv::read(SIL_RATES);
+    let recs = csv.records();
+    let (header, body) = table("docs/tracker.md", "sil-rates");
+    assert_eq!(
+        header,
+        [
+            "motion",
+            "rate, deg/s",
+            "frames",
+            "with attitude",
+            "with attitude, %",
+            "wrong",
+            "worst error, arcsec",
+            "cross-boresight RMS, arcsec",
+            "bound, arcsec",
+            "error / bound"
+        ]
+    );
+    assert_eq!(body.len(), recs.len(), "{SIL_RATES}: one row a rate");
+    for (row, rec) in body.iter().zip(&recs) {
+        assert_eq!(row[0], rec["motion"], "{row:?} vs {rec:?}");
+        for (i, col) in [
+            (1, "rate_deg_s"),
+            (2, "frames"),
+            (3, "solved"),
+            (5, "wrong"),
+            (6, "worst_arcsec"),
+            (7, "rms_cross_arcsec"),
+            (8, "bound_cross_arcsec"),
+            (9, "ratio"),
+        ] {
+            assert!(matches(&row[i], rec[col]), "{col}: {row:?} vs {rec:?}");
+        }
+        assert!(
+            matches_value(&row[4], 100.0 * num(rec["availability"])),
+            "{row:?} vs {rec:?}"
+        );
+    }
+}
