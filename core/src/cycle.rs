@@ -7,15 +7,22 @@
 //!                  telemetry out as the home's link can take it
 //! run_frame        the tracker's frame (its records to the link and to the home's own sink)
 //!                  -> the link's periodic housekeeping
-//!                  -> the attitude stage on the frame's star list, its report on the link
+//!                  -> the attitude stage on the frame's star list, its report on the link,
+//!                     tagged at mid-exposure in spacecraft time (the cycle's clock, set by
+//!                     the link's time-set command and the home's sync pulses)
 //!                  -> housekeeping (Health): the frame's counters, the temperature and its
 //!                     source, the uptime
 //! ```
 //!
 //! A home binds its hardware to the ports ([`CyclePorts`], the line source, the link's
-//! table store and window reader) and calls [`FrameCycle::run_frame`] once a frame, with
-//! [`FrameCycle::receive`], [`FrameCycle::poll`] and [`FrameCycle::transmit`] between frames
-//! as its link allows; it decides nothing about a frame itself.
+//! table store and window reader, the sync pulse) and calls [`FrameCycle::run_frame`] once a
+//! frame, with [`FrameCycle::receive`], [`FrameCycle::poll`], [`FrameCycle::sync`] and
+//! [`FrameCycle::transmit`] between frames as its link allows; it decides nothing about a
+//! frame itself.
+//!
+//! Mid-exposure, the instant a report is tagged with, is the frame's start on the home's
+//! clock plus half the configured exposure (the exposure starts when the frame's readout
+//! request goes out, at its start).
 //!
 //! Cost: the tracker's frame ([`crate::tracker`]), the link's star list and report encoding
 //! ([`crate::link`]), the attitude stage when a catalog is given ([`crate::solver`]), and a
@@ -25,6 +32,7 @@
 use crate::link::{Housekeeping, LinkService, TableInfo, TableUpload, Targets, WindowReader};
 use crate::safe::{Health, ThermoSource};
 use crate::solver::{Fix, SolveError, Solver};
+use crate::time::{SpacecraftClock, SyncPulse};
 use crate::tracker::{
     Clock, Event, FrameSummary, LineSource, LineSummary, Ports, StarRecord, TableStore,
     TelemetrySink, Thermometer, Tracker,
@@ -75,6 +83,8 @@ pub struct FrameOutcome {
     pub summary: FrameSummary,
     /// The frame's attitude, or why it has none.
     pub attitude: Option<Result<Fix, SolveError>>,
+    /// The attitude report sent on the link (`None` without a catalog).
+    pub report: Option<crate::link::AttitudeReport>,
 }
 
 /// The tracker application with its link, its attitude stage and its housekeeping, for up
@@ -84,6 +94,7 @@ pub struct FrameCycle<'t, 'b, 'c, 'l, const N: usize> {
     link: &'l mut LinkService,
     solver: Option<Solver<'c>>,
     health: Health,
+    clock: SpacecraftClock,
 }
 
 /// The home's sink and the link, each given every record.
@@ -130,7 +141,20 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             link,
             solver,
             health,
+            clock: SpacecraftClock::new(),
         }
+    }
+
+    /// The spacecraft clock model the reports are tagged by.
+    pub fn spacecraft_clock(&self) -> &SpacecraftClock {
+        &self.clock
+    }
+
+    /// Takes the sync pulses `pulses` has seen since the last call (between frames, as
+    /// often as the home likes: each pulse carries its own counter value). A home calls it
+    /// before [`Self::receive`], so that a time-set command applies to a pulse after it.
+    pub fn sync(&mut self, pulses: &mut dyn SyncPulse) {
+        self.clock.poll(pulses);
     }
 
     /// The tracker application.
@@ -171,7 +195,8 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
     }
 
     /// Takes bytes the link received, executing every telecommand they complete on the
-    /// tracker, `tables` and `windows`.
+    /// tracker, `tables` and `windows`; a time-set command goes to the spacecraft clock, for
+    /// the next pulse [`Self::sync`] takes.
     pub fn receive(
         &mut self,
         bytes: &[u8],
@@ -184,6 +209,9 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             windows,
         };
         self.link.receive(bytes, &mut targets);
+        if let Some(t) = self.link.take_time_set() {
+            self.clock.command_set(t);
+        }
     }
 
     /// The link's work between frames: diagnostic window rows as its queue has room, the
@@ -232,16 +260,28 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         let summary = self.tracker.run_frame(source, &mut tracker_ports).await?;
         let (last_k, source_used) = (noted.last_k, noted.source());
         self.link.end_of_frame(ports.table_in_force);
+        let exposure_us = u64::from(self.tracker.config().exposure_ms) * 1000;
+        let mid_us = summary.start_us.saturating_add(exposure_us / 2);
+        let mut report = None;
         let attitude = self.solver.as_mut().map(|solver| {
-            let result = solver.update(self.tracker.stars(), summary.start_us);
-            self.link
-                .send_attitude(&crate::link::AttitudeReport::of(summary.frame, &result));
+            let result = solver.update(self.tracker.stars(), mid_us);
+            let time = self.clock.time_of(mid_us);
+            let mut r =
+                crate::link::AttitudeReport::of(summary.frame, &result, mid_us, time, None, false);
+            let latency = ports.clock.now_us().saturating_sub(mid_us);
+            r.latency_us = u32::try_from(latency).unwrap_or(u32::MAX);
+            self.link.send_attitude(&r);
+            report = Some(r);
             result
         });
         self.health.on_frame(&summary);
         self.health.on_temperature(last_k, source_used);
         self.health.uptime_ms = ports.clock.now_us() / 1000;
-        Ok(FrameOutcome { summary, attitude })
+        Ok(FrameOutcome {
+            summary,
+            attitude,
+            report,
+        })
     }
 }
 

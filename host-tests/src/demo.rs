@@ -344,6 +344,8 @@ pub fn run_scene(seed: u64, scene: DemoScene) -> Result<DemoReport, String> {
             crate::sil::AttitudeCheck {
                 truth: sc.attitude(0),
                 fix: solver.update(&result.stars, 0),
+                report: None,
+                true_time_s: None,
             }
         }),
     })

@@ -25,7 +25,7 @@ use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
 use startrack_core::centroid::cog::CogPower;
 use startrack_core::cycle::{CyclePorts, FrameCycle};
-use startrack_core::link::{Housekeeping, LinkService};
+use startrack_core::link::{AttitudeReport, Housekeeping, LinkService, NoWindows};
 use startrack_core::safe::Health;
 use startrack_core::solver::{Fix, SolveError, SolveMode, Solver, SolverConfig};
 use startrack_core::table::CalibTable;
@@ -76,7 +76,18 @@ pub struct SilConfig {
     /// (`stars` and `drift_px` are then not used); every frame is then also identified and
     /// its attitude checked against the truth.
     pub sky: Option<SkyScene>,
+    /// The spacecraft's time at the tracker's counter 0, us since the CUC epoch: the SIL
+    /// then runs the PPS line ([`crate::pps::PpsModel`]) and, before its first frame, sends
+    /// the time-set command of its next pulse through the link, so the attitude reports are
+    /// on spacecraft time (`None`: no time set, the reports say so).
+    pub spacecraft_epoch_us: Option<u64>,
+    /// The tracker's counter's frequency error against spacecraft time, ppm.
+    pub counter_rate_ppm: f64,
 }
+
+/// The spacecraft time the SIL's commands take at counter 0 (`--spacecraft-time`'s
+/// default): 2,100,000,000.25 s after 1958-01-01 TAI (2024-07-18).
+pub const SIL_EPOCH_US: u64 = 2_100_000_000_250_000;
 
 impl Default for SilConfig {
     fn default() -> Self {
@@ -89,6 +100,8 @@ impl Default for SilConfig {
             period_us: 100_000,
             pixcorr_curves: false,
             sky: None,
+            spacecraft_epoch_us: None,
+            counter_rate_ppm: 0.0,
         }
     }
 }
@@ -165,6 +178,11 @@ pub struct AttitudeCheck {
     pub truth: Quat,
     /// What the attitude stage gave.
     pub fix: Result<Fix, SolveError>,
+    /// The report the link carried (time, rate, flags; `None` outside the frame cycle).
+    pub report: Option<AttitudeReport>,
+    /// The true spacecraft time at mid-exposure, s since the CUC epoch (`None` without a
+    /// spacecraft clock).
+    pub true_time_s: Option<f64>,
 }
 
 impl AttitudeCheck {
@@ -355,11 +373,30 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
     let mut tables = FixedTable(Some(table));
     let mut thermometer = FixedTemperature(None);
     let mut frames = Vec::new();
+    let mut pps = config
+        .spacecraft_epoch_us
+        .map(|epoch| crate::pps::PpsModel::new(epoch, config.counter_rate_ppm, config.seed));
+    if let Some(line) = pps.as_ref() {
+        // The spacecraft's time-set command for its next pulse, through the link as the
+        // ground sends it.
+        let (tc, _) = startrack_ground::frame_telecommand(
+            startrack_core::link::protocol::TC_TIME_SET,
+            &line.next_pulse_time().with_p_field(),
+            0,
+        );
+        let mut store = crate::link_home::MemoryTables::new(params.geometry, None);
+        cycle.receive(&tc, &mut store, &mut NoWindows);
+        let _ = cycle.transmit(&mut [0u8; 256]);
+    }
     for k in 0..config.frames {
         let mut clock = FrameClock {
             frame: k,
             period_us: config.period_us,
         };
+        if let Some(line) = pps.as_mut() {
+            line.advance_to(u64::from(k) * config.period_us);
+            cycle.sync(line);
+        }
         let mut ports = CyclePorts {
             clock: &mut clock,
             thermometer: &mut thermometer,
@@ -379,9 +416,14 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
             source.samples_rendered - before,
         );
         if let (Some(fix), Some((scene, _))) = (outcome.attitude, sky.as_ref()) {
+            let mid_us = outcome.report.map_or(0, |r| r.mid_exposure_us);
             frame.attitude = Some(AttitudeCheck {
                 truth: scene.attitude(summary.frame),
                 fix,
+                report: outcome.report,
+                true_time_s: pps
+                    .as_ref()
+                    .map(|l| l.spacecraft_us_at(mid_us as f64) * 1e-6),
             });
         }
         frames.push(frame);

@@ -33,5 +33,7 @@ pub mod upload;
 pub use command::{Command, Rejection, WindowKind, WindowRequest};
 pub use flash_upload::{FlashTables, active_info, read_active_at, refusal_of};
 pub use service::{LinkService, NoWindows, Targets, TrackerControl, WindowReader};
-pub use telemetry::{AttitudeMissing, AttitudeReport, FrameTotals, Housekeeping, LinkCounters};
+pub use telemetry::{
+    AttitudeMissing, AttitudeReport, FrameTotals, Housekeeping, LinkCounters, Validity,
+};
 pub use upload::{TableInfo, TableUpload, UploadRefusal};

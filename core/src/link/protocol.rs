@@ -109,6 +109,10 @@ pub const TC_TABLE_REPORT: MessageType = mt(133, 5);
 pub const TC_TABLE_COMMIT_DEFECTS: MessageType = mt(133, 7);
 /// `TM[133,6]`: the table in force.
 pub const TM_TABLE_REPORT: MessageType = mt(133, 6);
+/// `TC[9,128]`: the spacecraft time of the next sync pulse (CUC with its P-field). Service 9
+/// is PUS time management; it defines no command to set an on-board clock, so the subtype is
+/// one of the mission-specific range (128 and up).
+pub const TC_TIME_SET: MessageType = mt(9, 128);
 /// A frame's attitude (every frame the attitude stage runs).
 pub const TM_ATTITUDE: MessageType = mt(134, 2);
 
@@ -157,7 +161,7 @@ const fn tm(name: &'static str, apid: u16, kind: MessageType, data: &'static str
 }
 
 /// Every message, telecommands first.
-pub const MESSAGES: [MessageDef; 24] = [
+pub const MESSAGES: [MessageDef; 25] = [
     tc("ping", TC_PING, "none"),
     tc("housekeeping", TC_HOUSEKEEPING, "none"),
     tc(
@@ -200,6 +204,11 @@ pub const MESSAGES: [MessageDef; 24] = [
     tc("table-abort", TC_TABLE_ABORT, "none"),
     tc("table-report", TC_TABLE_REPORT, "kind u8"),
     tc("table-commit-defects", TC_TABLE_COMMIT_DEFECTS, "none"),
+    tc(
+        "time-set",
+        TC_TIME_SET,
+        "P-field u8 (0x1E), coarse u32 s, fine u16 2^-16 s: the spacecraft time (CUC) of the next sync pulse",
+    ),
     tm(
         "accepted",
         APID_CONTROL,
@@ -253,7 +262,7 @@ pub const MESSAGES: [MessageDef; 24] = [
         "attitude",
         APID_ATTITUDE,
         TM_ATTITUDE,
-        "the attitude report's fields (76 bytes)",
+        "the attitude report's fields, format 2 (128 bytes)",
     ),
 ];
 

@@ -14,8 +14,11 @@ use spacepackets::ecss::{CreatorConfig, MessageTypeId};
 use startrack_core::link::command::mode_number;
 use startrack_core::link::framing::{Deframer, Pushed, encode, encoded_len_max};
 use startrack_core::link::protocol::{self as p, MessageType};
-use startrack_core::link::telemetry::{ATTITUDE_LEN, Housekeeping, Reader, decode_stars, event};
+use startrack_core::link::telemetry::{
+    ATTITUDE_FORMAT, ATTITUDE_LEN, Housekeeping, Reader, decode_stars, event,
+};
 use startrack_core::link::{AttitudeReport, Rejection, TableInfo, UploadRefusal, WindowKind};
+use startrack_core::time::Cuc;
 use startrack_core::tracker::{Mode, StarRecord};
 use std::fmt;
 use std::io::{ErrorKind, Read, Write};
@@ -576,6 +579,13 @@ impl Ground {
         Ok(out)
     }
 
+    /// The time-set command: `at_next_pulse` is the spacecraft time of the tracker's next
+    /// sync pulse (`TC[9,128]`, CUC with its P-field).
+    pub fn set_time(&mut self, at_next_pulse: Cuc) -> Result<(), GroundError> {
+        self.command("time-set", p::TC_TIME_SET, &at_next_pulse.with_p_field())
+            .map(|_| ())
+    }
+
     /// A `side` x `side` window at (`x0`, `y0`) of the next frame, row-major (raw ADU, or
     /// e- x 64 calibrated).
     pub fn window(
@@ -647,7 +657,10 @@ pub enum AttitudeDecodeError {
         /// Bytes received.
         got: usize,
     },
-    /// The right length, but a status the protocol does not have (garbled).
+    /// Another format than [`ATTITUDE_FORMAT`] (its eighth byte).
+    Format(u8),
+    /// The right length and format, but a status or a flag bit the protocol does not have
+    /// (garbled).
     Status(u8),
 }
 
@@ -657,7 +670,11 @@ impl fmt::Display for AttitudeDecodeError {
             Self::Length { got } => {
                 write!(f, "attitude report of {got} bytes, not {ATTITUDE_LEN}")
             }
-            Self::Status(s) => write!(f, "attitude report with unknown status {s}"),
+            Self::Format(v) => write!(
+                f,
+                "attitude report of format {v}, not {ATTITUDE_FORMAT} (format 1 reads 0)"
+            ),
+            Self::Status(s) => write!(f, "attitude report with unknown status {s} or flags"),
         }
     }
 }
@@ -668,6 +685,10 @@ impl std::error::Error for AttitudeDecodeError {}
 pub fn decode_attitude(data: &[u8]) -> Result<AttitudeReport, AttitudeDecodeError> {
     if data.len() != ATTITUDE_LEN {
         return Err(AttitudeDecodeError::Length { got: data.len() });
+    }
+    match data.get(7) {
+        Some(&v) if v != ATTITUDE_FORMAT => return Err(AttitudeDecodeError::Format(v)),
+        _ => {}
     }
     AttitudeReport::decode(data).ok_or(AttitudeDecodeError::Status(
         data.get(4).copied().unwrap_or(0),

@@ -8,7 +8,10 @@
 //! - `--truth FILE`: `frame,x_px,y_px,signal_e,a_px`;
 //! - with `--sky`, `--attitude FILE`: one row per frame,
 //!   `frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability`
-//!   (the quaternion takes ICRS to the camera, scalar first; errors against the truth).
+//!   then `cuc_mid_s,true_cuc_mid_s,flags` (the report's mid-exposure in spacecraft time,
+//!   CUC seconds, and the truth, both empty without `--spacecraft-time-s`; the report's
+//!   validity flags joined by `+`) (the quaternion takes ICRS to the camera, scalar first;
+//!   errors against the truth).
 //!
 //! With `--port P` it serves the link instead ([`crate::link_home::serve`]); with `--sky` too,
 //! each frame's attitude report (`TM[134,2]`) is sent as the board sends it.
@@ -52,6 +55,16 @@ pub struct SilArgs {
     /// With `--sky`: attitude CSV (one row per frame).
     #[arg(long, requires = "sky")]
     pub attitude: Option<PathBuf>,
+    /// The spacecraft time at the tracker's counter 0, CUC seconds (1958 TAI epoch): the SIL
+    /// runs the PPS line and sends the time-set command for its next pulse before the first
+    /// frame, so the attitude reports are on spacecraft time. Without it they flag the time
+    /// not synchronised.
+    #[arg(long, value_name = "S")]
+    pub spacecraft_time_s: Option<f64>,
+    /// With `--spacecraft-time-s`: the tracker counter's frequency error, ppm (within the
+    /// clock model's 200).
+    #[arg(long, default_value_t = 0.0, requires = "spacecraft_time_s")]
+    pub counter_ppm: f64,
     /// Serve the tracker's command and telemetry link on TCP 127.0.0.1:PORT (standing in
     /// for the UART) and run until stopped; `--frames`, `--telemetry` and `--truth` are then
     /// not used (drive it with `startrack gse --port PORT`). With `--sky` the attitude stage
@@ -104,7 +117,21 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
         // A turn about +y moves the field along +x, about +x along -y.
         startrack_sim::sky::scene::SkyScene::ccd47_15deg(q0, [-dy / f, dx / f, 0.0])
     });
+    let spacecraft_epoch_us = match args.spacecraft_time_s {
+        None => None,
+        Some(t) if t.is_finite() && (0.0..4.0e9).contains(&t) => Some((t * 1e6).round() as u64),
+        Some(_) => {
+            return Err(CliError::Usage(
+                "--spacecraft-time-s: 0 to 4e9 s after 1958".into(),
+            ));
+        }
+    };
+    if !(args.counter_ppm.is_finite() && args.counter_ppm.abs() <= 150.0) {
+        return Err(CliError::Usage("--counter-ppm: within -150 to 150".into()));
+    }
     Ok(SilConfig {
+        spacecraft_epoch_us,
+        counter_rate_ppm: args.counter_ppm,
         frames: args.frames,
         seed: args.seed,
         stars: args.stars,
@@ -165,7 +192,7 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
     const ARCSEC: f64 = 206_264.806;
     writeln!(
         out,
-        "frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability"
+        "frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability,cuc_mid_s,true_cuc_mid_s,flags"
     )?;
     for f in &report.frames {
         let Some(c) = &f.attitude else { continue };
@@ -175,7 +202,7 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
                 let [w, x, y, z] = a.q.0;
                 writeln!(
                     out,
-                    "{},1,{},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.3},{:.3},{:.2e}",
+                    "{},1,{},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.3},{:.3},{:.2e},{}",
                     f.summary.frame,
                     match fix.mode {
                         startrack_core::solver::SolveMode::Tracking => "tracking",
@@ -187,13 +214,27 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
                     e[2].abs() * ARCSEC,
                     a.boresight_sigma_rad() * ARCSEC,
                     a.roll_sigma_rad() * ARCSEC,
-                    fix.false_probability
+                    fix.false_probability,
+                    time_columns(c)
                 )?;
             }
-            _ => writeln!(out, "{},0,,,,,,,,,,,,", f.summary.frame)?,
+            _ => writeln!(out, "{},0,,,,,,,,,,,,,{}", f.summary.frame, time_columns(c))?,
         }
     }
     Ok(())
+}
+
+/// The spacecraft-time columns of an attitude row: `cuc_mid_s,true_cuc_mid_s,flags`.
+fn time_columns(c: &sil::AttitudeCheck) -> String {
+    let t = c
+        .report
+        .and_then(|r| r.time)
+        .map_or(String::new(), |t| format!("{:.6}", t.cuc.to_seconds()));
+    let truth = c.true_time_s.map_or(String::new(), |t| format!("{t:.6}"));
+    let flags = c
+        .report
+        .map_or(String::new(), |r| super::gse::flag_names(r.flags));
+    format!("{t},{truth},{flags}")
 }
 
 /// Runs `startrack sil --port P`: the SIL with its link on TCP, until stopped.

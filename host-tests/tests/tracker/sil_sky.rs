@@ -153,28 +153,61 @@ fn sil_over_the_sky_solves_every_frame_within_its_covariance() {
 }
 
 /// The attitude report the link carries reads back as written, for a fix and for each way of
-/// having none; any other length or status is refused, never misread.
+/// having none, with and without a spacecraft time and a rate; any other length, format,
+/// status or flag bit is refused, never misread.
 #[test]
 fn attitude_report_round_trips_and_refuses_garbage() {
-    use startrack_core::link::telemetry::ATTITUDE_LEN;
-    use startrack_core::link::{AttitudeMissing, AttitudeReport};
+    use startrack_core::attitude::Rate;
+    use startrack_core::link::telemetry::{ATTITUDE_FORMAT, ATTITUDE_LEN};
+    use startrack_core::link::{AttitudeMissing, AttitudeReport, Validity};
+    use startrack_core::time::{Cuc, SpacecraftTime, TimeError};
     let bytes = committed_catalog().unwrap();
     let cat = Catalog::parse(&bytes).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
     let q = random_attitude(&mut rng);
     let stars = records(q, &cat, 9);
     let fix = solver(&cat).update(&stars, 42).unwrap();
-    let mut buf = [0u8; 128];
+    let time = Ok(SpacecraftTime {
+        cuc: Cuc {
+            coarse_s: 2_100_000_001,
+            fine: 0x1234,
+        },
+        error_bound_us: 11,
+    });
+    let rate = Some(Rate {
+        w_rad_s: [0.01, -0.02, 0.003],
+        cov_rad2_s2: [[1e-9, 1e-11, 0.0], [1e-11, 2e-9, 0.0], [0.0, 0.0, 5e-8]],
+    });
+    let mut buf = [0u8; 160];
+    let mut with_latency = AttitudeReport::of(5, &Ok(fix), 42, time, rate, true);
+    with_latency.latency_us = 700_000;
     for report in [
-        AttitudeReport::of(5, &Ok(fix)),
-        AttitudeReport::of(6, &Err(SolveError::TooFewStars { usable: 2 })),
+        with_latency,
+        AttitudeReport::of(
+            5,
+            &Ok(fix),
+            42,
+            Err(TimeError::NotSynchronised),
+            None,
+            false,
+        ),
+        AttitudeReport::of(
+            6,
+            &Err(SolveError::TooFewStars { usable: 2 }),
+            43,
+            time,
+            None,
+            false,
+        ),
         AttitudeReport {
             frame: 7,
             fix: Err(AttitudeMissing::NotIdentified { used: 12 }),
+            ..AttitudeReport::of(7, &Ok(fix), 44, time, rate, false)
         },
     ] {
-        let n = report.encode(99, &mut buf).unwrap();
+        let n = report.encode(&mut buf).unwrap();
         assert_eq!(n, ATTITUDE_LEN);
+        assert_eq!(buf[7], ATTITUDE_FORMAT);
         let back = AttitudeReport::decode(&buf[..n]).unwrap();
         match (report.fix, back.fix) {
             (Ok(a), Ok(b)) => {
@@ -191,15 +224,118 @@ fn attitude_report_round_trips_and_refuses_garbage() {
             }
             (a, b) => assert_eq!(a, b),
         }
-        assert_eq!(back.frame, report.frame);
+        assert_eq!(
+            (
+                back.frame,
+                back.flags,
+                back.time,
+                back.latency_us,
+                back.mid_exposure_us
+            ),
+            (
+                report.frame,
+                report.flags,
+                report.time,
+                report.latency_us,
+                report.mid_exposure_us
+            )
+        );
+        match (report.rate, back.rate) {
+            (Some(a), Some(b)) => {
+                for (x, y) in a.w_rad_s.iter().zip(b.w_rad_s) {
+                    assert!((x - y).abs() <= 1e-7 * x.abs(), "{x} {y}");
+                }
+                assert!((a.cov_rad2_s2[2][2] - b.cov_rad2_s2[2][2]).abs() < 1e-14);
+            }
+            (a, b) => assert_eq!(a, b),
+        }
         assert_eq!(AttitudeReport::decode(&buf[..n - 1]), None);
         let mut bad = buf;
         bad[4] = 4;
-        assert_eq!(AttitudeReport::decode(&bad[..n]), None);
+        assert_eq!(AttitudeReport::decode(&bad[..n]), None, "status 4");
+        let mut bad = buf;
+        bad[7] = 0;
+        assert_eq!(AttitudeReport::decode(&bad[..n]), None, "format 1");
+        let mut bad = buf;
+        bad[8] = 0x80;
+        assert_eq!(AttitudeReport::decode(&bad[..n]), None, "unknown flag");
     }
+    // The flags follow what the report had.
+    let r = AttitudeReport::of(
+        6,
+        &Err(SolveError::TooFewStars { usable: 2 }),
+        43,
+        Err(TimeError::NotSynchronised),
+        None,
+        false,
+    );
+    assert_eq!(
+        r.flags,
+        Validity::TOO_FEW_STARS
+            | Validity::TIME_NOT_SYNCHRONISED
+            | Validity::NO_VELOCITY
+            | Validity::NO_RATE
+    );
+    assert!(
+        AttitudeReport::of(5, &Ok(fix), 42, time, rate, true)
+            .flags
+            .is_empty()
+    );
     // Too small a buffer: no report, no panic.
     assert_eq!(
-        AttitudeReport::of(1, &Ok(fix)).encode(0, &mut buf[..20]),
+        AttitudeReport::of(1, &Ok(fix), 0, time, None, false).encode(&mut buf[..20]),
         None
+    );
+}
+
+/// The SIL on spacecraft time: its PPS line runs 80 ppm slow against the tracker's counter
+/// and the time-set command goes through the link before the first frame. Until the first
+/// pulse the reports flag the time not synchronised; from it on, each report's mid-exposure
+/// time is the truth within its stated bound, and the bound shrinks once the second pulse
+/// has measured the counter's rate.
+#[test]
+fn sil_reports_mid_exposure_in_spacecraft_time_within_its_bound() {
+    use startrack_core::link::Validity;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let q0 = random_attitude(&mut rng);
+    let f = FieldSpec::ccd47_15deg(0.0).camera.focal_length_px;
+    let config = SilConfig {
+        frames: 12,
+        period_us: 250_000,
+        sky: Some(SkyScene::ccd47_15deg(q0, [0.2 / f, 0.3 / f, 1e-5])),
+        spacecraft_epoch_us: Some(sil::SIL_EPOCH_US),
+        counter_rate_ppm: -80.0,
+        ..SilConfig::default()
+    };
+    let report = sil::run(&config).unwrap();
+    let mut bounds = Vec::new();
+    for fr in &report.frames {
+        let c = fr.attitude.as_ref().unwrap();
+        let r = c.report.expect("a report every frame");
+        // The pulses fall at counter 0.75 s + k s: frames 3, 7, 11 take them first.
+        if fr.summary.frame < 3 {
+            assert!(r.flags.contains(Validity::TIME_NOT_SYNCHRONISED), "{r:?}");
+            assert_eq!(r.time, None);
+            continue;
+        }
+        assert!(!r.flags.contains(Validity::TIME_NOT_SYNCHRONISED), "{r:?}");
+        let t = r.time.expect("synchronised");
+        let err_us = (t.cuc.to_seconds() - c.true_time_s.unwrap()) * 1e6;
+        assert!(
+            err_us.abs() <= f64::from(t.error_bound_us),
+            "frame {}: {err_us:.1} us off, bound {} us",
+            fr.summary.frame,
+            t.error_bound_us
+        );
+        bounds.push(t.error_bound_us);
+        println!(
+            "frame {}: time error {err_us:+.1} us, bound {} us",
+            fr.summary.frame, t.error_bound_us
+        );
+    }
+    // 80 ppm over up to 1.25 s is 100 us: seen while the rate is not yet measured, gone after.
+    assert!(
+        bounds[0] > 100 && *bounds.last().unwrap() < 30,
+        "{bounds:?}"
     );
 }

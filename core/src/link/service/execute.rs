@@ -192,6 +192,7 @@ impl LinkService {
             Command::TableAbort => t.tables.abort(),
             Command::TableReport(kind) => self.answer = Answer::Table(kind),
             Command::TableCommitDefects => self.start_amend(t)?,
+            Command::TimeSet(c) => self.time_set = Some(c),
         }
         Ok(())
     }

@@ -76,6 +76,8 @@ pub struct LinkService {
     /// The in-flight defect commit under way: its plan, the bytes written so far, and the
     /// link rounds in a row the table in force could not be read.
     amend: Option<(AmendPlan, u32, u16)>,
+    /// A time-set command's time, for the frame cycle's clock to take.
+    time_set: Option<crate::time::Cuc>,
 }
 
 impl Default for LinkService {
@@ -150,7 +152,14 @@ impl LinkService {
             answer: Answer::None,
             setup_faults: 0,
             amend: None,
+            time_set: None,
         }
+    }
+
+    /// The time of the last time-set command not yet taken (the spacecraft time of the next
+    /// sync pulse): the frame cycle gives it to its clock.
+    pub fn take_time_set(&mut self) -> Option<crate::time::Cuc> {
+        self.time_set.take()
     }
 
     /// An in-flight defect commit is under way (`TC[133,7]` accepted, its table not yet
