@@ -9,7 +9,8 @@
 //!                  -> the link's periodic housekeeping
 //!                  -> the attitude stage on the frame's star list, its report on the link,
 //!                     tagged at mid-exposure in spacecraft time (the cycle's clock, set by
-//!                     the link's time-set command and the home's sync pulses)
+//!                     the link's time-set command and the home's sync pulses), with the
+//!                     angular rate of the last attitudes ([`crate::attitude::RateFilter`])
 //!                  -> housekeeping (Health): the frame's counters, the temperature and its
 //!                     source, the uptime
 //! ```
@@ -95,6 +96,7 @@ pub struct FrameCycle<'t, 'b, 'c, 'l, const N: usize> {
     solver: Option<Solver<'c>>,
     health: Health,
     clock: SpacecraftClock,
+    rate: crate::attitude::RateFilter,
 }
 
 /// The home's sink and the link, each given every record.
@@ -142,6 +144,7 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             solver,
             health,
             clock: SpacecraftClock::new(),
+            rate: crate::attitude::RateFilter::new(),
         }
     }
 
@@ -266,8 +269,13 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         let attitude = self.solver.as_mut().map(|solver| {
             let result = solver.update(self.tracker.stars(), mid_us);
             let time = self.clock.time_of(mid_us);
+            // The rate of the attitudes so far, this frame's the newest (none without it).
+            let rate = result
+                .as_ref()
+                .ok()
+                .and_then(|f| self.rate.push(f.time_us, &f.attitude));
             let mut r =
-                crate::link::AttitudeReport::of(summary.frame, &result, mid_us, time, None, false);
+                crate::link::AttitudeReport::of(summary.frame, &result, mid_us, time, rate, false);
             let latency = ports.clock.now_us().saturating_sub(mid_us);
             r.latency_us = u32::try_from(latency).unwrap_or(u32::MAX);
             self.link.send_attitude(&r);

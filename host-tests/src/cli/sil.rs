@@ -8,9 +8,10 @@
 //! - `--truth FILE`: `frame,x_px,y_px,signal_e,a_px`;
 //! - with `--sky`, `--attitude FILE`: one row per frame,
 //!   `frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability`
-//!   then `cuc_mid_s,true_cuc_mid_s,flags` (the report's mid-exposure in spacecraft time,
-//!   CUC seconds, and the truth, both empty without `--spacecraft-time-s`; the report's
-//!   validity flags joined by `+`) (the quaternion takes ICRS to the camera, scalar first;
+//!   then `cuc_mid_s,true_cuc_mid_s,flags,wx_deg_s,wy_deg_s,wz_deg_s,sigma_wx_deg_s,sigma_wy_deg_s,sigma_wz_deg_s`
+//!   (the report's mid-exposure in spacecraft time, CUC seconds, and the truth, both empty
+//!   without `--spacecraft-time-s`; the report's validity flags joined by `+`; its rate and
+//!   1-sigma, camera frame, deg/s) (the quaternion takes ICRS to the camera, scalar first;
 //!   errors against the truth).
 //!
 //! With `--port P` it serves the link instead ([`crate::link_home::serve`]); with `--sky` too,
@@ -192,7 +193,7 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
     const ARCSEC: f64 = 206_264.806;
     writeln!(
         out,
-        "frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability,cuc_mid_s,true_cuc_mid_s,flags"
+        "frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability,cuc_mid_s,true_cuc_mid_s,flags,wx_deg_s,wy_deg_s,wz_deg_s,sigma_wx_deg_s,sigma_wy_deg_s,sigma_wz_deg_s"
     )?;
     for f in &report.frames {
         let Some(c) = &f.attitude else { continue };
@@ -224,7 +225,8 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
     Ok(())
 }
 
-/// The spacecraft-time columns of an attitude row: `cuc_mid_s,true_cuc_mid_s,flags`.
+/// The spacecraft-time and rate columns of an attitude row: `cuc_mid_s,true_cuc_mid_s,flags`
+/// and the report's rate and its 1-sigma per axis, deg/s (empty without a rate).
 fn time_columns(c: &sil::AttitudeCheck) -> String {
     let t = c
         .report
@@ -234,7 +236,22 @@ fn time_columns(c: &sil::AttitudeCheck) -> String {
     let flags = c
         .report
         .map_or(String::new(), |r| super::gse::flag_names(r.flags));
-    format!("{t},{truth},{flags}")
+    let rate = c
+        .report
+        .and_then(|r| r.rate)
+        .map_or(",,,,,".to_string(), |w| {
+            let s = |i: usize| w.cov_rad2_s2[i][i].max(0.0).sqrt().to_degrees();
+            format!(
+                "{:.6},{:.6},{:.6},{:.3e},{:.3e},{:.3e}",
+                w.w_rad_s[0].to_degrees(),
+                w.w_rad_s[1].to_degrees(),
+                w.w_rad_s[2].to_degrees(),
+                s(0),
+                s(1),
+                s(2)
+            )
+        });
+    format!("{t},{truth},{flags},{rate}")
 }
 
 /// Runs `startrack sil --port P`: the SIL with its link on TCP, until stopped.

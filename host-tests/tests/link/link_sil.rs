@@ -412,7 +412,16 @@ fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
         let cols: Vec<&str> = row.split(',').collect();
         assert_eq!(cols.len(), 21, "{row}");
         assert!(cols[11].parse::<f64>().expect("t_mid_s") >= 2.2e9, "{row}");
-        assert_eq!(cols[14], "no_velocity+no_rate", "{row}");
+        assert_eq!(cols[14], "no_velocity", "{row}");
+        let w: Vec<f64> = cols[15..18]
+            .iter()
+            .map(|c| c.parse().expect("rate"))
+            .collect();
+        // The scene turns by (0.2 / f, 0.3 / f, 1e-5) rad a frame of 0.1 s: 0.029, 0.044 deg/s.
+        assert!(
+            (w[0] - 0.0295).abs() < 1e-3 && (w[1] - 0.0442).abs() < 1e-3,
+            "{row}"
+        );
         assert!(matches!(cols[1], "tracking" | "lost_in_space"), "{row}");
         let q: Vec<f64> = cols[4..8].iter().map(|c| c.parse().expect("q")).collect();
         let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();

@@ -292,7 +292,8 @@ fn attitude_report_round_trips_and_refuses_garbage() {
 /// and the time-set command goes through the link before the first frame. Until the first
 /// pulse the reports flag the time not synchronised; from it on, each report's mid-exposure
 /// time is the truth within its stated bound, and the bound shrinks once the second pulse
-/// has measured the counter's rate.
+/// has measured the counter's rate. From the second frame on each report carries the rate of
+/// the attitudes so far, within 5 of its sigmas of the scene's on every axis.
 #[test]
 fn sil_reports_mid_exposure_in_spacecraft_time_within_its_bound() {
     use startrack_core::link::Validity;
@@ -338,4 +339,32 @@ fn sil_reports_mid_exposure_in_spacecraft_time_within_its_bound() {
         bounds[0] > 100 && *bounds.last().unwrap() < 30,
         "{bounds:?}"
     );
+    // The rate of the attitudes, from the second frame on, against the scene's.
+    let sky = config.sky.unwrap();
+    let true_w = sky
+        .rate_rad_per_frame
+        .map(|v| v / (config.period_us as f64 * 1e-6));
+    for fr in &report.frames {
+        let r = fr.attitude.as_ref().unwrap().report.unwrap();
+        let Some(w) = r.rate else {
+            assert_eq!(fr.summary.frame, 0, "{r:?}");
+            assert!(r.flags.contains(Validity::NO_RATE));
+            continue;
+        };
+        assert!(!r.flags.contains(Validity::NO_RATE) && !r.flags.contains(Validity::RATE_TOO_HIGH));
+        for (i, tw) in true_w.iter().enumerate() {
+            let (e, s) = (w.w_rad_s[i] - tw, w.cov_rad2_s2[i][i].sqrt());
+            println!(
+                "frame {} axis {i}: rate error {:+.2} arcsec/s, sigma {:.2}",
+                fr.summary.frame,
+                e * 206_264.8,
+                s * 206_264.8
+            );
+            assert!(
+                e.abs() < 5.0 * s,
+                "frame {}: axis {i}: {e:e} rad/s, sigma {s:e}",
+                fr.summary.frame
+            );
+        }
+    }
 }

@@ -12,6 +12,10 @@ use crate::time::{SpacecraftTime, TimeError};
 /// spacecraft time, rate or flags.
 pub const ATTITUDE_FORMAT: u8 = 2;
 
+/// Above this rate the report flags [`Validity::RATE_TOO_HIGH`], rad/s: 3 deg/s, the rate up
+/// to which tracking is to hold (docs/tracker.md); beyond it stars trail past their windows.
+pub const RATE_LIMIT_RAD_S: f64 = 3.0 * core::f64::consts::PI / 180.0;
+
 /// The attitude report's fields (`TM[134,2]`), in order: name, type, meaning.
 pub const ATTITUDE_FIELDS: [(&str, &str, &str); 31] = [
     ("frame", "u32", "the frame"),
@@ -192,6 +196,13 @@ impl AttitudeReport {
         flags.set(Validity::TIME_NOT_SYNCHRONISED, time.is_err());
         flags.set(Validity::NO_VELOCITY, !velocity_applied);
         flags.set(Validity::NO_RATE, rate.is_none());
+        flags.set(
+            Validity::RATE_TOO_HIGH,
+            rate.is_some_and(|r| {
+                let m = r.magnitude_rad_s();
+                m.is_nan() || m > RATE_LIMIT_RAD_S
+            }),
+        );
         Self {
             frame,
             fix,
