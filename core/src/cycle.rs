@@ -10,7 +10,10 @@
 //!                  -> the attitude stage on the frame's star list, its report on the link,
 //!                     tagged at mid-exposure in spacecraft time (the cycle's clock, set by
 //!                     the link's time-set command and the home's sync pulses), with the
-//!                     angular rate of the last attitudes ([`crate::attitude::RateFilter`])
+//!                     angular rate of the last attitudes ([`crate::attitude::RateFilter`]);
+//!                     with the link's velocity command (within [`VELOCITY_MAX_AGE_S`] of
+//!                     the frame's spacecraft time) the attitude is of the ICRF, stellar
+//!                     aberration removed, else of the apparent sky and flagged so
 //!                  -> housekeeping (Health): the frame's counters, the temperature and its
 //!                     source, the uptime
 //! ```
@@ -97,7 +100,12 @@ pub struct FrameCycle<'t, 'b, 'c, 'l, const N: usize> {
     health: Health,
     clock: SpacecraftClock,
     rate: crate::attitude::RateFilter,
+    velocity: Option<crate::link::Velocity>,
 }
+
+/// A velocity is applied to frames within this of its time, s: a low orbit's velocity turns
+/// by 4 degrees a minute, 0.4" of aberration at 7.7 km/s.
+pub const VELOCITY_MAX_AGE_S: f64 = 60.0;
 
 /// The home's sink and the link, each given every record.
 struct Both<'a> {
@@ -145,6 +153,7 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             health,
             clock: SpacecraftClock::new(),
             rate: crate::attitude::RateFilter::new(),
+            velocity: None,
         }
     }
 
@@ -215,6 +224,9 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         if let Some(t) = self.link.take_time_set() {
             self.clock.command_set(t);
         }
+        if let Some(v) = self.link.take_velocity() {
+            self.velocity = Some(v);
+        }
     }
 
     /// The link's work between frames: diagnostic window rows as its queue has room, the
@@ -267,15 +279,31 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         let mid_us = summary.start_us.saturating_add(exposure_us / 2);
         let mut report = None;
         let attitude = self.solver.as_mut().map(|solver| {
-            let result = solver.update(self.tracker.stars(), mid_us);
             let time = self.clock.time_of(mid_us);
+            // The velocity, when the frame's spacecraft time is known and near its time.
+            let velocity = match (time, self.velocity) {
+                (Ok(t), Some(v))
+                    if libm::fabs(t.cuc.to_seconds() - v.at.to_seconds()) <= VELOCITY_MAX_AGE_S =>
+                {
+                    Some(v.v_m_s)
+                }
+                _ => None,
+            };
+            let (result, aberration_applied) =
+                solver.update_at_velocity(self.tracker.stars(), mid_us, velocity);
             // The rate of the attitudes so far, this frame's the newest (none without it).
             let rate = result
                 .as_ref()
                 .ok()
                 .and_then(|f| self.rate.push(f.time_us, &f.attitude));
-            let mut r =
-                crate::link::AttitudeReport::of(summary.frame, &result, mid_us, time, rate, false);
+            let mut r = crate::link::AttitudeReport::of(
+                summary.frame,
+                &result,
+                mid_us,
+                time,
+                rate,
+                aberration_applied,
+            );
             let latency = ports.clock.now_us().saturating_sub(mid_us);
             r.latency_us = u32::try_from(latency).unwrap_or(u32::MAX);
             self.link.send_attitude(&r);

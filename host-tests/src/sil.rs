@@ -83,6 +83,13 @@ pub struct SilConfig {
     pub spacecraft_epoch_us: Option<u64>,
     /// The tracker's counter's frequency error against spacecraft time, ppm.
     pub counter_rate_ppm: f64,
+    /// The spacecraft's velocity, ICRF, m/s: a sky scene's stars are then seen aberrated
+    /// ([`aberrated_sky_stars`]).
+    pub velocity_m_s: Option<[f64; 3]>,
+    /// With `velocity_m_s` and a spacecraft clock: the SIL sends the velocity command (at the
+    /// time of its first pulse) before its first frame, so the attitude stage removes the
+    /// aberration; `false` leaves the attitude apparent (for comparison).
+    pub send_velocity: bool,
 }
 
 /// The spacecraft time the SIL's commands take at counter 0 (`--spacecraft-time`'s
@@ -102,6 +109,8 @@ impl Default for SilConfig {
             sky: None,
             spacecraft_epoch_us: None,
             counter_rate_ppm: 0.0,
+            velocity_m_s: None,
+            send_velocity: true,
         }
     }
 }
@@ -386,6 +395,14 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         );
         let mut store = crate::link_home::MemoryTables::new(params.geometry, None);
         cycle.receive(&tc, &mut store, &mut NoWindows);
+        if let (Some(v), true) = (config.velocity_m_s, config.send_velocity) {
+            let (tc, _) = startrack_ground::frame_telecommand(
+                startrack_core::link::protocol::TC_VELOCITY,
+                &velocity_command(v, line.next_pulse_time()),
+                1,
+            );
+            cycle.receive(&tc, &mut store, &mut NoWindows);
+        }
         let _ = cycle.transmit(&mut [0u8; 256]);
     }
     for k in 0..config.frames {
@@ -445,9 +462,55 @@ pub fn frame_stars(
     frame: u32,
 ) -> Vec<Star> {
     match (&config.sky, catalog) {
-        (Some(sky), Some(cat)) => sky.stars(cat, frame, f64::from(config.tracker.psf_a_px)),
+        (Some(sky), Some(cat)) => match config.velocity_m_s {
+            Some(v) => aberrated_sky_stars(sky, cat, frame, f64::from(config.tracker.psf_a_px), v),
+            None => sky.stars(cat, frame, f64::from(config.tracker.psf_a_px)),
+        },
         _ => stars_at(base, config.drift_px, frame),
     }
+}
+
+/// The velocity command's data (`TC[134,1]`): `v_m_s` as f32 and the time it holds at.
+pub fn velocity_command(v_m_s: [f64; 3], at: startrack_core::time::Cuc) -> Vec<u8> {
+    let mut d = Vec::with_capacity(18);
+    for c in v_m_s {
+        d.extend_from_slice(&(c as f32).to_be_bytes());
+    }
+    d.extend_from_slice(&at.t_field());
+    d
+}
+
+/// The stars of `sky`'s frame `frame` seen by an observer moving at `v_m_s` (ICRF, m/s):
+/// [`SkyScene::stars`] with each catalog direction moved by
+/// [`startrack_core::attitude::aberrate`] before it is projected.
+pub fn aberrated_sky_stars(
+    sky: &SkyScene,
+    catalog: &Catalog<'_>,
+    frame: u32,
+    a_px: f64,
+    v_m_s: [f64; 3],
+) -> Vec<Star> {
+    use startrack_sim::sky::scene::EDGE_MARGIN_PX;
+    let q = sky.attitude(frame);
+    let boresight = q.rotate_inv([0.0, 0.0, 1.0]);
+    let [cols, rows] = sky.active_px.map(f64::from);
+    let m = EDGE_MARGIN_PX;
+    catalog
+        .cone(boresight, catalog.field_radius_rad() + 0.02)
+        .filter_map(|(idx, dir)| {
+            let seen = startrack_core::attitude::aberrate(dir, v_m_s);
+            let p = sky.camera.project(q.rotate(seen))?;
+            let inside =
+                p[0] >= -m && p[1] >= -m && p[0] <= cols - 1.0 + m && p[1] <= rows - 1.0 + m;
+            let hp = f64::from(catalog.star(idx)?.hp_mmag) / 1000.0;
+            inside.then(|| Star {
+                x_px: p[0],
+                y_px: p[1],
+                signal_e: sky.flux_e_at_mag0 * 10f64.powf(-0.4 * hp),
+                a_px,
+            })
+        })
+        .collect()
 }
 
 /// The attitude stage the SIL runs after each frame of a sky scene: the core's solver over

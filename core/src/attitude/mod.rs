@@ -22,7 +22,9 @@
 //! normalised error squared at 3).
 //!
 //! Stellar aberration: [`aberrate`] moves a catalog direction by the observer's velocity
-//! (first order in v/c, the residual below 1 mas at orbital speeds) before it is matched.
+//! (first order in v/c, the residual below 1 mas at orbital speeds); the attitude stage
+//! refits an identified attitude with the matched catalog directions moved so
+//! ([`crate::solver::Solver::update_at_velocity`]).
 
 mod camera;
 mod quat;

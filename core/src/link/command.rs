@@ -90,6 +90,17 @@ pub enum Command<'a> {
     TableCommitDefects,
     /// `TC[9,128]`: the spacecraft time of the next sync pulse.
     TimeSet(Cuc),
+    /// `TC[134,1]`: the spacecraft's velocity.
+    Velocity(Velocity),
+}
+
+/// The spacecraft's velocity at a time (`TC[134,1]`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Velocity {
+    /// ICRF, barycentric, m/s (finite, at most [`p::MAX_SPEED_M_S`]).
+    pub v_m_s: [f64; 3],
+    /// The spacecraft time it holds at.
+    pub at: Cuc,
 }
 
 /// Why a telecommand was not executed. Codes ([`Self::code`]) and parameters are stable:
@@ -330,6 +341,17 @@ impl<'a> Command<'a> {
                 Self::TableReport(*d.first().ok_or(short)?)
             }
             p::TC_TABLE_COMMIT_DEFECTS => exact(d, 0).map(|()| Self::TableCommitDefects)?,
+            p::TC_VELOCITY => {
+                exact(d, 18)?;
+                let f = |at: usize| be32(d, at).map(|b| f64::from(f32::from_bits(b)));
+                let v_m_s = [f(0).ok_or(short)?, f(4).ok_or(short)?, f(8).ok_or(short)?];
+                let speed = libm::sqrt(v_m_s.iter().map(|c| c * c).sum());
+                if speed.is_nan() || speed > p::MAX_SPEED_M_S {
+                    return Err(Rejection::BadValue);
+                }
+                let at = Cuc::from_t_field(d.get(12..).ok_or(short)?).map_err(|_| short)?;
+                Self::Velocity(Velocity { v_m_s, at })
+            }
             p::TC_TIME_SET => match Cuc::from_p_and_t(d) {
                 Ok(c) => Self::TimeSet(c),
                 Err(CucError::PField(p)) => return Err(Rejection::TimeCode(p)),

@@ -30,7 +30,7 @@ pub mod service;
 pub mod telemetry;
 pub mod upload;
 
-pub use command::{Command, Rejection, WindowKind, WindowRequest};
+pub use command::{Command, Rejection, Velocity, WindowKind, WindowRequest};
 pub use flash_upload::{FlashTables, active_info, read_active_at, refusal_of};
 pub use service::{LinkService, NoWindows, Targets, TrackerControl, WindowReader};
 pub use telemetry::{

@@ -66,6 +66,16 @@ pub struct SilArgs {
     /// clock model's 200).
     #[arg(long, default_value_t = 0.0, requires = "spacecraft_time_s")]
     pub counter_ppm: f64,
+    /// With `--sky`: the spacecraft's velocity, ICRF, km/s: VX,VY,VZ (at most 300 km/s). The
+    /// scene's stars are seen aberrated, and the SIL sends the velocity command (and, without
+    /// `--spacecraft-time-s`, the time from 2,100,000,000.25 s) so the attitude is of the
+    /// ICRF.
+    #[arg(long, value_delimiter = ',', num_args = 3, requires = "sky")]
+    pub velocity_km_s: Option<Vec<f64>>,
+    /// With `--velocity-km-s`: do not send the velocity command (the attitude stays apparent,
+    /// its aberration uncorrected).
+    #[arg(long, requires = "velocity_km_s")]
+    pub apparent: bool,
     /// Serve the tracker's command and telemetry link on TCP 127.0.0.1:PORT (standing in
     /// for the UART) and run until stopped; `--frames`, `--telemetry` and `--truth` are then
     /// not used (drive it with `startrack gse --port PORT`). With `--sky` the attitude stage
@@ -130,7 +140,27 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
     if !(args.counter_ppm.is_finite() && args.counter_ppm.abs() <= 150.0) {
         return Err(CliError::Usage("--counter-ppm: within -150 to 150".into()));
     }
+    let velocity_m_s = match args.velocity_km_s.as_deref() {
+        None => None,
+        Some(&[x, y, z]) => {
+            let v = [x, y, z].map(|c| c * 1000.0);
+            let speed = v.iter().map(|c| c * c).sum::<f64>().sqrt();
+            if !(speed.is_finite() && speed <= startrack_core::link::protocol::MAX_SPEED_M_S) {
+                return Err(CliError::Usage(
+                    "--velocity-km-s: VX,VY,VZ, at most 300 km/s".into(),
+                ));
+            }
+            Some(v)
+        }
+        Some(_) => {
+            return Err(CliError::Usage("--velocity-km-s takes VX,VY,VZ".into()));
+        }
+    };
+    let spacecraft_epoch_us =
+        spacecraft_epoch_us.or(velocity_m_s.map(|_| crate::sil::SIL_EPOCH_US));
     Ok(SilConfig {
+        velocity_m_s,
+        send_velocity: !args.apparent,
         spacecraft_epoch_us,
         counter_rate_ppm: args.counter_ppm,
         frames: args.frames,

@@ -193,6 +193,7 @@ impl LinkService {
             Command::TableReport(kind) => self.answer = Answer::Table(kind),
             Command::TableCommitDefects => self.start_amend(t)?,
             Command::TimeSet(c) => self.time_set = Some(c),
+            Command::Velocity(v) => self.velocity = Some(v),
         }
         Ok(())
     }

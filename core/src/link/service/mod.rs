@@ -78,6 +78,8 @@ pub struct LinkService {
     amend: Option<(AmendPlan, u32, u16)>,
     /// A time-set command's time, for the frame cycle's clock to take.
     time_set: Option<crate::time::Cuc>,
+    /// A velocity command's velocity, for the frame cycle to take.
+    velocity: Option<super::command::Velocity>,
 }
 
 impl Default for LinkService {
@@ -153,6 +155,7 @@ impl LinkService {
             setup_faults: 0,
             amend: None,
             time_set: None,
+            velocity: None,
         }
     }
 
@@ -160,6 +163,12 @@ impl LinkService {
     /// sync pulse): the frame cycle gives it to its clock.
     pub fn take_time_set(&mut self) -> Option<crate::time::Cuc> {
         self.time_set.take()
+    }
+
+    /// The velocity of the last velocity command not yet taken: the frame cycle keeps it for
+    /// the attitude stage's aberration.
+    pub fn take_velocity(&mut self) -> Option<super::command::Velocity> {
+        self.velocity.take()
     }
 
     /// An in-flight defect commit is under way (`TC[133,7]` accepted, its table not yet
