@@ -586,6 +586,17 @@ impl Ground {
             .map(|_| ())
     }
 
+    /// The velocity command: the spacecraft's velocity `v_m_s` (ICRF, barycentric, m/s) at
+    /// spacecraft time `at` (`TC[134,1]`).
+    pub fn set_velocity(&mut self, v_m_s: [f64; 3], at: Cuc) -> Result<(), GroundError> {
+        let mut d = Vec::with_capacity(18);
+        for c in v_m_s {
+            d.extend_from_slice(&(c as f32).to_be_bytes());
+        }
+        d.extend_from_slice(&at.t_field());
+        self.command("velocity", p::TC_VELOCITY, &d).map(|_| ())
+    }
+
     /// A `side` x `side` window at (`x0`, `y0`) of the next frame, row-major (raw ADU, or
     /// e- x 64 calibrated).
     pub fn window(

@@ -13,6 +13,8 @@
 //!   mid-exposure in spacecraft time, CUC seconds; `flags` the validity flags' names joined
 //!   by `+`; empty fields without an attitude, a time or a rate);
 //! - `time-set SECONDS`: the spacecraft time (CUC seconds) of the tracker's next sync pulse;
+//! - `velocity VX,VY,VZ --at SECONDS`: the spacecraft's velocity (ICRF, km/s) at a spacecraft
+//!   time, for the attitude stage's aberration;
 //! - `window X Y SIZE --out FILE [--calibrated]`: a window of the next frame as FITS;
 //! - `reset`.
 //!
@@ -97,6 +99,15 @@ pub enum GseCommand {
     TimeSet {
         /// CUC seconds since 1958-01-01 TAI (a fraction allowed, to 2^-16 s).
         seconds: f64,
+    },
+    /// Send the spacecraft's velocity (`TC[134,1]`).
+    Velocity {
+        /// ICRF, barycentric, km/s: VX,VY,VZ.
+        #[arg(value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+        km_s: Vec<f64>,
+        /// The spacecraft time it holds at, CUC seconds.
+        #[arg(long)]
+        at: f64,
     },
     /// Reset the tracker.
     Reset,
@@ -382,6 +393,16 @@ pub fn run(args: &GseArgs, out: &mut dyn Write) -> Result<(), GseError> {
                 .flatten()
                 .ok_or_else(|| GseError::Usage(format!("time-set {seconds}: 0 to 2^32 s")))?;
             g.set_time(cuc)?;
+        }
+        GseCommand::Velocity { km_s, at } => {
+            let &[x, y, z] = &km_s[..] else {
+                return Err(GseError::Usage("velocity takes VX,VY,VZ".into()));
+            };
+            let at = (at.is_finite() && *at >= 0.0)
+                .then(|| Cuc::from_ticks((at * 65_536.0).round() as u64))
+                .flatten()
+                .ok_or_else(|| GseError::Usage(format!("--at {at}: 0 to 2^32 s")))?;
+            g.set_velocity([x, y, z].map(|c| c * 1000.0), at)?;
         }
         GseCommand::Reset => g.reset()?,
         GseCommand::CommitDefects => {

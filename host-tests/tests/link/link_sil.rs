@@ -403,6 +403,33 @@ fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
         &mut csv,
     )
     .expect("gse attitude");
+    // The velocity command (this scene is at rest against the stars: zero) makes the
+    // attitude of the ICRF: the apparent flag goes; a speed beyond the limit is rejected.
+    let gse_run = |command| {
+        gse::run(
+            &GseArgs {
+                port: server.port,
+                timeout_s: 60.0,
+                command,
+            },
+            &mut Vec::new(),
+        )
+    };
+    let too_fast = gse_run(GseCommand::Velocity {
+        km_s: vec![400.0, 0.0, 0.0],
+        at: f64::from(set_s),
+    });
+    assert_eq!(too_fast.map_err(|e| e.exit_code()), Err(2));
+    gse_run(GseCommand::Velocity {
+        km_s: vec![0.0, 0.0, 0.0],
+        at: f64::from(set_s),
+    })
+    .expect("gse velocity");
+    let mut g = Ground::connect(server.port, Duration::from_secs(60)).expect("connect");
+    for r in g.attitude(2).expect("attitude reports") {
+        assert!(r.flags.is_empty(), "{r:?}");
+    }
+    drop(g);
     let _ = server.finish();
     let csv = String::from_utf8(csv).expect("utf-8");
     let lines: Vec<&str> = csv.lines().collect();
