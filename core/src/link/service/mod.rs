@@ -159,7 +159,7 @@ impl LinkService {
         }
     }
 
-    /// The time of the last time-set command not yet taken (the spacecraft time of the next
+    /// The time of the newest time-set command not yet taken (the spacecraft time of the next
     /// sync pulse): the frame cycle gives it to its clock.
     pub fn take_time_set(&mut self) -> Option<crate::time::Cuc> {
         self.time_set.take()
