@@ -103,7 +103,7 @@ pub enum GseCommand {
     /// Send the spacecraft's velocity (`TC[134,1]`).
     Velocity {
         /// ICRF, barycentric, km/s: VX,VY,VZ.
-        #[arg(value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+        #[arg(value_delimiter = ',', allow_hyphen_values = true)]
         km_s: Vec<f64>,
         /// The spacecraft time it holds at, CUC seconds.
         #[arg(long)]

@@ -60,17 +60,27 @@ pub struct SilArgs {
     /// runs the PPS line and sends the time-set command for its next pulse before the first
     /// frame, so the attitude reports are on spacecraft time. Without it they flag the time
     /// not synchronised.
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub spacecraft_time_s: Option<f64>,
     /// With `--spacecraft-time-s`: the tracker counter's frequency error, ppm (within the
     /// clock model's 200).
-    #[arg(long, default_value_t = 0.0, requires = "spacecraft_time_s")]
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        allow_negative_numbers = true,
+        requires = "spacecraft_time_s"
+    )]
     pub counter_ppm: f64,
     /// With `--sky`: the spacecraft's velocity, ICRF, km/s: VX,VY,VZ (at most 300 km/s). The
     /// scene's stars are seen aberrated, and the SIL sends the velocity command (and, without
     /// `--spacecraft-time-s`, the time from 2,100,000,000.25 s) so the attitude is of the
     /// ICRF.
-    #[arg(long, value_delimiter = ',', num_args = 3, requires = "sky")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        requires = "sky"
+    )]
     pub velocity_km_s: Option<Vec<f64>>,
     /// With `--velocity-km-s`: do not send the velocity command (the attitude stays apparent,
     /// its aberration uncorrected).
