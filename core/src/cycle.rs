@@ -25,8 +25,11 @@
 //! frame itself.
 //!
 //! Mid-exposure, the instant a report is tagged with, is the frame's start on the home's
-//! clock plus half the configured exposure (the exposure starts when the frame's readout
-//! request goes out, at its start).
+//! clock less half the exposure of the frame before: the CCD is frame-transfer, so the image
+//! a frame reads was integrated under the previous frame's program, up to the transfer that
+//! opens this frame's (docs/sequencer.md), for the exposure that program was given. It is
+//! held at the counter's 0 where it would fall before it (the first frames of a home whose
+//! clock starts at 0 with a frame period shorter than half the exposure, as the SIL's).
 //!
 //! Cost: the tracker's frame ([`crate::tracker`]), the link's star list and report encoding
 //! ([`crate::link`]), the attitude stage when a catalog is given ([`crate::solver`]), and a
@@ -101,6 +104,8 @@ pub struct FrameCycle<'t, 'b, 'c, 'l, const N: usize> {
     clock: SpacecraftClock,
     rate: crate::attitude::RateFilter,
     velocity: Option<crate::link::Velocity>,
+    /// The exposure the last frame's program integrated for, us (`None` before the first).
+    last_exposure_us: Option<u64>,
 }
 
 /// A velocity is applied to frames within this of its time, s: a low orbit's velocity turns
@@ -154,6 +159,7 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             clock: SpacecraftClock::new(),
             rate: crate::attitude::RateFilter::new(),
             velocity: None,
+            last_exposure_us: None,
         }
     }
 
@@ -276,7 +282,9 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         let (last_k, source_used) = (noted.last_k, noted.source());
         self.link.end_of_frame(ports.table_in_force);
         let exposure_us = u64::from(self.tracker.config().exposure_ms) * 1000;
-        let mid_us = summary.start_us.saturating_add(exposure_us / 2);
+        let integrated_us = self.last_exposure_us.unwrap_or(exposure_us);
+        self.last_exposure_us = Some(exposure_us);
+        let mid_us = summary.start_us.saturating_sub(integrated_us / 2);
         let mut report = None;
         let attitude = self.solver.as_mut().map(|solver| {
             let time = self.clock.time_of(mid_us);

@@ -292,7 +292,7 @@ fn attitude_report_round_trips_and_refuses_garbage() {
 /// and the time-set command goes through the link before the first frame. Until the first
 /// pulse the reports flag the time not synchronised; from it on, each report's mid-exposure
 /// time is the truth within its stated bound, and the bound shrinks once the second pulse
-/// has measured the counter's rate. From the second frame on each report carries the rate of
+/// has measured the counter's rate. From the fourth frame on each report carries the rate of
 /// the attitudes so far, within 5 of its sigmas of the scene's on every axis.
 #[test]
 fn sil_reports_mid_exposure_in_spacecraft_time_within_its_bound() {
@@ -347,7 +347,9 @@ fn sil_reports_mid_exposure_in_spacecraft_time_within_its_bound() {
     for fr in &report.frames {
         let r = fr.attitude.as_ref().unwrap().report.unwrap();
         let Some(w) = r.rate else {
-            assert_eq!(fr.summary.frame, 0, "{r:?}");
+            // Frames 0 to 2 all have their mid-exposure at counter 0 (it would fall before the
+            // counter's start, 0.5 s of exposure before their start): no rate until frame 3.
+            assert!(fr.summary.frame <= 2, "{r:?}");
             assert!(r.flags.contains(Validity::NO_RATE));
             continue;
         };
