@@ -7,15 +7,29 @@
 //!                  telemetry out as the home's link can take it
 //! run_frame        the tracker's frame (its records to the link and to the home's own sink)
 //!                  -> the link's periodic housekeeping
-//!                  -> the attitude stage on the frame's star list, its report on the link
+//!                  -> the attitude stage on the frame's star list, its report on the link,
+//!                     tagged at mid-exposure in spacecraft time (the cycle's clock, set by
+//!                     the link's time-set command and the home's sync pulses), with the
+//!                     angular rate of the last attitudes ([`crate::attitude::RateFilter`]);
+//!                     with the link's velocity command (within [`VELOCITY_MAX_AGE_S`] of
+//!                     the frame's spacecraft time) the attitude is of the ICRF, stellar
+//!                     aberration removed, else of the apparent sky and flagged so
 //!                  -> housekeeping (Health): the frame's counters, the temperature and its
 //!                     source, the uptime
 //! ```
 //!
 //! A home binds its hardware to the ports ([`CyclePorts`], the line source, the link's
-//! table store and window reader) and calls [`FrameCycle::run_frame`] once a frame, with
-//! [`FrameCycle::receive`], [`FrameCycle::poll`] and [`FrameCycle::transmit`] between frames
-//! as its link allows; it decides nothing about a frame itself.
+//! table store and window reader, the sync pulse) and calls [`FrameCycle::run_frame`] once a
+//! frame, with [`FrameCycle::receive`], [`FrameCycle::poll`], [`FrameCycle::sync`] and
+//! [`FrameCycle::transmit`] between frames as its link allows; it decides nothing about a
+//! frame itself.
+//!
+//! Mid-exposure, the instant a report is tagged with, is the frame's start on the home's
+//! clock less half the exposure of the frame before: the CCD is frame-transfer, so the image
+//! a frame reads was integrated under the previous frame's program, up to the transfer that
+//! opens this frame's (docs/sequencer.md), for the exposure that program was given. It is
+//! held at the counter's 0 where it would fall before it (the first frames of a home whose
+//! clock starts at 0 with a frame period shorter than half the exposure, as the SIL's).
 //!
 //! Cost: the tracker's frame ([`crate::tracker`]), the link's star list and report encoding
 //! ([`crate::link`]), the attitude stage when a catalog is given ([`crate::solver`]), and a
@@ -26,6 +40,7 @@ use crate::link::telemetry::Housekeeping;
 use crate::link::{LinkService, TableInfo, TableUpload, Targets, WindowReader};
 use crate::safe::{Health, ThermoSource};
 use crate::solver::{Fix, SolveError, Solver};
+use crate::time::{SpacecraftClock, SyncPulse};
 use crate::tracker::{
     Clock, Event, FrameSummary, LineSource, LineSummary, Ports, StarRecord, TableStore,
     TelemetrySink, Thermometer, Tracker,
@@ -76,6 +91,8 @@ pub struct FrameOutcome {
     pub summary: FrameSummary,
     /// The frame's attitude, or why it has none.
     pub attitude: Option<Result<Fix, SolveError>>,
+    /// The attitude report sent on the link (`None` without a catalog).
+    pub report: Option<crate::link::telemetry::AttitudeReport>,
 }
 
 /// The tracker application with its link, its attitude stage and its housekeeping, for up
@@ -85,7 +102,16 @@ pub struct FrameCycle<'t, 'b, 'c, 'l, const N: usize> {
     link: &'l mut LinkService,
     solver: Option<Solver<'c>>,
     health: Health,
+    clock: SpacecraftClock,
+    rate: crate::attitude::RateFilter,
+    velocity: Option<crate::link::Velocity>,
+    /// The exposure the last frame's program integrated for, us (`None` before the first).
+    last_exposure_us: Option<u64>,
 }
+
+/// A velocity is applied to frames within this of its time, s: a low orbit's velocity turns
+/// by 4 degrees a minute, 0.4" of aberration at 7.7 km/s.
+pub const VELOCITY_MAX_AGE_S: f64 = 60.0;
 
 /// The home's sink and the link, each given every record.
 struct Both<'a> {
@@ -131,7 +157,23 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             link,
             solver,
             health,
+            clock: SpacecraftClock::new(),
+            rate: crate::attitude::RateFilter::new(),
+            velocity: None,
+            last_exposure_us: None,
         }
+    }
+
+    /// The spacecraft clock model the reports are tagged by.
+    pub fn spacecraft_clock(&self) -> &SpacecraftClock {
+        &self.clock
+    }
+
+    /// Takes the sync pulses `pulses` has seen since the last call (between frames, as
+    /// often as the home likes: each pulse carries its own counter value). A home calls it
+    /// before [`Self::receive`], so that a time-set command applies to a pulse after it.
+    pub fn sync(&mut self, pulses: &mut dyn SyncPulse) {
+        self.clock.poll(pulses);
     }
 
     /// The tracker application.
@@ -172,7 +214,8 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
     }
 
     /// Takes bytes the link received, executing every telecommand they complete on the
-    /// tracker, `tables` and `windows`.
+    /// tracker, `tables` and `windows`; a time-set command goes to the spacecraft clock, for
+    /// the next pulse [`Self::sync`] takes.
     pub fn receive(
         &mut self,
         bytes: &[u8],
@@ -185,6 +228,12 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             windows,
         };
         self.link.receive(bytes, &mut targets);
+        if let Some(t) = self.link.take_time_set() {
+            self.clock.command_set(t);
+        }
+        if let Some(v) = self.link.take_velocity() {
+            self.velocity = Some(v);
+        }
     }
 
     /// The link's work between frames: diagnostic window rows as its queue has room, the
@@ -233,19 +282,51 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         let summary = self.tracker.run_frame(source, &mut tracker_ports).await?;
         let (last_k, source_used) = (noted.last_k, noted.source());
         self.link.end_of_frame(ports.table_in_force);
+        let exposure_us = u64::from(self.tracker.config().exposure_ms) * 1000;
+        let integrated_us = self.last_exposure_us.unwrap_or(exposure_us);
+        self.last_exposure_us = Some(exposure_us);
+        let mid_us = summary.start_us.saturating_sub(integrated_us / 2);
+        let mut report = None;
         let attitude = self.solver.as_mut().map(|solver| {
-            let result = solver.update(self.tracker.stars(), summary.start_us);
-            self.link
-                .send_attitude(&crate::link::telemetry::AttitudeReport::of(
-                    summary.frame,
-                    &result,
-                ));
+            let time = self.clock.time_of(mid_us);
+            // The velocity, when the frame's spacecraft time is known and near its time.
+            let velocity = match (time, self.velocity) {
+                (Ok(t), Some(v))
+                    if libm::fabs(t.cuc.to_seconds() - v.at.to_seconds()) <= VELOCITY_MAX_AGE_S =>
+                {
+                    Some(v.v_m_s)
+                }
+                _ => None,
+            };
+            let (result, aberration_applied) =
+                solver.update_at_velocity(self.tracker.stars(), mid_us, velocity);
+            // The rate of the attitudes so far, this frame's the newest (none without it).
+            let rate = result
+                .as_ref()
+                .ok()
+                .and_then(|f| self.rate.push(f.time_us, &f.attitude));
+            let mut r = crate::link::telemetry::AttitudeReport::of(
+                summary.frame,
+                &result,
+                mid_us,
+                time,
+                rate,
+                aberration_applied,
+            );
+            let latency = ports.clock.now_us().saturating_sub(mid_us);
+            r.latency_us = u32::try_from(latency).unwrap_or(u32::MAX);
+            self.link.send_attitude(&r);
+            report = Some(r);
             result
         });
         self.health.on_frame(&summary);
         self.health.on_temperature(last_k, source_used);
         self.health.uptime_ms = ports.clock.now_us() / 1000;
-        Ok(FrameOutcome { summary, attitude })
+        Ok(FrameOutcome {
+            summary,
+            attitude,
+            report,
+        })
     }
 }
 

@@ -39,6 +39,7 @@ pub mod sequencer;
 pub mod solver;
 pub mod store;
 pub mod table;
+pub mod time;
 pub mod tracker;
 pub mod units;
 pub mod window;

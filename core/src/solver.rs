@@ -20,7 +20,7 @@
 //! percentile) plus a sort of at most 32 stars; no allocation, about 1 KB of state beyond
 //! identification's stack.
 
-use crate::attitude::{Attitude, Camera, Quat};
+use crate::attitude::{self, Attitude, AttitudeError, Camera, Observation, Quat, aberrate};
 use crate::catalog::Catalog;
 use crate::ident::{self, IdentConfig, IdentError, Measured};
 use crate::tracker::{StarFlags, StarRecord};
@@ -142,8 +142,37 @@ impl<'c> Solver<'c> {
         self.prior = None;
     }
 
-    /// The attitude of the frame at `time_us` whose tracker reported `stars`.
+    /// The attitude of the frame at `time_us` whose tracker reported `stars`, of the apparent
+    /// directions (no aberration correction).
     pub fn update(&mut self, stars: &[StarRecord], time_us: u64) -> Result<Fix, SolveError> {
+        self.update_at_velocity(stars, time_us, None).0
+    }
+
+    /// [`Self::update`] for an observer moving at `velocity_m_s` (ICRF, barycentric, m/s):
+    /// once identified, the attitude is refitted with each matched catalog direction moved
+    /// by [`aberrate`](crate::attitude::aberrate), so the quaternion takes the ICRF (not the
+    /// apparent sky) to the camera. Identification itself runs on the catalog as it is (the
+    /// aberration, at most 0.001 c, is well inside its tolerances). The `bool` says whether
+    /// the correction was applied (`false` without a velocity, or when the refit failed and
+    /// the apparent attitude is given). Cost: one aberration a matched star and a q-method.
+    pub fn update_at_velocity(
+        &mut self,
+        stars: &[StarRecord],
+        time_us: u64,
+        velocity_m_s: Option<[f64; 3]>,
+    ) -> (Result<Fix, SolveError>, bool) {
+        let mut applied = false;
+        let result = self.identify(stars, time_us, velocity_m_s, &mut applied);
+        (result, applied)
+    }
+
+    fn identify(
+        &mut self,
+        stars: &[StarRecord],
+        time_us: u64,
+        velocity_m_s: Option<[f64; 3]>,
+        applied: &mut bool,
+    ) -> Result<Fix, SolveError> {
         let mut measured: heapless::Vec<(f32, Measured), { ident::MAX_STARS }> =
             heapless::Vec::new();
         for s in stars.iter().filter(|s| usable(s)) {
@@ -187,15 +216,50 @@ impl<'c> Solver<'c> {
                 SolveMode::LostInSpace,
             ),
         };
-        self.prior = Some((solution.attitude.q, time_us));
+        let mut attitude = solution.attitude;
+        if let Some(v) = velocity_m_s
+            && let Ok(a) = self.aberrated(&dirs, &solution, v)
+        {
+            attitude = a;
+            *applied = true;
+        }
+        self.prior = Some((attitude.q, time_us));
         Ok(Fix {
-            attitude: solution.attitude,
+            attitude,
             mode,
             used,
             matched: solution.matches.len() as u8,
             false_probability: solution.false_probability,
             time_us,
         })
+    }
+
+    /// The attitude of `solution`'s matches refitted with their catalog directions aberrated
+    /// for `v_m_s`.
+    fn aberrated(
+        &self,
+        dirs: &[Measured],
+        solution: &ident::Solution,
+        v_m_s: [f64; 3],
+    ) -> Result<Attitude, AttitudeError> {
+        let mut obs: heapless::Vec<Observation, { ident::MAX_STARS }> = heapless::Vec::new();
+        for m in &solution.matches {
+            let (Some(s), Some(r)) = (
+                dirs.get(usize::from(m.star)),
+                self.catalog.dir(usize::from(m.catalog)),
+            ) else {
+                continue;
+            };
+            let o = Observation {
+                camera: s.dir,
+                icrs: aberrate(r, v_m_s),
+                sigma_rad: s.sigma_rad,
+            };
+            if obs.push(o).is_err() {
+                break;
+            }
+        }
+        attitude::solve(&obs)
     }
 
     /// The direction of a star (at the camera's reference colour: colours are known only

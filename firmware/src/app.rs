@@ -7,6 +7,7 @@
 //! |---|---|
 //! | lines | [`ChannelLines`]: the request to the sequencer, the readout task's DMA'd line buffers back ([`crate::lines`]) |
 //! | clock | embassy-time's `Instant` |
+//! | sync pulse | the PPS line captured by TIM5 ([`crate::pps`]), taken between frames before the link |
 //! | temperature | [`BoardThermometer`]: the CCD board's TMP117 ([`crate::board_temp`]), else the MCU's ([`crate::mcu_temp`]) |
 //! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none; uploads through the link, and the in-flight defect commit (`TC[133,7]`, moved on by `LinkService::poll` between frames), go to the flash store ([`crate::flash_store::with_link_tables`]) and are used from the next start |
 //! | telemetry | the defmt log ([`crate::telemetry`]) |
@@ -248,7 +249,10 @@ pub async fn tracker_task(
     let mut store = crate::flash_store::HeldTables::new();
     let mut tables = FixedTable(table);
     let mut log = DefmtTelemetry;
+    let mut pulses = crate::pps::BoardPulses;
     loop {
+        // The pulses first: a time-set command served next is for a later pulse.
+        cycle.sync(&mut pulses);
         crate::flash_store::with_link_tables(&mut store, |uploads| {
             crate::link::serve(&mut cycle, uploads);
         });

@@ -24,6 +24,7 @@ mod link;
 mod mcu_temp;
 mod mdma_list;
 mod memory;
+mod pps;
 mod readout;
 mod safe_state;
 mod sequencer;
@@ -76,6 +77,7 @@ bind_interrupts!(
         DMA1_STREAM3 => dma::InterruptHandler<peripherals::DMA1_CH3>;
         USART3 => usart::InterruptHandler<peripherals::USART3>;
         FLASH => flash::InterruptHandler;
+        TIM5 => embassy_stm32::timer::CaptureCompareInterruptHandler<peripherals::TIM5>;
     }
 );
 
@@ -270,6 +272,25 @@ async fn main(spawner: Spawner) {
         }
         (Err(e), _) => defmt::error!("link: USART3 configuration refused: {}", e),
         (_, None) => defmt::error!("link: no DMA buffers"),
+    }
+
+    // The sync pulse: the PPS line on PA0, TIM5 channel 1 input capture at 1 MHz. Without it
+    // the reports say their time is not synchronised.
+    {
+        use embassy_stm32::gpio::Pull;
+        use embassy_stm32::timer::input_capture::{CapturePin, InputCapture};
+        use embassy_stm32::timer::low_level::CountingMode;
+        let capture = InputCapture::new(
+            p.TIM5,
+            Some(CapturePin::new(p.PA0, Pull::Down)),
+            None,
+            None,
+            None,
+            Irqs,
+            embassy_stm32::time::Hertz(1_000_000),
+            CountingMode::EdgeAlignedUp,
+        );
+        spawn_or_log(spawner, "pps", pps::pps_task(capture));
     }
 
     let started = match (fatal.is_empty(), buffers, clock, samples) {

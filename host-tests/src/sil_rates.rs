@@ -14,8 +14,8 @@
 //! frames cost in the SIL ([`startrack_homes::sil`]: ~1 s an acquisition frame in release, ~0.02 s a
 //! tracking frame), so a rate that keeps losing its stars costs most.
 
-use startrack_homes::sil::{self, SilConfig, SilReport};
 use rand::SeedableRng;
+use startrack_homes::sil::{self, SilConfig, SilReport};
 use startrack_sim::sky::field::random_attitude;
 use startrack_sim::sky::motion::{ExposureMotion, RateProfile};
 use startrack_sim::sky::scene::SkyScene;

@@ -22,14 +22,18 @@
 //! normalised error squared at 3).
 //!
 //! Stellar aberration: [`aberrate`] moves a catalog direction by the observer's velocity
-//! (first order in v/c, the residual below 1 mas at orbital speeds) before it is matched.
+//! (first order in v/c, the residual below 1 mas at orbital speeds); the attitude stage
+//! refits an identified attitude with the matched catalog directions moved so
+//! ([`crate::solver::Solver::update_at_velocity`]).
 
 mod camera;
 mod quat;
+pub mod rate;
 
 pub use camera::{Camera, CameraError};
 pub use quat::{Quat, angle_between};
 pub(crate) use quat::{cross, dot, mat_vec, norm};
+pub use rate::{RATE_WINDOW, Rate, RateFilter};
 
 /// Most Jacobi sweeps; a 4x4 converges to f64 precision in 5-6.
 pub(crate) const MAX_SWEEPS: usize = 12;

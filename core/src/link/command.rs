@@ -7,6 +7,7 @@
 use super::protocol::{self as p, MessageType};
 use super::upload::UploadRefusal;
 use crate::table::AmendError;
+use crate::time::{Cuc, CucError};
 use crate::tracker::{ConfigError, Mode};
 
 /// A configuration change of [`Command::SetParams`]: parameter id and raw value.
@@ -87,6 +88,19 @@ pub enum Command<'a> {
     TableReport(u8),
     /// `TC[133,7]`.
     TableCommitDefects,
+    /// `TC[9,128]`: the spacecraft time of the next sync pulse.
+    TimeSet(Cuc),
+    /// `TC[134,1]`: the spacecraft's velocity.
+    Velocity(Velocity),
+}
+
+/// The spacecraft's velocity at a time (`TC[134,1]`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Velocity {
+    /// ICRF, barycentric, m/s (finite, at most [`p::MAX_SPEED_M_S`]).
+    pub v_m_s: [f64; 3],
+    /// The spacecraft time it holds at.
+    pub at: Cuc,
 }
 
 /// Why a telecommand was not executed. Codes ([`Self::code`]) and parameters are stable:
@@ -123,6 +137,9 @@ pub enum Rejection {
     /// The in-flight defects could not be put into a table update (nothing new to add, the
     /// table in force unreadable, no room in its directory).
     Amend(AmendError),
+    /// The time-set command's time code is not the tracker's (its P-field is not
+    /// [`crate::time::CUC_P_FIELD`]).
+    TimeCode(u8),
 }
 
 impl Rejection {
@@ -141,12 +158,13 @@ impl Rejection {
             Self::WindowUnavailable => 10,
             Self::Standby => 11,
             Self::Amend(_) => 12,
+            Self::TimeCode(_) => 13,
         }
     }
 
     /// The reason's parameter in `TM[1,2]`: the APID, the service << 8 | subtype, the upload
     /// refusal's code << 16 | (its expected offset's low 16 bits), the amendment error's
-    /// code, or 0.
+    /// code, the P-field received, or 0.
     pub fn parameter(self) -> u32 {
         match self {
             Self::UnknownApid(a) => u32::from(a),
@@ -159,6 +177,7 @@ impl Rejection {
                 u32::from(r.code()) << 16 | low
             }
             Self::Amend(e) => u32::from(e.code()),
+            Self::TimeCode(p) => u32::from(p),
             _ => 0,
         }
     }
@@ -178,6 +197,7 @@ impl Rejection {
             10 => "window unavailable",
             11 => "tracker not running (safe standby)",
             12 => "in-flight defects not committed",
+            13 => "time code not CUC 4+2 (P-field 0x1E)",
             _ => "unknown reason",
         }
     }
@@ -190,6 +210,7 @@ impl core::fmt::Display for Rejection {
             Self::Config(e) => write!(f, ": {e:?}"),
             Self::Upload(r) => write!(f, ": {r}"),
             Self::Amend(e) => write!(f, ": {e:?}"),
+            Self::TimeCode(p) => write!(f, ": P-field {p:#04x}"),
             Self::UnknownApid(a) => write!(f, " {a:#x}"),
             Self::UnknownCommand(m) => write!(f, " [{},{}]", m.service, m.subtype),
             _ => Ok(()),
@@ -320,6 +341,22 @@ impl<'a> Command<'a> {
                 Self::TableReport(*d.first().ok_or(short)?)
             }
             p::TC_TABLE_COMMIT_DEFECTS => exact(d, 0).map(|()| Self::TableCommitDefects)?,
+            p::TC_VELOCITY => {
+                exact(d, 18)?;
+                let f = |at: usize| be32(d, at).map(|b| f64::from(f32::from_bits(b)));
+                let v_m_s = [f(0).ok_or(short)?, f(4).ok_or(short)?, f(8).ok_or(short)?];
+                let speed = libm::sqrt(v_m_s.iter().map(|c| c * c).sum());
+                if speed.is_nan() || speed > p::MAX_SPEED_M_S {
+                    return Err(Rejection::BadValue);
+                }
+                let at = Cuc::from_t_field(d.get(12..).ok_or(short)?).map_err(|_| short)?;
+                Self::Velocity(Velocity { v_m_s, at })
+            }
+            p::TC_TIME_SET => match Cuc::from_p_and_t(d) {
+                Ok(c) => Self::TimeSet(c),
+                Err(CucError::PField(p)) => return Err(Rejection::TimeCode(p)),
+                Err(CucError::Length { .. }) => return Err(short),
+            },
             other => return Err(Rejection::UnknownCommand(other)),
         })
     }

@@ -30,7 +30,7 @@ pub(crate) mod service;
 pub mod telemetry;
 pub(crate) mod upload;
 
-pub use command::{Command, Rejection, WindowKind, WindowRequest, mode_number};
+pub use command::{Command, Rejection, Velocity, WindowKind, WindowRequest, mode_number};
 pub use flash_upload::{FlashTables, active_info, read_active_at, refusal_of};
 pub use service::{LinkService, NoWindows, Targets, TrackerControl, WindowReader};
 pub use upload::{TableInfo, TableUpload, UploadRefusal};

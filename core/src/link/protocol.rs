@@ -43,6 +43,9 @@ pub const STAR_BYTES: usize = 33;
 /// The star list's format, its fourth byte: 2 has quality (`flags`) and provenance apart
 /// (format 1 had no format byte and carried provenance in `flags` bits 18-19).
 pub const STAR_LIST_FORMAT: u8 = 2;
+/// Largest speed the velocity command takes, m/s (0.001 c: the first-order aberration's
+/// neglected term is then 0.2").
+pub const MAX_SPEED_M_S: f64 = 300_000.0;
 /// Side of the largest diagnostic window, px.
 pub const MAX_WINDOW_PX: u16 = 64;
 /// Table kind of the calibration table (the only kind so far).
@@ -109,6 +112,13 @@ pub const TC_TABLE_REPORT: MessageType = mt(133, 5);
 pub const TC_TABLE_COMMIT_DEFECTS: MessageType = mt(133, 7);
 /// `TM[133,6]`: the table in force.
 pub const TM_TABLE_REPORT: MessageType = mt(133, 6);
+/// `TC[9,128]`: the spacecraft time of the next sync pulse (CUC with its P-field). Service 9
+/// is PUS time management; it defines no command to set an on-board clock, so the subtype is
+/// one of the mission-specific range (128 and up).
+pub const TC_TIME_SET: MessageType = mt(9, 128);
+/// `TC[134,1]`: the spacecraft's velocity (ICRF, barycentric) at a spacecraft time, for the
+/// attitude stage's stellar aberration.
+pub const TC_VELOCITY: MessageType = mt(134, 1);
 /// A frame's attitude (every frame the attitude stage runs).
 pub const TM_ATTITUDE: MessageType = mt(134, 2);
 
@@ -157,7 +167,7 @@ const fn tm(name: &'static str, apid: u16, kind: MessageType, data: &'static str
 }
 
 /// Every message, telecommands first.
-pub const MESSAGES: [MessageDef; 24] = [
+pub const MESSAGES: [MessageDef; 26] = [
     tc("ping", TC_PING, "none"),
     tc("housekeeping", TC_HOUSEKEEPING, "none"),
     tc(
@@ -200,6 +210,16 @@ pub const MESSAGES: [MessageDef; 24] = [
     tc("table-abort", TC_TABLE_ABORT, "none"),
     tc("table-report", TC_TABLE_REPORT, "kind u8"),
     tc("table-commit-defects", TC_TABLE_COMMIT_DEFECTS, "none"),
+    tc(
+        "time-set",
+        TC_TIME_SET,
+        "P-field u8 (0x1E), coarse u32 s, fine u16 2^-16 s: the spacecraft time (CUC) of the next sync pulse",
+    ),
+    tc(
+        "velocity",
+        TC_VELOCITY,
+        "vx, vy, vz f32 m/s (ICRF, barycentric; at most 300 km/s), coarse u32 s, fine u16: the CUC time it holds at",
+    ),
     tm(
         "accepted",
         APID_CONTROL,
@@ -253,7 +273,7 @@ pub const MESSAGES: [MessageDef; 24] = [
         "attitude",
         APID_ATTITUDE,
         TM_ATTITUDE,
-        "the attitude report's fields (76 bytes)",
+        "the attitude report's fields, format 2 (128 bytes)",
     ),
 ];
 

@@ -14,9 +14,11 @@ use spacepackets::ecss::{CreatorConfig, MessageTypeId};
 use startrack_core::link::framing::{Deframer, Pushed, encode, encoded_len_max};
 use startrack_core::link::mode_number;
 use startrack_core::link::protocol::{self as p, MessageType};
-use startrack_core::link::telemetry::AttitudeReport;
-use startrack_core::link::telemetry::{ATTITUDE_LEN, Housekeeping, Reader, decode_stars, event};
+use startrack_core::link::telemetry::{
+    ATTITUDE_FORMAT, ATTITUDE_LEN, AttitudeReport, Housekeeping, Reader, decode_stars, event,
+};
 use startrack_core::link::{Rejection, TableInfo, UploadRefusal, WindowKind};
+use startrack_core::time::Cuc;
 use startrack_core::tracker::{Mode, StarRecord};
 use std::fmt;
 use std::io::{ErrorKind, Read, Write};
@@ -577,6 +579,24 @@ impl Ground {
         Ok(out)
     }
 
+    /// The time-set command: `at_next_pulse` is the spacecraft time of the tracker's next
+    /// sync pulse (`TC[9,128]`, CUC with its P-field).
+    pub fn set_time(&mut self, at_next_pulse: Cuc) -> Result<(), GroundError> {
+        self.command("time-set", p::TC_TIME_SET, &at_next_pulse.with_p_field())
+            .map(|_| ())
+    }
+
+    /// The velocity command: the spacecraft's velocity `v_m_s` (ICRF, barycentric, m/s) at
+    /// spacecraft time `at` (`TC[134,1]`).
+    pub fn set_velocity(&mut self, v_m_s: [f64; 3], at: Cuc) -> Result<(), GroundError> {
+        let mut d = Vec::with_capacity(18);
+        for c in v_m_s {
+            d.extend_from_slice(&(c as f32).to_be_bytes());
+        }
+        d.extend_from_slice(&at.t_field());
+        self.command("velocity", p::TC_VELOCITY, &d).map(|_| ())
+    }
+
     /// A `side` x `side` window at (`x0`, `y0`) of the next frame, row-major (raw ADU, or
     /// e- x 64 calibrated).
     pub fn window(
@@ -648,7 +668,10 @@ pub enum AttitudeDecodeError {
         /// Bytes received.
         got: usize,
     },
-    /// The right length, but a status the protocol does not have (garbled).
+    /// Another format than [`ATTITUDE_FORMAT`] (its eighth byte).
+    Format(u8),
+    /// The right length and format, but a status or a flag bit the protocol does not have
+    /// (garbled).
     Status(u8),
 }
 
@@ -658,7 +681,11 @@ impl fmt::Display for AttitudeDecodeError {
             Self::Length { got } => {
                 write!(f, "attitude report of {got} bytes, not {ATTITUDE_LEN}")
             }
-            Self::Status(s) => write!(f, "attitude report with unknown status {s}"),
+            Self::Format(v) => write!(
+                f,
+                "attitude report of format {v}, not {ATTITUDE_FORMAT} (format 1 reads 0)"
+            ),
+            Self::Status(s) => write!(f, "attitude report with unknown status {s} or flags"),
         }
     }
 }
@@ -669,6 +696,10 @@ impl std::error::Error for AttitudeDecodeError {}
 pub fn decode_attitude(data: &[u8]) -> Result<AttitudeReport, AttitudeDecodeError> {
     if data.len() != ATTITUDE_LEN {
         return Err(AttitudeDecodeError::Length { got: data.len() });
+    }
+    match data.get(7) {
+        Some(&v) if v != ATTITUDE_FORMAT => return Err(AttitudeDecodeError::Format(v)),
+        _ => {}
     }
     AttitudeReport::decode(data).ok_or(AttitudeDecodeError::Status(
         data.get(4).copied().unwrap_or(0),

@@ -346,6 +346,8 @@ pub fn run_scene(seed: u64, scene: DemoScene) -> Result<DemoReport, String> {
                 truth: sc.attitude(0),
                 true_rate_rad_s: [0.0; 3],
                 fix: solver.update(&result.stars, 0),
+                report: None,
+                true_time_s: None,
             }
         }),
     })

@@ -12,8 +12,13 @@
 //! [`LINK_PHASE_MS`] (longer while bytes keep arriving, at most [`LINK_PHASE_MAX_MS`]), so
 //! a table upload goes at the TCP's speed and a frame never waits for the ground.
 //!
+//! The spacecraft's PPS line runs beside the frames ([`crate::pps::PpsModel`], on the
+//! frame clock's counter, from [`SilConfig::spacecraft_epoch_us`] or [`sil::SIL_EPOCH_US`]);
+//! the reports are on spacecraft time once the ground has sent a time-set command
+//! (`startrack gse --port P time-set S`) and the next pulse has come.
+//!
 //! Cost: the frames' (see [`crate::sil`]); the link adds a few us a packet; a sky scene adds
-//! the attitude stage's per frame and one 76-byte report (a 99-byte packet).
+//! the attitude stage's per frame and one 128-byte report (a 151-byte packet).
 
 use crate::home::{FrameClock, SimLines, block_on, host_health};
 use crate::sil::{self, SilConfig};
@@ -443,8 +448,12 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
     let mut buffers = Box::new(TrackerBuffers::new());
     let mut frame = 0u32;
     let start = Instant::now();
+    // The PPS line: spacecraft time at this boot's counter 0 (the counter restarts at a
+    // reset, the spacecraft's time does not).
+    let mut epoch_us = sc.spacecraft_epoch_us.unwrap_or(sil::SIL_EPOCH_US);
 
     'boot: loop {
+        let mut pps = crate::pps::PpsModel::new(epoch_us, sc.counter_rate_ppm, sc.seed);
         let tracker =
             Tracker::<{ sil::SIL_CAPACITY }>::new(sc.tracker, params.geometry, &mut buffers)
                 .map_err(|e| e.to_string())?;
@@ -471,6 +480,10 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             let sensor = sil::frame_simulator(sc, &params, &base, catalog, frame);
             (windows.stars, windows.trails) = (sensor.stars, sensor.trails);
             windows.calibration = cycle.tracker().calibration();
+            // The pulses up to now first: a time-set received in this phase is for a later
+            // pulse.
+            pps.advance_to(u64::from(frame) * sc.period_us);
+            cycle.sync(&mut pps);
             loop {
                 if client.is_none()
                     && let Ok((s, _)) = listener.accept()
@@ -524,6 +537,7 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                 if cycle.reset_requested() {
                     tables.reboot()?;
                     report.resets += 1;
+                    epoch_us += u64::from(frame) * sc.period_us;
                     frame = 0;
                     continue 'boot;
                 }

@@ -24,8 +24,8 @@ use rand::{RngExt, SeedableRng};
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
 use startrack_core::cycle::{CyclePorts, FrameCycle};
-use startrack_core::link::LinkService;
-use startrack_core::link::telemetry::Housekeeping;
+use startrack_core::link::telemetry::{AttitudeReport, Housekeeping};
+use startrack_core::link::{LinkService, NoWindows};
 use startrack_core::safe::Health;
 use startrack_core::solver::{Fix, SolveError, SolveMode, Solver, SolverConfig};
 use startrack_core::table::CalibTable;
@@ -77,7 +77,25 @@ pub struct SilConfig {
     /// (`stars` and `drift_px` are then not used); every frame is then also identified and
     /// its attitude checked against the truth.
     pub sky: Option<SkyScene>,
+    /// The spacecraft's time at the tracker's counter 0, us since the CUC epoch: the SIL
+    /// then runs the PPS line ([`crate::pps::PpsModel`]) and, before its first frame, sends
+    /// the time-set command of its next pulse through the link, so the attitude reports are
+    /// on spacecraft time (`None`: no time set, the reports say so).
+    pub spacecraft_epoch_us: Option<u64>,
+    /// The tracker's counter's frequency error against spacecraft time, ppm.
+    pub counter_rate_ppm: f64,
+    /// The spacecraft's velocity, ICRF, m/s: a sky scene's stars are then seen aberrated
+    /// ([`aberrated_sky_stars`]).
+    pub velocity_m_s: Option<[f64; 3]>,
+    /// With `velocity_m_s` and a spacecraft clock: the SIL sends the velocity command (at the
+    /// time of its first pulse) before its first frame, so the attitude stage removes the
+    /// aberration; `false` leaves the attitude apparent (for comparison).
+    pub send_velocity: bool,
 }
+
+/// The spacecraft time the SIL's commands take at counter 0 (`--spacecraft-time`'s
+/// default): 2,100,000,000.25 s after 1958-01-01 TAI (2024-07-18).
+pub const SIL_EPOCH_US: u64 = 2_100_000_000_250_000;
 
 impl Default for SilConfig {
     fn default() -> Self {
@@ -90,6 +108,10 @@ impl Default for SilConfig {
             period_us: 100_000,
             pixcorr_curves: false,
             sky: None,
+            spacecraft_epoch_us: None,
+            counter_rate_ppm: 0.0,
+            velocity_m_s: None,
+            send_velocity: true,
         }
     }
 }
@@ -170,6 +192,11 @@ pub struct AttitudeCheck {
     pub true_rate_rad_s: [f64; 3],
     /// What the attitude stage gave.
     pub fix: Result<Fix, SolveError>,
+    /// The report the link carried (time, rate, flags; `None` outside the frame cycle).
+    pub report: Option<AttitudeReport>,
+    /// The true spacecraft time at mid-exposure, s since the CUC epoch (`None` without a
+    /// spacecraft clock).
+    pub true_time_s: Option<f64>,
 }
 
 impl AttitudeCheck {
@@ -367,11 +394,38 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
     let mut tables = FixedTable(Some(table));
     let mut thermometer = FixedTemperature(None);
     let mut frames = Vec::new();
+    let mut pps = config
+        .spacecraft_epoch_us
+        .map(|epoch| crate::pps::PpsModel::new(epoch, config.counter_rate_ppm, config.seed));
+    if let Some(line) = pps.as_ref() {
+        // The spacecraft's time-set command for its next pulse, through the link as the
+        // ground sends it.
+        let (tc, _) = startrack_ground::frame_telecommand(
+            startrack_core::link::protocol::TC_TIME_SET,
+            &line.next_pulse_time().with_p_field(),
+            0,
+        );
+        let mut store = crate::link_home::MemoryTables::new(params.geometry, None);
+        cycle.receive(&tc, &mut store, &mut NoWindows);
+        if let (Some(v), true) = (config.velocity_m_s, config.send_velocity) {
+            let (tc, _) = startrack_ground::frame_telecommand(
+                startrack_core::link::protocol::TC_VELOCITY,
+                &velocity_command(v, line.next_pulse_time()),
+                1,
+            );
+            cycle.receive(&tc, &mut store, &mut NoWindows);
+        }
+        let _ = cycle.transmit(&mut [0u8; 256]);
+    }
     for k in 0..config.frames {
         let mut clock = FrameClock {
             frame: k,
             period_us: config.period_us,
         };
+        if let Some(line) = pps.as_mut() {
+            line.advance_to(u64::from(k) * config.period_us);
+            cycle.sync(line);
+        }
         let mut ports = CyclePorts {
             clock: &mut clock,
             thermometer: &mut thermometer,
@@ -391,11 +445,16 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
             source.samples_rendered - before,
         );
         if let (Some(fix), Some((scene, _))) = (outcome.attitude, sky.as_ref()) {
+            let mid_us = outcome.report.map_or(0, |r| r.mid_exposure_us);
             frame.attitude = Some(AttitudeCheck {
                 t_mid_s: scene.mid_exposure_s(summary.frame, period_s),
                 truth: scene.attitude(summary.frame),
                 true_rate_rad_s: scene.rate_rad_s(summary.frame, period_s),
                 fix,
+                report: outcome.report,
+                true_time_s: pps
+                    .as_ref()
+                    .map(|l| l.spacecraft_us_at(mid_us as f64) * 1e-6),
             });
         }
         frames.push(frame);
@@ -417,7 +476,10 @@ pub fn frame_stars(
     frame: u32,
 ) -> Vec<Star> {
     match (&config.sky, catalog) {
-        (Some(sky), Some(cat)) => sky.stars(cat, frame, f64::from(config.tracker.psf_a_px)),
+        (Some(sky), Some(cat)) => match config.velocity_m_s {
+            Some(v) => aberrated_sky_stars(sky, cat, frame, f64::from(config.tracker.psf_a_px), v),
+            None => sky.stars(cat, frame, f64::from(config.tracker.psf_a_px)),
+        },
         _ => stars_at(base, config.drift_px, frame),
     }
 }
@@ -444,6 +506,49 @@ pub fn frame_simulator(
         frame,
         ..Simulator::new(params.clone(), frame_stars(config, base, catalog, frame))
     }
+}
+
+/// The velocity command's data (`TC[134,1]`): `v_m_s` as f32 and the time it holds at.
+pub fn velocity_command(v_m_s: [f64; 3], at: startrack_core::time::Cuc) -> Vec<u8> {
+    let mut d = Vec::with_capacity(18);
+    for c in v_m_s {
+        d.extend_from_slice(&(c as f32).to_be_bytes());
+    }
+    d.extend_from_slice(&at.t_field());
+    d
+}
+
+/// The stars of `sky`'s frame `frame` seen by an observer moving at `v_m_s` (ICRF, m/s):
+/// [`SkyScene::stars`] with each catalog direction moved by
+/// [`startrack_core::attitude::aberrate`] before it is projected.
+pub fn aberrated_sky_stars(
+    sky: &SkyScene,
+    catalog: &Catalog<'_>,
+    frame: u32,
+    a_px: f64,
+    v_m_s: [f64; 3],
+) -> Vec<Star> {
+    use startrack_sim::sky::scene::EDGE_MARGIN_PX;
+    let q = sky.attitude(frame);
+    let boresight = q.rotate_inv([0.0, 0.0, 1.0]);
+    let [cols, rows] = sky.active_px.map(f64::from);
+    let m = EDGE_MARGIN_PX;
+    catalog
+        .cone(boresight, catalog.field_radius_rad() + 0.02)
+        .filter_map(|(idx, dir)| {
+            let seen = startrack_core::attitude::aberrate(dir, v_m_s);
+            let p = sky.camera.project(q.rotate(seen))?;
+            let inside =
+                p[0] >= -m && p[1] >= -m && p[0] <= cols - 1.0 + m && p[1] <= rows - 1.0 + m;
+            let hp = f64::from(catalog.star(idx)?.hp_mmag) / 1000.0;
+            inside.then(|| Star {
+                x_px: p[0],
+                y_px: p[1],
+                signal_e: sky.flux_e_at_mag0 * 10f64.powf(-0.4 * hp),
+                a_px,
+            })
+        })
+        .collect()
 }
 
 /// The attitude stage the SIL runs after each frame of a sky scene: the core's solver over

@@ -8,17 +8,22 @@
 //! - `stars --frames N [--out FILE]`: the next N frames' star lists as CSV
 //!   (`frame,mode,` and the `stars.csv` columns);
 //! - `attitude --frames N`: the next N frames' attitude reports (`TM[134,2]`) as CSV,
-//!   `frame,status,used,matched,qw,qx,qy,qz,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability`
-//!   (status `too_few_stars`, `not_identified`, `tracking` or `lost_in_space`; the quaternion
-//!   takes ICRS to the camera, scalar first; empty fields without an attitude);
+//!   [`ATTITUDE_CSV_HEADER`] (status `too_few_stars`, `not_identified`, `tracking` or
+//!   `lost_in_space`; the quaternion takes ICRS to the camera, scalar first; `t_mid_s` the
+//!   mid-exposure in spacecraft time, CUC seconds; `flags` the validity flags' names joined
+//!   by `+`; empty fields without an attitude, a time or a rate);
+//! - `time-set SECONDS`: the spacecraft time (CUC seconds) of the tracker's next sync pulse;
+//! - `velocity VX,VY,VZ --at SECONDS`: the spacecraft's velocity (ICRF, km/s) at a spacecraft
+//!   time, for the attitude stage's aberration;
 //! - `window X Y SIZE --out FILE [--calibrated]`: a window of the next frame as FITS;
 //! - `reset`.
 //!
 //! Errors are one line on standard error; the exit code says which kind ([`GseError::exit_code`]).
 
 use startrack_core::link::WindowKind;
-use startrack_core::link::telemetry::{AttitudeMissing, AttitudeReport, Housekeeping};
+use startrack_core::link::telemetry::{AttitudeMissing, AttitudeReport, Housekeeping, Validity};
 use startrack_core::solver::SolveMode;
+use startrack_core::time::Cuc;
 use startrack_core::tracker::Mode;
 use startrack_ground::{Ground, GroundError};
 use startrack_homes::home::{CSV_HEADER, csv_row};
@@ -90,6 +95,20 @@ pub enum GseCommand {
         /// Output FITS file.
         #[arg(long)]
         out: PathBuf,
+    },
+    /// Set the spacecraft time of the next sync pulse (`TC[9,128]`).
+    TimeSet {
+        /// CUC seconds since 1958-01-01 TAI (a fraction allowed, to 2^-16 s).
+        seconds: f64,
+    },
+    /// Send the spacecraft's velocity (`TC[134,1]`).
+    Velocity {
+        /// ICRF, barycentric, km/s: VX,VY,VZ.
+        #[arg(value_delimiter = ',', allow_hyphen_values = true)]
+        km_s: Vec<f64>,
+        /// The spacecraft time it holds at, CUC seconds.
+        #[arg(long)]
+        at: f64,
     },
     /// Reset the tracker.
     Reset,
@@ -194,7 +213,43 @@ pub fn status_json(h: &Housekeeping) -> serde_json::Value {
 }
 
 /// Header of the attitude CSV ([`attitude_row`]).
-pub const ATTITUDE_CSV_HEADER: &str = "frame,status,used,matched,qw,qx,qy,qz,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability";
+pub const ATTITUDE_CSV_HEADER: &str = "frame,status,used,matched,qw,qx,qy,qz,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability,t_mid_s,time_bound_us,latency_us,flags,wx_deg_s,wy_deg_s,wz_deg_s,sigma_wx_deg_s,sigma_wy_deg_s,sigma_wz_deg_s";
+
+/// The names of a report's validity flags joined by `+` (empty for none).
+pub fn flag_names(f: Validity) -> String {
+    f.iter_names()
+        .map(|(n, _)| n.to_ascii_lowercase())
+        .collect::<Vec<_>>()
+        .join("+")
+}
+
+/// The time, flag and rate columns of an attitude row (after `false_probability`).
+fn time_rate_columns(r: &AttitudeReport) -> String {
+    let (t, bound) = r.time.map_or((String::new(), String::new()), |t| {
+        (
+            format!("{:.6}", t.cuc.to_seconds()),
+            t.error_bound_us.to_string(),
+        )
+    });
+    let rate = r.rate.map_or(",,,,,".to_string(), |w| {
+        let d = |v: f64| v.to_degrees();
+        let s = |i: usize| w.cov_rad2_s2[i][i].max(0.0).sqrt().to_degrees();
+        format!(
+            "{:.6},{:.6},{:.6},{:.3e},{:.3e},{:.3e}",
+            d(w.w_rad_s[0]),
+            d(w.w_rad_s[1]),
+            d(w.w_rad_s[2]),
+            s(0),
+            s(1),
+            s(2)
+        )
+    });
+    format!(
+        "{t},{bound},{},{},{rate}",
+        r.latency_us,
+        flag_names(r.flags)
+    )
+}
 
 /// One attitude report as a row of [`ATTITUDE_CSV_HEADER`].
 pub fn attitude_row(r: &AttitudeReport) -> String {
@@ -208,20 +263,29 @@ pub fn attitude_row(r: &AttitudeReport) -> String {
                 SolveMode::LostInSpace => "lost_in_space",
             };
             format!(
-                "{},{mode},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.2e}",
+                "{},{mode},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.2e},{}",
                 r.frame,
                 fix.used,
                 fix.matched,
                 a.boresight_sigma_rad() * ARCSEC_PER_RAD,
                 a.roll_sigma_rad() * ARCSEC_PER_RAD,
-                fix.false_probability
+                fix.false_probability,
+                time_rate_columns(r)
             )
         }
         Err(AttitudeMissing::TooFewStars { used }) => {
-            format!("{},too_few_stars,{used},0,,,,,,,", r.frame)
+            format!(
+                "{},too_few_stars,{used},0,,,,,,,,{}",
+                r.frame,
+                time_rate_columns(r)
+            )
         }
         Err(AttitudeMissing::NotIdentified { used }) => {
-            format!("{},not_identified,{used},0,,,,,,,", r.frame)
+            format!(
+                "{},not_identified,{used},0,,,,,,,,{}",
+                r.frame,
+                time_rate_columns(r)
+            )
         }
     }
 }
@@ -323,6 +387,23 @@ pub fn run(args: &GseArgs, out: &mut dyn Write) -> Result<(), GseError> {
             };
             write_map(path, &map)
                 .map_err(|e| GseError::Usage(format!("{}: {e}", path.display())))?;
+        }
+        GseCommand::TimeSet { seconds } => {
+            let cuc = (seconds.is_finite() && *seconds >= 0.0)
+                .then(|| Cuc::from_ticks((seconds * 65_536.0).round() as u64))
+                .flatten()
+                .ok_or_else(|| GseError::Usage(format!("time-set {seconds}: 0 to 2^32 s")))?;
+            g.set_time(cuc)?;
+        }
+        GseCommand::Velocity { km_s, at } => {
+            let &[x, y, z] = &km_s[..] else {
+                return Err(GseError::Usage("velocity takes VX,VY,VZ".into()));
+            };
+            let at = (at.is_finite() && *at >= 0.0)
+                .then(|| Cuc::from_ticks((at * 65_536.0).round() as u64))
+                .flatten()
+                .ok_or_else(|| GseError::Usage(format!("--at {at}: 0 to 2^32 s")))?;
+            g.set_velocity([x, y, z].map(|c| c * 1000.0), at)?;
         }
         GseCommand::Reset => g.reset()?,
         GseCommand::CommitDefects => {

@@ -13,6 +13,10 @@
 //! - with `--sky`, `--rate-deg-s WX,WY,WZ`, `--exposure-ms MS` and `--slew-accel-deg-s2 A`:
 //!   the camera turns during each exposure ([`startrack_sim::sky::motion`]) and the stars
 //!   trail.
+//!   then `cuc_mid_s,true_cuc_mid_s,flags,wx_deg_s,wy_deg_s,wz_deg_s,sigma_wx_deg_s,sigma_wy_deg_s,sigma_wz_deg_s`
+//!   (the report's mid-exposure in spacecraft time, CUC seconds, and the truth, both empty
+//!   without `--spacecraft-time-s`; the report's validity flags joined by `+`; its rate and
+//!   1-sigma, camera frame, deg/s).
 //!
 //! With `--port P` it serves the link instead ([`startrack_homes::link_home::serve`]); with `--sky` too,
 //! each frame's attitude report (`TM[134,2]`) is sent as the board sends it.
@@ -76,6 +80,37 @@ pub struct SilArgs {
     /// acceleration, deg/s^2 (above 0; default: at the rate from the start).
     #[arg(long, requires = "rate_deg_s")]
     pub slew_accel_deg_s2: Option<f64>,
+    /// The spacecraft time at the tracker's counter 0, CUC seconds (1958 TAI epoch): the SIL
+    /// runs the PPS line and sends the time-set command for its next pulse before the first
+    /// frame, so the attitude reports are on spacecraft time. Without it they flag the time
+    /// not synchronised.
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
+    pub spacecraft_time_s: Option<f64>,
+    /// With `--spacecraft-time-s`: the tracker counter's frequency error, ppm (within the
+    /// clock model's 200).
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        allow_negative_numbers = true,
+        requires = "spacecraft_time_s"
+    )]
+    pub counter_ppm: f64,
+    /// With `--sky`: the spacecraft's velocity, ICRF, km/s: VX,VY,VZ (at most 300 km/s). The
+    /// scene's stars are seen aberrated, and the SIL sends the velocity command (and, without
+    /// `--spacecraft-time-s`, the time from 2,100,000,000.25 s) so the attitude is of the
+    /// ICRF. Not with `--rate-deg-s` or `--exposure-ms` (the trailed scene is not aberrated).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        requires = "sky",
+        conflicts_with_all = ["rate_deg_s", "exposure_ms"]
+    )]
+    pub velocity_km_s: Option<Vec<f64>>,
+    /// With `--velocity-km-s`: do not send the velocity command (the attitude stays apparent,
+    /// its aberration uncorrected).
+    #[arg(long, requires = "velocity_km_s")]
+    pub apparent: bool,
     /// Serve the tracker's command and telemetry link on TCP 127.0.0.1:PORT (standing in
     /// for the UART) and run until stopped; `--frames`, `--telemetry` and `--truth` are then
     /// not used (drive it with `startrack gse --port PORT`). With `--sky` the attitude stage
@@ -128,7 +163,40 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
         // A turn about +y moves the field along +x, about +x along -y.
         startrack_sim::sky::scene::SkyScene::ccd47_15deg(q0, [-dy / f, dx / f, 0.0])
     });
+    let spacecraft_epoch_us = match args.spacecraft_time_s {
+        None => None,
+        Some(t) if t.is_finite() && (0.0..4.0e9).contains(&t) => Some((t * 1e6).round() as u64),
+        Some(_) => {
+            return Err(CliError::Usage(
+                "--spacecraft-time-s: 0 to 4e9 s after 1958".into(),
+            ));
+        }
+    };
+    if !(args.counter_ppm.is_finite() && args.counter_ppm.abs() <= 150.0) {
+        return Err(CliError::Usage("--counter-ppm: within -150 to 150".into()));
+    }
+    let velocity_m_s = match args.velocity_km_s.as_deref() {
+        None => None,
+        Some(&[x, y, z]) => {
+            let v = [x, y, z].map(|c| c * 1000.0);
+            let speed = v.iter().map(|c| c * c).sum::<f64>().sqrt();
+            if !(speed.is_finite() && speed <= startrack_core::link::protocol::MAX_SPEED_M_S) {
+                return Err(CliError::Usage(
+                    "--velocity-km-s: VX,VY,VZ, at most 300 km/s".into(),
+                ));
+            }
+            Some(v)
+        }
+        Some(_) => {
+            return Err(CliError::Usage("--velocity-km-s takes VX,VY,VZ".into()));
+        }
+    };
+    let spacecraft_epoch_us = spacecraft_epoch_us.or(velocity_m_s.map(|_| sil::SIL_EPOCH_US));
     let mut config = SilConfig {
+        velocity_m_s,
+        send_velocity: !args.apparent,
+        spacecraft_epoch_us,
+        counter_rate_ppm: args.counter_ppm,
         frames: args.frames,
         seed: args.seed,
         stars: args.stars,
@@ -254,7 +322,7 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
     const ARCSEC: f64 = 206_264.806;
     writeln!(
         out,
-        "frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability,t_mid_s,true_qw,true_qx,true_qy,true_qz,true_wx_deg_s,true_wy_deg_s,true_wz_deg_s"
+        "frame,solved,solve_mode,used,matched,qw,qx,qy,qz,error_boresight_arcsec,error_roll_arcsec,sigma_boresight_arcsec,sigma_roll_arcsec,false_probability,t_mid_s,true_qw,true_qx,true_qy,true_qz,true_wx_deg_s,true_wy_deg_s,true_wz_deg_s,cuc_mid_s,true_cuc_mid_s,flags,wx_deg_s,wy_deg_s,wz_deg_s,sigma_wx_deg_s,sigma_wy_deg_s,sigma_wz_deg_s"
     )?;
     for f in &report.frames {
         let Some(c) = &f.attitude else { continue };
@@ -271,7 +339,7 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
                 let [w, x, y, z] = a.q.0;
                 writeln!(
                     out,
-                    "{},1,{},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.3},{:.3},{:.2e},{truth}",
+                    "{},1,{},{},{},{w:.9},{x:.9},{y:.9},{z:.9},{:.3},{:.3},{:.3},{:.3},{:.2e},{truth},{}",
                     f.summary.frame,
                     match fix.mode {
                         startrack_core::solver::SolveMode::Tracking => "tracking",
@@ -283,13 +351,48 @@ pub fn write_attitude(out: &mut dyn Write, report: &SilReport) -> std::io::Resul
                     e[2].abs() * ARCSEC,
                     a.boresight_sigma_rad() * ARCSEC,
                     a.roll_sigma_rad() * ARCSEC,
-                    fix.false_probability
+                    fix.false_probability,
+                    time_columns(c)
                 )?;
             }
-            _ => writeln!(out, "{},0,,,,,,,,,,,,,{truth}", f.summary.frame)?,
+            _ => writeln!(
+                out,
+                "{},0,,,,,,,,,,,,,{truth},{}",
+                f.summary.frame,
+                time_columns(c)
+            )?,
         }
     }
     Ok(())
+}
+
+/// The spacecraft-time and rate columns of an attitude row: `cuc_mid_s,true_cuc_mid_s,flags`
+/// and the report's rate and its 1-sigma per axis, deg/s (empty without a rate).
+fn time_columns(c: &sil::AttitudeCheck) -> String {
+    let t = c
+        .report
+        .and_then(|r| r.time)
+        .map_or(String::new(), |t| format!("{:.6}", t.cuc.to_seconds()));
+    let truth = c.true_time_s.map_or(String::new(), |t| format!("{t:.6}"));
+    let flags = c
+        .report
+        .map_or(String::new(), |r| super::gse::flag_names(r.flags));
+    let rate = c
+        .report
+        .and_then(|r| r.rate)
+        .map_or(",,,,,".to_string(), |w| {
+            let s = |i: usize| w.cov_rad2_s2[i][i].max(0.0).sqrt().to_degrees();
+            format!(
+                "{:.6},{:.6},{:.6},{:.3e},{:.3e},{:.3e}",
+                w.w_rad_s[0].to_degrees(),
+                w.w_rad_s[1].to_degrees(),
+                w.w_rad_s[2].to_degrees(),
+                s(0),
+                s(1),
+                s(2)
+            )
+        });
+    format!("{t},{truth},{flags},{rate}")
 }
 
 /// Runs `startrack sil --port P`: the SIL with its link on TCP, until stopped.

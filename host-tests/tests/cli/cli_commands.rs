@@ -580,3 +580,49 @@ fn removed_methods_are_refused_by_the_parser() {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }
+
+/// `startrack sil`'s spacecraft options: a velocity as VX,VY,VZ (negative components too)
+/// sets the scene's aberration and the clock; bad values are one-line errors.
+#[test]
+fn sil_velocity_and_time_options_parse_and_refuse_bad_values() {
+    use clap::Parser;
+    use startrack_host::cli::sil::{SilArgs, config_of};
+    #[derive(Parser)]
+    struct Wrap {
+        #[command(flatten)]
+        sil: SilArgs,
+    }
+    let parse = |args: &[&str]| {
+        let w = Wrap::try_parse_from(std::iter::once("sil").chain(args.iter().copied()))
+            .expect("parses");
+        config_of(&w.sil)
+    };
+    let c = parse(&["--sky", "--velocity-km-s", "-1.5,30,0"]).expect("valid");
+    assert_eq!(c.velocity_m_s, Some([-1500.0, 30_000.0, 0.0]));
+    assert_eq!(
+        c.spacecraft_epoch_us,
+        Some(startrack_homes::sil::SIL_EPOCH_US)
+    );
+    assert!(c.send_velocity);
+    let c = parse(&["--sky", "--velocity-km-s", "0,30,0", "--apparent"]).expect("valid");
+    assert!(!c.send_velocity);
+    let c = parse(&[
+        "--sky",
+        "--spacecraft-time-s",
+        "2000000000.5",
+        "--counter-ppm",
+        "-40",
+    ])
+    .expect("valid");
+    assert_eq!(c.spacecraft_epoch_us, Some(2_000_000_000_500_000));
+    assert_eq!((c.counter_rate_ppm, c.velocity_m_s), (-40.0, None));
+    assert!(parse(&["--sky", "--counter-ppm", "300", "--spacecraft-time-s", "1"]).is_err());
+    let s = "startrack sil: ";
+    assert_one_line_error(
+        &["sil", "--sky", "--velocity-km-s", "0,400,0"],
+        s,
+        "300 km/s",
+    );
+    assert_one_line_error(&["sil", "--sky", "--velocity-km-s", "1,2"], s, "VX,VY,VZ");
+    assert_one_line_error(&["sil", "--sky", "--spacecraft-time-s", "5e9"], s, "4e9");
+}

@@ -5,6 +5,7 @@
 //! fixtures come from `startrack-test-support`.
 
 mod attitude;
+mod attitude_rate;
 mod ident;
 mod ident_catalog;
 mod ident_solve;

@@ -147,6 +147,11 @@ type Case = ((MessageType, Vec<u8>), Result<(), u16>);
 /// track, no window source).
 #[test]
 fn each_command_is_accepted_or_rejected_with_its_reason() {
+    let velocity = |v: [f32; 3]| {
+        let mut d: Vec<u8> = v.iter().flat_map(|c| c.to_be_bytes()).collect();
+        d.extend_from_slice(&[0x83, 0, 0, 0, 0x80, 0]);
+        d
+    };
     let mode = |m: u8| (p::TC_SET_MODE, vec![m]);
     let cases: Vec<Case> = vec![
         ((p::TC_PING, vec![]), Ok(())),
@@ -179,6 +184,19 @@ fn each_command_is_accepted_or_rejected_with_its_reason() {
         ((p::TC_TABLE_COMMIT, vec![]), Err(9)),
         ((p::TC_TABLE_ABORT, vec![]), Ok(())),
         ((p::TC_TABLE_REPORT, vec![1]), Ok(())),
+        ((p::TC_TIME_SET, vec![0x1E, 0x83, 0, 0, 0, 0x80, 0]), Ok(())),
+        (
+            (p::TC_TIME_SET, vec![0x2E, 0x83, 0, 0, 0, 0x80, 0]),
+            Err(13),
+        ),
+        ((p::TC_TIME_SET, vec![0x83, 0, 0, 0, 0x80, 0]), Err(5)),
+        (
+            (p::TC_VELOCITY, velocity([7_500.0, -29_800.0, 12.0])),
+            Ok(()),
+        ),
+        ((p::TC_VELOCITY, velocity([400_000.0, 0.0, 0.0])), Err(6)),
+        ((p::TC_VELOCITY, velocity([f32::NAN, 0.0, 0.0])), Err(6)),
+        ((p::TC_VELOCITY, velocity([0.0; 3])[..17].to_vec()), Err(5)),
         ((p::TC_RESET, vec![]), Ok(())),
         (
             (

@@ -52,6 +52,7 @@ fn render() -> String {
         "0",
         "0",
         "the defect commit's error (below)",
+        "the P-field received",
     ];
     for (code, param) in (1u16..).zip(params) {
         writeln!(s, "| {code} | {} | {param} |", Rejection::name_of(code)).unwrap();

@@ -37,11 +37,19 @@ def main() -> int:
                 assert fields[9] == round(star[9] * 100), (fields, star)
         if "attitude" in want:
             a = want["attitude"]
-            fields = struct.unpack(">IBBBB4d7fQ", data)
-            assert fields[:5] == (a["frame"], a["status"], a["used"], a["matched"], 0), fields
-            assert list(fields[5:9]) == a["q"], fields
-            assert abs(fields[14] - a["cov_zz"]) <= 1e-6 * a["cov_zz"], fields
-            assert fields[16] == a["time_us"], fields
+            # Format 2: frame, status, used, matched, format, flags, CUC T-field (coarse,
+            # fine), time bound, latency, q, 6 covariances, rate, 6 rate covariances, false
+            # probability, mid-exposure counter.
+            fields = struct.unpack(">IBBBBHIHII4d6f3f6ffQ", data)
+            head = (a["frame"], a["status"], a["used"], a["matched"], a["format"], a["flags"])
+            assert fields[:6] == head, fields
+            assert fields[6:10] == (a["coarse"], a["fine"], a["bound_us"], a["latency_us"]), fields
+            assert list(fields[10:14]) == a["q"], fields
+            assert abs(fields[19] - a["cov_zz"]) <= 1e-6 * a["cov_zz"], fields
+            for got, w in zip(fields[20:23], a["w"]):
+                assert abs(got - w) <= 1e-6 * abs(w), fields
+            assert abs(fields[28] - a["rate_cov_zz"]) <= 1e-6 * a["rate_cov_zz"], fields
+            assert fields[30] == a["time_us"], fields
         if "housekeeping" in want:
             sid, mode, next_mode = struct.unpack(">HBB", data[:4])
             assert (sid, mode, next_mode) == (1, want["mode"], want["next_mode"]), data[:4]

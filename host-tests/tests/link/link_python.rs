@@ -100,10 +100,25 @@ fn spacepackets_decodes_the_telemetry() {
         false_probability: 1e-40,
         time_us: 987_654,
     };
-    link.send_attitude(&startrack_core::link::telemetry::AttitudeReport {
+    let report = startrack_core::link::telemetry::AttitudeReport {
         frame: 7,
         fix: Ok(fix),
-    });
+        flags: startrack_core::link::telemetry::Validity::NO_VELOCITY,
+        mid_exposure_us: fix.time_us,
+        time: Some(startrack_core::time::SpacecraftTime {
+            cuc: startrack_core::time::Cuc {
+                coarse_s: 2_100_000_123,
+                fine: 0x8001,
+            },
+            error_bound_us: 15,
+        }),
+        latency_us: 612_345,
+        rate: Some(startrack_core::attitude::Rate {
+            w_rad_s: [0.0175, -0.00125, 1e-4],
+            cov_rad2_s2: [[4e-10, 0.0, 0.0], [0.0, 5e-10, 0.0], [0.0, 0.0, 9e-9]],
+        }),
+    };
+    link.send_attitude(&report);
     let mut cmds = Vec::new();
     for (seq, kind) in [p::TC_PING, p::TC_HOUSEKEEPING].into_iter().enumerate() {
         cmds.extend(frame_telecommand(kind, &[], seq as u16).0);
@@ -160,6 +175,9 @@ fn spacepackets_decodes_the_telemetry() {
             e["attitude"] = serde_json::json!({
                 "frame": 7, "status": 2, "used": 30, "matched": 28,
                 "q": fix.attitude.q.0, "cov_zz": 3e-11, "time_us": fix.time_us,
+                "format": 2, "flags": 2, "coarse": 2_100_000_123u32, "fine": 0x8001,
+                "bound_us": 15, "latency_us": 612_345, "w": [0.0175, -0.00125, 1e-4],
+                "rate_cov_zz": 9e-9,
             });
         }
         if t.kind == p::TM_HOUSEKEEPING {

@@ -299,11 +299,16 @@ fn a_noisy_link_loses_commands_never_the_tracker() {
 
 /// Over a sky scene the served SIL runs the attitude stage after every frame, as the board
 /// does: the ground reads one report a frame, each within 5 of its own sigmas of the truth on
-/// every axis; a truncated or garbled report is an error, never misread.
+/// every axis; a truncated or garbled report is an error, never misread. After the ground's
+/// time-set command the reports are on spacecraft time from the next sync pulse: the set
+/// time plus the counter since that pulse, within the stated bound.
 #[test]
 fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
     use rand::SeedableRng;
+    use startrack_core::link::protocol as p;
     use startrack_core::link::telemetry::ATTITUDE_LEN;
+    use startrack_core::link::telemetry::Validity;
+    use startrack_core::time::Cuc;
     use startrack_ground::{AttitudeDecodeError, decode_attitude};
     use startrack_sim::sky::field::{FieldSpec, random_attitude};
     use startrack_sim::sky::scene::SkyScene;
@@ -320,7 +325,53 @@ fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
         0.0,
     );
     let mut g = Ground::connect(server.port, Duration::from_secs(60)).expect("connect");
-    let reports = g.attitude(4).expect("attitude reports");
+    let before = g.attitude(1).expect("attitude report");
+    assert!(
+        before[0].flags.contains(Validity::TIME_NOT_SYNCHRONISED) && before[0].time.is_none(),
+        "{before:?}"
+    );
+    // The next pulse is at 2,200,000,000 s. The SIL's pulses fall at counter 0.75 s + k s
+    // (its spacecraft epoch is SIL_EPOCH_US, a quarter past a second).
+    let set_s = 2_200_000_000u32;
+    g.set_time(Cuc {
+        coarse_s: set_s,
+        fine: 0,
+    })
+    .expect("time-set accepted");
+    // A malformed time code is refused with its reason.
+    match g.command("time-set", p::TC_TIME_SET, &[0x2E, 0, 0, 0, 1, 0, 0]) {
+        Err(GroundError::Rejected {
+            code, parameter, ..
+        }) => assert_eq!((code, parameter), (13, 0x2E)),
+        other => panic!("time-set with P-field 0x2E: {other:?}"),
+    }
+    let mut synced = Vec::new();
+    for r in g.attitude(30).expect("attitude reports") {
+        if let Some(t) = r.time {
+            synced.push((r, t));
+        }
+    }
+    assert!(
+        synced.len() >= 10,
+        "{} reports on spacecraft time",
+        synced.len()
+    );
+    for (r, t) in &synced {
+        assert!(!r.flags.contains(Validity::TIME_NOT_SYNCHRONISED));
+        assert!(r.flags.contains(Validity::NO_VELOCITY));
+        // The counter of the set pulse: the last 0.75 s + k s before the report's.
+        let since_pulse_s = t.cuc.to_seconds() - f64::from(set_s);
+        let counter_s = r.mid_exposure_us as f64 * 1e-6;
+        let frac = (counter_s - since_pulse_s - 0.75).rem_euclid(1.0);
+        let off_us = frac.min(1.0 - frac) * 1e6;
+        assert!(
+            off_us <= f64::from(t.error_bound_us),
+            "frame {}: {off_us} us off, bound {} us",
+            r.frame,
+            t.error_bound_us
+        );
+    }
+    let reports: Vec<_> = synced.iter().map(|(r, _)| *r).take(4).collect();
     assert_eq!(reports.len(), 4);
     for w in reports.windows(2) {
         assert!(w[1].frame > w[0].frame, "frames increase: {reports:?}");
@@ -352,6 +403,33 @@ fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
         &mut csv,
     )
     .expect("gse attitude");
+    // The velocity command (this scene is at rest against the stars: zero) makes the
+    // attitude of the ICRF: the apparent flag goes; a speed beyond the limit is rejected.
+    let gse_run = |command| {
+        gse::run(
+            &GseArgs {
+                port: server.port,
+                timeout_s: 60.0,
+                command,
+            },
+            &mut Vec::new(),
+        )
+    };
+    let too_fast = gse_run(GseCommand::Velocity {
+        km_s: vec![400.0, 0.0, 0.0],
+        at: f64::from(set_s),
+    });
+    assert_eq!(too_fast.map_err(|e| e.exit_code()), Err(2));
+    gse_run(GseCommand::Velocity {
+        km_s: vec![0.0, 0.0, 0.0],
+        at: f64::from(set_s),
+    })
+    .expect("gse velocity");
+    let mut g = Ground::connect(server.port, Duration::from_secs(60)).expect("connect");
+    for r in g.attitude(2).expect("attitude reports") {
+        assert!(r.flags.is_empty(), "{r:?}");
+    }
+    drop(g);
     let _ = server.finish();
     let csv = String::from_utf8(csv).expect("utf-8");
     let lines: Vec<&str> = csv.lines().collect();
@@ -359,7 +437,18 @@ fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
     assert_eq!(lines[0], gse::ATTITUDE_CSV_HEADER);
     for row in &lines[1..] {
         let cols: Vec<&str> = row.split(',').collect();
-        assert_eq!(cols.len(), 11, "{row}");
+        assert_eq!(cols.len(), 21, "{row}");
+        assert!(cols[11].parse::<f64>().expect("t_mid_s") >= 2.2e9, "{row}");
+        assert_eq!(cols[14], "no_velocity", "{row}");
+        let w: Vec<f64> = cols[15..18]
+            .iter()
+            .map(|c| c.parse().expect("rate"))
+            .collect();
+        // The scene turns by (0.2 / f, 0.3 / f, 1e-5) rad a frame of 0.1 s: 0.029, 0.044 deg/s.
+        assert!(
+            (w[0] - 0.0295).abs() < 1e-3 && (w[1] - 0.0442).abs() < 1e-3,
+            "{row}"
+        );
         assert!(matches!(cols[1], "tracking" | "lost_in_space"), "{row}");
         let q: Vec<f64> = cols[4..8].iter().map(|c| c.parse().expect("q")).collect();
         let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -368,7 +457,7 @@ fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
 
     // A report cut short, or with a status the protocol lacks, does not decode.
     let mut bytes = [0u8; ATTITUDE_LEN];
-    let n = reports[0].encode(0, &mut bytes).expect("encodes");
+    let n = reports[0].encode(&mut bytes).expect("encodes");
     assert_eq!(n, ATTITUDE_LEN);
     assert_eq!(decode_attitude(&bytes), Ok(reports[0]));
     assert_eq!(
@@ -377,6 +466,9 @@ fn ground_reads_the_attitude_reports_of_the_sil_over_the_sky() {
             got: ATTITUDE_LEN - 1
         })
     );
+    bytes[7] = 0;
+    assert_eq!(decode_attitude(&bytes), Err(AttitudeDecodeError::Format(0)));
+    bytes[7] = 2;
     bytes[4] = 9;
     assert_eq!(decode_attitude(&bytes), Err(AttitudeDecodeError::Status(9)));
 }

@@ -15,3 +15,4 @@ mod link_standby;
 mod store_api;
 mod store_power_cut;
 mod store_props;
+mod time_cuc;

@@ -192,6 +192,8 @@ impl LinkService {
             Command::TableAbort => t.tables.abort(),
             Command::TableReport(kind) => self.answer = Answer::Table(kind),
             Command::TableCommitDefects => self.start_amend(t)?,
+            Command::TimeSet(c) => self.time_set = Some(c),
+            Command::Velocity(v) => self.velocity = Some(v),
         }
         Ok(())
     }

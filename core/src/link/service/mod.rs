@@ -75,6 +75,10 @@ pub struct LinkService {
     /// The in-flight defect commit under way: its plan, the bytes written so far, and the
     /// link rounds in a row the table in force could not be read.
     amend: Option<(AmendPlan, u32, u16)>,
+    /// A time-set command's time, for the frame cycle's clock to take.
+    time_set: Option<crate::time::Cuc>,
+    /// A velocity command's velocity, for the frame cycle to take.
+    velocity: Option<super::command::Velocity>,
 }
 
 impl Default for LinkService {
@@ -149,7 +153,21 @@ impl LinkService {
             answer: Answer::None,
             setup_faults: 0,
             amend: None,
+            time_set: None,
+            velocity: None,
         }
+    }
+
+    /// The time of the newest time-set command not yet taken (the spacecraft time of the next
+    /// sync pulse): the frame cycle gives it to its clock.
+    pub fn take_time_set(&mut self) -> Option<crate::time::Cuc> {
+        self.time_set.take()
+    }
+
+    /// The velocity of the last velocity command not yet taken: the frame cycle keeps it for
+    /// the attitude stage's aberration.
+    pub fn take_velocity(&mut self) -> Option<super::command::Velocity> {
+        self.velocity.take()
     }
 
     /// An in-flight defect commit is under way (`TC[133,7]` accepted, its table not yet

@@ -73,7 +73,7 @@ impl LinkService {
     /// Sends a frame's attitude report (the attitude stage's result, after the frame), on the
     /// bulk queue: counted dropped when the queue is full, like a star list.
     pub fn send_attitude(&mut self, report: &AttitudeReport) {
-        let len = report.encode(self.now_us, &mut self.data).unwrap_or(0);
+        let len = report.encode(&mut self.data).unwrap_or(0);
         self.send(p::APID_ATTITUDE, p::TM_ATTITUDE, len, Queue::Bulk);
     }
 

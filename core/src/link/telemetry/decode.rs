@@ -6,7 +6,7 @@
 use super::super::command::mode_of;
 use super::super::protocol::{STAR_BYTES, STAR_LIST_FORMAT};
 use super::super::upload::TableInfo;
-use super::attitude::{ATTITUDE_LEN, AttitudeMissing, AttitudeReport};
+use super::attitude::{ATTITUDE_FORMAT, ATTITUDE_LEN, AttitudeMissing, AttitudeReport, Validity};
 use super::fields::Reader;
 use super::housekeeping::{FrameTotals, HK_LEN, Housekeeping, LinkCounters};
 use super::stars::{CHI2_DOF_UNIT, PSF_A_UNIT_PX};
@@ -126,53 +126,69 @@ pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usiz
 }
 
 impl AttitudeReport {
-    /// Reads a report back (`None`: wrong length or an unknown status).
+    /// Reads a report back (`None`: wrong length, another format than
+    /// [`ATTITUDE_FORMAT`], an unknown status or flag bit).
     pub fn decode(d: &[u8]) -> Option<Self> {
-        use crate::attitude::{Attitude, Quat};
+        use crate::attitude::{Attitude, Quat, Rate};
         use crate::solver::{Fix, SolveMode};
+        use crate::time::{Cuc, SpacecraftTime};
         if d.len() != ATTITUDE_LEN {
             return None;
         }
         let mut r = Reader::new(d);
         let frame = r.u32()?;
-        let (status, used, matched, _) = (r.u8()?, r.u8()?, r.u8()?, r.u8()?);
-        let q = Quat([r.f64()?, r.f64()?, r.f64()?, r.f64()?]);
-        let mut c = [0f32; 6];
-        for v in &mut c {
-            *v = r.f32()?;
+        let (status, used, matched, format) = (r.u8()?, r.u8()?, r.u8()?, r.u8()?);
+        if format != ATTITUDE_FORMAT {
+            return None;
         }
+        let flags = Validity::from_bits(r.u16()?)?;
+        let cuc = Cuc::from_t_field(r.bytes(6)?).ok()?;
+        let error_bound_us = r.u32()?;
+        let latency_us = r.u32()?;
+        let q = Quat([r.f64()?, r.f64()?, r.f64()?, r.f64()?]);
+        let sym = |r: &mut Reader<'_>| -> Option<[[f64; 3]; 3]> {
+            let mut c = [0f32; 6];
+            for v in &mut c {
+                *v = r.f32()?;
+            }
+            let [xx, xy, xz, yy, yz, zz] = c.map(f64::from);
+            Some([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+        };
+        let cov_rad2 = sym(&mut r)?;
+        let w = [r.f32()?, r.f32()?, r.f32()?].map(f64::from);
+        let rate_cov = sym(&mut r)?;
         let false_probability = f64::from(r.f32()?);
-        let time_us = r.u64()?;
-        let [xx, xy, xz, yy, yz, zz] = c.map(f64::from);
-        let mode = match status {
-            0 => {
-                return Some(Self {
-                    frame,
-                    fix: Err(AttitudeMissing::TooFewStars { used }),
-                });
-            }
-            1 => {
-                return Some(Self {
-                    frame,
-                    fix: Err(AttitudeMissing::NotIdentified { used }),
-                });
-            }
-            2 => SolveMode::Tracking,
-            3 => SolveMode::LostInSpace,
+        let mid_exposure_us = r.u64()?;
+        let fix = match status {
+            0 => Err(AttitudeMissing::TooFewStars { used }),
+            1 => Err(AttitudeMissing::NotIdentified { used }),
+            2 | 3 => Ok(Fix {
+                attitude: Attitude { q, cov_rad2 },
+                mode: if status == 2 {
+                    SolveMode::Tracking
+                } else {
+                    SolveMode::LostInSpace
+                },
+                used,
+                matched,
+                false_probability,
+                time_us: mid_exposure_us,
+            }),
             _ => return None,
         };
         Some(Self {
             frame,
-            fix: Ok(Fix {
-                attitude: Attitude {
-                    q,
-                    cov_rad2: [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]],
-                },
-                mode,
-                used,
-                matched,
-                false_probability,
-                time_us,
+            fix,
+            flags,
+            mid_exposure_us,
+            time: (!flags.contains(Validity::TIME_NOT_SYNCHRONISED)).then_some(SpacecraftTime {
+                cuc,
+                error_bound_us,
+            }),
+            latency_us,
+            rate: (!flags.contains(Validity::NO_RATE)).then_some(Rate {
+                w_rad_s: w,
+                cov_rad2_s2: rate_cov,
             }),
         })
     }

@@ -17,7 +17,10 @@ mod fields;
 mod housekeeping;
 mod stars;
 
-pub use attitude::{ATTITUDE_FIELDS, ATTITUDE_LEN, AttitudeMissing, AttitudeReport};
+pub use attitude::{
+    ATTITUDE_FIELDS, ATTITUDE_FORMAT, ATTITUDE_LEN, AttitudeMissing, AttitudeReport,
+    RATE_LIMIT_RAD_S, Validity,
+};
 pub use decode::decode_stars;
 pub use events::{EVENT_DATA_LEN, event, tracker_event};
 pub use fields::{Reader, Writer, type_len};
