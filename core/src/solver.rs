@@ -9,6 +9,12 @@
 //! frame with none leaves the prior to age out, so one bad frame does not send the next
 //! frames to lost in space.
 //!
+//! The focal-length scale identification fits with each attitude ([`ident::FocalScale`]:
+//! lost in space finds it within 2 % of the camera model's) is kept with the prior, and
+//! tracking starts from it, so a slow drift of the focal length (thermal) is followed from
+//! frame to frame; [`Solver::scale`] reports it. The camera model itself is never changed
+//! here: a corrected model reaches the table only by command.
+//!
 //! A star's angular sigma is its pixel sigma (the larger axis) scaled by the camera at its
 //! position: a pixel subtends `z^2 / f` rad radially and `z / f` across at `acos(z)` off the
 //! axis, and their geometric mean `z^1.5 / f` makes the isotropic sigma the identification and
@@ -21,7 +27,7 @@
 
 use crate::attitude::{Attitude, Camera, Quat};
 use crate::catalog::Catalog;
-use crate::ident::{self, IdentConfig, IdentError, Measured};
+use crate::ident::{self, FocalScale, IdentConfig, IdentError, Measured};
 use crate::tracker::{StarFlags, StarRecord};
 
 /// How the attitude stage identifies and when it trusts its prior.
@@ -119,6 +125,7 @@ pub struct Solver<'c> {
     catalog: Catalog<'c>,
     config: SolverConfig,
     prior: Option<(Quat, u64)>,
+    scale: Option<FocalScale>,
 }
 
 impl<'c> Solver<'c> {
@@ -128,7 +135,15 @@ impl<'c> Solver<'c> {
             catalog,
             config,
             prior: None,
+            scale: None,
         }
+    }
+
+    /// The focal-length scale of the last solved frame (true focal length over the camera
+    /// model's, with its 1-sigma); kept when the prior ages out, forgotten with it by
+    /// [`Solver::forget`].
+    pub fn scale(&self) -> Option<FocalScale> {
+        self.scale
     }
 
     /// The attitude of the last solved frame and its time, us.
@@ -139,6 +154,7 @@ impl<'c> Solver<'c> {
     /// Forgets the prior (the next frame is lost in space).
     pub fn forget(&mut self) {
         self.prior = None;
+        self.scale = None;
     }
 
     /// The attitude of the frame at `time_us` whose tracker reported `stars`.
@@ -171,8 +187,17 @@ impl<'c> Solver<'c> {
         let fresh = self
             .prior
             .filter(|&(_, t)| time_us >= t && time_us - t <= cfg.max_prior_age_us);
+        let prior_scale = self.scale.map_or(1.0, |s| s.value);
         let tracked = fresh.and_then(|(q, _)| {
-            ident::track(&self.catalog, &dirs, q, cfg.prior_error_rad, &cfg.ident).ok()
+            ident::track_scaled(
+                &self.catalog,
+                &dirs,
+                q,
+                prior_scale,
+                cfg.prior_error_rad,
+                &cfg.ident,
+            )
+            .ok()
         });
         let (solution, mode) = match tracked {
             Some(s) => (s, SolveMode::Tracking),
@@ -187,6 +212,7 @@ impl<'c> Solver<'c> {
             ),
         };
         self.prior = Some((solution.attitude.q, time_us));
+        self.scale = Some(solution.scale);
         Ok(Fix {
             attitude: solution.attitude,
             mode,

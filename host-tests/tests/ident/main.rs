@@ -7,6 +7,7 @@
 mod attitude;
 mod ident;
 mod ident_catalog;
+mod ident_scale;
 mod ident_solve;
 mod optics_camera;
 mod optics_cli;
