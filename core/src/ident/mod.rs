@@ -195,6 +195,10 @@ impl core::fmt::Display for IdentError {
 
 impl core::error::Error for IdentError {}
 
+/// Buckets of the `d_ik` scratch (by star index modulo this; 2 KB of offsets and 2 KB of
+/// cursors), about one entry each.
+pub(crate) const IK_BUCKETS: usize = 1024;
+
 /// Entries of the (star, partner) scratch of one triangle's `d_ik` pairs (16 KB: the
 /// shortest side's window over the whole scale range up to about 6.5 degrees).
 pub(crate) const IK_CAPACITY: usize = 4096;
@@ -305,6 +309,7 @@ pub fn lost_in_space(
     let (s_lo, s_hi) = (1.0 / (1.0 + ds), 1.0 / (1.0 - ds));
     let max_sep = cat.max_separation_rad();
     let mut scratch = [(0u16, 0u16); IK_CAPACITY];
+    let bucket = |star: u16| usize::from(star) % IK_BUCKETS;
     let mut hyps = 0u32;
     for tri in Triangles::new(np) {
         let (i, j, k) = relabel(stars, tri);
@@ -318,26 +323,45 @@ pub fn lost_in_space(
             continue;
         }
         let hand = handedness(vi, vj, vk, tol * dij.min(dik));
-        // The pairs near d_ik as (star, partner) both ways, sorted by star: the partners `c`
-        // of a vertex `a` are then a binary search away. A triangle whose range is too long
-        // for the scratch (a shortest side beyond about 4.5 degrees) is left to the others.
+        // The pairs near d_ik as (star, partner) both ways, grouped by a bucket of the star
+        // (a counting sort: two passes over the pairs), so the partners `c` of a vertex `a`
+        // are the few entries of its bucket. A triangle whose range is too long for the
+        // scratch (a shortest side beyond about 6.5 degrees) is left to the others.
         let ik_range = cat.pairs_between(dik / s_hi - tol, dik / s_lo + tol);
         if 2 * ik_range.len() > IK_CAPACITY {
             continue;
         }
-        let mut len = 0usize;
+        let mut start = [0u16; IK_BUCKETS + 1];
         for pk in ik_range.clone() {
             let Some(p) = cat.pair(pk) else { continue };
-            for e in [(p.a, p.b), (p.b, p.a)] {
-                if let Some(slot) = scratch.get_mut(len) {
-                    *slot = e;
-                    len += 1;
+            for x in [p.a, p.b] {
+                if let Some(c) = start.get_mut(bucket(x) + 1) {
+                    *c += 1;
                 }
             }
         }
-        let by_star = scratch.get_mut(..len).unwrap_or(&mut []);
-        by_star.sort_unstable();
-        let by_star = &*by_star;
+        for b in 0..IK_BUCKETS {
+            let prev = start.get(b).copied().unwrap_or(0);
+            if let Some(c) = start.get_mut(b + 1) {
+                *c += prev;
+            }
+        }
+        let mut next = [0u16; IK_BUCKETS];
+        next.copy_from_slice(start.get(..IK_BUCKETS).unwrap_or(&[0; IK_BUCKETS]));
+        for pk in ik_range.clone() {
+            let Some(p) = cat.pair(pk) else { continue };
+            for (x, y) in [(p.a, p.b), (p.b, p.a)] {
+                let Some(at) = next.get_mut(bucket(x)) else {
+                    continue;
+                };
+                if let Some(slot) = scratch.get_mut(usize::from(*at)) {
+                    *slot = (x, y);
+                }
+                *at += 1;
+            }
+        }
+        let len = usize::from(start.get(IK_BUCKETS).copied().unwrap_or(0));
+        let by_star = scratch.get(..len).unwrap_or(&[]);
         for pi in cat.pairs_between(dij / s_hi - tol, dij / s_lo + tol) {
             let Some(pij) = cat.pair(pi) else { continue };
             // The scales this pair allows: |d_ij - s D_ab| <= tol, within the searched range.
@@ -355,15 +379,18 @@ pub fn lost_in_space(
             let ac = ((dik - tol) / hi_s, (dik + tol) / lo_s);
             let bc = ((djk - tol) / hi_s, (djk + tol) / lo_s);
             for (a, b) in [(pij.a, pij.b), (pij.b, pij.a)] {
-                let lo = by_star.partition_point(|e| e.0 < a);
-                let hi = by_star.partition_point(|e| e.0 <= a);
+                let (lo, hi) = (
+                    usize::from(start.get(bucket(a)).copied().unwrap_or(0)),
+                    usize::from(start.get(bucket(a) + 1).copied().unwrap_or(0)),
+                );
                 if lo == hi {
                     continue;
                 }
                 let (Some(ra), Some(rb)) = (cat.dir(a.into()), cat.dir(b.into())) else {
                     continue;
                 };
-                for c in by_star.get(lo..hi).unwrap_or(&[]).iter().map(|e| e.1) {
+                let partners = by_star.get(lo..hi).unwrap_or(&[]).iter();
+                for c in partners.filter(|e| e.0 == a).map(|e| e.1) {
                     let Some(rc) = cat.dir(c.into()) else {
                         continue;
                     };
@@ -432,19 +459,23 @@ fn rescaled(stars: &[Measured], n: usize, scale: f64) -> heapless::Vec<Measured,
     stars
         .iter()
         .take(n.min(MAX_STARS))
-        .map(|s| {
-            let [x, y, z] = s.dir;
-            if z <= 1e-6 {
-                return *s;
-            }
-            let (u, v) = (x / z * k, y / z * k);
-            let r = 1.0 / libm::sqrt(u * u + v * v + 1.0);
-            Measured {
-                dir: [u * r, v * r, r],
-                sigma_rad: s.sigma_rad * k,
-            }
+        .map(|s| Measured {
+            dir: rescale_dir(s.dir, k),
+            sigma_rad: s.sigma_rad * k,
         })
         .collect()
+}
+
+/// The unit vector `dir` with its tangent-plane coordinates multiplied by `k` (unchanged
+/// when it is not in front of the camera).
+fn rescale_dir(dir: [f64; 3], k: f64) -> [f64; 3] {
+    let [x, y, z] = dir;
+    if z <= 1e-6 {
+        return dir;
+    }
+    let (u, v) = (x / z * k, y / z * k);
+    let r = 1.0 / libm::sqrt(u * u + v * v + 1.0);
+    [u * r, v * r, r]
 }
 
 /// Identifies `stars` (brightest first) near the `prior` attitude, which may be off by up to
@@ -585,16 +616,17 @@ fn hypothesis(
     cfg: &IdentConfig,
     hyps: u32,
 ) -> Option<Solution> {
-    let scaled = rescaled(stars, n, scale);
     if !precheck(
         cat,
-        &scaled,
+        stars,
         n,
+        scale,
         basis,
         PRECHECK_RADII * cfg.match_radius_rad,
     ) {
         return None;
     }
+    let scaled = rescaled(stars, n, scale);
     let mut obs = [Observation {
         camera: [0.0, 0.0, 1.0],
         icrs: [0.0, 0.0, 1.0],
@@ -672,16 +704,18 @@ const PRECHECK_RADII: f64 = 2.0;
 /// triangles are tried then). It only rejects: what it passes is verified in full.
 fn precheck(
     cat: &Catalog<'_>,
-    scaled: &[Measured],
+    stars: &[Measured],
     n: usize,
+    scale: f64,
     basis: [(usize, u16); 3],
     radius: f64,
 ) -> bool {
+    let at = |m: usize| rescale_dir(dir_of(stars, m), 1.0 / scale);
     let [(i, a), (j, b), _] = basis;
     let (Some(ra), Some(rb)) = (cat.dir(a.into()), cat.dir(b.into())) else {
         return false;
     };
-    let (bi, bj) = (dir_of(scaled, i), dir_of(scaled, j));
+    let (bi, bj) = (at(i), at(j));
     let frame = |x: [f64; 3], y: [f64; 3]| -> Option<[[f64; 3]; 3]> {
         let c = cross(x, y);
         let nc = libm::sqrt(dot(c, c));
@@ -695,7 +729,7 @@ fn precheck(
         return false;
     };
     let mut looked = 0;
-    for (m, s) in scaled.iter().enumerate().take(n) {
+    for m in 0..n.min(stars.len()) {
         if basis.iter().any(|&(x, _)| x == m) {
             continue;
         }
@@ -704,7 +738,8 @@ fn precheck(
         }
         looked += 1;
         // The star in the basis's own frame, then that frame's axes on the sky.
-        let c = fb.map(|t| dot(t, s.dir));
+        let v = at(m);
+        let c = fb.map(|t| dot(t, v));
         let mut sky = [0.0f64; 3];
         for (axis, coef) in fr.iter().zip(c) {
             for (out, v) in sky.iter_mut().zip(axis) {
@@ -745,8 +780,11 @@ pub(crate) fn false_match_bound(
     bound_with_field_stars(cat, n, matched, cfg, local)
 }
 
-/// The bound with `field_stars` catalog stars in the field cone.
-fn bound_with_field_stars(
+/// The false-match bound of a solution with `matched` of `n` measured stars matched in a
+/// field holding `field_stars` catalog stars (the densest field's is the catalog header's
+/// `max_field_stars`): what a field needs to be solved, so the floor of sparse fields can
+/// be computed.
+pub fn bound_with_field_stars(
     cat: &Catalog<'_>,
     n: usize,
     matched: usize,

@@ -62,6 +62,8 @@ pub struct Tally {
     pub worst_scale_sigmas: f64,
     /// Fewest matched stars in a solution.
     pub min_matched: usize,
+    /// Unsolved fields by their count of true (catalog) stars, 0 to 15 and more.
+    pub unsolved_by_stars: [usize; 16],
 }
 
 /// `fields` fields, each with a focal error drawn uniformly in `+-max_focal_error`, the
@@ -110,7 +112,11 @@ fn run_lis(
                 t.scale_chi2 += z * z;
                 t.worst_scale_sigmas = t.worst_scale_sigmas.max(z.abs());
             }
-            Err(IdentError::NoMatch { hypotheses }) => t.max_hyps = t.max_hyps.max(hypotheses),
+            Err(IdentError::NoMatch { hypotheses }) => {
+                t.max_hyps = t.max_hyps.max(hypotheses);
+                let real = stars.iter().filter(|s| s.truth.is_some()).count();
+                t.unsolved_by_stars[real.min(15)] += 1;
+            }
             Err(IdentError::TooFewStars) => t.too_few += 1,
             Err(e) => panic!("{e}"),
         }
@@ -131,7 +137,15 @@ fn print(name: &str, t: &Tally) {
         t.scale_chi2 / t.solved.max(1) as f64,
         t.worst_scale_sigmas
     );
+    println!(
+        "  unsolved fields by their true stars (0..15+): {:?}",
+        t.unsolved_by_stars
+    );
 }
+
+/// The floors docs/attitude.md states, for fields of 30, 60, 100, 150 and the densest
+/// field's catalog stars (0.3 px, 10^-9, at most 5,000 hypotheses).
+const FLOORS: [usize; 5] = [7, 8, 8, 8, 9];
 
 /// 0.3 px, 10 % of the stars dropped, 3 false stars.
 fn nominal_spec() -> FieldSpec {
@@ -208,6 +222,46 @@ fn sparse_fields_solve_or_say_no_and_are_never_wrong() {
         t.solved,
         t.fields
     );
+}
+
+/// The floor: the fewest stars, all matched, whose false-match bound passes 10^-9, for a
+/// field holding `field_stars` catalog stars.
+fn floor(cat: &Catalog<'_>, cfg: &IdentConfig, field_stars: f64) -> usize {
+    (4..=ident::MAX_STARS)
+        .find(|&m| {
+            ident::bound_with_field_stars(cat, m, m, cfg, field_stars) <= cfg.max_false_probability
+        })
+        .unwrap_or(usize::MAX)
+}
+
+#[test]
+fn the_floor_of_a_sparse_field() {
+    let cat = catalog();
+    let spec = FieldSpec::ccd47_15deg(0.3);
+    let cfg = IdentConfig::for_camera(spec.camera.focal_length_px, spec.sigma_px);
+    let densest = f64::from(cat.max_field_stars());
+    let rows: Vec<(f64, usize)> = [30.0, 60.0, 100.0, 150.0, densest]
+        .iter()
+        .map(|&n| (n, floor(&cat, &cfg, n)))
+        .collect();
+    for (n, m) in &rows {
+        println!("field with {n} catalog stars: fewest stars to solve {m}");
+    }
+    // The sky's own fields: the catalog stars in the field cone at random boresights.
+    let mut rng = ChaCha8Rng::seed_from_u64(81);
+    let mut counts: Vec<usize> = (0..2000)
+        .map(|_| {
+            let b = field::random_attitude(&mut rng).rotate_inv([0.0, 0.0, 1.0]);
+            cat.cone(b, cat.field_radius_rad() + cfg.match_radius_rad)
+                .count()
+        })
+        .collect();
+    counts.sort_unstable();
+    println!(
+        "catalog stars in a field cone: 5 % {}, median {}, 95 % {}, max {}",
+        counts[100], counts[1000], counts[1900], counts[1999]
+    );
+    assert_eq!(rows.iter().map(|r| r.1).collect::<Vec<_>>(), FLOORS);
 }
 
 #[test]
