@@ -376,8 +376,10 @@ pub fn lost_in_space(
             if lo_s > hi_s || lo_s <= 0.0 {
                 continue;
             }
-            let ac = ((dik - tol) / hi_s, (dik + tol) / lo_s);
-            let bc = ((djk - tol) / hi_s, (djk + tol) / lo_s);
+            // As squared chords |r_a - r_c|^2 (monotonic in the angle; no arc cosine in the
+            // inner loop).
+            let ac = (chord2((dik - tol) / hi_s), chord2((dik + tol) / lo_s));
+            let bc = (chord2((djk - tol) / hi_s), chord2((djk + tol) / lo_s));
             for (a, b) in [(pij.a, pij.b), (pij.b, pij.a)] {
                 let (lo, hi) = (
                     usize::from(start.get(bucket(a)).copied().unwrap_or(0)),
@@ -397,10 +399,11 @@ pub fn lost_in_space(
                     if c == b {
                         continue;
                     }
-                    let (d_ac, d_bc) = (angle_between(ra, rc), angle_between(rb, rc));
-                    if d_ac < ac.0 || d_ac > ac.1 || d_bc < bc.0 || d_bc > bc.1 {
+                    let (c_ac, c_bc) = (dist2(ra, rc), dist2(rb, rc));
+                    if c_ac < ac.0 || c_ac > ac.1 || c_bc < bc.0 || c_bc > bc.1 {
                         continue;
                     }
+                    let (d_ac, d_bc) = (angle_between(ra, rc), angle_between(rb, rc));
                     if hand != 0 && handedness(ra, rb, rc, 0.0) != hand {
                         continue;
                     }
@@ -427,6 +430,19 @@ pub fn lost_in_space(
         }
     }
     Err(IdentError::NoMatch { hypotheses: hyps })
+}
+
+/// The squared chord `4 sin^2(d / 2)` of an angle `d` (negative angles give 0), from its
+/// series `d^2 (1 - d^2 / 12)`: below 1e-7 of it relative for `d` up to 0.4 rad.
+fn chord2(d: f64) -> f64 {
+    let d = d.max(0.0);
+    d * d * (1.0 - d * d / 12.0 + d * d * d * d / 360.0)
+}
+
+/// `|a - b|^2`.
+fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    dot(d, d)
 }
 
 /// The triangle `tri` relabelled `(i, j, k)`: `i` opposite the longest side, `(i, j)` the
@@ -648,12 +664,13 @@ fn hypothesis(
     // stars far from it fall outside the match radius, or on a neighbour, until a round
     // brings them in. The largest set seen is kept.
     let mut best: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
-    let mut s = scale;
+    let (mut s, mut q) = (scale, first.q);
     for _ in 0..MAX_REFITS {
-        let refit = fit(cat, stars, &matches, s)?;
+        let refit = fit(cat, stars, &matches, s, Some(q))?;
         let scaled = rescaled(stars, n, refit.scale.value);
         let (all, _) = match_all(cat, &scaled, n, refit.attitude.q, cfg.match_radius_rad);
-        let refit = fit(cat, stars, &all, refit.scale.value)?;
+        let refit = fit(cat, stars, &all, refit.scale.value, Some(refit.attitude.q))?;
+        q = refit.attitude.q;
         s = refit.scale.value;
         let scaled = rescaled(stars, n, s);
         let next = keep_consistent(cat, &scaled, &all, refit.attitude.q);
@@ -670,7 +687,7 @@ fn hypothesis(
     if matches.len() < MIN_MATCHES {
         return None;
     }
-    let joint = fit(cat, stars, &matches, s)?;
+    let joint = fit(cat, stars, &matches, s, None)?;
     // The field's density at the basis's own attitude: it depends on the triangle only,
     // not on the stars the bound counts.
     let false_probability = false_match_bound(cat, n, matches.len(), cfg, first.q);
@@ -859,32 +876,46 @@ struct Joint {
     scale: FocalScale,
 }
 
-/// Gauss-Newton steps of the joint fit (it starts from the q-method at the given scale;
-/// two reach 1e-12 of the scale from an error of 2 %).
-const JOINT_STEPS: usize = 3;
+/// Gauss-Newton steps of the joint fit (it starts from the q-method at the given scale or
+/// from a given attitude near the solution; the model is nearly linear there).
+const JOINT_STEPS: usize = 2;
 
-/// The attitude and focal-length scale that best fit the matched stars: the q-method on
-/// the directions at `scale`, then Gauss-Newton on the four parameters (a small rotation
+/// The attitude and focal-length scale that best fit the matched stars: from `start` (or
+/// the q-method on the directions at `scale` when there is none), Gauss-Newton on the four parameters (a small rotation
 /// `e`, camera frame, and the scale `s`) of the model `t_i = s P(q r_i)`, `P(v) = (v_x,
 /// v_y) / v_z` the tangent-plane coordinates, against each star's measured `P(b_i)`, weight
 /// `(z_i^1.5 / sigma_i)^2` (a star's angular sigma is its tangent-plane sigma times
 /// `z^1.5`). The covariance is the inverse normal matrix: the attitude's block is its
 /// marginal covariance with the scale fitted.
-fn fit(cat: &Catalog<'_>, stars: &[Measured], matches: &[Match], scale: f64) -> Option<Joint> {
-    let scaled = rescaled(stars, MAX_STARS, scale);
-    let mut obs = [Observation {
-        camera: [0.0, 0.0, 1.0],
-        icrs: [0.0, 0.0, 1.0],
-        sigma_rad: 1.0,
-    }; MAX_STARS];
-    for (o, m) in obs.iter_mut().zip(matches) {
-        let s = scaled.get(usize::from(m.star))?;
-        o.camera = s.dir;
-        o.sigma_rad = s.sigma_rad;
-        o.icrs = cat.dir(m.catalog.into())?;
+fn fit(
+    cat: &Catalog<'_>,
+    stars: &[Measured],
+    matches: &[Match],
+    scale: f64,
+    start: Option<Quat>,
+) -> Option<Joint> {
+    let start = match start {
+        Some(q) => q,
+        None => {
+            let scaled = rescaled(stars, MAX_STARS, scale);
+            let mut obs = [Observation {
+                camera: [0.0, 0.0, 1.0],
+                icrs: [0.0, 0.0, 1.0],
+                sigma_rad: 1.0,
+            }; MAX_STARS];
+            for (o, m) in obs.iter_mut().zip(matches) {
+                let s = scaled.get(usize::from(m.star))?;
+                o.camera = s.dir;
+                o.sigma_rad = s.sigma_rad;
+                o.icrs = cat.dir(m.catalog.into())?;
+            }
+            attitude::solve(obs.get(..matches.len())?).ok()?.q
+        }
+    };
+    if matches.len() < 3 {
+        return None;
     }
-    let start = attitude::solve(obs.get(..matches.len())?).ok()?;
-    let (mut q, mut s) = (start.q, scale);
+    let (mut q, mut s) = (start, scale);
     let mut cov = [[0.0f64; 4]; 4];
     for step in 0..=JOINT_STEPS {
         let mut normal = [[0.0f64; 4]; 4];
@@ -1065,7 +1096,7 @@ pub fn colour_corrected(
     }
     // The scale is fitted again: the colour terms move stars along the radius, which the
     // uncorrected identification's scale partly absorbed.
-    fit(cat, &meas, &matches, sol.scale.value)
+    fit(cat, &meas, &matches, sol.scale.value, None)
         .map(|j| j.attitude)
         .ok_or(attitude::AttitudeError::Degenerate)
 }
