@@ -2,8 +2,8 @@
 //! or tracking (from a prior attitude several degrees off), with a bounded false-match
 //! probability, with the focal length up to [`IdentConfig::max_scale_error`] off (the scale
 //! is fitted and reported). No allocation: the work lives on the stack (lost in space about
-//! 20 KB, 16 KB of it the sorted pairs of one separation window, `IK_CAPACITY`; tracking
-//! about 6 KB: the high-water marks `cargo m7-bench` prints).
+//! 31 KB, 16 KB of it the pairs of one separation window, `IK_CAPACITY`; tracking about
+//! 12 KB: the high-water marks `cargo m7-bench` prints).
 //!
 //! # Lost in space: triangles from the pair database, then statistical verification
 //! Measured triangles of the brightest [`IdentConfig::pattern_stars`] stars are tried in the
@@ -55,11 +55,13 @@
 //! by [`IdentConfig::track_scale_error`] of their length (the drift since the prior).
 //! Triangles are formed from candidates only and verified as above.
 //!
-//! Cost: a lost-in-space triangle costs a sort of `2 P_ik` entries and `2 P_ij` binary
-//! searches (`P` the pairs in a tolerance window, a few hundred), a hypothesis a 3-star
-//! q-method and `n` cone searches; a tracking triangle a few dozen angle checks. On the
-//! Cortex-M7 (`cargo m7-bench`, 15 degree fields) lost in space takes about 1.6 M
-//! instructions a field (median) and 6.7 M at the 99th percentile, tracking 0.39 M.
+//! Cost: a lost-in-space triangle costs a counting sort of `2 P_ik` entries and one bucket
+//! lookup per orientation of the `P_ij` pairs (`P` the pairs in a tolerance window over the
+//! scale range, a few thousand), a hypothesis a quick check of a few cone searches and, for
+//! the few that pass it, a 3-star q-method, `n` cone searches and rounds of the joint fit; a
+//! tracking triangle a few dozen angle checks. On the Cortex-M7 (`cargo m7-bench`, 15 degree
+//! fields) lost in space takes about 3.3 M instructions a field (median) and 15.7 M at the
+//! 99th percentile, tracking 0.61 M.
 
 use crate::attitude::{self, Attitude, Observation, Quat, angle_between, cross, dot};
 use crate::catalog::Catalog;
