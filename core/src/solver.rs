@@ -10,19 +10,25 @@
 //! frame with none leaves the prior to age out, so one bad frame does not send the next
 //! frames to lost in space.
 //!
+//! The focal-length scale identification fits with each attitude ([`ident::FocalScale`]:
+//! lost in space finds it within 2 % of the camera model's) is kept with the prior, and
+//! tracking starts from it, so a slow drift of the focal length (thermal) is followed from
+//! frame to frame; [`Solver::scale`] reports it. The camera model itself is never changed
+//! here: a corrected model reaches the table only by command.
+//!
 //! A star's angular sigma is its pixel sigma (the larger axis) scaled by the camera at its
 //! position: a pixel subtends `z^2 / f` rad radially and `z / f` across at `acos(z)` off the
 //! axis, and their geometric mean `z^1.5 / f` makes the isotropic sigma the identification and
 //! the q-method take.
 //!
 //! Cost: what identification costs (docs/attitude.md: on the Cortex-M7 tracking and attitude
-//! about 0.39 M instructions a frame, lost in space 1.6 M median and 6.7 M at the 99th
+//! about 0.61 M instructions a frame, lost in space 3.3 M median and 15.7 M at the 99th
 //! percentile) plus a sort of at most 32 stars; no allocation, about 1 KB of state beyond
 //! identification's stack.
 
 use crate::attitude::{self, Attitude, AttitudeError, Camera, Observation, Quat, aberrate};
 use crate::catalog::Catalog;
-use crate::ident::{self, IdentConfig, IdentError, Measured};
+use crate::ident::{self, FocalScale, IdentConfig, IdentError, Measured};
 use crate::tracker::{StarFlags, StarRecord};
 
 /// How the attitude stage identifies and when it trusts its prior.
@@ -120,6 +126,7 @@ pub struct Solver<'c> {
     catalog: Catalog<'c>,
     config: SolverConfig,
     prior: Option<(Quat, u64)>,
+    scale: Option<FocalScale>,
 }
 
 impl<'c> Solver<'c> {
@@ -129,7 +136,15 @@ impl<'c> Solver<'c> {
             catalog,
             config,
             prior: None,
+            scale: None,
         }
+    }
+
+    /// The focal-length scale of the last solved frame (true focal length over the camera
+    /// model's, with its 1-sigma); kept when the prior ages out, forgotten with it by
+    /// [`Solver::forget`].
+    pub fn scale(&self) -> Option<FocalScale> {
+        self.scale
     }
 
     /// The attitude of the last solved frame and its time, us.
@@ -140,6 +155,7 @@ impl<'c> Solver<'c> {
     /// Forgets the prior (the next frame is lost in space).
     pub fn forget(&mut self) {
         self.prior = None;
+        self.scale = None;
     }
 
     /// The attitude of the frame at `time_us` whose tracker reported `stars`, of the apparent
@@ -201,8 +217,17 @@ impl<'c> Solver<'c> {
         let fresh = self
             .prior
             .filter(|&(_, t)| time_us >= t && time_us - t <= cfg.max_prior_age_us);
+        let prior_scale = self.scale.map_or(1.0, |s| s.value);
         let tracked = fresh.and_then(|(q, _)| {
-            ident::track(&self.catalog, &dirs, q, cfg.prior_error_rad, &cfg.ident).ok()
+            ident::track_scaled(
+                &self.catalog,
+                &dirs,
+                q,
+                prior_scale,
+                cfg.prior_error_rad,
+                &cfg.ident,
+            )
+            .ok()
         });
         let (solution, mode) = match tracked {
             Some(s) => (s, SolveMode::Tracking),
@@ -224,6 +249,7 @@ impl<'c> Solver<'c> {
             *applied = true;
         }
         self.prior = Some((attitude.q, time_us));
+        self.scale = Some(solution.scale);
         Ok(Fix {
             attitude,
             mode,
@@ -242,6 +268,8 @@ impl<'c> Solver<'c> {
         solution: &ident::Solution,
         v_m_s: [f64; 3],
     ) -> Result<Attitude, AttitudeError> {
+        // The directions of the focal length the identification fitted (as its attitude's).
+        let k = 1.0 / solution.scale.value;
         let mut obs: heapless::Vec<Observation, { ident::MAX_STARS }> = heapless::Vec::new();
         for m in &solution.matches {
             let (Some(s), Some(r)) = (
@@ -251,9 +279,9 @@ impl<'c> Solver<'c> {
                 continue;
             };
             let o = Observation {
-                camera: s.dir,
+                camera: ident::rescale_dir(s.dir, k),
                 icrs: aberrate(r, v_m_s),
-                sigma_rad: s.sigma_rad,
+                sigma_rad: s.sigma_rad * k,
             };
             if obs.push(o).is_err() {
                 break;

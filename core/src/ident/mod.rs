@@ -1,17 +1,25 @@
 //! Star identification: which catalog star each measured star is, lost in space (no prior)
 //! or tracking (from a prior attitude several degrees off), with a bounded false-match
-//! probability. No allocation: the work lives on the stack (lost in space about 12 KB, 8 KB
-//! of it the sorted pairs of one separation window, `IK_CAPACITY`; tracking about 5 KB:
-//! the high-water marks `cargo m7-bench` prints).
+//! probability, with the focal length up to [`IdentConfig::max_scale_error`] off (the scale
+//! is fitted and reported). No allocation: the work lives on the stack (lost in space about
+//! 31 KB, 16 KB of it the pairs of one separation window, `IK_CAPACITY`; tracking about
+//! 12 KB: the high-water marks `cargo m7-bench` prints).
 //!
 //! # Lost in space: triangles from the pair database, then statistical verification
 //! Measured triangles of the brightest [`IdentConfig::pattern_stars`] stars are tried in the
 //! pyramid order (Mortari et al. 2004: indices spread so a false or missing star spoils few
-//! triangles). For a triangle (i, j, k), the k-vector gives the catalog pairs whose separation
-//! is within [`IdentConfig::pair_tolerance_rad`] of `d_ij`; for each orientation (a, b) the
-//! pairs near `d_ik` holding `a` (sorted by star once per triangle) give `c`, and `c` must sit at `d_jk` from `b` (from the
-//! catalog directions: no third search) with the same handedness. Each such catalog triangle
-//! is a hypothesis: its 3-star attitude is checked against every measured star.
+//! triangles). The focal length may be off by up to [`IdentConfig::max_scale_error`]
+//! (thermal or calibration error), so a measured separation `d` is `s D` of the catalog
+//! one, `s` unknown within `1 +- max_scale_error`: what is matched is the triangle's shape.
+//! A triangle is labelled `i` opposite its longest side, `(i, j)` its middle side and
+//! `(i, k)` its shortest. The k-vector gives the catalog pairs `(a, b)` whose separation
+//! `D_ab` puts `d_ij` within [`IdentConfig::pair_tolerance_rad`] at some scale of the range;
+//! that pair fixes the scale to `tol / D_ab`, and at it the pairs near `d_ik` holding `a`
+//! (sorted by star once per triangle) give `c`, which must sit at `d_jk` from `b` (from the
+//! catalog directions: no third search) with the same handedness; finally the three sides
+//! must fit one scale (their sums' ratio) within the tolerance each. Each such catalog
+//! triangle is a hypothesis: its 3-star attitude and scale are checked against every
+//! measured star.
 //!
 //! Why this rather than 4-star geometric hashing: the pair database (8 bytes a pair, k-vector
 //! 4 bytes a bin) is the smallest database that finds a pattern in O(1) per pair, fits
@@ -19,15 +27,22 @@
 //! which counts every star in the field rather than four.
 //!
 //! # Verification and the false-match bound
-//! A hypothesis attitude maps each measured star to the sky; it matches when a catalog star
-//! lies within [`IdentConfig::match_radius_rad`]. In rounds (at most `MAX_REFITS`, until
-//! the matches stop changing) the attitude is refit from the matches, every star matched
-//! again, the attitude refit, and a match whose residual exceeds `TIGHT_SIGMAS` of its own
-//! sigma dropped (an attitude pulled by a false star or a wrong neighbour loses it here).
+//! A hypothesis attitude maps each measured star (its tangent-plane coordinates divided by
+//! the hypothesis's scale) to the sky; it matches when a catalog star lies within
+//! [`IdentConfig::match_radius_rad`]. In rounds (at most `MAX_REFITS`, until the matches
+//! stop changing) the attitude and the scale are refit from the matches (Gauss-Newton on
+//! four parameters from the q-method's start), every star matched again, refit, and a match
+//! whose residual exceeds `TIGHT_SIGMAS` of its own sigma dropped (an attitude pulled by a
+//! false star or a wrong neighbour loses it here). The solution's attitude covariance is
+//! the marginal one of that fit (the scale's uncertainty included), and its scale is
+//! reported with its sigma ([`FocalScale`]); a fitted scale outside the searched range is
+//! no solution.
 //! If the hypothesis is wrong, each of the `n - 3` non-basis stars
 //! matches by chance with probability at most `p = N_max (1 - cos r) / (1 - cos R)`, `N_max`
 //! the most catalog stars in any field cone of radius `R` (from the catalog header), `r` the
-//! match radius. The chance that a wrong hypothesis matches `m` or more of them is the
+//! match radius; when that fails, `N_max` is replaced by the count of catalog stars in the
+//! field the triangle's own attitude points at (a sparse field's sky is sparse for a wrong
+//! hypothesis too, and the count depends on the triangle only). The chance that a wrong hypothesis matches `m` or more of them is the
 //! binomial tail `T(n - 3, m, p)`, and over at most [`IdentConfig::max_hypotheses`]
 //! hypotheses the false-match probability is at most `H_max T`. A solution is accepted only
 //! when that bound is at most [`IdentConfig::max_false_probability`]; the bound is reported.
@@ -35,14 +50,18 @@
 //! # Tracking
 //! The prior attitude maps each pattern star to the sky; its candidates are the catalog
 //! stars within the prior error plus the pair tolerance (a rotation by `theta` moves any
-//! direction by at most `theta`), at most `MAX_CANDIDATES` each. Triangles are formed from
-//! candidates only and verified as above.
+//! direction by at most `theta`), at most `MAX_CANDIDATES` each. The directions are first
+//! rescaled by the prior's focal-length scale, and the sides may differ from the catalog's
+//! by [`IdentConfig::track_scale_error`] of their length (the drift since the prior).
+//! Triangles are formed from candidates only and verified as above.
 //!
-//! Cost: a lost-in-space triangle costs a sort of `2 P_ik` entries and `2 P_ij` binary
-//! searches (`P` the pairs in a tolerance window, a few hundred), a hypothesis a 3-star
-//! q-method and `n` cone searches; a tracking triangle a few dozen angle checks. On the
-//! Cortex-M7 (`cargo m7-bench`, 15 degree fields) lost in space takes about 1.6 M
-//! instructions a field (median) and 6.7 M at the 99th percentile, tracking 0.39 M.
+//! Cost: a lost-in-space triangle costs a counting sort of `2 P_ik` entries and one bucket
+//! lookup per orientation of the `P_ij` pairs (`P` the pairs in a tolerance window over the
+//! scale range, a few thousand), a hypothesis a quick check of a few cone searches and, for
+//! the few that pass it, a 3-star q-method, `n` cone searches and rounds of the joint fit; a
+//! tracking triangle a few dozen angle checks. On the Cortex-M7 (`cargo m7-bench`, 15 degree
+//! fields) lost in space takes about 3.3 M instructions a field (median) and 15.7 M at the
+//! 99th percentile, tracking 0.61 M.
 
 use crate::attitude::{self, Attitude, Observation, Quat, angle_between, cross, dot};
 use crate::catalog::Catalog;
@@ -74,12 +93,20 @@ pub struct IdentConfig {
     pub pattern_stars: usize,
     /// Most hypotheses verified in one identification (the union bound's count).
     pub max_hypotheses: u32,
+    /// Largest focal-length error lost in space searches: the camera model's focal length
+    /// is within `1 +- max_scale_error` times the true one (0 to 0.05).
+    pub max_scale_error: f64,
+    /// Largest change of the focal length from the prior's in tracking, as a fraction of it
+    /// (0 to 0.05): the drift between two solved frames.
+    pub track_scale_error: f64,
 }
 
 impl IdentConfig {
     /// Settings for a camera with focal length `focal_length_px` and centroid 1-sigma
     /// `sigma_px`: pair tolerance 6 sigma of a separation (two stars' errors) plus 1 px of
-    /// catalog and model error, match radius 5 sigma plus 1 px, 10^-9 false-match bound.
+    /// catalog and model error, match radius 5 sigma plus 1 px, 10^-9 false-match bound;
+    /// lost in space tolerates a focal length off by up to 2 %, tracking a drift of 0.5 %
+    /// from the prior's scale.
     pub fn for_camera(focal_length_px: f64, sigma_px: f64) -> Self {
         let sep_sigma_px = sigma_px * core::f64::consts::SQRT_2;
         Self {
@@ -88,6 +115,8 @@ impl IdentConfig {
             max_false_probability: 1e-9,
             pattern_stars: 12,
             max_hypotheses: 5000,
+            max_scale_error: 0.02,
+            track_scale_error: 0.005,
         }
     }
 }
@@ -121,6 +150,20 @@ pub struct Solution {
     pub false_probability: f64,
     /// Hypotheses verified.
     pub hypotheses: u32,
+    /// The focal-length scale fitted with the attitude: the focal length that images the
+    /// matched stars is the camera model's times `scale.value` (measured separations are
+    /// `scale.value` times the true ones).
+    pub scale: FocalScale,
+}
+
+/// A focal-length scale estimated from identified stars, with its 1-sigma.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FocalScale {
+    /// True focal length over the camera model's (1 when the model is right).
+    pub value: f64,
+    /// 1-sigma of `value` (from the fit's covariance; the attitude's covariance is the
+    /// marginal one with the scale fitted).
+    pub sigma: f64,
 }
 
 /// Why no identification was made.
@@ -154,8 +197,13 @@ impl core::fmt::Display for IdentError {
 
 impl core::error::Error for IdentError {}
 
-/// Entries of the (star, partner) scratch of one triangle's `d_ik` pairs (8 KB).
-pub(crate) const IK_CAPACITY: usize = 2048;
+/// Buckets of the `d_ik` scratch (by star index modulo this; 2 KB of offsets and 2 KB of
+/// cursors), about one entry each.
+pub(crate) const IK_BUCKETS: usize = 1024;
+
+/// Entries of the (star, partner) scratch of one triangle's `d_ik` pairs (16 KB: the
+/// shortest side's window over the whole scale range up to about 6.5 degrees).
+pub(crate) const IK_CAPACITY: usize = 4096;
 
 /// The pyramid order of triangles over `n` stars (Mortari): (i, i+dj, i+dj+dk).
 struct Triangles {
@@ -213,7 +261,9 @@ fn check_input(stars: &[Measured], cfg: &IdentConfig) -> Result<usize, IdentErro
         && cfg.match_radius_rad > 0.0
         && cfg.match_radius_rad < 0.1
         && cfg.max_false_probability.is_finite()
-        && (3..=MAX_PATTERN).contains(&cfg.pattern_stars);
+        && (3..=MAX_PATTERN).contains(&cfg.pattern_stars)
+        && (0.0..=0.05).contains(&cfg.max_scale_error)
+        && (0.0..=0.05).contains(&cfg.track_scale_error);
     if !stars_ok || !cfg_ok {
         return Err(IdentError::BadInput);
     }
@@ -240,7 +290,14 @@ fn handedness(a: [f64; 3], b: [f64; 3], c: [f64; 3], min_abs: f64) -> i8 {
     }
 }
 
-/// Identifies `stars` (brightest first) with no prior.
+/// Identifies `stars` (brightest first) with no prior, the focal length anywhere within
+/// `1 +- cfg.max_scale_error` of the camera model's.
+///
+/// Each triangle is relabelled so that `i` is the vertex opposite its longest side, `(i, j)`
+/// its middle side and `(i, k)` its shortest: the pairs near `d_ij` (searched over the
+/// whole scale range) fix the scale to `tol / D_ab`, so the partners `c` of `a` near `d_ik`
+/// and the longest side `b c` are checked at that scale, and the longest side, read from
+/// the catalog directions, may be longer than the pair database's largest separation.
 pub fn lost_in_space(
     cat: &Catalog<'_>,
     stars: &[Measured],
@@ -249,76 +306,121 @@ pub fn lost_in_space(
     let n = check_input(stars, cfg)?;
     let np = n.min(cfg.pattern_stars);
     let tol = cfg.pair_tolerance_rad;
+    // The model's focal length within 1 +- ds of the true one: s = f_true / f_model.
+    let ds = cfg.max_scale_error;
+    let (s_lo, s_hi) = (1.0 / (1.0 + ds), 1.0 / (1.0 - ds));
     let max_sep = cat.max_separation_rad();
     let mut scratch = [(0u16, 0u16); IK_CAPACITY];
+    let bucket = |star: u16| usize::from(star) % IK_BUCKETS;
     let mut hyps = 0u32;
-    for (i, j, k) in Triangles::new(np) {
+    for tri in Triangles::new(np) {
+        let (i, j, k) = relabel(stars, tri);
         let (vi, vj, vk) = (dir_of(stars, i), dir_of(stars, j), dir_of(stars, k));
         let (dij, dik, djk) = (
             angle_between(vi, vj),
             angle_between(vi, vk),
             angle_between(vj, vk),
         );
-        if dij.max(dik).max(djk) + tol >= max_sep || dij.min(dik).min(djk) < 4.0 * tol {
+        if dij / s_lo + tol >= max_sep || dik < 4.0 * tol {
             continue;
         }
         let hand = handedness(vi, vj, vk, tol * dij.min(dik));
-        // The pairs near d_ik as (star, partner) both ways, sorted by star: the partners `c`
-        // of a vertex `a` are then a binary search away. A range too long for the scratch
-        // (never with the default tolerance) falls back to a scan of the range per `a`.
-        let ik_range = cat.pairs_between(dik - tol, dik + tol);
-        let fits = 2 * ik_range.len() <= IK_CAPACITY;
-        let mut len = 0usize;
-        if fits {
-            for pk in ik_range.clone() {
-                let Some(p) = cat.pair(pk) else { continue };
-                for e in [(p.a, p.b), (p.b, p.a)] {
-                    if let Some(slot) = scratch.get_mut(len) {
-                        *slot = e;
-                        len += 1;
-                    }
+        // The pairs near d_ik as (star, partner) both ways, grouped by a bucket of the star
+        // (a counting sort: two passes over the pairs), so the partners `c` of a vertex `a`
+        // are the few entries of its bucket. A triangle whose range is too long for the
+        // scratch (a shortest side beyond about 6.5 degrees) is left to the others.
+        let ik_range = cat.pairs_between(dik / s_hi - tol, dik / s_lo + tol);
+        if 2 * ik_range.len() > IK_CAPACITY {
+            continue;
+        }
+        let mut start = [0u16; IK_BUCKETS + 1];
+        for pk in ik_range.clone() {
+            let Some(p) = cat.pair(pk) else { continue };
+            for x in [p.a, p.b] {
+                if let Some(c) = start.get_mut(bucket(x) + 1) {
+                    *c += 1;
                 }
             }
         }
-        let by_star = scratch.get_mut(..len).unwrap_or(&mut []);
-        by_star.sort_unstable();
-        let by_star = &*by_star;
-        for pi in cat.pairs_between(dij - tol, dij + tol) {
+        for b in 0..IK_BUCKETS {
+            let prev = start.get(b).copied().unwrap_or(0);
+            if let Some(c) = start.get_mut(b + 1) {
+                *c += prev;
+            }
+        }
+        let mut next = [0u16; IK_BUCKETS];
+        next.copy_from_slice(start.get(..IK_BUCKETS).unwrap_or(&[0; IK_BUCKETS]));
+        for pk in ik_range.clone() {
+            let Some(p) = cat.pair(pk) else { continue };
+            for (x, y) in [(p.a, p.b), (p.b, p.a)] {
+                let Some(at) = next.get_mut(bucket(x)) else {
+                    continue;
+                };
+                if let Some(slot) = scratch.get_mut(usize::from(*at)) {
+                    *slot = (x, y);
+                }
+                *at += 1;
+            }
+        }
+        let len = usize::from(start.get(IK_BUCKETS).copied().unwrap_or(0));
+        let by_star = scratch.get(..len).unwrap_or(&[]);
+        for pi in cat.pairs_between(dij / s_hi - tol, dij / s_lo + tol) {
             let Some(pij) = cat.pair(pi) else { continue };
+            // The scales this pair allows: |d_ij - s D_ab| <= tol, within the searched range.
+            let d_ab = f64::from(pij.separation_nrad) / crate::catalog::NRAD_PER_RAD;
+            if d_ab <= 0.0 {
+                continue;
+            }
+            let (lo_s, hi_s) = (
+                ((dij - tol) / d_ab).max(s_lo),
+                ((dij + tol) / d_ab).min(s_hi),
+            );
+            if lo_s > hi_s || lo_s <= 0.0 {
+                continue;
+            }
+            // As squared chords |r_a - r_c|^2 (monotonic in the angle; no arc cosine in the
+            // inner loop).
+            let ac = (chord2((dik - tol) / hi_s), chord2((dik + tol) / lo_s));
+            let bc = (chord2((djk - tol) / hi_s), chord2((djk + tol) / lo_s));
             for (a, b) in [(pij.a, pij.b), (pij.b, pij.a)] {
-                let lo = by_star.partition_point(|e| e.0 < a);
-                let hi = by_star.partition_point(|e| e.0 <= a);
-                if fits && lo == hi {
+                let (lo, hi) = (
+                    usize::from(start.get(bucket(a)).copied().unwrap_or(0)),
+                    usize::from(start.get(bucket(a) + 1).copied().unwrap_or(0)),
+                );
+                if lo == hi {
                     continue;
                 }
                 let (Some(ra), Some(rb)) = (cat.dir(a.into()), cat.dir(b.into())) else {
                     continue;
                 };
-                let sorted = by_star.get(lo..hi).unwrap_or(&[]).iter().map(|e| e.1);
-                let scanned = (if fits { 0..0 } else { ik_range.clone() })
-                    .filter_map(|pk| cat.pair(pk))
-                    .filter_map(|p| {
-                        if p.a == a {
-                            Some(p.b)
-                        } else if p.b == a {
-                            Some(p.a)
-                        } else {
-                            None
-                        }
-                    });
-                for c in sorted.chain(scanned) {
+                let partners = by_star.get(lo..hi).unwrap_or(&[]).iter();
+                for c in partners.filter(|e| e.0 == a).map(|e| e.1) {
                     let Some(rc) = cat.dir(c.into()) else {
                         continue;
                     };
-                    if c == b || (angle_between(rb, rc) - djk).abs() > tol {
+                    if c == b {
                         continue;
                     }
+                    let (c_ac, c_bc) = (dist2(ra, rc), dist2(rb, rc));
+                    if c_ac < ac.0 || c_ac > ac.1 || c_bc < bc.0 || c_bc > bc.1 {
+                        continue;
+                    }
+                    let (d_ac, d_bc) = (angle_between(ra, rc), angle_between(rb, rc));
                     if hand != 0 && handedness(ra, rb, rc, 0.0) != hand {
                         continue;
                     }
+                    // One scale for the three sides (their sum's ratio), each side within
+                    // the tolerance at it: the triangle's shape matches.
+                    let s = (dij + dik + djk) / (d_ab + d_ac + d_bc);
+                    if (dij - s * d_ab).abs() > tol
+                        || (dik - s * d_ac).abs() > tol
+                        || (djk - s * d_bc).abs() > tol
+                    {
+                        continue;
+                    }
                     hyps += 1;
-                    if let Some(sol) =
-                        hypothesis(cat, stars, n, [(i, a), (j, b), (k, c)], cfg, hyps)
+                    let basis = [(i, a), (j, b), (k, c)];
+                    if let Some(sol) = hypothesis(cat, stars, n, basis, s, (s_lo, s_hi), cfg, hyps)
                     {
                         return Ok(sol);
                     }
@@ -332,8 +434,71 @@ pub fn lost_in_space(
     Err(IdentError::NoMatch { hypotheses: hyps })
 }
 
+/// The squared chord `4 sin^2(d / 2)` of an angle `d` (negative angles give 0), from its
+/// series `d^2 (1 - d^2 / 12)`: below 1e-7 of it relative for `d` up to 0.4 rad.
+fn chord2(d: f64) -> f64 {
+    let d = d.max(0.0);
+    d * d * (1.0 - d * d / 12.0 + d * d * d * d / 360.0)
+}
+
+/// `|a - b|^2`.
+fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    dot(d, d)
+}
+
+/// The triangle `tri` relabelled `(i, j, k)`: `i` opposite the longest side, `(i, j)` the
+/// middle side, `(i, k)` the shortest.
+fn relabel(stars: &[Measured], tri: (usize, usize, usize)) -> (usize, usize, usize) {
+    let v = [tri.0, tri.1, tri.2];
+    let d = |a: usize, b: usize| angle_between(dir_of(stars, a), dir_of(stars, b));
+    // opposite[x]: the side not touching vertex x; `order` sorts the vertices by it,
+    // longest first. The side (i, j) is the one opposite k, so k is opposite the middle
+    // side and j opposite the shortest.
+    let opposite = [d(tri.1, tri.2), d(tri.0, tri.2), d(tri.0, tri.1)];
+    let mut order = [0usize, 1, 2];
+    order.sort_unstable_by(|&x, &y| {
+        let dx = opposite.get(x).copied().unwrap_or(0.0);
+        let dy = opposite.get(y).copied().unwrap_or(0.0);
+        dy.total_cmp(&dx)
+    });
+    let at = |x: usize| {
+        v.get(order.get(x).copied().unwrap_or(0))
+            .copied()
+            .unwrap_or(0)
+    };
+    (at(0), at(2), at(1))
+}
+
+/// `stars` with their tangent-plane coordinates `(x/z, y/z)` divided by `scale` (the
+/// directions a camera model with the focal length times `scale` gives), the first `n`.
+fn rescaled(stars: &[Measured], n: usize, scale: f64) -> heapless::Vec<Measured, MAX_STARS> {
+    let k = 1.0 / scale;
+    stars
+        .iter()
+        .take(n.min(MAX_STARS))
+        .map(|s| Measured {
+            dir: rescale_dir(s.dir, k),
+            sigma_rad: s.sigma_rad * k,
+        })
+        .collect()
+}
+
+/// The unit vector `dir` with its tangent-plane coordinates multiplied by `k` (unchanged
+/// when it is not in front of the camera).
+pub(crate) fn rescale_dir(dir: [f64; 3], k: f64) -> [f64; 3] {
+    let [x, y, z] = dir;
+    if z <= 1e-6 {
+        return dir;
+    }
+    let (u, v) = (x / z * k, y / z * k);
+    let r = 1.0 / libm::sqrt(u * u + v * v + 1.0);
+    [u * r, v * r, r]
+}
+
 /// Identifies `stars` (brightest first) near the `prior` attitude, which may be off by up to
-/// `prior_error_rad` (any axis).
+/// `prior_error_rad` (any axis), the focal length within `cfg.track_scale_error` of the
+/// camera model's.
 pub fn track(
     cat: &Catalog<'_>,
     stars: &[Measured],
@@ -341,18 +506,37 @@ pub fn track(
     prior_error_rad: f64,
     cfg: &IdentConfig,
 ) -> Result<Solution, IdentError> {
+    track_scaled(cat, stars, prior, 1.0, prior_error_rad, cfg)
+}
+
+/// [`track`] from a prior that also holds a focal-length scale (a [`FocalScale::value`] of
+/// an earlier solution): the scale may have drifted from it by `cfg.track_scale_error`.
+pub fn track_scaled(
+    cat: &Catalog<'_>,
+    stars: &[Measured],
+    prior: Quat,
+    prior_scale: f64,
+    prior_error_rad: f64,
+    cfg: &IdentConfig,
+) -> Result<Solution, IdentError> {
     let n = check_input(stars, cfg)?;
-    if !(0.0..0.2).contains(&prior_error_rad) {
+    if !(0.0..0.2).contains(&prior_error_rad) || !(0.9..=1.1).contains(&prior_scale) {
         return Err(IdentError::BadInput);
     }
     let prior = prior.normalized().ok_or(IdentError::BadInput)?;
+    let scaled = rescaled(stars, n, prior_scale);
     let np = n.min(cfg.pattern_stars);
+    let ds = cfg.track_scale_error;
     let tol = cfg.pair_tolerance_rad;
+    let side_tol = |d: f64| tol + ds * d;
     let mut cands: [heapless::Vec<u16, MAX_CANDIDATES>; MAX_PATTERN] =
         core::array::from_fn(|_| heapless::Vec::new());
     for (i, c) in cands.iter_mut().enumerate().take(np) {
-        let sky = prior.rotate_inv(dir_of(stars, i));
-        for (idx, _) in cat.cone(sky, prior_error_rad + tol) {
+        let v = dir_of(&scaled, i);
+        let sky = prior.rotate_inv(v);
+        // A scale error moves a star by at most `ds` times its angle from the boresight.
+        let off_axis = libm::acos(v[2].clamp(-1.0, 1.0));
+        for (idx, _) in cat.cone(sky, prior_error_rad + tol + ds * off_axis) {
             // Past the capacity, the farther candidates are dropped: the triangle is
             // then found from other stars or not at all, never wrongly.
             let _ = c.push(u16::try_from(idx).unwrap_or(u16::MAX));
@@ -360,8 +544,9 @@ pub fn track(
     }
     let cand = |i: usize| cands.get(i).map_or(&[][..], |c| c.as_slice());
     let mut hyps = 0u32;
+    let range = (prior_scale / (1.0 + ds), prior_scale / (1.0 - ds));
     for (i, j, k) in Triangles::new(np) {
-        let (vi, vj, vk) = (dir_of(stars, i), dir_of(stars, j), dir_of(stars, k));
+        let (vi, vj, vk) = (dir_of(&scaled, i), dir_of(&scaled, j), dir_of(&scaled, k));
         let (dij, dik, djk) = (
             angle_between(vi, vj),
             angle_between(vi, vk),
@@ -379,7 +564,7 @@ pub fn track(
                 let Some(rb) = cat.dir(b.into()) else {
                     continue;
                 };
-                if b == a || (angle_between(ra, rb) - dij).abs() > tol {
+                if b == a || (angle_between(ra, rb) - dij).abs() > side_tol(dij) {
                     continue;
                 }
                 for &c in cand(k) {
@@ -388,16 +573,18 @@ pub fn track(
                     };
                     if c == a
                         || c == b
-                        || (angle_between(ra, rc) - dik).abs() > tol
-                        || (angle_between(rb, rc) - djk).abs() > tol
+                        || (angle_between(ra, rc) - dik).abs() > side_tol(dik)
+                        || (angle_between(rb, rc) - djk).abs() > side_tol(djk)
                         || (hand != 0 && handedness(ra, rb, rc, 0.0) != hand)
                     {
                         continue;
                     }
                     hyps += 1;
-                    if let Some(sol) =
-                        hypothesis(cat, stars, n, [(i, a), (j, b), (k, c)], cfg, hyps)
-                    {
+                    let basis = [(i, a), (j, b), (k, c)];
+                    let d_cat =
+                        angle_between(ra, rb) + angle_between(ra, rc) + angle_between(rb, rc);
+                    let s = prior_scale * (dij + dik + djk) / d_cat;
+                    if let Some(sol) = hypothesis(cat, stars, n, basis, s, range, cfg, hyps) {
                         return Ok(sol);
                     }
                     if hyps >= cfg.max_hypotheses {
@@ -433,42 +620,62 @@ pub(crate) fn binomial_tail(n: usize, m: usize, p: f64) -> f64 {
     tail.min(1.0)
 }
 
-/// Verifies the triangle `basis` (measured index, catalog index): the solution when its
-/// false-match bound passes.
+/// Verifies the triangle `basis` (measured index, catalog index) with `scale` its
+/// focal-length scale: the solution when its false-match bound passes and its fitted scale
+/// lies in `range` (widened by 3 of its sigmas).
+#[allow(clippy::too_many_arguments)]
 fn hypothesis(
     cat: &Catalog<'_>,
     stars: &[Measured],
     n: usize,
     basis: [(usize, u16); 3],
+    scale: f64,
+    range: (f64, f64),
     cfg: &IdentConfig,
     hyps: u32,
 ) -> Option<Solution> {
+    if !precheck(
+        cat,
+        stars,
+        n,
+        scale,
+        basis,
+        PRECHECK_RADII * cfg.match_radius_rad,
+    ) {
+        return None;
+    }
+    let scaled = rescaled(stars, n, scale);
     let mut obs = [Observation {
         camera: [0.0, 0.0, 1.0],
         icrs: [0.0, 0.0, 1.0],
         sigma_rad: 1.0,
     }; 3];
     for (o, &(m, c)) in obs.iter_mut().zip(basis.iter()) {
-        o.camera = dir_of(stars, m);
+        o.camera = dir_of(&scaled, m);
         o.icrs = cat.dir(c.into())?;
     }
     let first = attitude::solve(&obs).ok()?;
-    let (mut matches, _) = match_all(cat, stars, n, first.q, cfg.match_radius_rad);
+    let (mut matches, _) = match_all(cat, &scaled, n, first.q, cfg.match_radius_rad);
     if matches.len() < MIN_MATCHES {
         return None;
     }
-    // Rounds of: refit from the matches, match every star again, refit, and keep only the
-    // stars within TIGHT_SIGMAS of their own sigma of that fit (an attitude pulled by a false
-    // star or a wrong neighbour loses them here); until the matches stop changing. A
-    // triangle's attitude can be off in roll enough that the stars far from it fall outside
-    // the match radius, or on a neighbour, until a round brings them in. The largest set
-    // seen is kept.
+    // Rounds of: refit attitude and scale from the matches, match every star again, refit,
+    // and keep only the stars within TIGHT_SIGMAS of their own sigma of that fit (an
+    // attitude pulled by a false star or a wrong neighbour loses them here); until the
+    // matches stop changing. A triangle's attitude and scale can be off enough that the
+    // stars far from it fall outside the match radius, or on a neighbour, until a round
+    // brings them in. The largest set seen is kept.
     let mut best: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
+    let (mut s, mut q) = (scale, first.q);
     for _ in 0..MAX_REFITS {
-        let refit = fit(cat, stars, &matches)?;
-        let (all, _) = match_all(cat, stars, n, refit.q, cfg.match_radius_rad);
-        let refit = fit(cat, stars, &all)?;
-        let next = keep_consistent(cat, stars, &all, refit.q);
+        let refit = fit(cat, stars, &matches, s, Some(q))?;
+        let scaled = rescaled(stars, n, refit.scale.value);
+        let (all, _) = match_all(cat, &scaled, n, refit.attitude.q, cfg.match_radius_rad);
+        let refit = fit(cat, stars, &all, refit.scale.value, Some(refit.attitude.q))?;
+        q = refit.attitude.q;
+        s = refit.scale.value;
+        let scaled = rescaled(stars, n, s);
+        let next = keep_consistent(cat, &scaled, &all, refit.attitude.q);
         let same = next == matches;
         matches = next;
         if matches.len() > best.len() {
@@ -482,29 +689,130 @@ fn hypothesis(
     if matches.len() < MIN_MATCHES {
         return None;
     }
-    let false_probability = false_match_bound(cat, n, matches.len(), cfg);
+    let joint = fit(cat, stars, &matches, s, None)?;
+    // The field's density at the basis's own attitude: it depends on the triangle only,
+    // not on the stars the bound counts.
+    let false_probability = false_match_bound(cat, n, matches.len(), cfg, first.q);
     if false_probability > cfg.max_false_probability {
         return None;
     }
-    let attitude = fit(cat, stars, &matches)?;
+    let margin = 3.0 * joint.scale.sigma;
+    if joint.scale.value < range.0 - margin || joint.scale.value > range.1 + margin {
+        return None;
+    }
     Some(Solution {
-        attitude,
+        attitude: joint.attitude,
         matches,
         false_probability,
         hypotheses: hyps,
+        scale: joint.scale,
     })
 }
 
-/// `H_max T(n - 3, matched - 3, p)`: the bound in the module documentation.
+/// Non-basis stars the quick check of a hypothesis looks at (the brightest).
+const PRECHECK_STARS: usize = 4;
+/// The quick check's radius in match radii (the triangle's own attitude and scale, before
+/// any refit, can put a star a match radius or more off).
+const PRECHECK_RADII: f64 = 2.0;
+
+/// The quick check of a hypothesis before its verification: under the TRIAD attitude of
+/// two of its stars (about 100 flops), at least one of the [`PRECHECK_STARS`] brightest
+/// other stars falls within `radius` of a catalog star. A wrong triangle fails it almost
+/// always, for a few cone searches instead of a q-method and a cone search per star; a
+/// right one fails only when all of those stars are false or missing (its other
+/// triangles are tried then). It only rejects: what it passes is verified in full.
+fn precheck(
+    cat: &Catalog<'_>,
+    stars: &[Measured],
+    n: usize,
+    scale: f64,
+    basis: [(usize, u16); 3],
+    radius: f64,
+) -> bool {
+    let at = |m: usize| rescale_dir(dir_of(stars, m), 1.0 / scale);
+    let [(i, a), (j, b), _] = basis;
+    let (Some(ra), Some(rb)) = (cat.dir(a.into()), cat.dir(b.into())) else {
+        return false;
+    };
+    let (bi, bj) = (at(i), at(j));
+    let frame = |x: [f64; 3], y: [f64; 3]| -> Option<[[f64; 3]; 3]> {
+        let c = cross(x, y);
+        let nc = libm::sqrt(dot(c, c));
+        if nc <= 1e-12 {
+            return None;
+        }
+        let t2 = c.map(|v| v / nc);
+        Some([x, t2, cross(x, t2)])
+    };
+    let (Some(fb), Some(fr)) = (frame(bi, bj), frame(ra, rb)) else {
+        return false;
+    };
+    let mut looked = 0;
+    for m in 0..n.min(stars.len()) {
+        if basis.iter().any(|&(x, _)| x == m) {
+            continue;
+        }
+        if looked == PRECHECK_STARS {
+            break;
+        }
+        looked += 1;
+        // The star in the basis's own frame, then that frame's axes on the sky.
+        let v = at(m);
+        let c = fb.map(|t| dot(t, v));
+        let mut sky = [0.0f64; 3];
+        for (axis, coef) in fr.iter().zip(c) {
+            for (out, v) in sky.iter_mut().zip(axis) {
+                *out += coef * v;
+            }
+        }
+        if cat.cone(sky, radius).next().is_some() {
+            return true;
+        }
+    }
+    looked == 0
+}
+
+/// `H_max T(n - 3, matched - 3, p)`: the bound in the module documentation, with `p`
+/// from the densest field of the sky (the catalog header's `N_max`) or, when that does not
+/// pass, from the field the hypothesis's triangle points at (`q`, its 3-star attitude: the
+/// catalog stars within the field radius plus the match radius of its boresight). Under a
+/// wrong hypothesis the other measured stars fall on that field's sky, so its own star
+/// count bounds their chance of a match as `N_max` does for any field; the count costs one
+/// cone scan (about 1,000 stars), paid only when the densest-field bound fails.
 pub(crate) fn false_match_bound(
     cat: &Catalog<'_>,
     n: usize,
     matched: usize,
     cfg: &IdentConfig,
+    q: Quat,
+) -> f64 {
+    let densest = bound_with_field_stars(cat, n, matched, cfg, f64::from(cat.max_field_stars()));
+    if densest <= cfg.max_false_probability {
+        return densest;
+    }
+    let boresight = q.rotate_inv([0.0, 0.0, 1.0]);
+    let local = cat
+        .cone(boresight, cat.field_radius_rad() + cfg.match_radius_rad)
+        .count();
+    // Never above the densest field's count: the bound is at most the global one.
+    let local = (local as f64).min(f64::from(cat.max_field_stars()));
+    bound_with_field_stars(cat, n, matched, cfg, local)
+}
+
+/// The false-match bound of a solution with `matched` of `n` measured stars matched in a
+/// field holding `field_stars` catalog stars (the densest field's is the catalog header's
+/// `max_field_stars`): what a field needs to be solved, so the floor of sparse fields can
+/// be computed.
+pub fn bound_with_field_stars(
+    cat: &Catalog<'_>,
+    n: usize,
+    matched: usize,
+    cfg: &IdentConfig,
+    field_stars: f64,
 ) -> f64 {
     let cap = 1.0 - libm::cos(cfg.match_radius_rad);
     let field = 1.0 - libm::cos(cat.field_radius_rad());
-    let p = (f64::from(cat.max_field_stars()) * cap / field).min(1.0);
+    let p = (field_stars * cap / field).min(1.0);
     let tail = binomial_tail(n.saturating_sub(3), matched.saturating_sub(3), p);
     (f64::from(cfg.max_hypotheses) * tail).min(1.0)
 }
@@ -564,20 +872,179 @@ fn keep_consistent(
         .collect()
 }
 
-/// The q-method attitude from the matched stars with their sigmas.
-fn fit(cat: &Catalog<'_>, stars: &[Measured], matches: &[Match]) -> Option<Attitude> {
-    let mut obs = [Observation {
-        camera: [0.0, 0.0, 1.0],
-        icrs: [0.0, 0.0, 1.0],
-        sigma_rad: 1.0,
-    }; MAX_STARS];
-    for (o, m) in obs.iter_mut().zip(matches) {
-        let s = stars.get(usize::from(m.star))?;
-        o.camera = s.dir;
-        o.sigma_rad = s.sigma_rad;
-        o.icrs = cat.dir(m.catalog.into())?;
+/// An attitude fitted with the focal-length scale.
+struct Joint {
+    attitude: Attitude,
+    scale: FocalScale,
+}
+
+/// Gauss-Newton steps of the joint fit (it starts from the q-method at the given scale or
+/// from a given attitude near the solution; the model is nearly linear there).
+const JOINT_STEPS: usize = 2;
+
+/// The attitude and focal-length scale that best fit the matched stars: from `start` (or
+/// the q-method on the directions at `scale` when there is none), Gauss-Newton on the four parameters (a small rotation
+/// `e`, camera frame, and the scale `s`) of the model `t_i = s P(q r_i)`, `P(v) = (v_x,
+/// v_y) / v_z` the tangent-plane coordinates, against each star's measured `P(b_i)`, weight
+/// `(z_i^1.5 / sigma_i)^2` (a star's angular sigma is its tangent-plane sigma times
+/// `z^1.5`). The covariance is the inverse normal matrix: the attitude's block is its
+/// marginal covariance with the scale fitted.
+fn fit(
+    cat: &Catalog<'_>,
+    stars: &[Measured],
+    matches: &[Match],
+    scale: f64,
+    start: Option<Quat>,
+) -> Option<Joint> {
+    let start = match start {
+        Some(q) => q,
+        None => {
+            let scaled = rescaled(stars, MAX_STARS, scale);
+            let mut obs = [Observation {
+                camera: [0.0, 0.0, 1.0],
+                icrs: [0.0, 0.0, 1.0],
+                sigma_rad: 1.0,
+            }; MAX_STARS];
+            for (o, m) in obs.iter_mut().zip(matches) {
+                let s = scaled.get(usize::from(m.star))?;
+                o.camera = s.dir;
+                o.sigma_rad = s.sigma_rad;
+                o.icrs = cat.dir(m.catalog.into())?;
+            }
+            attitude::solve(obs.get(..matches.len())?).ok()?.q
+        }
+    };
+    if matches.len() < 3 {
+        return None;
     }
-    attitude::solve(obs.get(..matches.len())?).ok()
+    let (mut q, mut s) = (start, scale);
+    let mut cov = [[0.0f64; 4]; 4];
+    for step in 0..=JOINT_STEPS {
+        let mut normal = [[0.0f64; 4]; 4];
+        let mut rhs = [0.0f64; 4];
+        for m in matches {
+            let meas = stars.get(usize::from(m.star))?;
+            let r = cat.dir(m.catalog.into())?;
+            let [bx, by, bz] = meas.dir;
+            if bz <= 1e-6 {
+                return None;
+            }
+            let v = q.rotate(r);
+            let [vx, vy, vz] = v;
+            if vz <= 1e-6 {
+                return None;
+            }
+            let (u, w) = (vx / vz, vy / vz);
+            // d v / d e for v' = v + e x v: columns e_x, e_y, e_z.
+            let dv = [[0.0, vz, -vy], [-vz, 0.0, vx], [vy, -vx, 0.0]];
+            let mut ju = [0.0f64; 4];
+            let mut jw = [0.0f64; 4];
+            for c in 0..3 {
+                let (dx, dy, dz) = (
+                    dv.first().and_then(|r| r.get(c)).copied().unwrap_or(0.0),
+                    dv.get(1).and_then(|r| r.get(c)).copied().unwrap_or(0.0),
+                    dv.get(2).and_then(|r| r.get(c)).copied().unwrap_or(0.0),
+                );
+                if let (Some(a), Some(b)) = (ju.get_mut(c), jw.get_mut(c)) {
+                    *a = s * (dx - u * dz) / vz;
+                    *b = s * (dy - w * dz) / vz;
+                }
+            }
+            ju[3] = u;
+            jw[3] = w;
+            let sigma_t = meas.sigma_rad / (bz * libm::sqrt(bz));
+            let wt = 1.0 / (sigma_t * sigma_t);
+            let (ru, rw) = (bx / bz - s * u, by / bz - s * w);
+            for (r_i, row) in normal.iter_mut().enumerate() {
+                let (a, b) = (ju.get(r_i).copied()?, jw.get(r_i).copied()?);
+                if let Some(x) = rhs.get_mut(r_i) {
+                    *x += wt * (a * ru + b * rw);
+                }
+                for (c_i, x) in row.iter_mut().enumerate() {
+                    *x += wt * (a * ju.get(c_i).copied()? + b * jw.get(c_i).copied()?);
+                }
+            }
+        }
+        cov = inverse4(&normal)?;
+        if step == JOINT_STEPS {
+            break;
+        }
+        let mut delta = [0.0f64; 4];
+        for (d, row) in delta.iter_mut().zip(cov.iter()) {
+            *d = row.iter().zip(rhs.iter()).map(|(a, b)| a * b).sum();
+        }
+        q = (Quat::from_rotation_vector([delta[0], delta[1], delta[2]]) * q).normalized()?;
+        s += delta[3];
+        if !(0.5..2.0).contains(&s) {
+            return None;
+        }
+    }
+    let cov_rad2 = [
+        [cov[0][0], cov[0][1], cov[0][2]],
+        [cov[1][0], cov[1][1], cov[1][2]],
+        [cov[2][0], cov[2][1], cov[2][2]],
+    ];
+    let sigma = libm::sqrt(cov[3][3]);
+    if !sigma.is_finite() {
+        return None;
+    }
+    Some(Joint {
+        attitude: Attitude { q, cov_rad2 },
+        scale: FocalScale { value: s, sigma },
+    })
+}
+
+/// The inverse of a symmetric positive definite 4 x 4 matrix (Gauss-Jordan with partial
+/// pivoting); `None` when it is singular.
+fn inverse4(m: &[[f64; 4]; 4]) -> Option<[[f64; 4]; 4]> {
+    let mut a = *m;
+    let mut inv = [[0.0f64; 4]; 4];
+    for (i, row) in inv.iter_mut().enumerate() {
+        if let Some(x) = row.get_mut(i) {
+            *x = 1.0;
+        }
+    }
+    let scale = a.iter().flatten().fold(0.0f64, |acc, x| acc.max(x.abs()));
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    for col in 0..4 {
+        let pivot = (col..4).max_by(|&x, &y| {
+            let ax = a.get(x).and_then(|r| r.get(col)).map_or(0.0, |v| v.abs());
+            let ay = a.get(y).and_then(|r| r.get(col)).map_or(0.0, |v| v.abs());
+            ax.total_cmp(&ay)
+        })?;
+        a.swap(col, pivot);
+        inv.swap(col, pivot);
+        let p = a.get(col).and_then(|r| r.get(col)).copied()?;
+        if p.abs() <= scale * 1e-14 {
+            return None;
+        }
+        for c in 0..4 {
+            if let Some(x) = a.get_mut(col).and_then(|r| r.get_mut(c)) {
+                *x /= p;
+            }
+            if let Some(x) = inv.get_mut(col).and_then(|r| r.get_mut(c)) {
+                *x /= p;
+            }
+        }
+        let (arow, irow) = (*a.get(col)?, *inv.get(col)?);
+        for r in 0..4 {
+            if r == col {
+                continue;
+            }
+            let f = a.get(r).and_then(|x| x.get(col)).copied()?;
+            for c in 0..4 {
+                if let Some(x) = a.get_mut(r).and_then(|x| x.get_mut(c)) {
+                    *x -= f * arow.get(c).copied().unwrap_or(0.0);
+                }
+                if let Some(x) = inv.get_mut(r).and_then(|x| x.get_mut(c)) {
+                    *x -= f * irow.get(c).copied().unwrap_or(0.0);
+                }
+            }
+        }
+    }
+    Some(inv)
 }
 
 /// The attitude of an identification refit from directions corrected for each matched
@@ -586,8 +1053,10 @@ fn fit(cat: &Catalog<'_>, stars: &[Measured], matches: &[Match]) -> Option<Attit
 /// so the lateral colour the camera model holds is removed before Wahba's problem is solved.
 /// Identification itself runs on uncorrected directions (the colours are not known before
 /// it); the colour shifts are a fraction of a pixel, well inside its match radius. A star
-/// whose direction the model cannot invert is left out. Cost: one undistortion and one
-/// catalog read a match, then the q-method (a few thousand flops).
+/// whose direction the model cannot invert is left out; the focal-length scale is fitted
+/// with the attitude as in identification, and the covariance is the fit's. Cost: one
+/// undistortion and one catalog read a match, then the q-method and the joint fit (a few
+/// thousand flops).
 pub fn colour_corrected(
     cat: &Catalog<'_>,
     camera: &attitude::Camera,
@@ -595,7 +1064,8 @@ pub fn colour_corrected(
     sigma_px: f64,
     sol: &Solution,
 ) -> Result<Attitude, attitude::AttitudeError> {
-    let mut obs: heapless::Vec<Observation, MAX_STARS> = heapless::Vec::new();
+    let mut meas: heapless::Vec<Measured, MAX_STARS> = heapless::Vec::new();
+    let mut matches: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
     for m in &sol.matches {
         let (Some(p), Some(s)) = (
             stars_px.get(usize::from(m.star)),
@@ -607,14 +1077,28 @@ pub fn colour_corrected(
         let Ok(dir) = camera.direction_of(p[0], p[1], bv_mag) else {
             continue;
         };
-        let o = Observation {
-            camera: dir,
-            icrs: s.dir,
+        let star = u8::try_from(meas.len()).unwrap_or(u8::MAX);
+        let o = Measured {
+            dir,
             sigma_rad: sigma_px / camera.focal_length_px * libm::pow(dir[2], 1.5),
         };
-        if obs.push(o).is_err() {
+        if meas.push(o).is_err()
+            || matches
+                .push(Match {
+                    star,
+                    catalog: m.catalog,
+                })
+                .is_err()
+        {
             break;
         }
     }
-    attitude::solve(&obs)
+    if matches.len() < 3 {
+        return Err(attitude::AttitudeError::TooFewStars);
+    }
+    // The scale is fitted again: the colour terms move stars along the radius, which the
+    // uncorrected identification's scale partly absorbed.
+    fit(cat, &meas, &matches, sol.scale.value, None)
+        .map(|j| j.attitude)
+        .ok_or(attitude::AttitudeError::Degenerate)
 }

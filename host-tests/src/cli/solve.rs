@@ -6,7 +6,9 @@
 //! `FILE` gets one row per field: `field,solved,qw,qx,qy,qz,time_us`, then the attitude
 //! covariance in the camera frame (`cov_xx_rad2,cov_xy_rad2,cov_xz_rad2,cov_yy_rad2,
 //! cov_yz_rad2,cov_zz_rad2`; x, y across the boresight, z roll), the stars matched and the
-//! false-match probability bound. `time_us` is the wall time of identification and
+//! false-match probability bound, then the focal-length scale fitted with the attitude and
+//! its 1-sigma (`focal_scale`, `focal_scale_sigma`: the true focal length over
+//! `case.json`'s). `time_us` is the wall time of identification and
 //! attitude (directions from pixels included, file reading not).
 
 use super::{CliError, read_file, write_file};
@@ -167,7 +169,7 @@ pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
         .collect();
     names.sort();
     let mut csv = String::from(
-        "field,solved,qw,qx,qy,qz,time_us,cov_xx_rad2,cov_xy_rad2,cov_xz_rad2,cov_yy_rad2,cov_yz_rad2,cov_zz_rad2,matched,false_probability\n",
+        "field,solved,qw,qx,qy,qz,time_us,cov_xx_rad2,cov_xy_rad2,cov_xz_rad2,cov_yy_rad2,cov_yz_rad2,cov_zz_rad2,matched,false_probability,focal_scale,focal_scale_sigma\n",
     );
     let mut times = Vec::with_capacity(names.len());
     let mut solved = 0;
@@ -204,7 +206,7 @@ pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
                 let c = sol.attitude.cov_rad2;
                 let _ = writeln!(
                     csv,
-                    "{name},1,{w:.12},{x:.12},{y:.12},{z:.12},{us:.1},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{},{:.1e}",
+                    "{name},1,{w:.12},{x:.12},{y:.12},{z:.12},{us:.1},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{},{:.1e},{:.7},{:.1e}",
                     c[0][0],
                     c[0][1],
                     c[0][2],
@@ -212,11 +214,13 @@ pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
                     c[1][2],
                     c[2][2],
                     sol.matches.len(),
-                    sol.false_probability
+                    sol.false_probability,
+                    sol.scale.value,
+                    sol.scale.sigma
                 );
             }
             Err(_) => {
-                let _ = writeln!(csv, "{name},0,,,,,{us:.1},,,,,,,0,");
+                let _ = writeln!(csv, "{name},0,,,,,{us:.1},,,,,,,0,,,");
             }
         }
     }

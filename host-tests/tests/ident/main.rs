@@ -8,6 +8,7 @@ mod attitude;
 mod attitude_rate;
 mod ident;
 mod ident_catalog;
+mod ident_scale;
 mod ident_solve;
 mod optics_camera;
 mod optics_cli;

@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 20] = [
+const CHECKED: [&str; 21] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -45,6 +45,7 @@ const CHECKED: [&str; 20] = [
     "accuracy-frames-field",
     "trail-bound",
     "sil-rates",
+    "ident-tetra3rs",
 ];
 
 #[test]
