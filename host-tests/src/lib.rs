@@ -15,5 +15,6 @@ pub mod home;
 pub mod link_home;
 pub mod optics;
 pub mod psf_model;
+pub mod realsky;
 pub mod sil;
 pub mod tradeoff;
