@@ -110,6 +110,9 @@ def main():
               "t3_roll_deg", "t3_fov_deg", "t3_matched", "t3_rmse_arcsec",
               "boresight_diff_arcsec", "roll_diff_arcsec"]
     with open(out_csv, "w", newline="") as f:
+        f.write("# ESA tetra3 test data (github.com/esa/tetra3 test_data), credit ESA / Gustav "
+                "Pettersson, CC BY-SA 3.0 IGO; tetra3rs " + tetra3rs.__version__ + "; "
+                "host-tests/scripts/tetra3rs_realsky.py\n")
         w = csv.DictWriter(f, fieldnames=fields, lineterminator="\n")
         w.writeheader()
         for row in rows:

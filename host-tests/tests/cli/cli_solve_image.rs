@@ -6,6 +6,9 @@
 //!   originals too with the same attitude (the two readers agree to the bit), with at least 25 matched stars,
 //!   a residual RMS under 12 arcsec (0.3 px at 40 arcsec a pixel) and the fitted field of
 //!   view within 0.5 % of tetra3rs's 11.42 degrees.
+//! - Each frame's solution is the one committed in `host-tests/figures/realsky-tetra3rs.csv`
+//!   (RA, Dec and roll as written there, so a change that moves them must regenerate it),
+//!   its boresight within 10 arcsec of tetra3rs's and its roll within 60 arcsec.
 //! - Bad input gets one line on stderr and a non-zero exit: a truncated TIFF, a 1 x 1
 //!   image, an image of nothing but noise, a field of view of 0 or 180 degrees.
 
@@ -78,6 +81,7 @@ fn every_shared_frame_solves_from_fits_and_tiff() {
         );
         assert_eq!(qa, qb, "{} and its TIFF", a.path.display());
     }
+    check_against_tetra3rs(&s.images[..8]);
     let csv = std::fs::read_to_string(tmp.path().join("solutions.csv")).unwrap();
     let mut lines = csv.lines();
     assert_eq!(
@@ -95,6 +99,63 @@ fn every_shared_frame_solves_from_fits_and_tiff() {
     for l in stars.lines().skip(1) {
         let hip: u32 = l.split(',').nth(2).unwrap().parse().unwrap();
         assert!(hip > 0, "{l}");
+    }
+}
+
+fn unit(ra_deg: f64, dec_deg: f64) -> [f64; 3] {
+    let (ra, dec) = (ra_deg.to_radians(), dec_deg.to_radians());
+    [dec.cos() * ra.cos(), dec.cos() * ra.sin(), dec.sin()]
+}
+
+/// The fresh solutions against the committed comparison (see the module docs).
+fn check_against_tetra3rs(images: &[startrack_host::cli::solve_image::ImageOutcome]) {
+    use startrack_host::realsky::solve::{ra_dec_deg, roll_tetra3_deg};
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("figures/realsky-tetra3rs.csv");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let cols: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let get = |r: &[&str], name: &str| -> f64 {
+        let i = cols.iter().position(|c| *c == name).unwrap();
+        r[i].parse().unwrap()
+    };
+    assert_eq!(rows.len(), images.len());
+    for i in images {
+        let name = i.path.file_stem().unwrap().to_string_lossy().into_owned();
+        let r = rows
+            .iter()
+            .find(|r| r[0] == name)
+            .expect("frame in the CSV");
+        let q = i.result.as_ref().unwrap().attitude.q;
+        let (ra, dec) = ra_dec_deg(q.rotate_inv([0.0, 0.0, 1.0]));
+        let roll = roll_tetra3_deg(q);
+        // As committed (written with 6 decimals).
+        for (v, c) in [
+            (ra, "st_ra_deg"),
+            (dec, "st_dec_deg"),
+            (roll, "st_roll_deg"),
+        ] {
+            assert!(
+                (v - get(r, c)).abs() <= 5.1e-7,
+                "{name}: {c} {v} is not the CSV's"
+            );
+        }
+        let sep_arcsec = startrack_core::attitude::angle_between(
+            unit(ra, dec),
+            unit(get(r, "t3_ra_deg"), get(r, "t3_dec_deg")),
+        )
+        .to_degrees()
+            * 3600.0;
+        let droll_arcsec =
+            ((roll - get(r, "t3_roll_deg") + 180.0).rem_euclid(360.0) - 180.0) * 3600.0;
+        assert!(
+            sep_arcsec < 10.0,
+            "{name}: boresight {sep_arcsec:.2} arcsec from tetra3rs"
+        );
+        assert!(
+            droll_arcsec.abs() < 60.0,
+            "{name}: roll {droll_arcsec:.1} arcsec from tetra3rs"
+        );
     }
 }
 

@@ -7,6 +7,7 @@
 mod helpers;
 
 mod accuracy;
+mod attitude;
 mod figures;
 mod formats;
 mod pages;
