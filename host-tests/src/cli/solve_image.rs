@@ -8,8 +8,10 @@
 //! stars matched, the RMS of their angular residuals and the wall time from reading the file
 //! to the attitude. Per solved image, `DIR/<stem>.stars.csv` holds the matched stars:
 //! `x_px,y_px,hip,ra_deg,dec_deg,mag,residual_arcsec` (catalog position and Hp magnitude),
-//! and per image read `DIR/<stem>.detections.csv` every star found
-//! (`x_px,y_px,flux_e,snr,sigma_px,flags`, brightest first).
+//! its TAN WCS as a header-only FITS file `DIR/<stem>.wcs` and an annotated
+//! `DIR/<stem>.png` ([`crate::realsky::wcs`]); and per image read
+//! `DIR/<stem>.detections.csv` every star found (`x_px,y_px,flux_e,snr,sigma_px,flags`,
+//! brightest first).
 //! An image that cannot be read or solved gets a row with `solved` 0 and one line on stderr,
 //! and the command then exits non-zero.
 
@@ -17,6 +19,7 @@ use super::{CliError, read_file, write_file};
 use crate::realsky::picture;
 use crate::realsky::solve::{self, ImageSolution, SolveSpec};
 use crate::realsky::stars::{self, StarField};
+use crate::realsky::wcs;
 use startrack_core::attitude::angle_between;
 use startrack_core::catalog::Catalog;
 use startrack_sim::sky::{SkyStar, default_list_path, read_list};
@@ -177,9 +180,12 @@ pub fn run(args: &SolveImageArgs) -> Result<SolveImageSummary, CliError> {
         let t0 = Instant::now();
         let outcome = solve_one(path, args, &cat);
         let time_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let (field, size_px, result) = match outcome {
-            Ok((field, size, r)) => (Some(field), size, r),
-            Err(e) => (None, [0, 0], Err(e.to_string())),
+        let (pic, field, size_px, result) = match outcome {
+            Ok((pic, field, r)) => {
+                let size = [pic.width, pic.height];
+                (Some(pic), Some(field), size, r)
+            }
+            Err(e) => (None, None, [0, 0], Err(e.to_string())),
         };
         let name = stem(path);
         if let Some(f) = &field {
@@ -199,11 +205,26 @@ pub fn run(args: &SolveImageArgs) -> Result<SolveImageSummary, CliError> {
                     sol.matches.len(),
                     sol.rmse_rad.to_degrees() * 3600.0,
                 );
-                let field = field.as_ref().map_or(&[][..], |f| f.stars.as_slice());
+                let stars = field.as_ref().map_or(&[][..], |f| f.stars.as_slice());
                 write_file(
                     &args.out.join(format!("{name}.stars.csv")),
-                    stars_csv(&cat, &list, field, sol).as_bytes(),
+                    stars_csv(&cat, &list, stars, sol).as_bytes(),
                 )?;
+                wcs::write_wcs(
+                    &args.out.join(format!("{name}.wcs")),
+                    &wcs::tan_wcs(sol, size_px),
+                )?;
+                if let (Some(pic), Some(field)) = (&pic, &field) {
+                    let hip = |d: [f64; 3]| hip_of(&list, d).map_or(0, |h| h.hip);
+                    wcs::write_annotated_png(
+                        &args.out.join(format!("{name}.png")),
+                        pic,
+                        field,
+                        sol,
+                        &cat,
+                        &hip,
+                    )?;
+                }
             }
             Err(_) => {
                 let _ = writeln!(csv, "{name},0,,,,,0,,{time_ms:.1}");
@@ -221,14 +242,13 @@ pub fn run(args: &SolveImageArgs) -> Result<SolveImageSummary, CliError> {
     Ok(SolveImageSummary { images })
 }
 
-type Solved = (StarField, [usize; 2], Result<ImageSolution, String>);
+type Solved = (picture::Picture, StarField, Result<ImageSolution, String>);
 
 fn solve_one(path: &Path, args: &SolveImageArgs, cat: &Catalog<'_>) -> Result<Solved, CliError> {
     let pic = picture::load(path)?;
     let field = stars::find_stars(&pic, args.gain_e_per_adu);
-    let size = [pic.width, pic.height];
     let spec = SolveSpec {
-        size_px: size,
+        size_px: [pic.width, pic.height],
         focal_length_px: args
             .focal_length_px
             .unwrap_or_else(|| solve::focal_length_px(pic.width, args.fov_deg)),
@@ -236,7 +256,7 @@ fn solve_one(path: &Path, args: &SolveImageArgs, cat: &Catalog<'_>) -> Result<So
         sigma_floor_px: args.sigma_floor_px,
     };
     let r = solve::solve(cat, &field.stars, &spec).map_err(|e| format!("{}: {e}", path.display()));
-    Ok((field, size, r))
+    Ok((pic, field, r))
 }
 
 /// Every star found in an image, brightest first, as CSV: position, the detector's signal

@@ -13,3 +13,4 @@
 pub mod picture;
 pub mod solve;
 pub mod stars;
+pub mod wcs;

@@ -9,6 +9,10 @@
 //! - Each frame's solution is the one committed in `host-tests/figures/realsky-tetra3rs.csv`
 //!   (RA, Dec and roll as written there, so a change that moves them must regenerate it),
 //!   its boresight within 10 arcsec of tetra3rs's and its roll within 60 arcsec.
+//! - Each frame's TAN WCS (`<stem>.wcs`, read back with CFITSIO) maps every matched star's
+//!   catalog RA and Dec to its measured pixel within 0.3 px RMS (the standard gnomonic
+//!   formulas here, independent of the code that wrote it), and the annotated PNG is there
+//!   at the frame's size; docs/attitude.md quotes the range of those RMS.
 //! - Bad input gets one line on stderr and a non-zero exit: a truncated TIFF, a 1 x 1
 //!   image, an image of nothing but noise, a field of view of 0 or 180 degrees.
 
@@ -82,6 +86,29 @@ fn every_shared_frame_solves_from_fits_and_tiff() {
         assert_eq!(qa, qb, "{} and its TIFF", a.path.display());
     }
     check_against_tetra3rs(&s.images[..8]);
+    let mut rms_all = Vec::new();
+    for i in &s.images[..8] {
+        let stem = i.path.file_stem().unwrap().to_string_lossy().into_owned();
+        let rms_px = wcs_rms_px(tmp.path(), &stem);
+        eprintln!("{stem}: WCS maps the matched stars to their pixels within {rms_px:.3} px RMS");
+        assert!(rms_px < 0.3, "{stem}: {rms_px} px");
+        rms_all.push(rms_px);
+        let png = image::open(tmp.path().join(format!("{stem}.png"))).unwrap();
+        assert_eq!((png.width(), png.height()), (1024, 768));
+    }
+    // docs/attitude.md quotes the range this measures.
+    let (lo, hi) = rms_all
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(l, h), &v| (l.min(v), h.max(v)));
+    let phrase = format!("{lo:.3} to {hi:.3} px RMS");
+    let page =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/attitude.md"))
+            .unwrap();
+    let page = page.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(
+        page.contains(&phrase),
+        "docs/attitude.md does not quote {phrase:?}"
+    );
     let csv = std::fs::read_to_string(tmp.path().join("solutions.csv")).unwrap();
     let mut lines = csv.lines();
     assert_eq!(
@@ -100,6 +127,37 @@ fn every_shared_frame_solves_from_fits_and_tiff() {
         let hip: u32 = l.split(',').nth(2).unwrap().parse().unwrap();
         assert!(hip > 0, "{l}");
     }
+}
+
+/// RMS over the matched stars of `<stem>.stars.csv` of the distance between the measured
+/// pixel and the catalog position through `<stem>.wcs`, px.
+fn wcs_rms_px(dir: &Path, stem: &str) -> f64 {
+    let path = dir.join(format!("{stem}.wcs"));
+    let mut f = fitsio::FitsFile::open(&path).unwrap();
+    let hdu = f.primary_hdu().unwrap();
+    let mut key = |k: &str| -> f64 { hdu.read_key::<f64>(&mut f, k).unwrap() };
+    let (crpix1, crpix2) = (key("CRPIX1"), key("CRPIX2"));
+    let (a0, d0) = (key("CRVAL1").to_radians(), key("CRVAL2").to_radians());
+    let cd = [[key("CD1_1"), key("CD1_2")], [key("CD2_1"), key("CD2_2")]];
+    let ctype: String = hdu.read_key(&mut f, "CTYPE1").unwrap();
+    assert_eq!(ctype.trim(), "RA---TAN");
+    let det = cd[0][0] * cd[1][1] - cd[0][1] * cd[1][0];
+    let text = std::fs::read_to_string(dir.join(format!("{stem}.stars.csv"))).unwrap();
+    let (mut sum2, mut n) = (0.0, 0usize);
+    for l in text.lines().skip(1) {
+        let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+        let (x, y, a, d) = (v[0], v[1], v[3].to_radians(), v[4].to_radians());
+        let cosc = d0.sin() * d.sin() + d0.cos() * d.cos() * (a - a0).cos();
+        let xi = (d.cos() * (a - a0).sin() / cosc).to_degrees();
+        let eta = ((d0.cos() * d.sin() - d0.sin() * d.cos() * (a - a0).cos()) / cosc).to_degrees();
+        let u = (cd[1][1] * xi - cd[0][1] * eta) / det;
+        let w = (-cd[1][0] * xi + cd[0][0] * eta) / det;
+        let (px, py) = (u + crpix1 - 1.0, w + crpix2 - 1.0);
+        sum2 += (px - x).powi(2) + (py - y).powi(2);
+        n += 1;
+    }
+    assert!(n >= 25, "{stem}: {n} matched stars");
+    (sum2 / n as f64).sqrt()
 }
 
 fn unit(ra_deg: f64, dec_deg: f64) -> [f64; 3] {
