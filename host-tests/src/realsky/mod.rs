@@ -8,7 +8,8 @@
 //!   and centroids (the width-free Gaussian fit; saturated stars flagged, not fitted);
 //! - [`solve`]: the core's lost-in-space identification over a ladder of focal lengths (the
 //!   field of view known to a stated error), then the core's q-method from every matched star
-//!   with the focal length refit.
+//!   with the focal length refit;
+//! - [`wcs`]: the solution as a FITS TAN WCS, and the annotated PNG.
 
 pub mod picture;
 pub mod solve;
