@@ -225,7 +225,7 @@ fn check_against_tetra3rs(
 }
 
 /// The field of view given 7 % small (10.6 degrees for 11.42): the focal-length ladder finds
-/// the same solutions. Minutes in the dev profile (each failed rung is up to 5,000
+/// the same solutions. Minutes a frame in the dev profile (each failed rung is up to 5,000
 /// hypotheses), so not in CI: `cargo test -p startrack-host --test cli
 /// cli_solve_image::fov_seven_percent_off -- --ignored --nocapture`.
 #[test]
