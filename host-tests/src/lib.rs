@@ -10,4 +10,5 @@ pub mod cli;
 pub mod cti;
 pub mod optics;
 pub mod psf_model;
+pub mod realsky;
 pub mod sil_rates;

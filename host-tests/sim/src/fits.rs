@@ -358,6 +358,25 @@ pub fn read_map(path: &Path, keys: &[&str]) -> Result<MapF32, FitsError> {
     })
 }
 
+/// The full scale of the primary image in physical values, `BZERO + BSCALE * largest stored
+/// value` (255 for BITPIX 8, 65535 for BITPIX 16 with BZERO 32768), or `None` for a
+/// floating-point image, which has none.
+pub fn full_scale(path: &Path) -> Result<Option<f64>, FitsError> {
+    let mut fits = open(path)?;
+    let (hdu, _, _) = image_info(&mut fits, path)?;
+    let bitpix: i64 = hdu.read_key(&mut fits, "BITPIX").map_err(cfitsio(path))?;
+    let stored_max = match bitpix {
+        8 => 255.0,
+        16 => 32767.0,
+        32 => 2147483647.0,
+        64 => 9.223372036854776e18,
+        _ => return Ok(None),
+    };
+    let bscale = hdu.read_key::<f64>(&mut fits, "BSCALE").unwrap_or(1.0);
+    let bzero = hdu.read_key::<f64>(&mut fits, "BZERO").unwrap_or(0.0);
+    Ok(Some(bzero + bscale * stored_max))
+}
+
 /// Reads a map and checks that it is `rows` x `cols`.
 pub fn read_map_shaped(
     path: &Path,

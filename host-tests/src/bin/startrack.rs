@@ -75,6 +75,8 @@ enum Command {
     Catalog(CatalogCommand),
     /// Identify the stars of every field of a case and write each attitude with its covariance.
     Solve(startrack_host::cli::solve::SolveArgs),
+    /// Solve real night-sky images (FITS, TIFF, PNG, JPEG): attitude, matched stars.
+    SolveImage(startrack_host::cli::solve_image::SolveImageArgs),
     /// The camera model (focal length, principal point, distortion, lateral colour) fitted
     /// from identified stars over many frames.
     #[command(subcommand)]
@@ -244,6 +246,27 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             }
             Err(e) => fail("solve", &e),
+        },
+        Command::SolveImage(args) => match startrack_host::cli::solve_image::run(&args) {
+            Ok(s) => {
+                for i in &s.images {
+                    if let Err(e) = &i.result {
+                        eprintln!("startrack solve-image: {e}");
+                    }
+                }
+                println!(
+                    "{} of {} images solved; wrote {}",
+                    s.solved(),
+                    s.images.len(),
+                    args.out.join("solutions.csv").display()
+                );
+                if s.solved() == s.images.len() {
+                    ExitCode::SUCCESS
+                } else {
+                    ExitCode::FAILURE
+                }
+            }
+            Err(e) => fail("solve-image", &e),
         },
         Command::Optics(OpticsCommand::Case(args)) => {
             match startrack_host::cli::optics::run_case(&args) {

@@ -16,6 +16,7 @@ pub mod readout_plan;
 pub mod sil;
 pub mod simulate;
 pub mod solve;
+pub mod solve_image;
 pub mod tradeoff;
 
 use startrack_core::table::{TableError, WriteError};

@@ -7,6 +7,7 @@ mod cli_commands;
 mod cli_models;
 mod cli_pixcorr;
 mod cli_sil_motion;
+mod cli_solve_image;
 mod docs_numbers;
 
 /// The command-line helpers, with `startrack` running this package's binary.

@@ -1,0 +1,178 @@
+//! A solved image's FITS WCS (gnomonic, `TAN`) and its annotated PNG.
+//!
+//! # WCS
+//! The pinhole camera is exactly a gnomonic projection about the principal point, so the
+//! solution is a TAN WCS without distortion terms: `CRPIX` the principal point in FITS's
+//! 1-based pixels (`x + 1`, `y + 1`; FITS row 1 is row 0 here, the first row of the file and
+//! the top row of a TIFF), `CRVAL` its RA and Dec, and the `CD` matrix the camera's axes
+//! projected on the local east and north at `CRVAL` over the focal length: with `R` the
+//! rotation ICRS to camera, `e`, `n` east and north at the boresight,
+//! `CD1_j = (R e)_j / f`, `CD2_j = (R n)_j / f` (deg per px). Written as a header-only FITS
+//! file (`NAXIS 0`, as astrometry.net's `.wcs` files) that astropy and DS9 read with the
+//! image. Cost: nothing worth counting.
+//!
+//! # Annotated PNG
+//! The background-subtracted image, stretched for the eye (square root between +2 and +60
+//! background sigmas: the sky black, so the PNG compresses), every detection circled in yellow, each identified star circled in
+//! green and labelled with its HIP number and Hp magnitude, and the catalog stars the
+//! solution predicts in the image (to the catalog's faintest) marked with a red cross.
+//! Labels need a TrueType font ([`startrack_analysis::figures::plot::ensure_font`]); without one the PNG
+//! is drawn unlabelled.
+
+use super::picture::Picture;
+use super::solve::{ImageSolution, ra_dec_deg};
+use super::stars::StarField;
+use crate::cli::CliError;
+use startrack_core::catalog::Catalog;
+use std::path::Path;
+
+/// The TAN WCS of a solution.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TanWcs {
+    /// Reference pixel, FITS 1-based (column, row).
+    pub crpix: [f64; 2],
+    /// Reference point RA, Dec, deg.
+    pub crval_deg: [f64; 2],
+    /// `CD` matrix, deg per px: `[[CD1_1, CD1_2], [CD2_1, CD2_2]]`.
+    pub cd_deg: [[f64; 2]; 2],
+    /// Image size, px.
+    pub size_px: [usize; 2],
+}
+
+/// The WCS of `sol` for an image of `size_px`.
+pub fn tan_wcs(sol: &ImageSolution, size_px: [usize; 2]) -> TanWcs {
+    let q = sol.attitude.q;
+    let b = q.rotate_inv([0.0, 0.0, 1.0]);
+    let (ra, dec) = ra_dec_deg(b);
+    let (a, d) = (ra.to_radians(), dec.to_radians());
+    let east = [-a.sin(), a.cos(), 0.0];
+    let north = [-d.sin() * a.cos(), -d.sin() * a.sin(), d.cos()];
+    let (re, rn) = (q.rotate(east), q.rotate(north));
+    let f = sol.focal_length_px;
+    let k = 180.0 / std::f64::consts::PI / f;
+    let pp = sol.camera.principal_point_px;
+    TanWcs {
+        crpix: [pp[0] + 1.0, pp[1] + 1.0],
+        crval_deg: [ra, dec],
+        cd_deg: [[re[0] * k, re[1] * k], [rn[0] * k, rn[1] * k]],
+        size_px,
+    }
+}
+
+/// Writes `wcs` as a header-only FITS file.
+pub fn write_wcs(path: &Path, wcs: &TanWcs) -> Result<(), CliError> {
+    let err = |e: fitsio::errors::Error| CliError::Io {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    };
+    let _ = std::fs::remove_file(path);
+    let mut f = fitsio::FitsFile::create(path).open().map_err(err)?;
+    let hdu = f.primary_hdu().map_err(err)?;
+    hdu.write_key(&mut f, "WCSAXES", 2i64).map_err(err)?;
+    hdu.write_key(&mut f, "CTYPE1", "RA---TAN").map_err(err)?;
+    hdu.write_key(&mut f, "CTYPE2", "DEC--TAN").map_err(err)?;
+    hdu.write_key(&mut f, "CUNIT1", "deg").map_err(err)?;
+    hdu.write_key(&mut f, "CUNIT2", "deg").map_err(err)?;
+    hdu.write_key(&mut f, "RADESYS", "ICRS").map_err(err)?;
+    for (k, v) in [
+        ("CRPIX1", wcs.crpix[0]),
+        ("CRPIX2", wcs.crpix[1]),
+        ("CRVAL1", wcs.crval_deg[0]),
+        ("CRVAL2", wcs.crval_deg[1]),
+        ("CD1_1", wcs.cd_deg[0][0]),
+        ("CD1_2", wcs.cd_deg[0][1]),
+        ("CD2_1", wcs.cd_deg[1][0]),
+        ("CD2_2", wcs.cd_deg[1][1]),
+    ] {
+        hdu.write_key(&mut f, k, v).map_err(err)?;
+    }
+    hdu.write_key(&mut f, "IMAGEW", wcs.size_px[0] as i64)
+        .map_err(err)?;
+    hdu.write_key(&mut f, "IMAGEH", wcs.size_px[1] as i64)
+        .map_err(err)?;
+    Ok(())
+}
+
+/// Writes the annotated PNG (see the module docs).
+pub fn write_annotated_png(
+    path: &Path,
+    pic: &Picture,
+    field: &StarField,
+    sol: &ImageSolution,
+    cat: &Catalog<'_>,
+    hip_of: &dyn Fn([f64; 3]) -> u32,
+) -> Result<(), CliError> {
+    use plotters::prelude::*;
+    let (w, h) = (pic.width, pic.height);
+    // Stretch: the background-subtracted values over the robust sigma of the residual.
+    let mut resid: Vec<f32> = pic
+        .data_adu
+        .iter()
+        .zip(&field.background_adu)
+        .map(|(v, b)| v - b)
+        .collect();
+    let mut abs: Vec<f32> = resid.iter().map(|v| v.abs()).collect();
+    let mid = abs.len() / 2;
+    let sigma = abs.select_nth_unstable_by(mid, f32::total_cmp).1.max(1e-6) * 1.4826;
+    let (lo, hi) = (2.0 * sigma, 60.0 * sigma);
+    let mut rgb = vec![0u8; w * h * 3];
+    for (px, v) in rgb.chunks_exact_mut(3).zip(resid.iter_mut()) {
+        let t = ((*v - lo) / (hi - lo)).clamp(0.0, 1.0).sqrt();
+        let g = (t * 255.0).round() as u8;
+        px.copy_from_slice(&[g, g, g]);
+    }
+    let font = startrack_analysis::figures::plot::ensure_font().is_ok();
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w as u32, h as u32)).into_drawing_area();
+        let yellow = RGBColor(230, 200, 40);
+        let green = RGBColor(60, 220, 90);
+        let red = RGBColor(240, 60, 60);
+        let pt = |x: f64, y: f64| (x.round() as i32, y.round() as i32);
+        let draw = |e: Result<(), DrawingAreaErrorKind<_>>| {
+            e.map_err(|e| CliError::Io {
+                path: path.to_path_buf(),
+                msg: format!("drawing: {e}"),
+            })
+        };
+        for s in &field.stars {
+            draw(root.draw(&Circle::new(pt(s.x_px, s.y_px), 7, yellow)))?;
+        }
+        // Catalog stars the solution predicts in the frame.
+        let cone = (((w * w + h * h) as f64).sqrt() / 2.0 / sol.focal_length_px).atan();
+        for (_, dir) in cat.cone(sol.attitude.q.rotate_inv([0.0, 0.0, 1.0]), cone) {
+            let Some(p) = sol.camera.project(sol.attitude.q.rotate(dir)) else {
+                continue;
+            };
+            if p[0] < 0.0 || p[1] < 0.0 || p[0] > w as f64 || p[1] > h as f64 {
+                continue;
+            }
+            let (x, y) = pt(p[0], p[1]);
+            draw(root.draw(&PathElement::new(vec![(x - 12, y), (x - 5, y)], red)))?;
+            draw(root.draw(&PathElement::new(vec![(x + 5, y), (x + 12, y)], red)))?;
+            draw(root.draw(&PathElement::new(vec![(x, y - 12), (x, y - 5)], red)))?;
+            draw(root.draw(&PathElement::new(vec![(x, y + 5), (x, y + 12)], red)))?;
+        }
+        for m in &sol.matches {
+            let (Some(s), Some(c)) = (field.stars.get(m.star), cat.star(m.catalog)) else {
+                continue;
+            };
+            let (x, y) = pt(s.x_px, s.y_px);
+            draw(root.draw(&Circle::new((x, y), 10, green.stroke_width(2))))?;
+            if font {
+                let label = format!("HIP {} {:.1}", hip_of(c.dir), f64::from(c.hp_mmag) / 1000.0);
+                let style = ("sans-serif", 13).into_font().color(&green);
+                draw(root.draw(&Text::new(label, (x + 12, y - 16), style)))?;
+            }
+        }
+        draw(root.present())?;
+    }
+    let img = image::RgbImage::from_raw(w as u32, h as u32, rgb).ok_or_else(|| CliError::Io {
+        path: path.to_path_buf(),
+        msg: "image buffer size".into(),
+    })?;
+    img.save_with_format(path, image::ImageFormat::Png)
+        .map_err(|e| CliError::Io {
+            path: path.to_path_buf(),
+            msg: e.to_string(),
+        })
+}

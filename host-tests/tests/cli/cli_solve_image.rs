@@ -1,0 +1,304 @@
+//! `startrack solve-image` on the shared real night-sky frames (ESA tetra3 test data, credit
+//! ESA / Gustav Pettersson, CC BY-SA 3.0 IGO; `../shared/realsky` from the repo root, the
+//! test skips with a message where it is absent) and on bad input.
+//!
+//! - Every shared frame solves from its FITS copy, and the first two from their TIFF
+//!   originals too with the same attitude (the two readers agree to the bit), with at least 25 matched stars,
+//!   a residual RMS under 12 arcsec (0.3 px at 40 arcsec a pixel) and the fitted field of
+//!   view within 0.5 % of tetra3rs's 11.42 degrees.
+//! - Each frame's solution is the one committed in `host-tests/figures/realsky-tetra3rs.csv`
+//!   (RA, Dec and roll as written there, so a change that moves them must regenerate it),
+//!   its boresight within 10 arcsec of tetra3rs's and its roll within 60 arcsec.
+//! - Each frame's TAN WCS (`<stem>.wcs`, read back with CFITSIO) maps every matched star's
+//!   catalog RA and Dec to its measured pixel within 0.3 px RMS (the standard gnomonic
+//!   formulas here, independent of the code that wrote it), and the annotated PNG is there
+//!   at the frame's size; docs/attitude.md quotes the range of those RMS.
+//! - Bad input gets one line on stderr and a non-zero exit: a truncated TIFF, a 1 x 1
+//!   image, an image of nothing but noise, a field of view of 0 or 180 degrees.
+
+use crate::common_cli::startrack;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+use startrack_host::cli::solve_image::{SolveImageArgs, run};
+use std::path::{Path, PathBuf};
+
+/// The shared frames, if present.
+pub fn realsky_dir() -> Option<PathBuf> {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/realsky");
+    d.is_dir().then_some(d)
+}
+
+fn args(images: Vec<PathBuf>, out: PathBuf) -> SolveImageArgs {
+    SolveImageArgs {
+        images,
+        fov_deg: 11.4,
+        fov_max_error: 0.1,
+        focal_length_px: None,
+        catalog: None,
+        list: None,
+        out,
+        gain_e_per_adu: 1.0,
+        sigma_floor_px: 0.5,
+    }
+}
+
+fn frames(dir: &Path, ext: &str) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|r| r.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    v.retain(|p| p.extension().is_some_and(|x| x == ext));
+    v.sort();
+    v
+}
+
+#[test]
+fn every_shared_frame_solves_from_fits_and_tiff() {
+    let Some(dir) = realsky_dir() else {
+        eprintln!("skipped: ../shared/realsky (the real night-sky frames) is not there");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let fits = frames(&dir, "fits");
+    let tiff = frames(&dir, "tiff");
+    assert_eq!((fits.len(), tiff.len()), (8, 8));
+    let mut images = fits.clone();
+    images.extend(tiff.iter().take(2).cloned());
+    let s = run(&args(images, tmp.path().to_path_buf())).unwrap();
+    for i in &s.images {
+        let sol = i.result.as_ref().unwrap_or_else(|e| panic!("{e}"));
+        let rmse_arcsec = sol.rmse_rad.to_degrees() * 3600.0;
+        let fov = startrack_host::realsky::solve::fov_deg(i.size_px[0], sol.focal_length_px);
+        eprintln!(
+            "{}: {} matched, RMS {rmse_arcsec:.2} arcsec, fov {fov:.4} deg, {:.0} ms",
+            i.path.display(),
+            sol.matches.len(),
+            i.time_ms
+        );
+        assert!(sol.matches.len() >= 25, "{}", i.path.display());
+        assert!(rmse_arcsec < 12.0, "{}", i.path.display());
+        assert!((fov / 11.42 - 1.0).abs() < 0.005, "{fov}");
+    }
+    for (a, b) in s.images.iter().zip(&s.images[8..]) {
+        let (qa, qb) = (
+            a.result.as_ref().unwrap().attitude.q,
+            b.result.as_ref().unwrap().attitude.q,
+        );
+        assert_eq!(qa, qb, "{} and its TIFF", a.path.display());
+    }
+    check_against_tetra3rs(&s.images[..8], true);
+    let mut rms_all = Vec::new();
+    for i in &s.images[..8] {
+        let stem = i.path.file_stem().unwrap().to_string_lossy().into_owned();
+        let rms_px = wcs_rms_px(tmp.path(), &stem);
+        eprintln!("{stem}: WCS maps the matched stars to their pixels within {rms_px:.3} px RMS");
+        assert!(rms_px < 0.3, "{stem}: {rms_px} px");
+        rms_all.push(rms_px);
+        let png = image::open(tmp.path().join(format!("{stem}.png"))).unwrap();
+        assert_eq!((png.width(), png.height()), (1024, 768));
+    }
+    // docs/attitude.md quotes the range this measures.
+    let (lo, hi) = rms_all
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(l, h), &v| (l.min(v), h.max(v)));
+    let phrase = format!("{lo:.3} to {hi:.3} px RMS");
+    let page =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/attitude.md"))
+            .unwrap();
+    let page = page.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(
+        page.contains(&phrase),
+        "docs/attitude.md does not quote {phrase:?}"
+    );
+    let csv = std::fs::read_to_string(tmp.path().join("solutions.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some("image,solved,ra_deg,dec_deg,roll_deg,fov_deg,matched,rmse_arcsec,time_ms")
+    );
+    assert_eq!(
+        lines.filter(|l| l.split(',').nth(1) == Some("1")).count(),
+        10
+    );
+    // A matched-stars file per image, every star with its HIP number.
+    let stem = fits[0].file_stem().unwrap().to_string_lossy().into_owned();
+    let stars = std::fs::read_to_string(tmp.path().join(format!("{stem}.stars.csv"))).unwrap();
+    assert!(stars.starts_with("x_px,y_px,hip,ra_deg,dec_deg,mag,residual_arcsec\n"));
+    for l in stars.lines().skip(1) {
+        let hip: u32 = l.split(',').nth(2).unwrap().parse().unwrap();
+        assert!(hip > 0, "{l}");
+    }
+}
+
+/// RMS over the matched stars of `<stem>.stars.csv` of the distance between the measured
+/// pixel and the catalog position through `<stem>.wcs`, px.
+fn wcs_rms_px(dir: &Path, stem: &str) -> f64 {
+    let path = dir.join(format!("{stem}.wcs"));
+    let mut f = fitsio::FitsFile::open(&path).unwrap();
+    let hdu = f.primary_hdu().unwrap();
+    let mut key = |k: &str| -> f64 { hdu.read_key::<f64>(&mut f, k).unwrap() };
+    let (crpix1, crpix2) = (key("CRPIX1"), key("CRPIX2"));
+    let (a0, d0) = (key("CRVAL1").to_radians(), key("CRVAL2").to_radians());
+    let cd = [[key("CD1_1"), key("CD1_2")], [key("CD2_1"), key("CD2_2")]];
+    let ctype: String = hdu.read_key(&mut f, "CTYPE1").unwrap();
+    assert_eq!(ctype.trim(), "RA---TAN");
+    let det = cd[0][0] * cd[1][1] - cd[0][1] * cd[1][0];
+    let text = std::fs::read_to_string(dir.join(format!("{stem}.stars.csv"))).unwrap();
+    let (mut sum2, mut n) = (0.0, 0usize);
+    for l in text.lines().skip(1) {
+        let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+        let (x, y, a, d) = (v[0], v[1], v[3].to_radians(), v[4].to_radians());
+        let cosc = d0.sin() * d.sin() + d0.cos() * d.cos() * (a - a0).cos();
+        let xi = (d.cos() * (a - a0).sin() / cosc).to_degrees();
+        let eta = ((d0.cos() * d.sin() - d0.sin() * d.cos() * (a - a0).cos()) / cosc).to_degrees();
+        let u = (cd[1][1] * xi - cd[0][1] * eta) / det;
+        let w = (-cd[1][0] * xi + cd[0][0] * eta) / det;
+        let (px, py) = (u + crpix1 - 1.0, w + crpix2 - 1.0);
+        sum2 += (px - x).powi(2) + (py - y).powi(2);
+        n += 1;
+    }
+    assert!(n >= 25, "{stem}: {n} matched stars");
+    (sum2 / n as f64).sqrt()
+}
+
+fn unit(ra_deg: f64, dec_deg: f64) -> [f64; 3] {
+    let (ra, dec) = (ra_deg.to_radians(), dec_deg.to_radians());
+    [dec.cos() * ra.cos(), dec.cos() * ra.sin(), dec.sin()]
+}
+
+/// The fresh solutions against the committed comparison (see the module docs).
+/// With `as_committed`, also RA, Dec and roll as the CSV writes them.
+fn check_against_tetra3rs(
+    images: &[startrack_host::cli::solve_image::ImageOutcome],
+    as_committed: bool,
+) {
+    use startrack_host::realsky::solve::{ra_dec_deg, roll_tetra3_deg};
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("figures/realsky-tetra3rs.csv");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let cols: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let get = |r: &[&str], name: &str| -> f64 {
+        let i = cols.iter().position(|c| *c == name).unwrap();
+        r[i].parse().unwrap()
+    };
+    assert_eq!(rows.len(), images.len());
+    for i in images {
+        let name = i.path.file_stem().unwrap().to_string_lossy().into_owned();
+        let r = rows
+            .iter()
+            .find(|r| r[0] == name)
+            .expect("frame in the CSV");
+        let q = i.result.as_ref().unwrap().attitude.q;
+        let (ra, dec) = ra_dec_deg(q.rotate_inv([0.0, 0.0, 1.0]));
+        let roll = roll_tetra3_deg(q);
+        // As committed (written with 6 decimals).
+        for (v, c) in [
+            (ra, "st_ra_deg"),
+            (dec, "st_dec_deg"),
+            (roll, "st_roll_deg"),
+        ]
+        .into_iter()
+        .filter(|_| as_committed)
+        {
+            assert!(
+                (v - get(r, c)).abs() <= 5.1e-7,
+                "{name}: {c} {v} is not the CSV's"
+            );
+        }
+        let sep_arcsec = startrack_core::attitude::angle_between(
+            unit(ra, dec),
+            unit(get(r, "t3_ra_deg"), get(r, "t3_dec_deg")),
+        )
+        .to_degrees()
+            * 3600.0;
+        let droll_arcsec =
+            ((roll - get(r, "t3_roll_deg") + 180.0).rem_euclid(360.0) - 180.0) * 3600.0;
+        assert!(
+            sep_arcsec < 10.0,
+            "{name}: boresight {sep_arcsec:.2} arcsec from tetra3rs"
+        );
+        assert!(
+            droll_arcsec.abs() < 60.0,
+            "{name}: roll {droll_arcsec:.1} arcsec from tetra3rs"
+        );
+    }
+}
+
+/// The field of view given 7 % small (10.6 degrees for 11.42): the focal-length ladder finds
+/// the same solutions. Minutes a frame in the dev profile (each failed rung is up to 5,000
+/// hypotheses), so not in CI: `cargo test -p startrack-host --test cli
+/// cli_solve_image::fov_seven_percent_off -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn fov_seven_percent_off_gives_the_same_solutions() {
+    let Some(dir) = realsky_dir() else {
+        eprintln!("skipped: ../shared/realsky (the real night-sky frames) is not there");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let s = run(&SolveImageArgs {
+        fov_deg: 10.6,
+        ..args(frames(&dir, "fits"), tmp.path().to_path_buf())
+    })
+    .unwrap();
+    for i in &s.images {
+        let sol = i.result.as_ref().unwrap_or_else(|e| panic!("{e}"));
+        eprintln!(
+            "{}: solved at rung {}, {} matched",
+            i.path.display(),
+            sol.trials,
+            sol.matches.len()
+        );
+        assert!(sol.trials > 1, "the nominal focal length is 7 % off");
+    }
+    check_against_tetra3rs(&s.images, false);
+}
+
+/// Runs the binary on `images` with `fov`: (success, stderr).
+fn cli(images: &[&Path], fov: &str, out: &Path) -> (bool, String) {
+    let mut a: Vec<&str> = vec!["solve-image"];
+    a.extend(images.iter().map(|p| p.to_str().unwrap()));
+    a.extend(["--fov-deg", fov, "--out", out.to_str().unwrap()]);
+    let (ok, _, err) = startrack(&a);
+    (ok, err)
+}
+
+#[test]
+fn bad_input_is_one_line_and_a_failure() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    // A truncated 16-bit TIFF.
+    let img = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(200, 150, |x, y| {
+        image::Luma([(1000 + x * 3 + y) as u16])
+    });
+    let tif = tmp.path().join("whole.tiff");
+    img.save(&tif).unwrap();
+    let bytes = std::fs::read(&tif).unwrap();
+    let cut = tmp.path().join("cut.tiff");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    // A 1 x 1 PNG.
+    let one = tmp.path().join("one.png");
+    image::GrayImage::from_pixel(1, 1, image::Luma([7]))
+        .save(&one)
+        .unwrap();
+    // Nothing but noise (seeded), 16-bit.
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let n = Normal::new(3000.0f64, 200.0).unwrap();
+    let noise_img = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(512, 384, |_, _| {
+        image::Luma([n.sample(&mut rng).round().clamp(0.0, 65535.0) as u16])
+    });
+    let noise = tmp.path().join("noise.png");
+    noise_img.save(&noise).unwrap();
+    for p in [&cut, &one, &noise] {
+        let (ok, err) = cli(&[p], "11.4", &out);
+        assert!(!ok, "{}", p.display());
+        assert_eq!(err.trim_end().lines().count(), 1, "{}: {err}", p.display());
+        assert!(err.contains(&*p.to_string_lossy()), "{err}");
+    }
+    for fov in ["0", "180"] {
+        let (ok, err) = cli(&[&noise], fov, &out);
+        assert!(!ok);
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains("--fov-deg"), "{err}");
+    }
+}
