@@ -362,6 +362,31 @@ impl DarkAccum {
         })
     }
 
+    /// The relative dark's frame-limited floor, RMS over the active and covered pixels of
+    /// relative dark below 3 (hot pixels apart): `sqrt(sum e- + frames x read^2) / sum scale`.
+    pub fn floor_rms(&self, read_noise_e: &[f64]) -> f64 {
+        let len = self.g.line_len();
+        let (mut v, mut n) = (0.0, 0usize);
+        for (i, s) in self.sum_e.iter().enumerate() {
+            let c = i % len;
+            if !matches!(self.g.segment(c), Some(Segment::Active | Segment::Covered))
+                || *s > 3.0 * self.sum_scale_e
+            {
+                continue;
+            }
+            let read = read_noise_e
+                .get(usize::from(self.g.output_of_col(c).0))
+                .copied()
+                .unwrap_or(0.0);
+            v += s.max(0.0) + f64::from(self.frames) * read * read;
+            n += 1;
+        }
+        if n == 0 || self.sum_scale_e <= 0.0 {
+            return 0.0;
+        }
+        (v / n as f64).sqrt() / self.sum_scale_e
+    }
+
     /// The covered pixels' dark rate at each temperature, e-/s, sorted by temperature.
     pub fn covered_rates(&self) -> Vec<(f64, f64)> {
         let mut v: Vec<(f64, f64)> = self

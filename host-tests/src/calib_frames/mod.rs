@@ -311,9 +311,21 @@ pub fn calibrate_with(
                 if sat.is_ok() { "the saturation signal" } else { "the ADC's range" }
             ))
         })?;
+        // Frame-limited floors (relative standard errors): the gain's from the variance of
+        // N pixel differences per pair, the read noise's from the bias pairs (half the
+        // variance's relative error) plus the gain's.
+        let px = ptc_pixels(&pts);
+        let gain_floor = (2.0 / (px * fit.pairs_fitted.max(1) as f64)).sqrt();
+        let bias_pairs = bias_var.get(o).map_or(0, |b| b.1).max(1) as f64;
+        let read_floor = (1.0 / (2.0 * px * bias_pairs)).sqrt().hypot(gain_floor);
         notes.push(format!(
-            "output {o}: gain {:.4} e-/ADU, read noise {:.3} e- from {} flat pairs",
-            fit.gain_e_per_adu, fit.read_noise_e, fit.pairs_fitted
+            "output {o}: gain {:.4} e-/ADU from {} flat pairs of the linear range (floor {:.3} %), read noise {:.3} e- from {} bias pairs (floor {:.3} %)",
+            fit.gain_e_per_adu,
+            fit.pairs_fitted,
+            100.0 * gain_floor,
+            fit.read_noise_e,
+            bias_pairs,
+            100.0 * read_floor
         ));
         match sat {
             Ok(s) => {
@@ -461,11 +473,14 @@ pub fn calibrate_with(
         None => "no covered dark law (darks at fewer than two temperatures, or no rise): the tracker's dark drift is not measured".into(),
     });
     notes.push(format!(
-        "relative dark from {} darks at {} temperatures; {} hot pixels ({} candidates without a law)",
+        "relative dark from {} darks at {} temperatures (floor {:.4} RMS: the darks' shot and read noise); {} hot pixels ({} candidates without a law; doubling standard error {:.3} K RMS, in hot.csv)",
         darks.frames(),
         darks.groups.len(),
+        darks.floor_rms(&read_noise_e),
         hot.len(),
-        hot_unfitted
+        hot_unfitted,
+        (hot.iter().map(|h| h.doubling_sigma_k.powi(2)).sum::<f64>() / hot.len().max(1) as f64)
+            .sqrt()
     ));
     let (rts, rts_series) = match (
         series.and_then(|(i, n)| Some((inv.dark_groups.get(i)?, n))),
@@ -474,9 +489,15 @@ pub fn calibrate_with(
         (Some((d, n)), Some(acc)) => {
             let (t, temp) = (d.exptime_s, d.temperature_k);
             let found = acc.telegraph(&gains, &bias_var_adu2);
+            let searched = g.lines as usize
+                * (0..g.line_len())
+                    .filter(|&c| matches!(g.segment(c), Some(Segment::Active | Segment::Covered)))
+                    .count();
             notes.push(format!(
-                "{} telegraph pixels from a {n}-frame series ({t} s, {temp:.3} K)",
-                found.len()
+                "{} telegraph pixels from a {n}-frame series ({t} s, {temp:.3} K); floor: {:.1} false expected among the {searched} pixels searched ({:.0e} per pixel per test on Gaussian noise)",
+                found.len(),
+                2.0 * rts::FALSE_ALARM_PER_TEST * searched as f64,
+                rts::FALSE_ALARM_PER_TEST
             ));
             (found, Some((t, temp, n)))
         }
@@ -489,6 +510,11 @@ pub fn calibrate_with(
         }
     };
     let flat_map = flat.flat(&gains, &dark_rel, &hot);
+    notes.push(format!(
+        "flat field from {} flats of the linear range (floor {:.5} RMS: their shot and read noise)",
+        flat.frames(),
+        flat.floor_rms(&gains, &read_noise_e)
+    ));
     let eper = eper::fit(&edges, &gains, &read_noise_e, g);
     notes.push(match &eper {
         Some(e) => format!(
@@ -535,6 +561,11 @@ pub fn calibrate_with(
         notes,
         groups,
     })
+}
+
+/// Pixels per photon transfer point of an output (the most any of its pairs used).
+fn ptc_pixels(pts: &[PairPoint]) -> f64 {
+    pts.iter().map(|p| p.pixels).max().unwrap_or(1).max(1) as f64
 }
 
 /// Share of a frame's active pixels at 65535 ADU.
