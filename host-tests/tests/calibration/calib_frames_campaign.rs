@@ -381,19 +381,26 @@ fn the_campaign_meets_the_targets() {
 }
 
 /// The campaign on the CCD47-20's full readout: `cargo test --release -p startrack-host
-/// --test calibration calib_frames_campaign::full -- --ignored --nocapture`.
+/// --test calibration calib_frames_campaign::full -- --ignored --nocapture` (with
+/// `CALIB_CAMPAIGN_DIR=DIR` the frames stay in DIR).
 #[test]
 #[ignore = "minutes: the 235 frames of the full readout"]
 fn full_readout_campaign_meets_the_targets() {
     let c = Campaign::new(ReadoutGeometry::CCD47_20_DUAL, SEED);
-    let dir = tempfile::tempdir().unwrap();
-    c.write(dir.path(), Format::Plain);
+    let tmp = tempfile::tempdir().unwrap();
+    // CALIB_CAMPAIGN_DIR keeps the frames there, for `startrack calib frames` to be timed on.
+    let dir = std::env::var_os("CALIB_CAMPAIGN_DIR")
+        .map_or_else(|| tmp.path().to_path_buf(), PathBuf::from);
+    c.write(&dir, Format::Plain);
     let t0 = std::time::Instant::now();
-    let p = calibrate_dir(dir.path(), &c.geometry);
+    let p = calibrate_dir(&dir, &c.geometry);
     println!(
         "calibrated 235 frames in {:.1} s",
         t0.elapsed().as_secs_f64()
     );
+    for l in p.groups.iter().chain(&p.notes) {
+        println!("{l}");
+    }
     let s = score(&c, &p);
     assert_targets(&s);
 }
