@@ -4,8 +4,9 @@
 //! and their sub-folders is read (`.fits`, `.fit`, `.fts`, and each gzipped, `.gz`, or
 //! tile-compressed, `.fz`); a bad input stops the run with one line naming the file and the
 //! problem, and no table is written. Cost: reading each file once and a few operations per
-//! sample (1.2 s and 81 MB for the CCD47-20 lab set of 78 frames without its saturation
-//! ladder, 4.2 s and 82 MB for the 98 with it on a loaded machine, in release); a progress
+//! sample (5.1 s and 131 MB for the CCD47-20 lab set of 98 frames, 30 s and 148 MB for the
+//! 235 frames of the second lab campaign, on a machine loaded by other jobs, in release;
+//! the command prints both); a progress
 //! bar on a terminal. Writing that lab set takes about 4 minutes (simulating 108 M samples;
 //! 3 minutes and 86 M without the ladder).
 
