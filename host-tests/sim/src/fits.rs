@@ -217,7 +217,16 @@ fn image_info(
     fits: &mut FitsFile,
     path: &Path,
 ) -> Result<(fitsio::hdu::FitsHdu, (usize, usize), ImageType), FitsError> {
-    let hdu = fits.primary_hdu().map_err(cfitsio(path))?;
+    image_info_at(fits, path, 0)
+}
+
+/// HDU `index`'s image shape (rows, cols) and equivalent type.
+fn image_info_at(
+    fits: &mut FitsFile,
+    path: &Path,
+    index: usize,
+) -> Result<(fitsio::hdu::FitsHdu, (usize, usize), ImageType), FitsError> {
+    let hdu = fits.hdu(index).map_err(cfitsio(path))?;
     match &hdu.info {
         HduInfo::ImageInfo { shape, image_type } => match shape[..] {
             [rows, cols] if rows > 0 && cols > 0 => {
@@ -252,8 +261,18 @@ fn type_name(t: ImageType) -> &'static str {
 
 /// Reads a raw frame of `geometry` (see the module docs) from `path`.
 pub fn read_raw_frame(path: &Path, geometry: &ReadoutGeometry) -> Result<RawFrame, FitsError> {
+    read_raw_frame_at(path, geometry, 0)
+}
+
+/// Reads a raw frame of `geometry` from HDU `index` of `path` (0: the primary; a
+/// tile-compressed `.fits.fz` holds its image in HDU 1, which CFITSIO decompresses).
+pub fn read_raw_frame_at(
+    path: &Path,
+    geometry: &ReadoutGeometry,
+    index: usize,
+) -> Result<RawFrame, FitsError> {
     let mut fits = open(path)?;
-    let (hdu, (rows, cols), t) = image_info(&mut fits, path)?;
+    let (hdu, (rows, cols), t) = image_info_at(&mut fits, path, index)?;
     if t != ImageType::UnsignedShort {
         return Err(FitsError::WrongType {
             path: path.to_path_buf(),

@@ -97,6 +97,25 @@ impl FlatAccum {
         self.frames
     }
 
+    /// The flat's frame-limited floor, RMS over the active pixels of
+    /// `sqrt(S + flats x read^2) / S` for each pixel's summed charge `S`, e-.
+    pub fn floor_rms(&self, gains: &[f64], read_noise_e: &[f64]) -> f64 {
+        let g = self.g;
+        let cols = usize::from(g.active_cols);
+        let (mut v, mut n) = (0.0, 0usize);
+        for (i, s) in self.sum_adu.iter().enumerate() {
+            let o = usize::from(g.output_of_col(g.raw_col_of_x(i % cols)).0);
+            let gain = gains.get(o).copied().unwrap_or(1.0);
+            let read = read_noise_e.get(o).copied().unwrap_or(0.0);
+            let e = s * gain;
+            if e > 0.0 {
+                v += (e + f64::from(self.frames) * read * read) / (e * e);
+                n += 1;
+            }
+        }
+        if n == 0 { 0.0 } else { (v / n as f64).sqrt() }
+    }
+
     /// The flat (active area, rows x columns, each output's mean 1) from the gains, the
     /// relative dark map (full readout) and the hot pixels.
     pub fn flat(&self, gains: &[f64], dark_rel: &MapF32, hot: &[HotFit]) -> MapF32 {

@@ -33,7 +33,7 @@ pub mod read;
 pub mod report;
 pub mod rts;
 
-pub use read::{FrameInfo, FrameKind, FramesError, Inventory};
+pub use read::{FrameInfo, FrameKind, FramesError, Grouping, Inventory};
 
 use crate::cli::CliError;
 use crate::cli::calib_build::{column_bias_from_map, encode, flat_from_map};
@@ -113,6 +113,8 @@ pub struct Products {
     pub eper: Option<eper::EperResult>,
     /// What was done with what, one line each.
     pub notes: Vec<String>,
+    /// Each group of frames found and what it was used for, one line each.
+    pub groups: Vec<String>,
 }
 
 /// A table with `gains` and the column bias only, for the core's level and dark-scale code.
@@ -145,28 +147,36 @@ fn table_err(e: impl std::fmt::Display) -> FramesError {
     FramesError::Missing(format!("internal table: {e}"))
 }
 
-/// The (EXPTIME, CCDTEMP) setting with the most darks, and its count.
-fn longest_series(darks: &[FrameInfo]) -> Option<((f64, f64), u32)> {
-    let mut counts: Vec<((f64, f64), u32)> = Vec::new();
-    for d in darks {
-        let k = (d.exptime_s, d.ccdtemp_k);
-        match counts.iter_mut().find(|(s, _)| *s == k) {
-            Some((_, n)) => *n += 1,
-            None => counts.push((k, 1)),
-        }
-    }
-    counts.into_iter().max_by_key(|(_, n)| *n)
+/// The dark group with the most frames (the earliest of equals), and its count.
+fn longest_series(groups: &[read::DarkGroup]) -> Option<(usize, u32)> {
+    groups
+        .iter()
+        .enumerate()
+        .rev()
+        .max_by_key(|(_, d)| d.frames)
+        .map(|(i, d)| (i, d.frames as u32))
 }
 
-/// Reads every frame of `paths` once and measures every product for geometry `g`; `tick`
-/// is called after each file (a progress bar).
+/// Reads every frame of `paths` once and measures every product for geometry `g` with the
+/// default grouping; `tick` is called after each file (a progress bar).
 pub fn calibrate(
     paths: &[PathBuf],
     g: &ReadoutGeometry,
     tick: &dyn Fn(),
 ) -> Result<Products, FramesError> {
-    let inv = read::inventory(paths, g)?;
+    calibrate_with(paths, g, &Grouping::default(), tick)
+}
+
+/// [`calibrate`] with the frames grouped by `grouping`.
+pub fn calibrate_with(
+    paths: &[PathBuf],
+    g: &ReadoutGeometry,
+    grouping: &Grouping,
+    tick: &dyn Fn(),
+) -> Result<Products, FramesError> {
+    let inv = read::inventory_with(paths, g, grouping)?;
     let mut notes = Vec::new();
+    let mut groups = Vec::new();
     let outputs = usize::from(g.outputs);
     // Bias: master bias and the pairs' variance.
     let mut bias = bias::BiasAccum::new(g);
@@ -301,9 +311,21 @@ pub fn calibrate(
                 if sat.is_ok() { "the saturation signal" } else { "the ADC's range" }
             ))
         })?;
+        // Frame-limited floors (relative standard errors): the gain's from the variance of
+        // N pixel differences per pair, the read noise's from the bias pairs (half the
+        // variance's relative error) plus the gain's.
+        let px = ptc_pixels(&pts);
+        let gain_floor = (2.0 / (px * fit.pairs_fitted.max(1) as f64)).sqrt();
+        let bias_pairs = bias_var.get(o).map_or(0, |b| b.1).max(1) as f64;
+        let read_floor = (1.0 / (2.0 * px * bias_pairs)).sqrt().hypot(gain_floor);
         notes.push(format!(
-            "output {o}: gain {:.4} e-/ADU, read noise {:.3} e- from {} flat pairs",
-            fit.gain_e_per_adu, fit.read_noise_e, fit.pairs_fitted
+            "output {o}: gain {:.4} e-/ADU from {} flat pairs of the linear range (floor {:.3} %), read noise {:.3} e- from {} bias pairs (floor {:.3} %)",
+            fit.gain_e_per_adu,
+            fit.pairs_fitted,
+            100.0 * gain_floor,
+            fit.read_noise_e,
+            bias_pairs,
+            100.0 * read_floor
         ));
         match sat {
             Ok(s) => {
@@ -365,27 +387,71 @@ pub fn calibrate(
     let gt = level_table(g, &gains, &column_bias)?;
     let tg = CalibTable::parse(&gt).map_err(table_err)?;
     let mut darks = dark::DarkAccum::new(g);
-    let series = longest_series(&inv.darks).filter(|(_, n)| *n >= rts::MIN_SERIES_FRAMES);
+    let series = longest_series(&inv.dark_groups).filter(|(_, n)| *n >= rts::MIN_SERIES_FRAMES);
     let mut series_acc = series.map(|_| rts::SeriesAccum::new(g));
-    for info in &inv.darks {
+    for (info, &setting) in inv.darks.iter().zip(&inv.dark_setting) {
         let f = read::read_frame(info, g)?;
+        let group_temp_k = inv
+            .dark_groups
+            .get(setting)
+            .map_or(info.ccdtemp_k, |d| d.temperature_k);
         darks
-            .add(&f, &tg, info.exptime_s, info.ccdtemp_k)
+            .add(&f, &tg, info.exptime_s, group_temp_k)
             .ok_or_else(|| {
                 FramesError::Missing(format!(
                     "{}: no covered pixels to scale the dark",
                     info.path.display()
                 ))
             })?;
-        if let (Some(((t, temp), _)), Some(acc)) = (series, series_acc.as_mut())
-            && info.exptime_s == t
-            && info.ccdtemp_k == temp
+        if let (Some((i, _)), Some(acc)) = (series, series_acc.as_mut())
+            && setting == i
         {
             acc.add(&f, &cb_adu);
         }
         tick();
     }
-    let dark_rel = darks.relative_map().ok_or_else(|| {
+    groups.push(format!(
+        "bias: {} frames, {} to {}: master bias and column bias; {} consecutive pairs: read noise",
+        inv.bias.len(),
+        inv.bias.first().map_or("", |b| b.date_obs.as_str()),
+        inv.bias.last().map_or("", |b| b.date_obs.as_str()),
+        inv.bias.len() / 2
+    ));
+    for (t, n) in &inv.flat_groups {
+        let used = flat_field_exposures_s
+            .iter()
+            .filter(|u| read::same_exposure(**u, *t))
+            .count();
+        groups.push(format!(
+            "flats {t} s: {n} frames, {} pairs: photon transfer{}",
+            n / 2,
+            if used > 0 {
+                ", flat field and EPER"
+            } else {
+                " (past the linear range: full well and linearity error only)"
+            }
+        ));
+    }
+    for (i, d) in inv.dark_groups.iter().enumerate() {
+        groups.push(format!(
+            "darks {} s at {:.3} K (CCDTEMP span {:.3} K): {} frames, {} to {}: relative dark and hot-pixel laws{}",
+            d.exptime_s,
+            d.temperature_k,
+            d.temperature_span_k,
+            d.frames,
+            d.dates.0,
+            d.dates.1,
+            if series.is_some_and(|(s, _)| s == i) {
+                ", telegraph series"
+            } else {
+                ""
+            }
+        ));
+    }
+    if inv.lights > 0 {
+        groups.push(format!("{} light frames: not used", inv.lights));
+    }
+    let dark_rel = darks.relative_map(&read_noise_e).ok_or_else(|| {
         FramesError::Missing(
             "the darks' covered pixels hold no dark signal: no relative dark map".into(),
         )
@@ -407,18 +473,31 @@ pub fn calibrate(
         None => "no covered dark law (darks at fewer than two temperatures, or no rise): the tracker's dark drift is not measured".into(),
     });
     notes.push(format!(
-        "relative dark from {} darks at {} temperatures; {} hot pixels ({} candidates without a law)",
+        "relative dark from {} darks at {} temperatures (floor {:.4} RMS: the darks' shot and read noise); {} hot pixels ({} candidates without a law; doubling standard error {:.3} K RMS, in hot.csv)",
         darks.frames(),
         darks.groups.len(),
+        darks.floor_rms(&read_noise_e),
         hot.len(),
-        hot_unfitted
+        hot_unfitted,
+        (hot.iter().map(|h| h.doubling_sigma_k.powi(2)).sum::<f64>() / hot.len().max(1) as f64)
+            .sqrt()
     ));
-    let (rts, rts_series) = match (series, series_acc) {
-        (Some(((t, temp), n)), Some(acc)) => {
+    let (rts, rts_series) = match (
+        series.and_then(|(i, n)| Some((inv.dark_groups.get(i)?, n))),
+        series_acc,
+    ) {
+        (Some((d, n)), Some(acc)) => {
+            let (t, temp) = (d.exptime_s, d.temperature_k);
             let found = acc.telegraph(&gains, &bias_var_adu2);
+            let searched = g.lines as usize
+                * (0..g.line_len())
+                    .filter(|&c| matches!(g.segment(c), Some(Segment::Active | Segment::Covered)))
+                    .count();
             notes.push(format!(
-                "{} telegraph pixels from a {n}-frame series ({t} s, {temp} K)",
-                found.len()
+                "{} telegraph pixels from a {n}-frame series ({t} s, {temp:.3} K); floor: {:.1} false expected among the {searched} pixels searched ({:.0e} per pixel per test on Gaussian noise)",
+                found.len(),
+                2.0 * rts::FALSE_ALARM_PER_TEST * searched as f64,
+                rts::FALSE_ALARM_PER_TEST
             ));
             (found, Some((t, temp, n)))
         }
@@ -431,6 +510,11 @@ pub fn calibrate(
         }
     };
     let flat_map = flat.flat(&gains, &dark_rel, &hot);
+    notes.push(format!(
+        "flat field from {} flats of the linear range (floor {:.5} RMS: their shot and read noise)",
+        flat.frames(),
+        flat.floor_rms(&gains, &read_noise_e)
+    ));
     let eper = eper::fit(&edges, &gains, &read_noise_e, g);
     notes.push(match &eper {
         Some(e) => format!(
@@ -475,7 +559,13 @@ pub fn calibrate(
         frames: (inv.bias.len(), 2 * inv.flat_pairs.len(), inv.darks.len()),
         eper,
         notes,
+        groups,
     })
+}
+
+/// Pixels per photon transfer point of an output (the most any of its pairs used).
+fn ptc_pixels(pts: &[PairPoint]) -> f64 {
+    pts.iter().map(|p| p.pixels).max().unwrap_or(1).max(1) as f64
 }
 
 /// Share of a frame's active pixels at 65535 ADU.

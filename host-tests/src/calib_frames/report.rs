@@ -2,8 +2,8 @@
 //!
 //! | file | contents |
 //! |---|---|
-//! | `report.json` | `gain_e_per_adu`, `read_noise_e`, `full_well_e` (where the mean stops rising), `full_well_adu`, `nonlinearity_pct` (EMVA 1288 linearity error over 5 to 95 % of the full well), one per output and `null` when no flat pair reaches saturation (a note says so); photon transfer points, covered dark rate per temperature, `covered_dark_law` (the law fitted over them as the table's section 11 stores it: `rate_e_per_s` at `reference_k`, `doubling_k`, `band`; `null` without one), counts, notes |
-//! | `hot.csv` | `col,row,rate_e_per_s_at_293k,doubling_k` (raw readout coordinates) |
+//! | `report.json` | `gain_e_per_adu`, `read_noise_e`, `full_well_e` (where the mean stops rising), `full_well_adu`, `nonlinearity_pct` (EMVA 1288 linearity error over 5 to 95 % of the full well), one per output and `null` when no flat pair reaches saturation (a note says so); photon transfer points, covered dark rate per temperature, `covered_dark_law` (the law fitted over them as the table's section 11 stores it: `rate_e_per_s` at `reference_k`, `doubling_k`, `band`; `null` without one), counts, `groups` (each group of frames found and what it served), notes |
+//! | `hot.csv` | `col,row,rate_e_per_s_at_293k,doubling_k,rate_sigma_e_per_s,doubling_sigma_k` (raw readout coordinates; each law's standard errors from its fit) |
 //! | `rts.csv` | `col,row` (raw readout coordinates) |
 //! | `cti_traps.json`, `cti.json` | the trap law measured by EPER, and the table's CTI coefficients from it (`calib build --cti`, `calib cti --traps`); written when EPER measured one |
 //! | `master_bias.fits`, `dark_rel.fits`, `flat.fits` | the maps for DS9 (full readout, full readout, active area) |
@@ -51,6 +51,7 @@ pub fn json(p: &Products) -> serde_json::Value {
         "cti_eper": p.eper.as_ref().map(|e| serde_json::json!({
             "traps": e.traps, "serial_measured": e.serial_measured, "mean_delay_px": e.mean_delay,
         })),
+        "groups": p.groups,
         "notes": p.notes,
     })
 }
@@ -72,12 +73,19 @@ pub fn write(p: &Products, dir: &Path) -> Result<Written, CliError> {
     let text =
         serde_json::to_string_pretty(&json(p)).map_err(|e| CliError::Usage(e.to_string()))?;
     put("report.json", text.as_bytes(), &mut w)?;
-    let mut hot = String::from("col,row,rate_e_per_s_at_293k,doubling_k\n");
+    let mut hot = String::from(
+        "col,row,rate_e_per_s_at_293k,doubling_k,rate_sigma_e_per_s,doubling_sigma_k\n",
+    );
     for h in &p.hot {
         let _ = writeln!(
             hot,
-            "{},{},{:.4},{:.4}",
-            h.col, h.row, h.rate_e_per_s_at_293k, h.doubling_k
+            "{},{},{:.4},{:.4},{:.4},{:.4}",
+            h.col,
+            h.row,
+            h.rate_e_per_s_at_293k,
+            h.doubling_k,
+            h.rate_sigma_e_per_s,
+            h.doubling_sigma_k
         );
     }
     put("hot.csv", hot.as_bytes(), &mut w)?;

@@ -1,16 +1,18 @@
 //! `startrack calib frames DIR... --out TABLE --report-dir DIR`: a calibration table and a
 //! report from raw lab frames (see [`crate::calib_frames`]), and `startrack calib lab-set
-//! --out DIR`, which writes a simulated lab set to try it on. Every `*.fits`/`*.fit` file of
-//! the folders is read; a bad input stops the run with one line naming the file and the
+//! --out DIR`, which writes a simulated lab set to try it on. Every FITS file of the folders
+//! and their sub-folders is read (`.fits`, `.fit`, `.fts`, and each gzipped, `.gz`, or
+//! tile-compressed, `.fz`); a bad input stops the run with one line naming the file and the
 //! problem, and no table is written. Cost: reading each file once and a few operations per
-//! sample (1.2 s and 81 MB for the CCD47-20 lab set of 78 frames without its saturation
-//! ladder, 4.2 s and 82 MB for the 98 with it on a loaded machine, in release); a progress
+//! sample (5.1 s and 131 MB for the CCD47-20 lab set of 98 frames, 30 s and 148 MB for the
+//! 235 frames of the second lab campaign, on a machine loaded by other jobs, in release;
+//! the command prints both); a progress
 //! bar on a terminal. Writing that lab set takes about 4 minutes (simulating 108 M samples;
 //! 3 minutes and 86 M without the ladder).
 
 use super::{CliError, write_file};
 use crate::calib_frames::labset::LabSet;
-use crate::calib_frames::{Products, calibrate, report};
+use crate::calib_frames::{Grouping, Products, calibrate_with, report};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::MAX_TILE_LOG2;
 use std::path::{Path, PathBuf};
@@ -40,7 +42,8 @@ impl Sensor {
 /// Options of `startrack calib frames`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct CalibFramesArgs {
-    /// Folders of raw FITS frames (IMAGETYP, EXPTIME, CCDTEMP, DATE-OBS in each header).
+    /// Folders of raw FITS frames (IMAGETYP, EXPTIME or EXPOSURE, CCDTEMP in K or CCD-TEMP in
+    /// deg C, DATE-OBS in each header), searched with their sub-folders.
     #[arg(required = true)]
     pub dirs: Vec<PathBuf>,
     /// Output table file.
@@ -55,6 +58,10 @@ pub struct CalibFramesArgs {
     /// The readout of the frames.
     #[arg(long, value_enum, default_value_t = Sensor::Ccd4720)]
     pub sensor: Sensor,
+    /// Regulation band: darks whose CCDTEMP lies within this of their group's median are
+    /// one temperature, K.
+    #[arg(long, default_value_t = crate::calib_frames::read::DEFAULT_TEMPERATURE_TOLERANCE_K)]
+    pub temperature_tolerance_k: f64,
 }
 
 /// Options of `startrack calib lab-set`.
@@ -79,26 +86,48 @@ pub struct LabSetArgs {
     pub no_saturation_ladder: bool,
 }
 
-/// The FITS files of `dirs`, sorted by path.
+/// True for a FITS file name: `.fits`, `.fit`, `.fts`, each also gzipped (`.gz`) or
+/// tile-compressed (`.fz`), any case.
+pub fn is_fits_name(name: &str) -> bool {
+    let n = name.to_ascii_lowercase();
+    let n = n
+        .strip_suffix(".gz")
+        .or_else(|| n.strip_suffix(".fz"))
+        .unwrap_or(&n);
+    [".fits", ".fit", ".fts"].iter().any(|e| n.ends_with(e))
+}
+
+fn collect_fits(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), CliError> {
+    let rd = std::fs::read_dir(dir).map_err(|e| CliError::Io {
+        path: dir.to_path_buf(),
+        msg: e.to_string(),
+    })?;
+    for e in rd.flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            collect_fits(&p, out)?;
+        } else if p
+            .file_name()
+            .and_then(|x| x.to_str())
+            .is_some_and(is_fits_name)
+        {
+            out.push(p);
+        }
+    }
+    Ok(())
+}
+
+/// The FITS files of `dirs` and their sub-folders, sorted by path.
 pub fn fits_files(dirs: &[PathBuf]) -> Result<Vec<PathBuf>, CliError> {
     let mut v = Vec::new();
     for d in dirs {
-        let rd = std::fs::read_dir(d).map_err(|e| CliError::Io {
-            path: d.clone(),
-            msg: e.to_string(),
-        })?;
-        for e in rd.flatten() {
-            let p = e.path();
-            let ext = p.extension().and_then(|x| x.to_str()).unwrap_or("");
-            if ext.eq_ignore_ascii_case("fits") || ext.eq_ignore_ascii_case("fit") {
-                v.push(p);
-            }
-        }
+        collect_fits(d, &mut v)?;
     }
     v.sort();
+    v.dedup();
     if v.is_empty() {
         return Err(CliError::Usage(format!(
-            "no .fits files in {}",
+            "no FITS files in {}",
             dirs.iter()
                 .map(|d| d.display().to_string())
                 .collect::<Vec<_>>()
@@ -110,16 +139,20 @@ pub fn fits_files(dirs: &[PathBuf]) -> Result<Vec<PathBuf>, CliError> {
 
 /// Runs `startrack calib frames`: measures, writes the report, then the table.
 pub fn run(args: &CalibFramesArgs) -> Result<Products, CliError> {
+    let started = std::time::Instant::now();
     let files = fits_files(&args.dirs)?;
     let bar = indicatif::ProgressBar::new(files.len() as u64);
     let tick = || bar.inc(1);
-    let products = calibrate(&files, &args.sensor.geometry(), &tick)
+    let grouping = Grouping {
+        temperature_tolerance_k: args.temperature_tolerance_k,
+    };
+    let products = calibrate_with(&files, &args.sensor.geometry(), &grouping, &tick)
         .map_err(|e| CliError::Usage(e.to_string()))?;
     bar.finish_and_clear();
     let table = products.table(args.tile_log2)?;
     let written = report::write(&products, &args.report_dir)?;
     write_file(&args.out, &table)?;
-    for n in &products.notes {
+    for n in products.groups.iter().chain(&products.notes) {
         println!("{n}");
     }
     for s in &written.skipped_png {
@@ -132,7 +165,24 @@ pub fn run(args: &CalibFramesArgs) -> Result<Products, CliError> {
         written.files.len(),
         args.report_dir.display()
     );
+    println!(
+        "{} files in {:.1} s{}",
+        files.len(),
+        started.elapsed().as_secs_f64(),
+        peak_resident_mb().map_or(String::new(), |mb| format!(
+            ", peak resident memory {mb:.0} MB"
+        ))
+    );
     Ok(products)
+}
+
+/// This process's peak resident memory, MB (Linux: `VmHWM` of `/proc/self/status`; `None`
+/// elsewhere).
+pub fn peak_resident_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
 }
 
 /// Runs `startrack calib lab-set`: writes the frames and prints how many.

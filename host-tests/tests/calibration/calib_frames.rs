@@ -453,7 +453,9 @@ fn report_directory_holds_every_product() {
     assert_eq!(json["gain_e_per_adu"].as_array().unwrap().len(), 2);
     assert_eq!(json["read_noise_e"].as_array().unwrap().len(), 2);
     let hot = std::fs::read_to_string(dir.path().join("hot.csv")).unwrap();
-    assert!(hot.starts_with("col,row,rate_e_per_s_at_293k,doubling_k\n"));
+    assert!(hot.starts_with(
+        "col,row,rate_e_per_s_at_293k,doubling_k,rate_sigma_e_per_s,doubling_sigma_k\n"
+    ));
     assert_eq!(hot.lines().count(), r.products.hot.len() + 1);
     let rts = std::fs::read_to_string(dir.path().join("rts.csv")).unwrap();
     assert_eq!(rts.lines().count(), r.products.rts.len() + 1);

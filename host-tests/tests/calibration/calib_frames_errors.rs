@@ -1,6 +1,7 @@
 //! Bad lab sets stop `calib frames` with one line naming the file and the problem, and no
 //! table: a missing keyword, mixed geometry, too few flats, a saturated flat, a geometry
-//! without covered pixels. Also the command itself on a good minimal set.
+//! without covered pixels, temperatures that fall into no regulation band. Also the command
+//! itself on a good minimal set, and the keyword spellings it reads.
 
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_host::calib_frames::labset::{LabSet, write_string_keys};
@@ -46,6 +47,7 @@ fn the_minimal_set_runs_through_the_command() {
         report_dir: dir.path().join("report"),
         tile_log2: 0,
         sensor: Sensor::Test128,
+        temperature_tolerance_k: 0.5,
     };
     let p = run(&args).expect("runs");
     assert_eq!(p.frames, (2, 6, 2));
@@ -156,4 +158,101 @@ fn a_geometry_without_covered_pixels_is_refused() {
     let e = calibrate(&paths, &g, &|| ()).expect_err("must fail");
     assert!(matches!(e, FramesError::Missing(_)));
     assert!(e.to_string().contains("no covered columns"), "{e}");
+}
+
+/// Adds a dark of `set`'s first dark frame at `ccdtemp_k` as `name`.
+fn add_dark(dir: &Path, set: &LabSet, name: &str, ccdtemp_k: f64, date: &str) -> PathBuf {
+    let i = set.plan().iter().position(|p| p.0 == "DARK").unwrap();
+    let (frame, _, t, _) = set.render(i).unwrap();
+    let p = dir.join(name);
+    write_raw_frame(&p, &frame, &[("EXPTIME", t), ("CCDTEMP", ccdtemp_k)]).unwrap();
+    write_string_keys(&p, &[("IMAGETYP", "Dark Frame"), ("DATE-OBS", date)]).unwrap();
+    p
+}
+
+#[test]
+fn temperatures_that_chain_past_the_band_name_the_file_and_keyword() {
+    let dir = tempfile::tempdir().unwrap();
+    let (set, mut paths) = written(dir.path());
+    // 263.0 (the set's own dark), then 263.4, 263.8, 264.2: neighbours within 0.5 K, the
+    // chain 1.2 K wide: no regulation band holds it.
+    for (k, t) in [263.4, 263.8, 264.2].iter().enumerate() {
+        paths.push(add_dark(
+            dir.path(),
+            &set,
+            &format!("chain{k}.fits"),
+            *t,
+            &format!("2026-03-02T00:00:0{k}"),
+        ));
+    }
+    let s = err(&paths, &set.geometry);
+    assert!(
+        s.contains("CCDTEMP") && s.contains("regulation band") && s.contains(".fits:"),
+        "{s}"
+    );
+    // Darks wandering by hundredths of a kelvin are one temperature.
+    let (set, mut paths) = written(&dir.path().join("wander"));
+    for (k, t) in [263.02, 262.99, 263.03].iter().enumerate() {
+        paths.push(add_dark(
+            &dir.path().join("wander"),
+            &set,
+            &format!("w{k}.fits"),
+            *t,
+            &format!("2026-03-02T00:00:0{k}"),
+        ));
+    }
+    let p = calibrate(&paths, &set.geometry, &|| ()).expect("grouped");
+    assert_eq!(
+        p.covered_rates.len(),
+        2,
+        "263 and 273 K: {:?}",
+        p.covered_rates
+    );
+}
+
+#[test]
+fn a_missing_temperature_names_the_file_and_the_keyword() {
+    let dir = tempfile::tempdir().unwrap();
+    let (set, mut paths) = written(dir.path());
+    let (frame, _, _, _) = set.render(0).unwrap();
+    let bad = dir.path().join("notemp.fits");
+    write_raw_frame(&bad, &frame, &[("EXPOSURE", 0.0)]).unwrap();
+    write_string_keys(
+        &bad,
+        &[
+            ("IMAGETYP", "Bias Frame"),
+            ("DATE-OBS", "2026-03-01T00:00:00"),
+        ],
+    )
+    .unwrap();
+    paths.push(bad);
+    let s = err(&paths, &set.geometry);
+    assert!(
+        s.contains("notemp.fits") && s.contains("CCDTEMP") && s.contains("CCD-TEMP"),
+        "{s}"
+    );
+}
+
+#[test]
+fn imagetyp_spellings_of_acquisition_programs() {
+    use startrack_host::calib_frames::FrameKind::{Bias, Dark, Flat, Light};
+    use startrack_host::calib_frames::read::frame_kind;
+    for (s, k) in [
+        ("BIAS", Bias),
+        ("Bias Frame", Bias),
+        ("zero", Bias),
+        ("OFFSET", Bias),
+        ("DARK", Dark),
+        ("Dark Frame", Dark),
+        ("FLAT", Flat),
+        ("Flat Field", Flat),
+        ("FLATFIELD", Flat),
+        ("flat_frame", Flat),
+        ("Light Frame", Light),
+        ("LIGHT", Light),
+        ("OBJECT", Light),
+    ] {
+        assert_eq!(frame_kind(s), Some(k), "{s}");
+    }
+    assert_eq!(frame_kind("Tricolor"), None);
 }

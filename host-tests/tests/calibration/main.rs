@@ -5,11 +5,14 @@
 //! fixtures come from `startrack-test-support`.
 
 mod calib_frames;
+mod calib_frames_campaign;
 mod calib_frames_errors;
+mod calib_frames_rts;
 mod calibration;
 mod cti;
 mod cti_eper;
 mod defect_commit;
+mod lab_campaign;
 mod refresh;
 mod table_amend;
 mod table_format;
