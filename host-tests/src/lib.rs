@@ -14,6 +14,7 @@ pub mod frame_accuracy;
 pub mod home;
 pub mod link_home;
 pub mod optics;
+pub mod pil;
 pub mod psf_model;
 pub mod sil;
 pub mod tradeoff;
