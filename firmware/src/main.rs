@@ -60,7 +60,11 @@ pub(crate) fn spawn_or_log<S>(
 /// failed step is recorded in the fault record and housekeeping; one the tracker cannot run
 /// without leads to the safe standby ([`safe_state::standby_forever`]), never to a return
 /// with nothing running.
-#[embassy_executor::main]
+#[cfg_attr(feature = "board-stm32h743", embassy_executor::main)]
+#[cfg_attr(
+    feature = "board-mps2-an500",
+    embassy_executor::main(entry = "cortex_m_rt::entry", executor = "crate::board::Executor")
+)]
 async fn main(spawner: Spawner) {
     let board::Parts {
         watchdog: wdg,

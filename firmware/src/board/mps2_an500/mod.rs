@@ -18,6 +18,7 @@
 //! After each frame the outcome, its stars, the SysTick count and the painted stack's
 //! high-water mark go to the host ([`after_frame`]).
 
+pub mod executor;
 pub mod flash;
 pub mod host;
 pub mod time;
@@ -40,6 +41,7 @@ use startrack_core::tracker::{FixedTemperature, StarRecord};
 use static_cell::ConstStaticCell;
 
 use defmt_semihosting as _;
+pub use executor::Executor;
 
 /// The table store's flash: the RAM model of bank 2.
 pub type Flash = flash::RamBank;
