@@ -495,3 +495,81 @@ fn read_outcome(r: &mut impl Read) -> Result<PilFrame, String> {
         stack_used_b,
     })
 }
+
+/// A PIL run against the SIL on the same scene and the same table (the bank's, in its flash
+/// form), frame by frame.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Comparison {
+    /// Frames compared (both runs have them).
+    pub frames: usize,
+    /// Frames whose mode or star count differ.
+    pub frames_differing: usize,
+    /// Stars compared (same frame, same index).
+    pub stars: usize,
+    /// Of them, equal bit for bit in x, y, flux and flags.
+    pub stars_identical: usize,
+    /// Largest position difference, px.
+    pub max_position_px: f64,
+    /// Largest relative flux difference.
+    pub max_flux_rel: f64,
+    /// Frames with an attitude in both runs.
+    pub attitudes: usize,
+    /// Of them, equal bit for bit.
+    pub attitudes_identical: usize,
+    /// Largest angle between the two attitudes, arcsec.
+    pub max_attitude_arcsec: f64,
+}
+
+/// Runs the SIL with the PIL's table and frame period (`period_us`, the firmware's frame
+/// time rounded) and compares it with `report`.
+pub fn compare(
+    config: &SilConfig,
+    report: &PilReport,
+    period_us: u64,
+) -> Result<Comparison, String> {
+    let params = SensorParams {
+        seed: config.seed,
+        ..SensorParams::default()
+    };
+    let table = crate::flash_home::flash_table(config, &params)?;
+    let sil_config = SilConfig {
+        period_us,
+        ..config.clone()
+    };
+    let sil = sil::run_with_table(&sil_config, &table)?;
+    let mut c = Comparison::default();
+    for (p, s) in report.frames.iter().zip(&sil.frames) {
+        c.frames += 1;
+        if p.mode != s.summary.mode || p.stars.len() != s.stars.len() {
+            c.frames_differing += 1;
+        }
+        for (a, b) in p.stars.iter().zip(&s.stars) {
+            let b = &b.star;
+            c.stars += 1;
+            let same = a.x_px.to_bits() == b.x_px.to_bits()
+                && a.y_px.to_bits() == b.y_px.to_bits()
+                && a.flux_e.to_bits() == b.flux_e.to_bits()
+                && a.flags == b.flags.bits();
+            c.stars_identical += usize::from(same);
+            let d = f64::from(a.x_px - b.x_px).hypot(f64::from(a.y_px - b.y_px));
+            c.max_position_px = c.max_position_px.max(d);
+            let rel = f64::from((a.flux_e - b.flux_e).abs()) / f64::from(b.flux_e.abs()).max(1.0);
+            c.max_flux_rel = c.max_flux_rel.max(rel);
+        }
+        if let (Some(Some(pf)), Some(sc)) = (&p.attitude, &s.attitude)
+            && let Ok(sf) = &sc.fix
+        {
+            c.attitudes += 1;
+            let sq = sf.attitude.q.0;
+            c.attitudes_identical += usize::from(
+                pf.q.iter()
+                    .zip(&sq)
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+            );
+            let e = startrack_core::attitude::Quat(pf.q).error_vector(sf.attitude.q);
+            let angle = e.iter().map(|v| v * v).sum::<f64>().sqrt() * 206_264.806;
+            c.max_attitude_arcsec = c.max_attitude_arcsec.max(angle);
+        }
+    }
+    Ok(c)
+}

@@ -48,6 +48,10 @@ pub struct PilArgs {
     /// QEMU's working directory (pipes, bank image, catalog, the defmt log `defmt.bin`).
     #[arg(long)]
     pub dir: Option<PathBuf>,
+    /// Run the SIL on the same scene with the firmware's table too, and compare: stars and
+    /// attitudes bit for bit, and the largest differences.
+    #[arg(long)]
+    pub compare: bool,
     /// Longest run, wall-clock seconds.
     #[arg(long, default_value_t = 600)]
     pub timeout_s: u64,
@@ -188,6 +192,28 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
         "stack high-water mark: {} bytes of 131072 (all tasks share the one stack of the thread-mode executor)",
         report.stack_used_b()
     );
+    if args.compare {
+        // The firmware's frame period: its tracking frames' mean, to the microsecond.
+        let n = report.frames.len().max(2) as u64 - 1;
+        let span = match (report.frames.first(), report.frames.last()) {
+            (Some(a), Some(b)) => b.counts.saturating_sub(a.counts),
+            _ => 0,
+        };
+        let period_us = span * pil::NS_PER_COUNT / 1000 / n;
+        let c = pil::compare(&sil, &report, period_us.max(1)).map_err(CliError::Usage)?;
+        println!(
+            "sil against pil ({} frames, sil period {period_us} us): {} frames differ in mode or star count; {} of {} stars bit for bit, largest difference {:.3e} px, flux {:.3e} relative; {} of {} attitudes bit for bit, largest difference {:.3e} arcsec",
+            c.frames,
+            c.frames_differing,
+            c.stars_identical,
+            c.stars,
+            c.max_position_px,
+            c.max_flux_rel,
+            c.attitudes_identical,
+            c.attitudes,
+            c.max_attitude_arcsec
+        );
+    }
     if let (Some(p), Some(sky)) = (&args.attitude, sil.sky) {
         let mut f = std::fs::File::create(p)
             .map(std::io::BufWriter::new)
