@@ -52,6 +52,10 @@ pub struct PilArgs {
     /// attitudes bit for bit, and the largest differences.
     #[arg(long)]
     pub compare: bool,
+    /// The run's figures as CSV (`name,value`; the ones of docs/hardware.md's PIL table come
+    /// from `--frames 4 --sky --compare`).
+    #[arg(long)]
+    pub figures: Option<PathBuf>,
     /// Longest run, wall-clock seconds.
     #[arg(long, default_value_t = 600)]
     pub timeout_s: u64,
@@ -192,6 +196,7 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
         "stack high-water mark: {} bytes of 131072 (all tasks share the one stack of the thread-mode executor)",
         report.stack_used_b()
     );
+    let mut comparison = None;
     if args.compare {
         // The firmware's frame period: its tracking frames' mean, to the microsecond.
         let n = report.frames.len().max(2) as u64 - 1;
@@ -213,6 +218,19 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
             c.attitudes,
             c.max_attitude_arcsec
         );
+        comparison = Some(c);
+    }
+    if let Some(p) = &args.figures {
+        let io = |e: std::io::Error| CliError::Io {
+            path: p.clone(),
+            msg: e.to_string(),
+        };
+        let mut f = std::fs::File::create(p)
+            .map(std::io::BufWriter::new)
+            .map_err(io)?;
+        write_figures(&mut f, &report, comparison.as_ref())
+            .and_then(|()| f.flush())
+            .map_err(io)?;
     }
     if let (Some(p), Some(sky)) = (&args.attitude, sil.sky) {
         let mut f = std::fs::File::create(p)
@@ -269,6 +287,49 @@ pub fn write_attitude(
             Some(None) => writeln!(out, "{},0,,,,,,,,,,,,", f.frame)?,
             None => {}
         }
+    }
+    Ok(())
+}
+
+/// Instructions of each tracking frame after the first frame (busy counts between two
+/// outcomes of the same boot).
+pub fn tracking_frame_instructions(report: &PilReport) -> Vec<u64> {
+    report
+        .frames
+        .windows(2)
+        .filter(|w| w[1].mode == startrack_core::tracker::Mode::Tracking && w[1].frame > w[0].frame)
+        .map(|w| pil::instructions(w[1].busy_counts.saturating_sub(w[0].busy_counts)))
+        .collect()
+}
+
+/// Writes the run's figures, `name,value`.
+pub fn write_figures(
+    out: &mut dyn Write,
+    report: &PilReport,
+    comparison: Option<&pil::Comparison>,
+) -> std::io::Result<()> {
+    writeln!(out, "name,value")?;
+    if let Some(b) = report.boots.first() {
+        writeln!(
+            out,
+            "startup_instructions,{}",
+            pil::instructions(u64::from(b.startup_counts))
+        )?;
+    }
+    if let Some((n, _)) = report.boot_to_first_attitude() {
+        writeln!(out, "boot_to_first_attitude_instructions,{n}")?;
+    }
+    let tracking = tracking_frame_instructions(report);
+    if let (Some(lo), Some(hi)) = (tracking.iter().min(), tracking.iter().max()) {
+        writeln!(out, "tracking_frame_instructions_min,{lo}")?;
+        writeln!(out, "tracking_frame_instructions_max,{hi}")?;
+    }
+    writeln!(out, "stack_high_water_b,{}", report.stack_used_b())?;
+    if let Some(c) = comparison {
+        writeln!(out, "stars_compared,{}", c.stars)?;
+        writeln!(out, "stars_identical,{}", c.stars_identical)?;
+        writeln!(out, "attitudes_compared,{}", c.attitudes)?;
+        writeln!(out, "attitudes_identical,{}", c.attitudes_identical)?;
     }
     Ok(())
 }

@@ -9,6 +9,7 @@ mod helpers;
 mod accuracy;
 mod figures;
 mod formats;
+mod hardware;
 mod pages;
 mod readme;
 mod sequencer;
