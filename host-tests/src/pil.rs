@@ -62,6 +62,27 @@ pub struct PilConfig {
     pub port: Option<u16>,
     /// Longest run, wall clock.
     pub timeout: Duration,
+    /// A fault to make the firmware commit at a frame of its first boot (instead of that
+    /// frame's lines).
+    pub inject: Option<(u32, Fault)>,
+}
+
+/// A fault the firmware commits on request (its line header), to test its safe states.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// Its thread-mode loop spins for ever: the watchdog must reset it.
+    Hang,
+    /// It panics: the panic handler must reset it.
+    Panic,
+}
+
+impl Fault {
+    const fn header(self) -> u16 {
+        match self {
+            Self::Hang => 0xFFFD,
+            Self::Panic => 0xFFFC,
+        }
+    }
 }
 
 /// A reported star.
@@ -335,7 +356,13 @@ pub fn run(
                 on_boot(&boot);
                 report.boots.push(boot);
             }
-            b'Q' => serve_request(&mut req, &mut lines, &mut source)?,
+            b'Q' => {
+                let inject = config
+                    .inject
+                    .filter(|_| report.boots.len() == 1)
+                    .map(|(frame, fault)| (frame, fault.header()));
+                serve_request(&mut req, &mut lines, &mut source, inject)?;
+            }
             b'R' => {
                 let frame = read_outcome(&mut req)?;
                 on_frame(&frame);
@@ -384,6 +411,7 @@ fn serve_request<F: FnMut(u32) -> Simulator>(
     req: &mut impl Read,
     out: &mut impl Write,
     source: &mut SimLines<F>,
+    inject: Option<(u32, u16)>,
 ) -> Result<(), String> {
     let frame = read_u32(req)?;
     let _exposure_us = read_u32(req)?;
@@ -404,6 +432,13 @@ fn serve_request<F: FnMut(u32) -> Simulator>(
         ReadoutRequest::FullFrame
     };
     let io = |e: std::io::Error| format!("host channel: {e}");
+    if let Some((at, header)) = inject
+        && at == frame
+    {
+        let [a, b] = header.to_le_bytes();
+        out.write_all(&[a, b, 0, 0]).map_err(io)?;
+        return out.flush().map_err(io);
+    }
     let Ok(()) = pollster::block_on(source.start_frame(frame, &request));
     // One line held back, to mark the last.
     let mut held: Option<(u16, Vec<u16>)> = None;

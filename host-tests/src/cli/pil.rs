@@ -56,6 +56,14 @@ pub struct PilArgs {
     /// from `--frames 4 --sky --compare`).
     #[arg(long)]
     pub figures: Option<PathBuf>,
+    /// Make the firmware hang at frame N of its first boot (the watchdog's test: a reset with
+    /// the cause watchdog, 2, must follow).
+    #[arg(long, conflicts_with = "panic_at_frame")]
+    pub hang_at_frame: Option<u32>,
+    /// Make the firmware panic at frame N of its first boot (a reset with the cause other, 5,
+    /// must follow).
+    #[arg(long)]
+    pub panic_at_frame: Option<u32>,
     /// Longest run, wall-clock seconds.
     #[arg(long, default_value_t = 600)]
     pub timeout_s: u64,
@@ -159,6 +167,10 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
         dir,
         port: args.port,
         timeout: Duration::from_secs(args.timeout_s),
+        inject: args
+            .hang_at_frame
+            .map(|n| (n, pil::Fault::Hang))
+            .or(args.panic_at_frame.map(|n| (n, pil::Fault::Panic))),
     };
     if let Some(p) = args.port {
         eprintln!("startrack pil: link on 127.0.0.1:{p}");

@@ -18,7 +18,7 @@
 //! | boot | `b'B'`, reset cause u8, start-up SysTick counts u32 |
 //! | request | `b'Q'`, frame u32, exposure us u32, kind u8 (0 full frame, 1 windows), windows u16, per window x0, y0, width, height u16 |
 //! | outcome | `b'R'`, frame u32, mode u8, stars u16, SysTick counts since boot u64, of them busy u64, stack used bytes u32, attitude u8 (0 none, 1 fix, 2 refused), solve mode u8, matched u8, used u8, q f64 x 4, 1-sigma cross-boresight and roll rad f64, false-match probability f64, then per star x px, y px, flux e- f32, flags u32 |
-//! | line (host) | line u16 (0xFFFF: the frame reads no more), last u8, 0 u8, then the line's samples u16 x 1072 |
+//! | line (host) | line u16 (0xFFFF: the frame reads no more; 0xFFFD, 0xFFFC: hang or panic, the fault tests), last u8, 0 u8, then the line's samples u16 x 1072 |
 
 use crate::lines::{FrameRequest, LINE_LEN, LineBuf};
 use semihosting::fs::File;
@@ -29,6 +29,11 @@ use startrack_core::tracker::{Mode, StarRecord};
 
 /// The line header's "no more lines" value.
 pub const END_OF_FRAME: u16 = 0xFFFF;
+/// The line header that makes the firmware hang (its thread-mode loop spins: the watchdog's
+/// test), sent by `startrack pil --hang-at-frame`.
+pub const INJECT_HANG: u16 = 0xFFFD;
+/// The line header that makes the firmware panic, sent by `startrack pil --panic-at-frame`.
+pub const INJECT_PANIC: u16 = 0xFFFC;
 
 /// The two pipes, open.
 pub struct HostChannel {

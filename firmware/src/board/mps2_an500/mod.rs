@@ -328,6 +328,18 @@ async fn host_lines_task() {
             if header.line == host::END_OF_FRAME {
                 break;
             }
+            if header.line == host::INJECT_HANG {
+                // The fault test: the thread-mode loop stops here (interrupts still run), the
+                // tracker makes no more progress and the watchdog must reset.
+                defmt::warn!("pil: hang injected at frame {}", req.frame);
+                loop {
+                    core::hint::spin_loop();
+                }
+            }
+            if header.line == host::INJECT_PANIC {
+                // The fault test: a panic must end in a reset with the cause recorded.
+                panic!("pil: panic injected at frame {}", req.frame);
+            }
             let buf = FREE.receive().await;
             let read = HOST.lock(|h| h.borrow_mut().as_mut().map(|ch| ch.line_samples(buf)));
             if !matches!(read, Some(Ok(()))) {
