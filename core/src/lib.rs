@@ -36,6 +36,7 @@ pub mod link;
 pub mod readout;
 pub mod safe;
 pub mod sequencer;
+mod small_sort;
 pub mod solver;
 pub mod store;
 pub mod table;

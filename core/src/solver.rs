@@ -204,7 +204,7 @@ impl<'c> Solver<'c> {
                 *dimmest = (s.flux_e, m);
             }
         }
-        measured.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
+        crate::small_sort::sort_by(&mut measured, |a, b| b.0.total_cmp(&a.0));
         let mut dirs: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
         for (_, m) in &measured {
             let _ = dirs.push(*m);

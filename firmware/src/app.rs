@@ -1,15 +1,15 @@
 //! The tracker task: the core's tracker application ([`startrack_core::tracker`]) bound to
-//! the board's ports and run frame after frame. Everything from a raw line to a reported
-//! star happens in the core; this file only says where lines, time, temperature, the table
-//! and the telemetry come from on this board.
+//! the board's ports and run frame after frame, the same on every board. Everything from a
+//! raw line to a reported star happens in the core; this file only says where lines, time,
+//! temperature, the table and the telemetry come from.
 //!
-//! | port | on this board |
+//! | port | bound to |
 //! |---|---|
-//! | lines | [`ChannelLines`]: the request to the sequencer, the readout task's DMA'd line buffers back ([`crate::lines`]) |
-//! | clock | embassy-time's `Instant` |
-//! | sync pulse | the PPS line captured by TIM5 ([`crate::pps`]), taken between frames before the link |
-//! | temperature | [`BoardThermometer`]: the CCD board's TMP117 ([`crate::board_temp`]), else the MCU's ([`crate::mcu_temp`]) |
-//! | table | the calibration table in force in flash bank 2, copied to RAM at start-up ([`crate::flash_store`]), or none; uploads through the link, and the in-flight defect commit (`TC[133,7]`, moved on by `LinkService::poll` between frames), go to the flash store ([`crate::flash_store::with_link_tables`]) and are used from the next start |
+//! | lines | [`ChannelLines`]: the request to the board's line path ([`crate::lines::REQUESTS`]; on the STM32H743 the sequencer), its line buffers back ([`crate::lines::FILLED`]) |
+//! | clock | embassy-time's `Instant` (the board's time driver) |
+//! | sync pulse | the board's capture of the PPS line ([`crate::pps`]; on the STM32H743 TIM5), taken between frames before the link |
+//! | temperature | the board's `Thermometer` (on the STM32H743 the CCD board's TMP117, else the MCU's) |
+//! | table | the calibration table in force in the board's table store, copied to RAM at start-up ([`crate::flash_store`]), or none; uploads through the link, and the in-flight defect commit (`TC[133,7]`, moved on by `LinkService::poll` between frames), go to the flash store ([`crate::flash_store::with_link_tables`]) and are used from the next start |
 //! | telemetry | the defmt log ([`crate::telemetry`]) |
 //!
 //! The frame and what follows it (the link's housekeeping, the attitude stage with the
@@ -19,14 +19,14 @@
 //! ([`crate::watchdog`]) and publishes the cycle's housekeeping ([`crate::safe_state::HEALTH`]).
 //!
 //! Each frame's [`ReadoutRequest`] (full frame, or the tracking windows) and the configured
-//! exposure go to the CCD sequencer ([`crate::sequencer`]), which compiles and plays that
-//! frame next; only the lines its plan digitises come back.
+//! exposure go to the board's line path (on the STM32H743 the CCD sequencer, which compiles
+//! and plays that frame next); only the lines its plan digitises come back. After each frame
+//! the board sees its outcome too (`board::after_frame`).
 
-use crate::board_temp::BoardSensor;
-use crate::lines::{FILLED, FREE, GEOMETRY, LineBuf, RawLine};
-use crate::mcu_temp::McuThermometer;
+use crate::board::Thermometer;
+use crate::lines::{FILLED, FREE, FrameRequest, GEOMETRY, LineBuf, REQUESTS, RawLine};
 use crate::telemetry::DefmtTelemetry;
-use crate::{safe_state, watchdog};
+use crate::{board, safe_state, watchdog};
 use core::convert::Infallible;
 use startrack_core::attitude::Camera;
 use startrack_core::catalog::Catalog;
@@ -34,15 +34,12 @@ use startrack_core::cycle::{CyclePorts, FrameCycle};
 use startrack_core::link::TableUpload;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::readout::ReadoutRequest;
-use startrack_core::safe::{FallbackThermometer, SetupFaults};
+use startrack_core::safe::SetupFaults;
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
     Clock, FixedTable, LineSource, SourceLine, Tracker, TrackerBuffers, TrackerConfig,
 };
-
-/// The board's sensor temperature: the CCD board's sensor, else the MCU's.
-pub type BoardThermometer = FallbackThermometer<BoardSensor, McuThermometer>;
 
 /// Stars a frame the board keeps (candidates, windows, reported stars).
 pub const MAX_STARS: usize = 32;
@@ -66,9 +63,9 @@ fn nominal_camera() -> Camera {
 /// Centroid 1-sigma the identification's tolerances assume, px.
 const IDENT_SIGMA_PX: f64 = 0.2;
 
-/// The sequencer's lines as the tracker's line source. `start_frame` sends the request
-/// (windows copied) and the exposure to the sequencer ([`crate::sequencer::REQUESTS`]),
-/// which compiles and plays it; `next_line` then hands over the lines read for that frame
+/// The board's lines as the tracker's line source. `start_frame` sends the request
+/// (windows copied) and the exposure to the board's line path ([`REQUESTS`]), which reads
+/// that frame; `next_line` then hands over the lines read for that frame
 /// (tagged with its number), in order, up to the one marked last. Lines of older frames
 /// are given back unread; a line of a later frame ends this one. The buffer handed out last
 /// goes back to the readout at the next call.
@@ -136,11 +133,7 @@ impl LineSource for ChannelLines {
         // No window: nothing to read (the frame is still clocked, for its exposure).
         self.no_lines_us = matches!(request, ReadoutRequest::Windows(w) if w.is_empty())
             .then_some(u64::from(self.exposure_us));
-        crate::sequencer::REQUESTS.signal(crate::sequencer::FrameRequest::new(
-            frame,
-            request,
-            self.exposure_us,
-        ));
+        REQUESTS.signal(FrameRequest::new(frame, request, self.exposure_us));
         Ok(())
     }
 
@@ -212,7 +205,7 @@ pub async fn tracker_task(
     table: Option<CalibTable<'static>>,
     catalog: Option<Catalog<'static>>,
     buffers: &'static mut TrackerBuffers,
-    mut thermometer: BoardThermometer,
+    mut thermometer: Thermometer,
 ) {
     let config = TrackerConfig {
         exposure_ms: EXPOSURE_MS,
@@ -259,7 +252,7 @@ pub async fn tracker_task(
         if cycle.reset_requested() {
             // Let the transmit task send the acceptance, then reset.
             embassy_time::Timer::after_millis(50).await;
-            cortex_m::peripheral::SCB::sys_reset();
+            crate::board::system_reset(startrack_core::safe::ResetCause::Software);
         }
         source.set_exposure_ms(cycle.tracker().config().exposure_ms);
         let mut ports = CyclePorts {
@@ -285,6 +278,7 @@ pub async fn tracker_task(
             Some(Err(e)) => defmt::info!("frame {}: no attitude ({})", outcome.summary.frame, e),
             None => {}
         }
+        board::after_frame(&outcome, cycle.tracker().stars());
         watchdog::progress();
         safe_state::set_health(cycle.health());
     }

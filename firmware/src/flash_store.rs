@@ -1,12 +1,7 @@
-//! The table store on the board: the core's two-slot [`FlashStore`] over flash bank 2
-//! (0x0810_0000, 1 MB; the firmware runs from bank 1), and the calibration table in force
-//! copied to RAM for the tracker.
+//! The table store on any board: the core's two-slot [`FlashStore`] over the board's
+//! [`StoreFlash`] (on the STM32H743 flash bank 2, `board::stm32h743::bank2`; on `mps2-an500`
+//! a RAM model of it), and the calibration table in force copied to RAM for the tracker.
 //!
-//! - [`Bank2`] is bank 2 as an `embedded-storage` NOR flash: offsets from the bank's start,
-//!   programs and erases through embassy-stm32's flash driver, reads through
-//!   [`ecc_guarded_read`] so that a unit torn by a power cut reads as an error, not a bus
-//!   fault. Its erase is also offered async ([`Bank2::erase_async`]): the driver then waits
-//!   for the flash interrupt and the executor keeps running the other tasks.
 //! - [`mount`] mounts the store at start-up; [`load_calibration`] copies the calibration
 //!   table in force into [`TABLE_RAM_B`] bytes of RAM (checking its CRC again) and has the
 //!   core parse it there.
@@ -20,34 +15,26 @@
 //!   [`HeldTables`] (uploads refused "busy", the table in force reported from the last
 //!   round) and frames keep running.
 //!
-//! Why a RAM copy: while a sector of bank 2 is erased (1-2 s) or programmed, reads of bank 2
-//! wait for the operation's end (RM0433, flash read-while-write is only across banks). The
+//! Why a RAM copy: while a sector of the H7's bank 2 is erased (1-2 s) or programmed, reads
+//! of bank 2 wait for the operation's end (RM0433, flash read-while-write is only across
+//! banks). The
 //! tracker reads its table for every calibrated pixel, so a table read in place from bank 2
 //! would stall the frame loop during an upload. Read from RAM, it never touches the flash.
 //! A newly committed table is in force in flash at once (housekeeping and the table report
 //! show it) and in the tracker from the next start: the ground commits, then commands a
 //! reset. Swapping the RAM copy under a running tracker would need a second 192 KB buffer.
 
+use crate::board::{Flash, STORE_LAYOUT, StoreFlash};
 use crate::lines::GEOMETRY;
-use embassy_stm32::flash::{Async, Error as DriverError, FLASH_BASE, Flash};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::mutex::Mutex;
 use embassy_sync::signal::Signal;
-use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::{FlashTables, TableInfo, TableUpload, UploadRefusal};
-use startrack_core::store::{
-    EraseProgress, FlashStore, H743_BANK_B, H743_BANK2, H743_BANK2_ADDRESS, H743_PROGRAM_UNIT_B,
-    H743_SECTOR_B, StoreError, TableKind,
-};
+use startrack_core::store::{EraseProgress, FlashStore, StoreError, TableKind};
 use startrack_core::table::{CalibTable, TableError};
 use static_cell::ConstStaticCell;
-
-/// Bank 2's offset in embassy's flash offsets (from `FLASH_BASE`, 0x0800_0000).
-const BANK2_OFFSET: u32 = H743_BANK2_ADDRESS - FLASH_BASE as u32;
 
 /// Largest calibration table the tracker can use (its RAM copy), bytes: 192 KB, enough for
 /// the CCD47-20's dark map in 4x4 tiles (64 KB) and flat map in 8x8 tiles (32 KB) with
@@ -58,148 +45,18 @@ pub const TABLE_RAM_B: usize = 192 * 1024;
 static TABLE_RAM: ConstStaticCell<[u8; TABLE_RAM_B]> = ConstStaticCell::new([0; TABLE_RAM_B]);
 
 /// The store on this board.
-pub type Store = FlashStore<Bank2>;
+pub type Store = FlashStore<Flash>;
 
 /// The mounted store, shared by the tracker task (the link's uploads, between frames) and
-/// [`erase_task`]; `None` when bank 2 could not be mounted.
+/// [`erase_task`]; `None` when the store could not be mounted.
 pub static SHARED: Mutex<CriticalSectionRawMutex, Option<Store>> = Mutex::new(None);
 
 /// Wakes [`erase_task`]: an upload's slot waits for its erase.
 pub static ERASE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
-/// Flash bank 2 as a NOR flash device (offsets from 0x0810_0000).
-pub struct Bank2 {
-    flash: Flash<'static, Async>,
-}
-
-/// Why a bank-2 operation failed.
-#[derive(Clone, Copy, Debug, defmt::Format)]
-pub enum Bank2Error {
-    /// The driver refused or the flash reported an error.
-    Driver(DriverError),
-    /// A read met an ECC double error (a torn or half-erased unit).
-    Ecc {
-        /// Offset of the read, bytes from the start of bank 2.
-        offset_b: u32,
-    },
-    /// Outside bank 2.
-    OutOfBounds,
-}
-
-impl NorFlashError for Bank2Error {
-    fn kind(&self) -> NorFlashErrorKind {
-        match self {
-            Self::Driver(e) => e.kind(),
-            Self::Ecc { .. } => NorFlashErrorKind::Other,
-            Self::OutOfBounds => NorFlashErrorKind::OutOfBounds,
-        }
-    }
-}
-
-impl Bank2 {
-    /// Bank 2 of `flash`.
-    pub fn new(flash: Flash<'static, Async>) -> Self {
-        Self { flash }
-    }
-
-    /// Erases `from..to` (offsets in bank 2, whole sectors), waiting for the flash interrupt
-    /// rather than spinning: the executor runs the other tasks meanwhile.
-    pub async fn erase_async(&mut self, from: u32, to: u32) -> Result<(), Bank2Error> {
-        if to < from || to > H743_BANK_B {
-            return Err(Bank2Error::OutOfBounds);
-        }
-        self.flash
-            .erase(BANK2_OFFSET + from, BANK2_OFFSET + to)
-            .await
-            .map_err(Bank2Error::Driver)
-    }
-}
-
-impl ErrorType for Bank2 {
-    type Error = Bank2Error;
-}
-
-impl ReadNorFlash for Bank2 {
-    const READ_SIZE: usize = 1;
-
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Bank2Error> {
-        let end = offset as usize + bytes.len();
-        if end > H743_BANK_B as usize {
-            return Err(Bank2Error::OutOfBounds);
-        }
-        ecc_guarded_read(offset, bytes)
-    }
-
-    fn capacity(&self) -> usize {
-        H743_BANK_B as usize
-    }
-}
-
-impl NorFlash for Bank2 {
-    const WRITE_SIZE: usize = H743_PROGRAM_UNIT_B as usize;
-    const ERASE_SIZE: usize = H743_SECTOR_B as usize;
-
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Bank2Error> {
-        if to < from || to > H743_BANK_B {
-            return Err(Bank2Error::OutOfBounds);
-        }
-        self.flash
-            .blocking_erase(BANK2_OFFSET + from, BANK2_OFFSET + to)
-            .map_err(Bank2Error::Driver)
-    }
-
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Bank2Error> {
-        if offset as usize + bytes.len() > H743_BANK_B as usize {
-            return Err(Bank2Error::OutOfBounds);
-        }
-        self.flash
-            .blocking_write(BANK2_OFFSET + offset, bytes)
-            .map_err(Bank2Error::Driver)
-    }
-}
-
-/// SCB CCR bit 8, BFHFNMIGN: handlers at priority -1 (and code running with FAULTMASK set)
-/// ignore precise data bus faults of loads.
-const CCR_BFHFNMIGN: u32 = 1 << 8;
-
-/// Reads bank-2 bytes so that an ECC double error (a 32-byte unit torn by a power cut during
-/// its program or erase) gives an error instead of a bus fault: the loads run with FAULTMASK
-/// set and CCR.BFHFNMIGN, which make the core ignore their bus faults, and the bank's
-/// DBECCERR flag (FLASH_SR2 bit 26) says whether one happened; it is then cleared.
-/// The data cache is not enabled by this firmware, so no stale line hides a fresh erase.
-fn ecc_guarded_read(offset: u32, out: &mut [u8]) -> Result<(), Bank2Error> {
-    let bank = embassy_stm32::pac::FLASH.bank(1);
-    let base = (H743_BANK2_ADDRESS + offset) as usize;
-    // SAFETY: `base .. base + out.len()` lies inside bank 2 (checked by the caller), which is
-    // memory-mapped and readable; the loads are volatile byte reads of that region and write
-    // only into `out`. FAULTMASK is set just around them (no interrupt, no fault handler runs
-    // meanwhile) and CCR is restored to its previous value; nothing else in this firmware
-    // changes CCR concurrently (FAULTMASK masks every other context).
-    unsafe {
-        let scb = &*cortex_m::peripheral::SCB::PTR;
-        let ccr = scb.ccr.read();
-        scb.ccr.write(ccr | CCR_BFHFNMIGN);
-        cortex_m::asm::dsb();
-        cortex_m::asm::isb();
-        core::arch::asm!("cpsid f", options(nomem, nostack, preserves_flags));
-        for (i, b) in out.iter_mut().enumerate() {
-            *b = core::ptr::read_volatile(core::ptr::with_exposed_provenance::<u8>(base + i));
-        }
-        cortex_m::asm::dsb();
-        core::arch::asm!("cpsie f", options(nomem, nostack, preserves_flags));
-        scb.ccr.write(ccr);
-        cortex_m::asm::isb();
-    }
-    if bank.sr().read().dbeccerr() {
-        bank.ccr().write(|w| w.set_clr_dbeccerr(true));
-        return Err(Bank2Error::Ecc { offset_b: offset });
-    }
-    Ok(())
-}
-
-/// Mounts the store on bank 2 and logs what each slot holds.
-pub fn mount(flash: Flash<'static, Async>) -> Result<Store, StoreError> {
-    let store = FlashStore::mount(Bank2::new(flash), H743_BANK2).map_err(|e| e.error)?;
+/// Mounts the store on the board's flash and logs what each slot holds.
+pub fn mount(flash: Flash) -> Result<Store, StoreError> {
+    let store = FlashStore::mount(flash, STORE_LAYOUT).map_err(|e| e.error)?;
     for kind in TableKind::ALL {
         let [s0, s1] = store.slot_states(kind);
         defmt::info!(
@@ -271,21 +128,13 @@ fn load(store: &mut Store) -> Result<CalibTable<'static>, LoadError> {
 }
 
 /// The calibration table's own checks for [`FlashStore::commit_checked`]: the core parses
-/// the uploaded table where it lies in bank 2 and its geometry must be this firmware's.
-pub fn calibration_ok(_bank: &mut Bank2, offset_b: u32, len_b: u32) -> bool {
-    if offset_b
-        .checked_add(len_b)
-        .is_none_or(|end| end > H743_BANK_B)
-    {
-        return false;
-    }
-    let start = core::ptr::with_exposed_provenance::<u8>((H743_BANK2_ADDRESS + offset_b) as usize);
-    // SAFETY: the range lies inside bank 2 (checked above), memory-mapped and readable. The
-    // store calls this after programming every unit of the range and reading it all back
-    // (its CRC), so no unit in it is torn (no ECC fault), and nothing writes or erases that
-    // slot while the slice lives: `_bank`'s exclusive borrow (the only writer) spans it.
-    let bytes = unsafe { core::slice::from_raw_parts(start, len_b as usize) };
-    CalibTable::parse(bytes).is_ok_and(|t| *t.geometry() == GEOMETRY)
+/// the uploaded table where it lies in the store and its geometry must be this firmware's.
+pub fn calibration_ok(flash: &mut Flash, offset_b: u32, len_b: u32) -> bool {
+    // The store calls this after programming every unit of the range and reading it all
+    // back (its CRC), holding the flash exclusively: what `mapped` asks.
+    flash
+        .mapped(offset_b, len_b)
+        .is_some_and(|bytes| CalibTable::parse(bytes).is_ok_and(|t| *t.geometry() == GEOMETRY))
 }
 
 /// The erase step of an upload, for the task that owns the store: erases the next sector of
@@ -373,7 +222,7 @@ pub fn with_link_tables<R>(held: &mut HeldTables, f: impl FnOnce(&mut dyn TableU
         held.refusal = UploadRefusal::Storage;
         return f(held);
     };
-    let mut tables = FlashTables::new(store, calibration_ok as fn(&mut Bank2, u32, u32) -> bool);
+    let mut tables = FlashTables::new(store, calibration_ok as fn(&mut Flash, u32, u32) -> bool);
     if core::mem::take(&mut held.abort_pending) {
         tables.abort();
     }

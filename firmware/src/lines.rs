@@ -1,4 +1,5 @@
-//! The raw line buffers and their hand-off from readout to processing.
+//! The raw line buffers and their hand-off from the board's line path to processing, and
+//! each frame's request to it ([`REQUESTS`]).
 //!
 //! Two line buffers (ping-pong) circulate between the readout task and the processing task
 //! by ownership: a buffer is a `&'static mut LineBuf` that travels through two channels,
@@ -9,18 +10,19 @@
 //! ```
 //!
 //! so while processing works on one line the readout fills the other, and the borrow
-//! checker guarantees that no two tasks hold a buffer at once. The ADC words themselves
-//! arrive by SPI DMA in a separate sample buffer and are put in their raw columns by the
-//! readout (`LineJob::unpack`: a line read through windows fills only the columns read).
-//!
-//! Placement: the buffers are part of [`crate::memory::DmaRegion`], in `.bss` (AXI SRAM at
-//! 0x2400_0000, which every DMA master reaches; the DTCM would not be) and made
-//! non-cacheable by the MPU, so with the D-cache on the CPU still sees what the DMA wrote
-//! without cache maintenance.
+//! checker guarantees that no two tasks hold a buffer at once. The readout is the board's
+//! (on the STM32H743 the ADC words arrive by SPI DMA in a separate sample buffer and are put
+//! in their raw columns, `LineJob::unpack`: a line read through windows fills only the
+//! columns read), and so is the buffers' placement (on the STM32H743 in its DMA region,
+//! non-cacheable, `board::stm32h743::memory`).
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_core::readout::ReadoutRequest;
+use startrack_core::sequencer::MAX_WINDOWS;
+use startrack_core::window::Rect;
 
 /// The readout mode of this firmware: the CCD47-20 read through both outputs.
 pub const GEOMETRY: ReadoutGeometry = ReadoutGeometry::CCD47_20_DUAL;
@@ -67,3 +69,40 @@ pub fn init(bufs: &'static mut [LineBuf; BUFFERS]) -> Result<(), PoolError> {
     }
     Ok(())
 }
+
+/// One frame's request as the board's line path gets it (on the STM32H743 the sequencer):
+/// the tracker's frame number, its exposure and its windows copied (no borrow crosses
+/// tasks). Cost: ~530 bytes.
+#[derive(Clone, Debug)]
+pub struct FrameRequest {
+    /// The tracker's frame number (tags the frame's lines).
+    pub frame: u32,
+    /// The exposure the tracker's configuration sets, us.
+    pub exposure_us: u32,
+    /// `None`: full frame; else the windows.
+    pub windows: Option<heapless::Vec<Rect, MAX_WINDOWS>>,
+    /// The request had more windows than a message holds (compiled as a full frame).
+    pub truncated: bool,
+}
+
+impl FrameRequest {
+    /// Copies `request` for frame `frame` with `exposure_us`.
+    pub fn new(frame: u32, request: &ReadoutRequest<'_>, exposure_us: u32) -> Self {
+        let (windows, truncated) = match request {
+            ReadoutRequest::FullFrame => (None, false),
+            ReadoutRequest::Windows(rects) => match heapless::Vec::from_slice(rects) {
+                Ok(v) => (Some(v), false),
+                Err(_) => (None, true),
+            },
+        };
+        Self {
+            frame,
+            exposure_us,
+            windows,
+            truncated,
+        }
+    }
+}
+
+/// The latest request (a newer one replaces one not yet compiled).
+pub static REQUESTS: Signal<CriticalSectionRawMutex, FrameRequest> = Signal::new();

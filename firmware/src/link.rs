@@ -1,42 +1,29 @@
-//! The command and telemetry link on the board: USART3 (the NUCLEO's ST-LINK virtual COM
-//! port, PD8 TX / PD9 RX; an RS-422 transceiver on the same pins in flight) at
-//! [`BAUD`], receive by DMA into a ring buffer, transmit by DMA. The protocol is the core's
-//! [`LinkService`] (docs/protocol.md); this file moves bytes only.
+//! The command and telemetry link, as the application serves it on any board. The protocol
+//! is the core's [`LinkService`] (docs/protocol.md); the board moves the bytes
+//! ([`crate::board`]'s `start_io`: on the STM32H743 USART3 by DMA, on `mps2-an500` a CMSDK
+//! UART) between the wire and the [`RX`] and [`TX`] pipes.
 //!
-//! Two tasks beside readout and processing: [`link_rx_task`] copies what the DMA ring
-//! received into the [`RX`] pipe, [`link_tx_task`] sends what the [`TX`] pipe holds. The
-//! tracker task owns the [`LinkService`] and serves it between frames ([`serve`]): it takes
-//! the received bytes (commands act on the tracker there, never mid-frame) and moves queued
-//! telemetry into [`TX`] as far as it has room, without waiting. A slow link therefore
-//! leaves telemetry in the service's queues (dropped and counted when they are full), and
-//! a flood of bytes fills [`RX`] (the excess is dropped and counted by the receive task):
-//! neither can stall the frame loop.
+//! The tracker task owns the [`LinkService`] and serves it between frames ([`serve`]): it
+//! takes the received bytes (commands act on the tracker there, never mid-frame) and moves
+//! queued telemetry into [`TX`] as far as it has room, without waiting. A slow link therefore
+//! leaves telemetry in the service's queues (dropped and counted when they are full), and a
+//! flood of bytes fills [`RX`] (the excess is dropped and counted by the board's receive
+//! task in [`RX_DROPPED`]): neither can stall the frame loop.
 //!
-//! Memory: the pipes ([`RX_PIPE_BYTES`] + [`TX_PIPE_BYTES`]) in `.bss`, the DMA ring
-//! ([`RX_RING_BYTES`]) and transmit buffer ([`TX_DMA_BYTES`]) in the non-cacheable DMA
-//! region, the service (~16 KB) in the tracker task's static.
+//! Memory: the pipes ([`RX_PIPE_BYTES`] + [`TX_PIPE_BYTES`]) in `.bss`, the service (~16 KB)
+//! in [`SERVICE`]; the board's buffers are the board's.
 
-use core::sync::atomic::{AtomicU32, Ordering};
-use embassy_stm32::mode::Async;
-use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+use core::sync::atomic::AtomicU32;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
 use startrack_core::cycle::FrameCycle;
 use startrack_core::link::{LinkService, NoWindows, TableUpload};
 
-/// The link's bit rate (the ST-LINK V3 bridge takes it; an RS-422 line up to 10 Mbit/s).
-pub const BAUD: u32 = 921_600;
-/// Bytes received and not yet served: what arrives in one frame at [`BAUD`] with room (a
-/// ground station that keeps 8 chunks of 1 KB in flight needs ~9 KB).
+/// Bytes received and not yet served: what arrives in one frame at 921,600 bit/s with room
+/// (a ground station that keeps 8 chunks of 1 KB in flight needs ~9 KB).
 pub const RX_PIPE_BYTES: usize = 16 * 1024;
 /// Telemetry handed to the transmit task and not yet sent.
 pub const TX_PIPE_BYTES: usize = 4 * 1024;
-/// The receive DMA ring (half-transfer and transfer-complete interrupts at 512 bytes), in the
-/// non-cacheable DMA region ([`crate::memory::DmaRegion`]).
-pub const RX_RING_BYTES: usize = 1024;
-/// The transmit DMA buffer, in the same region: the D-cache would otherwise hide the bytes
-/// the CPU copies into it from the DMA.
-pub const TX_DMA_BYTES: usize = 512;
 
 /// The service, owned by the tracker task. A `StaticCell` set up at run time, so it lives in
 /// `.bss`: a constant one would go to `.data` (the queues' uninitialised bytes are not
@@ -47,45 +34,10 @@ pub static SERVICE: static_cell::StaticCell<LinkService> = static_cell::StaticCe
 pub static RX: Pipe<CriticalSectionRawMutex, RX_PIPE_BYTES> = Pipe::new();
 /// Telemetry bytes, from the tracker task to the transmit task.
 pub static TX: Pipe<CriticalSectionRawMutex, TX_PIPE_BYTES> = Pipe::new();
-/// Received bytes dropped because [`RX`] was full, and receive errors (overrun, framing,
-/// noise) of the USART.
+/// Received bytes dropped because [`RX`] was full.
 pub static RX_DROPPED: AtomicU32 = AtomicU32::new(0);
-/// USART receive errors (the ring is restarted after each).
+/// The UART's receive errors (overrun, framing, noise).
 pub static RX_ERRORS: AtomicU32 = AtomicU32::new(0);
-
-/// Copies the DMA ring's bytes into [`RX`]; a full pipe drops them (counted).
-#[embassy_executor::task]
-pub async fn link_rx_task(mut rx: RingBufferedUartRx<'static>) {
-    let mut buf = [0u8; 256];
-    loop {
-        match rx.read(&mut buf).await {
-            Ok(n) => {
-                let bytes = buf.get(..n).unwrap_or_default();
-                let taken = RX.try_write(bytes).unwrap_or(0);
-                if taken < n {
-                    RX_DROPPED.fetch_add((n - taken) as u32, Ordering::Relaxed);
-                }
-            }
-            Err(e) => {
-                // The ring restarts on its next read; the partial frame fails its COBS or
-                // CRC check and is counted by the service.
-                RX_ERRORS.fetch_add(1, Ordering::Relaxed);
-                defmt::warn!("link: receive error {}", e);
-            }
-        }
-    }
-}
-
-/// Sends what [`TX`] holds.
-#[embassy_executor::task]
-pub async fn link_tx_task(mut tx: UartTx<'static, Async>, buf: &'static mut [u8; TX_DMA_BYTES]) {
-    loop {
-        let n = TX.read(buf).await;
-        if let Err(e) = tx.write(buf.get(..n).unwrap_or_default()).await {
-            defmt::warn!("link: transmit error {}", e);
-        }
-    }
-}
 
 /// One link service round between frames: received bytes executed on the cycle's tracker,
 /// the link's work between frames (window rows, the in-flight defect commit) moved on,
@@ -131,7 +83,7 @@ pub async fn serve_standby(link: &mut LinkService, held: &mut crate::flash_store
     if link.reset_requested() {
         // Let the transmit task send the acceptance, then reset.
         embassy_time::Timer::after_millis(50).await;
-        cortex_m::peripheral::SCB::sys_reset();
+        crate::board::system_reset(startrack_core::safe::ResetCause::Software);
     }
 }
 

@@ -1,46 +1,18 @@
-//! The sync pulse: the spacecraft's PPS line on PA0 (TIM5_CH1, alternate function 2), captured by
-//! TIM5 channel 1 (a 32-bit timer at 1 MHz, rising edge). The capture holds the timer's count
-//! at the edge, whatever the interrupt's latency; the task then reads TIM5's count and
-//! embassy-time's `Instant` together and takes the edge's age from the first, so each pulse
-//! goes to [`PULSES`] as the tracker clock's microsecond at its edge. Both counters run
-//! from the same oscillator: the conversion adds the two reads' gap (under 1 us) to the
-//! capture's 1 us resolution ([`startrack_core::time::PULSE_JITTER_US`]).
+//! The sync pulse as the application takes it: the board's capture of the spacecraft's PPS
+//! line pushes each edge, as the tracker clock's microsecond at the edge, into [`PULSES`]
+//! (on the STM32H743 TIM5's input capture, `board::stm32h743::pps`; the emulated board has
+//! no PPS line, so its reports say their time is not synchronised). The tracker task takes
+//! them between frames ([`BoardPulses`], the core's [`SyncPulse`] port) before it serves the
+//! link, so a time-set command applies to a pulse after it.
 //!
-//! The tracker task takes them between frames ([`BoardPulses`], the core's
-//! [`SyncPulse`] port) before it serves the link, so a time-set command applies to a pulse
-//! after it.
-//!
-//! HIL step (not run yet: no board has run the firmware): feed PA0 a 1 Hz, 3.3 V pulse from
-//! a GPS receiver's PPS or a signal generator locked to a reference, send `startrack gse
-//! time-set S` within the second after a pulse, and check that the attitude reports' time
-//! advances by 1 s per pulse with `time_bound_us` at most 20 us, and that the counter's
-//! rate the clock measures matches the board's crystal against the reference.
-//!
-//! Cost: one interrupt and a queue push a second; 4 pulses of queue (40 B).
+//! Cost: a queue push a second; 4 pulses of queue (40 B).
 
-use embassy_stm32::peripherals::TIM5;
-use embassy_stm32::timer::Channel;
-use embassy_stm32::timer::input_capture::InputCapture;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel as Queue;
 use startrack_core::time::SyncPulse;
 
 /// The pulses captured and not yet taken: the tracker clock's us at each edge.
 pub static PULSES: Queue<CriticalSectionRawMutex, u64, 4> = Queue::new();
-
-/// Captures the PPS edges on TIM5 channel 1 for ever.
-#[embassy_executor::task]
-pub async fn pps_task(mut capture: InputCapture<'static, TIM5>) {
-    loop {
-        let at: u32 = capture.wait_for_rising_edge(Channel::Ch1).await;
-        let count: u32 = embassy_stm32::pac::TIM5.cnt().read();
-        let now_us = embassy_time::Instant::now().as_micros();
-        let age_us = u64::from(count.wrapping_sub(at));
-        if PULSES.try_send(now_us.saturating_sub(age_us)).is_err() {
-            defmt::warn!("pps: pulse queue full, a pulse is dropped");
-        }
-    }
-}
 
 /// The captured pulses as the core's sync pulse port.
 pub struct BoardPulses;

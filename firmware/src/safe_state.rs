@@ -1,5 +1,6 @@
-//! Safe states on the board: the fault record kept over a reset, the reset cause, the
-//! housekeeping the link will report, and the standby a set-up failure falls back to.
+//! Safe states on any board: the fault record kept over a reset (the reset cause is the
+//! board's `reset_cause`), the housekeeping the link will report, and the standby a set-up
+//! failure falls back to.
 //!
 //! - The fault record ([`startrack_core::safe::FaultRecord`], 32 bytes) lives in
 //!   cortex-m-rt's `.uninit` section (AXI SRAM, after `.bss`), which the start-up code
@@ -7,7 +8,6 @@
 //!   power-on it holds whatever the SRAM powers up with, which the record's magic and CRC
 //!   turn into a fresh record. It is written whole, 32-byte aligned (whole 64-bit ECC words
 //!   of the AXI SRAM, so no read-modify-write of a never-written ECC word).
-//! - [`reset_cause`] reads and clears RCC_RSR.
 //! - [`HEALTH`] is the core's [`Health`]: set-up's fields, then the frame cycle's after every
 //!   frame (the tracker task publishes it).
 //! - [`standby_forever`] is where a set-up failure ends up (through [`enter_standby`] and
@@ -23,7 +23,7 @@ use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Timer};
-use startrack_core::safe::{FAULT_RECORD_WORDS, FaultRecord, Health, ResetCause, SetupFaults};
+use startrack_core::safe::{FAULT_RECORD_WORDS, FaultRecord, Health, SetupFaults};
 
 /// The record's RAM image, aligned to a 32-byte line.
 #[repr(C, align(32))]
@@ -57,25 +57,6 @@ pub fn store_record(record: &FaultRecord) {
             words,
         );
     }
-}
-
-/// Why the MCU reset (RCC_RSR), and clears the flags so the next reset reads its own.
-pub fn reset_cause() -> ResetCause {
-    let rcc = embassy_stm32::pac::RCC;
-    let rsr = rcc.rsr().read();
-    let cause = if rsr.iwdg1rstf() {
-        ResetCause::Watchdog
-    } else if rsr.sftrstf() {
-        ResetCause::Software
-    } else if rsr.porrstf() || rsr.borrstf() {
-        ResetCause::PowerOn
-    } else if rsr.pinrstf() {
-        ResetCause::Pin
-    } else {
-        ResetCause::Other
-    };
-    rcc.rsr().modify(|w| w.set_rmvf(true));
-    cause
 }
 
 /// Housekeeping, shared by the tasks (copied in and out under a critical section).

@@ -1,4 +1,4 @@
-//! The independent watchdog (IWDG1), fed by the frame loop's progress: a frame loop that
+//! The board's watchdog (IWDG1 on the STM32H743, the CMSDK watchdog on `mps2-an500`), fed by the frame loop's progress: a frame loop that
 //! stops (a hung DMA, a deadlock, a runaway task) resets the MCU within [`TIMEOUT_US`], and
 //! the reset is counted in the fault record ([`crate::safe_state`]).
 //!
@@ -11,12 +11,11 @@
 //! (32 kHz) and cannot be stopped once started: a debugger that halts the core must freeze
 //! it (DBGMCU), or the board resets under the probe.
 
+use crate::board::{Watchdog, WatchdogPort};
 use core::sync::atomic::{AtomicU32, Ordering};
-use embassy_stm32::peripherals::IWDG1;
-use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Timer};
 
-/// The IWDG's timeout, us.
+/// The watchdog's timeout, us.
 pub const TIMEOUT_US: u32 = 8_000_000;
 /// How often the watchdog task looks at the progress counter.
 pub const CHECK_PERIOD: Duration = Duration::from_secs(1);
@@ -29,9 +28,9 @@ pub fn progress() {
     PROGRESS.fetch_add(1, Ordering::Relaxed);
 }
 
-/// Starts the IWDG and feeds it while the progress counter moves.
+/// Starts the watchdog and feeds it while the progress counter moves.
 #[embassy_executor::task]
-pub async fn watchdog_task(mut wdg: IndependentWatchdog<'static, IWDG1>) {
+pub async fn watchdog_task(mut wdg: Watchdog) {
     wdg.unleash();
     let mut fed_at = PROGRESS.load(Ordering::Relaxed);
     loop {

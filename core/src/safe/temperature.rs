@@ -20,7 +20,7 @@ pub(crate) const PLAUSIBLE_K: (Kelvin, Kelvin) =
 /// The CCD board's sensor as this design specifies it: a TI TMP117 (I2C, +-0.1 degC from
 /// -20 to 50 degC, 16-bit result) bonded to the CCD's package, read over I2C once a frame.
 /// Its register formats, so the conversion is tested on the host; the bus transfer is the
-/// board's (`firmware/src/board_temp.rs`).
+/// board's (`firmware/src/board/stm32h743/board_temp.rs`).
 pub mod tmp117 {
     use crate::units::Kelvin;
 

@@ -162,7 +162,7 @@ impl Tracking {
                 let _ = order.push((s.flux_e, i));
             }
         }
-        order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        crate::small_sort::sort_by(&mut order, |a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         self.priors.clear();
         for (_, i) in order.iter().take(max.min(TRACK_WINDOWS)) {
             if let Some((s, c)) = stars.iter().nth(*i) {

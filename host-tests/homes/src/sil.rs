@@ -358,6 +358,16 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         seed: config.seed,
         ..SensorParams::default()
     };
+    run_with_table(config, &truth_table(config, &params)?)
+}
+
+/// [`run`] with `table_bytes` as the calibration table instead of the true per-pixel one
+/// (the PIL's comparison runs the SIL with the table the firmware has in flash).
+pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilReport, String> {
+    let params = SensorParams {
+        seed: config.seed,
+        ..SensorParams::default()
+    };
     let base = scene(config, &params);
     let catalog_bytes = match config.sky {
         Some(_) => committed_catalog()?,
@@ -382,8 +392,7 @@ pub fn run(config: &SilConfig) -> Result<SilReport, String> {
         ));
     }
     let solver = sky.as_ref().map(|(scene, cat)| sky_solver(scene, *cat));
-    let table_bytes = truth_table(config, &params)?;
-    let table = CalibTable::parse(&table_bytes).map_err(|e| e.to_string())?;
+    let table = CalibTable::parse(table_bytes).map_err(|e| e.to_string())?;
     let mut buffers = Box::new(TrackerBuffers::new());
     let tracker = Tracker::<SIL_CAPACITY>::new(config.tracker, params.geometry, &mut buffers)
         .map_err(|e| e.to_string())?;

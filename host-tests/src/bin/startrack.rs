@@ -54,6 +54,9 @@ enum Command {
     /// Run the tracker application live on the simulated sensor over a drifting scene
     /// (software in the loop); telemetry and truth as CSV.
     Sil(startrack_host::cli::sil::SilArgs),
+    /// The flight firmware on QEMU's emulated Cortex-M7 (mps2-an500) fed by the simulated
+    /// sensor (processor in the loop): per frame mode, stars, attitude, emulated time.
+    Pil(startrack_host::cli::pil::PilArgs),
     /// The ground tool: command a tracker's link (`startrack sil --port P`) and read it.
     Gse(startrack_host::cli::gse::GseArgs),
     /// Write a simulated raw frame, its star truth and the true calibration maps to a folder.
@@ -207,6 +210,10 @@ fn main() -> ExitCode {
                 }
             }
         }
+        Command::Pil(args) => match startrack_host::cli::pil::run(&args) {
+            Ok(_) => ExitCode::SUCCESS,
+            Err(e) => fail("pil", &e),
+        },
         Command::Sil(args) => match startrack_host::cli::sil::run(&args) {
             Ok(_) => ExitCode::SUCCESS,
             Err(e) => fail("sil", &e),

@@ -11,6 +11,7 @@ pub mod catalog;
 pub mod figures;
 pub mod gse;
 pub mod optics;
+pub mod pil;
 pub mod process;
 pub mod readout_plan;
 pub mod sil;

@@ -23,10 +23,10 @@
 use super::picture::Picture;
 use startrack_core::calib::PixelFlags;
 use startrack_core::centroid::cog::{Anchor, CogParams, cog};
-use startrack_core::table::pixcorr::CogPower;
 use startrack_core::centroid::gauss_fit::{WidthFitParams, gauss_fit_width};
 use startrack_core::centroid::{Background, CentroidFlags, CentroidInput};
 use startrack_core::detect::{DetectConfig, DetectionFlags, LineDetector};
+use startrack_core::table::pixcorr::CogPower;
 use startrack_core::units::Electrons;
 use startrack_core::window::{Rect, Window};
 

@@ -1,4 +1,4 @@
-//! The firmware's MDMA nodes (`firmware/src/mdma_list.rs`, included here as the board
+//! The firmware's MDMA nodes (`firmware/src/board/stm32h743/mdma_list.rs`, included here as the board
 //! builds it) run through a model of the MDMA's linked-list mode as RM0433 describes it: each
 //! node's registers loaded, one word a request from the source (incremented) to the
 //! destination (fixed), the block repeated `BRC + 1` times with the source stepped back by
@@ -13,7 +13,7 @@
 //! last node before the next batch was linked to it) the ring asks for the restart that
 //! resumes it.
 
-#[path = "../../../firmware/src/mdma_list.rs"]
+#[path = "../../../firmware/src/board/stm32h743/mdma_list.rs"]
 #[allow(dead_code, reason = "the test reads the nodes, not every item")]
 mod mdma_list;
 

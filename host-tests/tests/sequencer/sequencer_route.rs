@@ -2,7 +2,7 @@
 //! tracking frame's compiled program digitises (`LineJobs`, `LineJob::unpack`: what the
 //! firmware's readout delivers), clocked through the charge-transfer model, give the tracker
 //! the same stars as the whole frame; and the tables the firmware sets aside for a frame (two
-//! of them, `firmware/src/sequencer.rs`) hold every plan the board compiles.
+//! of them, `firmware/src/board/stm32h743/sequencer.rs`) hold every plan the board compiles.
 
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::readout::ReadoutRequest;
@@ -207,7 +207,7 @@ fn same_bits(
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| key(x) == key(y))
 }
 
-/// `firmware/src/sequencer.rs`'s `MAX_WORDS` and `MAX_STEPS` (the firmware crate does not
+/// `firmware/src/board/stm32h743/sequencer.rs`'s `MAX_WORDS` and `MAX_STEPS` (the firmware crate does not
 /// build for the host; keep them equal).
 const BOARD_MAX_WORDS: usize = 1024;
 const BOARD_MAX_STEPS: usize = 4096;

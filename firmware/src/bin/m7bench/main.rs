@@ -27,7 +27,7 @@ mod ident;
 mod inputs;
 mod line_path;
 // The firmware's MDMA node builder, timed as the board runs it.
-#[path = "../../mdma_list.rs"]
+#[path = "../../board/stm32h743/mdma_list.rs"]
 #[allow(dead_code, reason = "the bench uses the node builder, not every item")]
 mod mdma_list;
 mod scan;
@@ -50,8 +50,8 @@ use startrack_core::units::Electrons;
 
 // ---------------------------------------------------------------------------------------------
 // Start-up: the bench's own vector table and reset handler (linked by `m7bench.x`, written by
-// build.rs), so that it needs neither cortex-m-rt's `link.x` (whose `INCLUDE memory.x` would
-// find the STM32H743 map in the workspace root) nor a device crate.
+// build.rs), so that it needs neither cortex-m-rt's `link.x` (and a `memory.x`) nor a device
+// crate.
 
 unsafe extern "C" {
     static mut __m7_sbss: u32;

@@ -10,6 +10,7 @@ mod accuracy;
 mod attitude;
 mod figures;
 mod formats;
+mod hardware;
 mod pages;
 mod readme;
 mod sequencer;

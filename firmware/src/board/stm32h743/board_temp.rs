@@ -1,6 +1,6 @@
 //! The CCD board's temperature sensor: a TI TMP117 on I2C1 (PB8 SCL, PB9 SDA: the NUCLEO's
 //! Arduino D15/D14), address 0x48 (ADD0 to ground), as a [`Thermometer`]: the first choice of
-//! the core's `FallbackThermometer`, the MCU's sensor ([`crate::mcu_temp`]) the second.
+//! the core's `FallbackThermometer`, the MCU's sensor ([`super::mcu_temp`]) the second.
 //!
 //! A reading is one blocking register read (write the register pointer, read two bytes) at
 //! each frame start: ~0.1 ms at 400 kHz, bounded by a 2 ms bus timeout so a missing or stuck

@@ -16,7 +16,7 @@
 //! to the Ethernet PHY.
 //!
 //! # In step with the clocks
-//! Each line comes from the sequencer ([`crate::sequencer::LINE_JOBS`]), only the lines the
+//! Each line comes from the sequencer ([`super::sequencer::LINE_JOBS`]), only the lines the
 //! frame's plan digitises (the tracker's windows, or every line), each tagged with its raw
 //! line index, the tracker's frame number and whether it ends the frame: the job says how
 //! many words the line digitised (read pixels x outputs, in the order the pixels left the
@@ -26,8 +26,8 @@
 //! therefore buffers the samples (a FIFO of at least a line and the sequencer's ring, see
 //! docs/hardware.md); with no ADC on the pins every word reads 0 (MISO pulled down).
 
+use super::sequencer::LINE_JOBS;
 use crate::lines::{FILLED, FREE, GEOMETRY, LINE_LEN, LineBuf, RawLine};
-use crate::sequencer::LINE_JOBS;
 use embassy_stm32::gpio::Output;
 use embassy_stm32::mode::Async;
 use embassy_stm32::spi::{self, Spi, mode::Master};

@@ -7,14 +7,14 @@
 //! DMAMUX1, circular, one item, no interrupt), which writes 0 into GPIOE's BSRR (a word that
 //! changes no line) and so raises the stream's transfer-complete flag once a tick. That flag
 //! is a hardware request of the MDMA (channel 0), which plays the frame as a linked list
-//! ([`crate::mdma_list`]): each request moves the next word of the frame's chain table
+//! ([`super::mdma_list`]): each request moves the next word of the frame's chain table
 //! (`startrack_core::sequencer::Chain`) into GPIOE's BSRR, setting all 16 clock lines, the
 //! ADC's CONVST among them, at once (pin map: [`PINS`], docs/hardware.md), then clears the
 //! flag (the node's mask write). Each node plays one program step: a segment's words,
 //! repeated up to 4096 times by the MDMA itself. The CPU writes nodes, one a step, into a
 //! ring of [`NODE_RING`] nodes ahead of the MDMA and links them to the node in play (the
 //! last written node ends the list until the next are linked to it). The ring, the chain
-//! tables and the pacing word sit in the non-cacheable DMA region ([`crate::memory`]); the
+//! tables and the pacing word sit in the non-cacheable DMA region ([`super::memory`]); the
 //! compiled tables the chain is made from are CPU-only and cacheable.
 //!
 //! # Cost
@@ -35,7 +35,7 @@
 //! (`LineJobs`): when a job's last tick is linked it goes to [`LINE_JOBS`], tagged with the
 //! tracker's frame number and whether it is the frame's last line, with the instant its last
 //! sample will be taken (from the ticks linked ahead of it and the tick), and the readout
-//! task reads that line's words from the ADC board after that instant ([`crate::readout`]).
+//! task reads that line's words from the ADC board after that instant ([`super::readout`]).
 //! The board must buffer the samples of at least a line and what the feeder links ahead
 //! (docs/hardware.md).
 //!
@@ -60,6 +60,7 @@
 //! whether the MDMA serves each request within a tick (at 125 ns: the HIL step counts the
 //! ticks on the analyser).
 
+use crate::lines::{FrameRequest, REQUESTS};
 use core::sync::atomic::{AtomicU32, Ordering};
 use embassy_stm32::Peri;
 use embassy_stm32::gpio::{AnyPin, Level, Output, Speed};
@@ -70,16 +71,14 @@ use embassy_stm32::timer::UpDma;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
-use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant};
 use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
-    Binning, Chain, CompileError, Cost, Limits, LineJob, LineJobs, Link, Links, MAX_WINDOWS,
-    PinMap, PlanError, Program, ProgramParts, ReadoutPlan, Step, Ticks, Timing, compile,
+    Binning, Chain, CompileError, Cost, Limits, LineJob, LineJobs, Link, Links, PinMap, PlanError,
+    Program, ProgramParts, ReadoutPlan, Step, Ticks, Timing, compile,
 };
-use startrack_core::window::Rect;
 
-use crate::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};
+use super::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};
 
 /// The clock port's pin map: line `l` on PE`l` (I1-I3 PE0-2, S1-S3 PE3-5, R1L-R3L PE6-8,
 /// R1R-R3R PE9-11, RG PE12, SW PE13, DG PE14, CONVST PE15).
@@ -527,42 +526,6 @@ pub const IDLE_US: u64 = 32;
 
 /// Longest wait for the next request before the last program is replayed unannounced, us.
 pub const MAX_WAIT_US: u64 = 200_000;
-
-/// One frame's request as the sequencer gets it: the tracker's frame number, its exposure
-/// and its windows copied (no borrow crosses tasks). Cost: ~530 bytes.
-#[derive(Clone, Debug)]
-pub struct FrameRequest {
-    /// The tracker's frame number (tags the frame's lines).
-    pub frame: u32,
-    /// The exposure the tracker's configuration sets, us.
-    pub exposure_us: u32,
-    /// `None`: full frame; else the windows.
-    pub windows: Option<heapless::Vec<Rect, MAX_WINDOWS>>,
-    /// The request had more windows than a message holds (compiled as a full frame).
-    pub truncated: bool,
-}
-
-impl FrameRequest {
-    /// Copies `request` for frame `frame` with `exposure_us`.
-    pub fn new(frame: u32, request: &ReadoutRequest<'_>, exposure_us: u32) -> Self {
-        let (windows, truncated) = match request {
-            ReadoutRequest::FullFrame => (None, false),
-            ReadoutRequest::Windows(rects) => match heapless::Vec::from_slice(rects) {
-                Ok(v) => (Some(v), false),
-                Err(_) => (None, true),
-            },
-        };
-        Self {
-            frame,
-            exposure_us,
-            windows,
-            truncated,
-        }
-    }
-}
-
-/// The latest request (a newer one replaces one not yet compiled).
-pub static REQUESTS: Signal<CriticalSectionRawMutex, FrameRequest> = Signal::new();
 
 /// Requests compiled as full frames instead (refused plan or compile), since start-up.
 pub static FALLBACKS: AtomicU32 = AtomicU32::new(0);

@@ -8,9 +8,9 @@
 //! tables, code) is cached. Cost: none per transfer; 32 KB of AXI SRAM (23 KB used) served
 //! uncached.
 
+use super::sequencer::ClockBuffers;
+use super::uart::{RX_RING_BYTES, TX_DMA_BYTES};
 use crate::lines::{BUFFERS, LINE_LEN, LineBuf};
-use crate::link::{RX_RING_BYTES, TX_DMA_BYTES};
-use crate::sequencer::ClockBuffers;
 use core::cell::UnsafeCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
