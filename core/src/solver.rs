@@ -166,7 +166,7 @@ impl<'c> Solver<'c> {
 
     /// [`Self::update`] for an observer moving at `velocity_m_s` (ICRF, barycentric, m/s):
     /// once identified, the attitude is refitted with each matched catalog direction moved
-    /// by [`aberrate`](crate::attitude::aberrate), so the quaternion takes the ICRF (not the
+    /// by [`aberrate`], so the quaternion takes the ICRF (not the
     /// apparent sky) to the camera. Identification itself runs on the catalog as it is (the
     /// aberration, at most 0.001 c, is well inside its tolerances). The `bool` says whether
     /// the correction was applied (`false` without a velocity, or when the refit failed and

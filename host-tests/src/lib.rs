@@ -9,7 +9,6 @@ pub mod calib_frames;
 pub mod cli;
 pub mod cti;
 pub mod optics;
-pub mod pil;
 pub mod psf_model;
 pub mod realsky;
 pub mod sil_rates;

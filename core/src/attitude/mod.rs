@@ -28,7 +28,7 @@
 
 mod camera;
 mod quat;
-pub mod rate;
+mod rate;
 
 pub use camera::{Camera, CameraError};
 pub use quat::{Quat, angle_between};

@@ -456,16 +456,12 @@ fn relabel(stars: &[Measured], tri: (usize, usize, usize)) -> (usize, usize, usi
     // longest first. The side (i, j) is the one opposite k, so k is opposite the middle
     // side and j opposite the shortest.
     let opposite = [d(tri.1, tri.2), d(tri.0, tri.2), d(tri.0, tri.1)];
-    // Three compare-exchanges (a sorting network) rather than the slice sort, whose generic
-    // code for this one closure would cost the firmware about 10 KB of flash; equal sides keep
-    // their order, as a stable sort would.
     let mut order = [0usize, 1, 2];
-    let side = |x: usize| opposite.get(x).copied().unwrap_or(0.0);
-    for (a, b) in [(0, 1), (1, 2), (0, 1)] {
-        if side(order[a]).total_cmp(&side(order[b])).is_lt() {
-            order.swap(a, b);
-        }
-    }
+    order.sort_unstable_by(|&x, &y| {
+        let dx = opposite.get(x).copied().unwrap_or(0.0);
+        let dy = opposite.get(y).copied().unwrap_or(0.0);
+        dy.total_cmp(&dx)
+    });
     let at = |x: usize| {
         v.get(order.get(x).copied().unwrap_or(0))
             .copied()

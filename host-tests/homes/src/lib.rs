@@ -7,11 +7,13 @@
 //! - [`link_home`]: the SIL serving its command and telemetry link on TCP;
 //! - [`flash_home`]: the served SIL's table store over the H7 flash model;
 //! - [`pps`]: the spacecraft's PPS line and time-set, as the SIL and the served SIL drive them;
+//! - [`pil`]: the same scene fed to the flight image on QEMU's Cortex-M7 (processor in the loop);
 //! - [`demo`]: `cargo demo`'s frame, compared with the simulator's truth.
 
 pub mod demo;
 pub mod flash_home;
 pub mod home;
 pub mod link_home;
+pub mod pil;
 pub mod pps;
 pub mod sil;

@@ -1,5 +1,5 @@
 //! `startrack pil`: the flight firmware on QEMU's `mps2-an500` fed by the simulated sensor
-//! ([`crate::pil`]). Prints a line per frame (mode, stars, attitude, emulated time), then the
+//! ([`startrack_homes::pil`]). Prints a line per frame (mode, stars, attitude, emulated time), then the
 //! boot-to-first-attitude figure and the stack's high-water mark; `--attitude FILE` writes
 //! the CSV of `startrack sil --attitude`.
 //!
@@ -9,7 +9,7 @@
 
 use super::CliError;
 use super::sil::SilArgs;
-use crate::pil::{self, PilConfig, PilFrame, PilReport};
+use startrack_homes::pil::{self, PilConfig, PilFrame, PilReport};
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -155,6 +155,13 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
         link_noise: 0.0,
         flash: None,
         power_cut_at_write: None,
+        rate_deg_s: None,
+        exposure_ms: None,
+        slew_accel_deg_s2: None,
+        spacecraft_time_s: None,
+        counter_ppm: 0.0,
+        velocity_km_s: None,
+        apparent: false,
     };
     let sil = super::sil::config_of(&sil_args)?;
     let elf = elf_of(args)?;

@@ -439,12 +439,12 @@ fn serve_request<F: FnMut(u32) -> Simulator>(
         out.write_all(&[a, b, 0, 0]).map_err(io)?;
         return out.flush().map_err(io);
     }
-    let Ok(()) = pollster::block_on(source.start_frame(frame, &request));
+    let Ok(()) = crate::home::block_on(source.start_frame(frame, &request));
     // One line held back, to mark the last.
     let mut held: Option<(u16, Vec<u16>)> = None;
     let mut written = 0usize;
     loop {
-        let Ok(next) = pollster::block_on(source.next_line());
+        let Ok(next) = crate::home::block_on(source.next_line());
         let next = next.map(|l| (l.line, l.samples.to_vec()));
         if let Some((line, samples)) = held.take() {
             write_line(out, line, next.is_none(), &samples).map_err(io)?;
