@@ -192,7 +192,7 @@ pub fn run_case(case: &RateCase, seed0: u64, runs: u64, frames: u32) -> Result<R
     Ok(row)
 }
 
-/// The CSV header of [`write_csv`].
+/// The CSV header of [`csv`].
 pub const CSV_HEADER: &str = "motion,rate_deg_s,runs,frames,solved,availability,wrong,worst_arcsec,rms_cross_arcsec,bound_cross_arcsec,ratio";
 
 /// The rows as CSV, after `comment` lines (each prefixed `# `).
