@@ -87,7 +87,7 @@ fn the_attitude_csv_carries_the_truth_at_mid_exposure() {
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    assert_eq!(header.len(), 22, "{header:?}");
+    assert_eq!(header.len(), 31, "{header:?}");
     let rows: Vec<Vec<f64>> = lines
         .map(|l| {
             l.split(',')
