@@ -537,27 +537,9 @@ pub fn aberrated_sky_stars(
     a_px: f64,
     v_m_s: [f64; 3],
 ) -> Vec<Star> {
-    use startrack_sim::sky::scene::EDGE_MARGIN_PX;
-    let q = sky.attitude(frame);
-    let boresight = q.rotate_inv([0.0, 0.0, 1.0]);
-    let [cols, rows] = sky.active_px.map(f64::from);
-    let m = EDGE_MARGIN_PX;
-    catalog
-        .cone(boresight, catalog.field_radius_rad() + 0.02)
-        .filter_map(|(idx, dir)| {
-            let seen = startrack_core::attitude::aberrate(dir, v_m_s);
-            let p = sky.camera.project(q.rotate(seen))?;
-            let inside =
-                p[0] >= -m && p[1] >= -m && p[0] <= cols - 1.0 + m && p[1] <= rows - 1.0 + m;
-            let hp = f64::from(catalog.star(idx)?.hp_mmag) / 1000.0;
-            inside.then(|| Star {
-                x_px: p[0],
-                y_px: p[1],
-                signal_e: sky.flux_e_at_mag0 * 10f64.powf(-0.4 * hp),
-                a_px,
-            })
-        })
-        .collect()
+    sky.stars_seen(catalog, frame, a_px, |dir| {
+        startrack_core::attitude::aberrate(dir, v_m_s)
+    })
 }
 
 /// The attitude stage the SIL runs after each frame of a sky scene: the core's solver over

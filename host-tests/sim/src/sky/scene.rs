@@ -164,6 +164,18 @@ impl SkyScene {
     /// The stars of frame `frame` (at mid-exposure with a motion), each with the PSF width
     /// `a_px`.
     pub fn stars(&self, catalog: &Catalog<'_>, frame: u32, a_px: f64) -> Vec<Star> {
+        self.stars_seen(catalog, frame, a_px, |dir| dir)
+    }
+
+    /// [`Self::stars`] with each catalog direction moved by `seen` before it is projected
+    /// (an observer's aberration, say).
+    pub fn stars_seen(
+        &self,
+        catalog: &Catalog<'_>,
+        frame: u32,
+        a_px: f64,
+        seen: impl Fn([f64; 3]) -> [f64; 3],
+    ) -> Vec<Star> {
         let q = self.attitude(frame);
         let boresight = q.rotate_inv([0.0, 0.0, 1.0]);
         let [cols, rows] = self.active_px.map(f64::from);
@@ -171,7 +183,7 @@ impl SkyScene {
         catalog
             .cone(boresight, catalog.field_radius_rad() + 0.02)
             .filter_map(|(idx, dir)| {
-                let p = self.camera.project(q.rotate(dir))?;
+                let p = self.camera.project(q.rotate(seen(dir)))?;
                 let inside =
                     p[0] >= -m && p[1] >= -m && p[0] <= cols - 1.0 + m && p[1] <= rows - 1.0 + m;
                 let hp = f64::from(catalog.star(idx)?.hp_mmag) / 1000.0;
