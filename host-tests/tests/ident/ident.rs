@@ -17,13 +17,14 @@ fn catalog_bytes() -> &'static [u8] {
     BYTES.get_or_init(|| default_catalog().map(|b| b.bytes).unwrap_or_default())
 }
 
-fn catalog() -> Catalog<'static> {
+/// The repo's catalog, built once for every module of this binary.
+pub(crate) fn catalog() -> Catalog<'static> {
     Catalog::parse(catalog_bytes()).unwrap_or_else(|e| panic!("catalog: {e}"))
 }
 
 /// A solution is right when its attitude is within 1 mrad (4 px) of the truth: a wrong
 /// identification is off by degrees.
-fn is_right(sol: &Solution, truth: Quat) -> bool {
+pub(crate) fn is_right(sol: &Solution, truth: Quat) -> bool {
     let e = sol.attitude.q.error_vector(truth);
     (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt() < 1e-3
 }
@@ -145,13 +146,27 @@ fn lost_in_space_solves_noisy_fields_and_is_never_wrong() {
 
 #[test]
 fn random_point_sets_never_solve() {
-    let cat = catalog();
+    let (solved, max_hyps) = random_point_sets(&catalog(), 7, 100, 10, 30);
+    println!("random point sets: {solved} of 100 solved, at most {max_hyps} hypotheses tried");
+    assert_eq!(solved, 0);
+}
+
+/// Lost in space on `sets` sets of uniformly random points (`min_n` to `min_n + span - 1` of
+/// them, seeded by `seed`) over the 15 degree field: how many solved, and the most
+/// hypotheses one set cost. Any other error than no match fails the test.
+pub(crate) fn random_point_sets(
+    cat: &Catalog<'_>,
+    seed: u64,
+    sets: usize,
+    min_n: usize,
+    span: u32,
+) -> (usize, u32) {
     let spec = FieldSpec::ccd47_15deg(0.3);
     let cfg = IdentConfig::for_camera(spec.camera.focal_length_px, spec.sigma_px);
-    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (mut solved, mut max_hyps) = (0, 0);
-    for _ in 0..100 {
-        let n = 10 + (rng.random::<u32>() % 30) as usize;
+    for _ in 0..sets {
+        let n = min_n + (rng.random::<u32>() % span) as usize;
         let pts: Vec<FieldStar> = (0..n)
             .map(|_| FieldStar {
                 x_px: rng.random::<f64>() * 1023.0,
@@ -161,14 +176,13 @@ fn random_point_sets_never_solve() {
             })
             .collect();
         let meas = field::measured(&pts, &spec.camera, spec.sigma_px);
-        match ident::lost_in_space(&cat, &meas, &cfg) {
+        match ident::lost_in_space(cat, &meas, &cfg) {
             Ok(_) => solved += 1,
             Err(IdentError::NoMatch { hypotheses }) => max_hyps = max_hyps.max(hypotheses),
             Err(e) => panic!("{e}"),
         }
     }
-    println!("random point sets: {solved} of 100 solved, at most {max_hyps} hypotheses tried");
-    assert_eq!(solved, 0);
+    (solved, max_hyps)
 }
 
 #[test]

@@ -9,25 +9,10 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use startrack_core::attitude::{Camera, Quat};
 use startrack_core::catalog::Catalog;
-use startrack_core::ident::{self, IdentConfig, IdentError, Measured, Solution};
-use startrack_sim::sky::build::default_catalog;
+use startrack_core::ident::{self, IdentConfig, IdentError, Measured};
 use startrack_sim::sky::field::{self, FLUX_E_AT_MAG0, FieldSpec, FieldStar};
-use std::sync::OnceLock;
 
-fn catalog_bytes() -> &'static [u8] {
-    static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
-    BYTES.get_or_init(|| default_catalog().map(|b| b.bytes).unwrap_or_default())
-}
-
-fn catalog() -> Catalog<'static> {
-    Catalog::parse(catalog_bytes()).unwrap_or_else(|e| panic!("catalog: {e}"))
-}
-
-/// Right when within 1 mrad (4 px) of the truth: a wrong identification is off by degrees.
-fn is_right(sol: &Solution, truth: Quat) -> bool {
-    let e = sol.attitude.q.error_vector(truth);
-    (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt() < 1e-3
-}
+use super::ident::{catalog, is_right};
 
 /// The camera model with its focal length `1 + focal_error` times the true camera's.
 fn told(camera: &Camera, focal_error: f64) -> Camera {
@@ -266,29 +251,9 @@ fn the_floor_of_a_sparse_field() {
 
 #[test]
 fn random_point_sets_never_solve_with_the_scale_searched() {
-    let cat = catalog();
-    let spec = FieldSpec::ccd47_15deg(0.3);
-    let cfg = IdentConfig::for_camera(spec.camera.focal_length_px, spec.sigma_px);
-    let mut rng = ChaCha8Rng::seed_from_u64(61);
-    let (mut solved, mut max_hyps, sets) = (0, 0, 200);
-    for _ in 0..sets {
-        // 4 to 39 points: sparse sets as well as dense ones.
-        let n = 4 + (rng.random::<u32>() % 36) as usize;
-        let pts: Vec<FieldStar> = (0..n)
-            .map(|_| FieldStar {
-                x_px: rng.random::<f64>() * 1023.0,
-                y_px: rng.random::<f64>() * 1023.0,
-                flux_e: 1.0,
-                truth: None,
-            })
-            .collect();
-        let meas = field::measured(&pts, &spec.camera, spec.sigma_px);
-        match ident::lost_in_space(&cat, &meas, &cfg) {
-            Ok(_) => solved += 1,
-            Err(IdentError::NoMatch { hypotheses }) => max_hyps = max_hyps.max(hypotheses),
-            Err(e) => panic!("{e}"),
-        }
-    }
+    // 4 to 39 points: sparse sets as well as dense ones.
+    let sets = 200;
+    let (solved, max_hyps) = super::ident::random_point_sets(&catalog(), 61, sets, 4, 36);
     println!("random point sets: {solved} of {sets} solved, at most {max_hyps} hypotheses");
     assert_eq!(solved, 0);
 }
