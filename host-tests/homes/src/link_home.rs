@@ -1,6 +1,6 @@
-//! The link's host home: the table store in memory ([`MemoryTables`], the host binding of
-//! the core's table-upload port), the simulated sensor as the diagnostic window source
-//! ([`SimWindows`]), and the software-in-the-loop served over TCP ([`serve`]): the core's
+//! The link's host home: the software-in-the-loop served over TCP ([`serve`]), with its table
+//! store in memory ([`MemoryTables`], [`crate::memory_tables`]) or on the flash model ([`crate::flash_home`]) and the
+//! simulated sensor as the diagnostic window source ([`SimWindows`]): the core's
 //! [`LinkService`] on 127.0.0.1:P standing in for the UART, optionally with seeded bit
 //! errors on the received bytes (`--link-noise`). With a sky scene ([`SilConfig::sky`]) each
 //! frame's star list also goes through the attitude stage as on the board, and its attitude
@@ -21,270 +21,23 @@
 //! the attitude stage's per frame and one 128-byte report (a 151-byte packet).
 
 use crate::home::{FrameClock, SimLines, block_on, host_health};
+use crate::memory_tables::MemoryTables;
 use crate::sil::{self, SilConfig};
+use crate::sim_windows::SimWindows;
 use rand::{RngExt, SeedableRng};
-use startrack_core::calib::{FrameCalibration, LineLevels};
 use startrack_core::catalog::Catalog;
 use startrack_core::cycle::{CyclePorts, FrameCycle};
-use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
-use startrack_core::link::{
-    LinkService, TableInfo, TableUpload, UploadRefusal, WindowKind, WindowReader, WindowRequest,
-};
-use startrack_core::table::CalibTable;
+use startrack_core::link::{LinkService, TableUpload};
 use startrack_core::tracker::{
     Event, FixedTemperature, FrameSummary, StarRecord, TableStore, TelemetrySink, Tracker,
     TrackerBuffers,
 };
-use startrack_core::window::Rect;
-use startrack_sim::flash_model::CRC32;
-use startrack_sim::sim::{SensorParams, Simulator, Star};
+use startrack_sim::sim::SensorParams;
 use startrack_sim::sky::scene::committed_catalog;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::time::{Duration, Instant};
-
-/// Largest table the memory store takes, bytes (a per-pixel table of the CCD47-20 is ~3 MB;
-/// the board's flash slot is 128 KB).
-pub const MEMORY_MAX_TABLE: u32 = 8 << 20;
-
-struct Upload {
-    kind: u8,
-    total_len: u32,
-    crc32: u32,
-    bytes: Vec<u8>,
-}
-
-/// The table store in memory: the table in force (a committed table is kept for the rest of
-/// the process, as flash keeps it), and the upload under way.
-pub struct MemoryTables {
-    geometry: ReadoutGeometry,
-    active: Option<(CalibTable<'static>, TableInfo)>,
-    /// The bytes of the table in force.
-    active_bytes: &'static [u8],
-    upload: Option<Upload>,
-    sequence: u32,
-}
-
-/// Leaks `bytes` and parses them as a table of `geometry`.
-fn keep(
-    bytes: Vec<u8>,
-    geometry: &ReadoutGeometry,
-) -> Option<(CalibTable<'static>, &'static [u8])> {
-    let b: &'static [u8] = bytes.leak();
-    let t = CalibTable::parse(b).ok()?;
-    (t.geometry() == geometry).then_some((t, b))
-}
-
-impl MemoryTables {
-    /// A store for tables of `geometry`, with `initial` in force if it is a usable table.
-    pub fn new(geometry: ReadoutGeometry, initial: Option<Vec<u8>>) -> Self {
-        let active = initial.and_then(|b| {
-            let info = TableInfo {
-                kind: TABLE_KIND_CALIBRATION,
-                len_bytes: u32::try_from(b.len()).ok()?,
-                crc32: CRC32.checksum(&b),
-                sequence: 0,
-            };
-            keep(b, &geometry).map(|t| (t, info))
-        });
-        Self {
-            geometry,
-            active_bytes: active.map_or(&[], |((_, b), _)| b),
-            active: active.map(|((t, _), i)| (t, i)),
-            upload: None,
-            sequence: 0,
-        }
-    }
-}
-
-impl TableUpload for MemoryTables {
-    fn begin(&mut self, kind: u8, total_len: u32, crc32: u32) -> Result<(), UploadRefusal> {
-        if self.upload.is_some() {
-            return Err(UploadRefusal::Busy);
-        }
-        if kind != TABLE_KIND_CALIBRATION {
-            return Err(UploadRefusal::UnknownKind);
-        }
-        if total_len == 0 || total_len > MEMORY_MAX_TABLE {
-            return Err(UploadRefusal::TooLong);
-        }
-        self.upload = Some(Upload {
-            kind,
-            total_len,
-            crc32,
-            bytes: Vec::new(),
-        });
-        Ok(())
-    }
-
-    fn chunk(&mut self, offset: u32, data: &[u8]) -> Result<(), UploadRefusal> {
-        let u = self.upload.as_mut().ok_or(UploadRefusal::NotStarted)?;
-        let at = u32::try_from(u.bytes.len()).map_err(|_| UploadRefusal::TooLong)?;
-        if offset != at {
-            return Err(UploadRefusal::OutOfOrder { expected: at });
-        }
-        let end = u64::from(at) + data.len() as u64;
-        if end > u64::from(u.total_len) {
-            return Err(UploadRefusal::TooLong);
-        }
-        u.bytes.extend_from_slice(data);
-        Ok(())
-    }
-
-    fn commit(&mut self) -> Result<TableInfo, UploadRefusal> {
-        let u = self.upload.take().ok_or(UploadRefusal::NotStarted)?;
-        if u.bytes.len() as u64 != u64::from(u.total_len) {
-            return Err(UploadRefusal::Incomplete);
-        }
-        if CRC32.checksum(&u.bytes) != u.crc32 {
-            return Err(UploadRefusal::CrcMismatch);
-        }
-        let (table, bytes) = keep(u.bytes, &self.geometry).ok_or(UploadRefusal::Invalid)?;
-        self.active_bytes = bytes;
-        self.sequence += 1;
-        let info = TableInfo {
-            kind: u.kind,
-            len_bytes: u.total_len,
-            crc32: u.crc32,
-            sequence: self.sequence,
-        };
-        self.active = Some((table, info));
-        Ok(info)
-    }
-
-    fn abort(&mut self) {
-        self.upload = None;
-    }
-
-    fn active(&self, kind: u8) -> Option<TableInfo> {
-        self.active.map(|(_, i)| i).filter(|i| i.kind == kind)
-    }
-
-    fn read_active(&mut self, kind: u8, offset: u32, out: &mut [u8]) -> bool {
-        let at = offset as usize;
-        match self
-            .active(kind)
-            .and(self.active_bytes.get(at..at + out.len()))
-        {
-            Some(b) => {
-                out.copy_from_slice(b);
-                true
-            }
-            None => false,
-        }
-    }
-}
-
-impl TableStore<'static> for MemoryTables {
-    fn active_table(&mut self) -> Option<CalibTable<'static>> {
-        self.active.map(|(t, _)| t)
-    }
-}
-
-/// Diagnostic windows from the simulated sensor, of the frame after the request: raw, or
-/// calibrated as the tracker calibrates a window (each line's bias from its own over-scan,
-/// then the per-pixel formula with the tracker's calibration: its table, dark scale, exposure
-/// and temperature, [`Tracker::calibration`]), in e- x 64.
-pub struct SimWindows {
-    /// The sensor.
-    pub params: SensorParams,
-    /// The stars of the frame to render.
-    pub stars: Vec<Star>,
-    /// Its stars that move during the exposure ([`Simulator::trails`]).
-    pub trails: Vec<startrack_sim::trail::TrailedImage>,
-    /// Its frame number (the noise draw).
-    pub frame: u32,
-    /// The tracker's calibration (calibrated windows need one).
-    pub calibration: Option<FrameCalibration<'static>>,
-    rendered: Option<(WindowRequest, Vec<i32>)>,
-}
-
-impl SimWindows {
-    /// A source for `params`' sensor.
-    pub fn new(params: SensorParams) -> Self {
-        Self {
-            params,
-            stars: Vec::new(),
-            trails: Vec::new(),
-            frame: 0,
-            calibration: None,
-            rendered: None,
-        }
-    }
-}
-
-impl WindowReader for SimWindows {
-    fn check(&mut self, r: &WindowRequest) -> bool {
-        let g = self.params.geometry;
-        let inside = u32::from(r.x0) + u32::from(r.side_px) <= u32::from(g.active_cols)
-            && u32::from(r.y0) + u32::from(r.side_px) <= u32::from(g.active_rows);
-        if !inside {
-            return false;
-        }
-        let sim = Simulator {
-            frame: self.frame,
-            trails: self.trails.clone(),
-            ..Simulator::new(self.params.clone(), self.stars.clone())
-        };
-        let rect = Rect {
-            x0: r.x0,
-            y0: r.y0,
-            width: r.side_px,
-            height: r.side_px,
-        };
-        let px = match r.kind {
-            WindowKind::Raw => sim.render_window(rect).into_iter().map(i32::from).collect(),
-            WindowKind::Calibrated => {
-                let Some(cal) = self.calibration else {
-                    return false;
-                };
-                match calibrated_window(&sim, &cal, rect) {
-                    Some(px) => px,
-                    None => return false,
-                }
-            }
-        };
-        self.rendered = Some((*r, px));
-        true
-    }
-
-    fn read_row(&mut self, r: &WindowRequest, row: u16, out: &mut [i32]) -> bool {
-        let Some((req, px)) = &self.rendered else {
-            return false;
-        };
-        if req != r {
-            return false;
-        }
-        let side = usize::from(r.side_px);
-        let start = usize::from(row) * side;
-        match px.get(start..start + side) {
-            Some(src) if out.len() == side => {
-                out.copy_from_slice(src);
-                true
-            }
-            _ => false,
-        }
-    }
-}
-
-/// Window `rect` of `sim`'s frame calibrated with `cal`, e- x 64 (I26F6 bits).
-fn calibrated_window(sim: &Simulator, cal: &FrameCalibration<'_>, rect: Rect) -> Option<Vec<i32>> {
-    let raw = crate::demo::render_frame(sim);
-    let g = sim.params.geometry;
-    let lines = raw
-        .chunks_exact(g.line_len())
-        .map(|l| LineLevels::measure(&g, l))
-        .collect::<Result<Vec<_>, _>>()
-        .ok()?;
-    let levels = crate::home::FrameLevels {
-        geometry: g,
-        lines,
-        dark_scale_e: None,
-    };
-    let (e, _, _) = levels.calibrate_window(cal, &raw, rect).ok()?;
-    Some(e.into_iter().map(|v| v.to_bits()).collect())
-}
 
 /// Between two frames the link is served at least this long, ms.
 pub const LINK_PHASE_MS: u64 = 20;

@@ -414,7 +414,7 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
             &line.next_pulse_time().with_p_field(),
             0,
         );
-        let mut store = crate::link_home::MemoryTables::new(params.geometry, None);
+        let mut store = crate::memory_tables::MemoryTables::new(params.geometry, None);
         cycle.receive(&tc, &mut store, &mut NoWindows);
         if let (Some(v), true) = (config.velocity_m_s, config.send_velocity) {
             let (tc, _) = startrack_ground::frame_telecommand(
