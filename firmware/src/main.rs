@@ -23,10 +23,12 @@ mod lines;
 mod link;
 mod pps;
 mod safe_state;
+mod spawn;
 mod telemetry;
 mod watchdog;
 
-use embassy_executor::{SpawnError, SpawnToken, Spawner};
+use embassy_executor::Spawner;
+use spawn::spawn_or_log;
 use startrack_core::safe::SetupFaults;
 use startrack_core::store::TableKind;
 use startrack_core::tracker::TrackerBuffers;
@@ -36,24 +38,6 @@ use static_cell::ConstStaticCell;
 /// zero, so in `.bss`; the tracker sets them up in place.
 static TRACKER_BUFFERS: ConstStaticCell<TrackerBuffers> =
     ConstStaticCell::new(TrackerBuffers::new());
-
-/// Spawns a task, or logs why it could not be (a task spawned twice); `false` then.
-pub(crate) fn spawn_or_log<S>(
-    spawner: Spawner,
-    name: &str,
-    token: Result<SpawnToken<S>, SpawnError>,
-) -> bool {
-    match token {
-        Ok(token) => {
-            spawner.spawn(token);
-            true
-        }
-        Err(e) => {
-            defmt::error!("cannot spawn {=str}: {}", name, e);
-            false
-        }
-    }
-}
 
 /// Set-up, in order: the board, the reset cause and the fault record, the watchdog (so a
 /// hang in what follows resets), the table store and the calibration table, the catalog, the

@@ -26,7 +26,7 @@ pub mod uart;
 
 use super::{Started, WatchdogPort};
 use crate::lines::{BUFFERS, FILLED, FREE, LINE_LEN, LineBuf, REQUESTS, RawLine};
-use crate::spawn_or_log;
+use crate::spawn::spawn_or_log;
 use core::cell::RefCell;
 use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};

@@ -19,7 +19,7 @@ pub mod uart;
 
 use super::{Started, WatchdogPort};
 use crate::lines::LINE_LEN;
-use crate::spawn_or_log;
+use crate::spawn::spawn_or_log;
 use embassy_executor::Spawner;
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::peripherals::{self as p, IWDG1};
