@@ -1,14 +1,7 @@
-//! The `startrack` command and the lab calibration behind it: building calibration tables from
-//! raw lab frames ([`calib_frames`]), the charge-trap and PSF-model fits ([`cti`],
-//! [`psf_model`]), the camera-model fit ([`optics`]), and each command's options and output
-//! ([`cli`]). The frame cycle's host ports live in `startrack-homes`, the analyses in
-//! `startrack-analysis`, the simulated sensor in `startrack-sim`, the ground client in
-//! `startrack-ground`.
+//! The `startrack` command: one module per subcommand ([`cli`]), each parsing its options and
+//! calling the library that does the work: the frame cycle's host homes (`startrack-homes`),
+//! the lab and sky tools (`startrack-lab`), the analyses (`startrack-analysis`), the simulated
+//! sensor (`startrack-sim`) and the ground client (`startrack-ground`). The binary is
+//! `src/bin/startrack.rs`; the tests of every crate live in `tests/`.
 
-pub mod calib_frames;
 pub mod cli;
-pub mod cti;
-pub mod optics;
-pub mod psf_model;
-pub mod realsky;
-pub mod sil_rates;

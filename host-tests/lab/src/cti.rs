@@ -37,6 +37,11 @@ use startrack_sim::sim::psf::sigma_of_a;
 use startrack_sim::sim::{Effects, SensorParams, Simulator, Star};
 use std::fmt::Write as _;
 
+/// The fluxes of the CTI fit's noise-free grid, e- (`calib cti` and the lab's EPER fit).
+pub const CTI_FIT_FLUXES_E: [f64; 8] = [
+    300.0, 600.0, 1200.0, 2500.0, 5000.0, 10_000.0, 20_000.0, 45_000.0,
+];
+
 /// The trap law the docs and tests use: 5e-5 (parallel) and 3e-5 (serial) per transfer at
 /// 1000 e-, alpha 0.5, a 3-pixel trail decaying by half (mean delay 1.57 px): for the flight
 /// method about 0.038 px of bias for a 300 e- star on the far rows of the CCD47-20, 0.015 px

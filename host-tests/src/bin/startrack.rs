@@ -107,7 +107,7 @@ enum CatalogCommand {
 #[derive(Subcommand)]
 enum CalibCommand {
     /// Build a table from bias, dark and flat FITS maps, gains and a hot-pixel CSV.
-    Build(startrack_host::cli::calib_build::CalibBuildArgs),
+    Build(startrack_lab::table_build::CalibBuildArgs),
     /// Build a table and a report from raw lab frames (bias, flat pairs, darks).
     Frames(startrack_host::cli::calib_frames::CalibFramesArgs),
     /// Write a simulated lab set of raw frames (to try `calib frames` on).

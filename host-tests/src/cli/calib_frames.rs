@@ -1,5 +1,5 @@
 //! `startrack calib frames DIR... --out TABLE --report-dir DIR`: a calibration table and a
-//! report from raw lab frames (see [`crate::calib_frames`]), and `startrack calib lab-set
+//! report from raw lab frames (see [`startrack_lab::calib_frames`]), and `startrack calib lab-set
 //! --out DIR`, which writes a simulated lab set to try it on. Every FITS file of the folders
 //! and their sub-folders is read (`.fits`, `.fit`, `.fts`, and each gzipped, `.gz`, or
 //! tile-compressed, `.fz`); a bad input stops the run with one line naming the file and the
@@ -11,10 +11,10 @@
 //! 3 minutes and 86 M without the ladder).
 
 use super::{CliError, write_file};
-use crate::calib_frames::labset::LabSet;
-use crate::calib_frames::{Grouping, Products, calibrate_with, report};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::MAX_TILE_LOG2;
+use startrack_lab::calib_frames::labset::LabSet;
+use startrack_lab::calib_frames::{Grouping, Products, calibrate_with, report};
 use std::path::{Path, PathBuf};
 
 /// The readouts `calib frames` and `calib lab-set` know.
@@ -60,7 +60,7 @@ pub struct CalibFramesArgs {
     pub sensor: Sensor,
     /// Regulation band: darks whose CCDTEMP lies within this of their group's median are
     /// one temperature, K.
-    #[arg(long, default_value_t = crate::calib_frames::read::DEFAULT_TEMPERATURE_TOLERANCE_K)]
+    #[arg(long, default_value_t = startrack_lab::calib_frames::read::DEFAULT_TEMPERATURE_TOLERANCE_K)]
     pub temperature_tolerance_k: f64,
 }
 

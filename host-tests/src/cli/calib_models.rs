@@ -3,7 +3,7 @@
 //! --cti` and `--psf-model` take.
 //!
 //! - `calib cti --out-dir DIR [--traps FILE]`: the CTI centroid bias of the flight method
-//!   against signal and transfer distance on the simulator ([`crate::cti`]), written as
+//!   against signal and transfer distance on the simulator ([`startrack_lab::cti`]), written as
 //!   `cti_bias.csv`; the coefficients fitted to it as `cti.json`; and the paired Monte Carlo
 //!   of the correction against the simulator's trap law as `cti_residual.csv`, summarised per
 //!   SNR on stdout (the CTI rows of the accuracy docs). `--traps` takes a trap law measured
@@ -11,27 +11,24 @@
 //!   come from the measurement, and the Monte Carlo still checks them against the simulator's
 //!   own law.
 //! - `calib psf-model STARS.csv... --out FILE [--degree D]`: the field PSF model fitted to the
-//!   stars' measured widths ([`crate::psf_model`]).
+//!   stars' measured widths ([`startrack_lab::psf_model`]).
 //!
 //! Cost: `calib cti` under a second (0.3 s in the test profile) (256 noise-free windows for the fit, 125 cells
 //! of 40-400 pairs for the Monte Carlo); `calib psf-model` one small SVD per clipping round.
 
 use super::{CliError, read_file, write_file};
-use crate::cti::{
-    CtiCoeffsJson, CtiExperiment, DEFAULT_TRAPS, McCell, bias_csv, mc_csv, summarize,
-};
-use crate::psf_model::{fit, read_stars_csv};
 use startrack_core::geometry::ReadoutGeometry;
+use startrack_lab::cti::{
+    CTI_FIT_FLUXES_E, CtiCoeffsJson, CtiExperiment, DEFAULT_TRAPS, McCell, bias_csv, mc_csv,
+    summarize,
+};
+use startrack_lab::psf_model::{fit, read_stars_csv};
 use startrack_sim::sim::effects::ChargeTraps;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// The SNRs of the Monte Carlo.
 pub const CTI_SNRS: [f64; 5] = [10.0, 20.0, 50.0, 100.0, 200.0];
-/// The fluxes of the fit's noise-free grid, e-.
-pub const CTI_FIT_FLUXES_E: [f64; 8] = [
-    300.0, 600.0, 1200.0, 2500.0, 5000.0, 10_000.0, 20_000.0, 45_000.0,
-];
 
 /// Pairs per Monte Carlo cell at `snr` (the paired residual's scatter falls as 1 / SNR):
 /// 400 at SNR 10, 40 from SNR 32 up.
@@ -162,7 +159,9 @@ pub fn run_cti(args: &CalibCtiArgs) -> Result<CtiRun, CliError> {
 }
 
 /// Runs `startrack calib psf-model`: fits and writes the model, prints its summary.
-pub fn run_psf_model(args: &PsfModelArgs) -> Result<crate::psf_model::PsfModelFit, CliError> {
+pub fn run_psf_model(
+    args: &PsfModelArgs,
+) -> Result<startrack_lab::psf_model::PsfModelFit, CliError> {
     let g = ReadoutGeometry::CCD47_20_DUAL;
     let mut stars = Vec::new();
     for p in &args.stars {

@@ -21,6 +21,7 @@ pub mod solve_image;
 pub mod tradeoff;
 
 use startrack_core::table::{TableError, WriteError};
+use startrack_lab::LabError;
 use startrack_sim::fits::FitsError;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -79,6 +80,19 @@ impl fmt::Display for CliError {
 }
 
 impl std::error::Error for CliError {}
+
+impl From<LabError> for CliError {
+    fn from(e: LabError) -> Self {
+        match e {
+            LabError::Io { path, msg } => Self::Io { path, msg },
+            LabError::Fits(e) => Self::Fits(e),
+            LabError::Table { path, err } => Self::Table { path, err },
+            LabError::TableWrite(e) => Self::TableWrite(e),
+            LabError::Csv { path, line, msg } => Self::Csv { path, line, msg },
+            LabError::Invalid(m) => Self::Usage(m),
+        }
+    }
+}
 
 impl From<FitsError> for CliError {
     fn from(e: FitsError) -> Self {

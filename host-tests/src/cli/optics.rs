@@ -1,5 +1,5 @@
 //! `startrack optics case|fit`: the camera model measured from identified stars over many
-//! frames ([`crate::optics`]), written as JSON for `startrack calib build --camera-model`.
+//! frames ([`startrack_lab::optics`]), written as JSON for `startrack calib build --camera-model`.
 //!
 //! `optics case --out DIR` writes simulated frames through distorted optics with lateral
 //! colour (seeded): `DIR/fields/*.csv` (`x_px,y_px,flux_e`, brightest first), `case.json`
@@ -13,10 +13,10 @@
 //! the truth, the model's image error and the colour residual after correction.
 
 use super::{CliError, read_file, write_file};
-use crate::optics::{self, FitOptions, PARAM_NAMES};
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 use startrack_core::attitude::{Camera, Quat};
 use startrack_core::catalog::Catalog;
+use startrack_lab::optics::{self, CameraModelJson, FitOptions, PARAM_NAMES, read_camera_model};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -53,103 +53,6 @@ pub struct OpticsFitArgs {
     /// Hold the lateral colour scale at 0 (to see what the colour term removes).
     #[arg(long)]
     pub no_colour: bool,
-}
-
-/// The camera-model file: the model and, from a fit, how well it is known.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct CameraModelJson {
-    /// Focal length, px.
-    pub focal_length_px: f64,
-    /// Principal point (column, row), px.
-    pub principal_point_px: [f64; 2],
-    /// Radial distortion, `r^2` term.
-    #[serde(default)]
-    pub k1: f64,
-    /// Radial distortion, `r^4` term.
-    #[serde(default)]
-    pub k2: f64,
-    /// Tangential distortion.
-    #[serde(default)]
-    pub p1: f64,
-    /// Tangential distortion.
-    #[serde(default)]
-    pub p2: f64,
-    /// Lateral colour, relative scale per mag of B-V.
-    #[serde(default)]
-    pub colour_scale_per_mag: f64,
-    /// Reference B-V of the colour scale, mag.
-    #[serde(default = "default_ref_bv")]
-    pub colour_ref_bv_mag: f64,
-    /// Formal 1-sigma of the fitted parameters, in the order of `sigma_names`.
-    #[serde(default)]
-    pub sigma: Vec<f64>,
-    /// Names of `sigma`'s entries.
-    #[serde(default)]
-    pub sigma_names: Vec<String>,
-    /// RMS of the fit's residuals per axis, px.
-    #[serde(default)]
-    pub residual_rms_px: Option<f64>,
-    /// Identified stars the fit used.
-    #[serde(default)]
-    pub stars: Option<usize>,
-    /// Frames the fit used.
-    #[serde(default)]
-    pub frames: Option<usize>,
-}
-
-fn default_ref_bv() -> f64 {
-    Camera::pinhole(1.0, [0.0, 0.0]).colour_ref_bv_mag
-}
-
-impl CameraModelJson {
-    /// The file of a bare model.
-    pub fn of(c: &Camera) -> Self {
-        Self {
-            focal_length_px: c.focal_length_px,
-            principal_point_px: c.principal_point_px,
-            k1: c.k1,
-            k2: c.k2,
-            p1: c.p1,
-            p2: c.p2,
-            colour_scale_per_mag: c.colour_scale_per_mag,
-            colour_ref_bv_mag: c.colour_ref_bv_mag,
-            sigma: Vec::new(),
-            sigma_names: Vec::new(),
-            residual_rms_px: None,
-            stars: None,
-            frames: None,
-        }
-    }
-
-    /// The model.
-    pub fn camera(&self) -> Camera {
-        Camera {
-            focal_length_px: self.focal_length_px,
-            principal_point_px: self.principal_point_px,
-            k1: self.k1,
-            k2: self.k2,
-            p1: self.p1,
-            p2: self.p2,
-            colour_scale_per_mag: self.colour_scale_per_mag,
-            colour_ref_bv_mag: self.colour_ref_bv_mag,
-        }
-    }
-}
-
-/// Reads a camera-model file (as `optics fit` writes) and checks that the model is usable over
-/// the CCD47-20's frame.
-pub fn read_camera_model(path: &Path) -> Result<Camera, CliError> {
-    let bytes = read_file(path)?;
-    let m: CameraModelJson = serde_json::from_slice(&bytes)
-        .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
-    let cam = m.camera();
-    cam.check_over(
-        1024,
-        1024,
-        startrack_core::table::camera::COLOUR_RANGE_BV_MAG,
-    )
-    .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
-    Ok(cam)
 }
 
 fn catalog_bytes(path: Option<&Path>) -> Result<Vec<u8>, CliError> {

@@ -240,8 +240,8 @@ fn mix_stars(
             s.a_px = mix.psf_a_list.get(i).copied().unwrap_or(s.a_px);
         }
         if let Some((c, k)) = field {
-            let u = crate::psf_model::norm(s.x_px, g.active_cols);
-            let v = crate::psf_model::norm(s.y_px, g.active_rows);
+            let u = startrack_lab::psf_model::norm(s.x_px, g.active_cols);
+            let v = startrack_lab::psf_model::norm(s.y_px, g.active_rows);
             s.a_px = c + (k - c) * (u * u + v * v) / 2.0;
         }
         if let Some((lo, hi)) = snr {

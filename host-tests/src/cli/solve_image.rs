@@ -1,27 +1,27 @@
 //! `startrack solve-image IMAGE... --fov-deg F [--fov-max-error E] [--focal-length-px P]
-//! [--catalog FILE] [--out DIR]`: real images to attitudes ([`crate::realsky`]).
+//! [--catalog FILE] [--out DIR]`: real images to attitudes ([`startrack_lab::realsky`]).
 //!
 //! `DIR/solutions.csv` gets one row per image:
 //! `image,solved,ra_deg,dec_deg,roll_deg,fov_deg,matched,rmse_arcsec,time_ms`, with RA and
 //! Dec of the image centre (ICRS, the catalog's epoch), roll as tetra3 defines it
-//! ([`crate::realsky::solve::roll_tetra3_deg`]), the fitted horizontal field of view, the
+//! ([`startrack_lab::realsky::solve::roll_tetra3_deg`]), the fitted horizontal field of view, the
 //! stars matched, the RMS of their angular residuals and the wall time from reading the file
 //! to the attitude. Per solved image, `DIR/<stem>.stars.csv` holds the matched stars:
 //! `x_px,y_px,hip,ra_deg,dec_deg,mag,residual_arcsec` (catalog position and Hp magnitude),
 //! its TAN WCS as a header-only FITS file `DIR/<stem>.wcs` and an annotated
-//! `DIR/<stem>.png` ([`crate::realsky::wcs`]); and per image read
+//! `DIR/<stem>.png` ([`startrack_lab::realsky::wcs`]); and per image read
 //! `DIR/<stem>.detections.csv` every star found (`x_px,y_px,flux_e,snr,sigma_px,flags`,
 //! brightest first).
 //! An image that cannot be read or solved gets a row with `solved` 0 and one line on stderr,
 //! and the command then exits non-zero.
 
 use super::{CliError, read_file, write_file};
-use crate::realsky::picture;
-use crate::realsky::solve::{self, ImageSolution, SolveSpec};
-use crate::realsky::stars::{self, StarField};
-use crate::realsky::wcs;
 use startrack_core::attitude::angle_between;
 use startrack_core::catalog::Catalog;
+use startrack_lab::realsky::picture;
+use startrack_lab::realsky::solve::{self, ImageSolution, SolveSpec};
+use startrack_lab::realsky::stars::{self, StarField};
+use startrack_lab::realsky::wcs;
 use startrack_sim::sky::{SkyStar, default_list_path, read_list};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

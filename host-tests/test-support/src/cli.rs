@@ -1,8 +1,8 @@
 //! What the command tests share: running a `startrack` binary, and `calib build`'s options
 //! for the maps `simulate` writes.
 
-use startrack_host::cli::calib_build::CalibBuildArgs;
 use startrack_host::cli::simulate::SimFiles;
+use startrack_lab::table_build::CalibBuildArgs;
 use std::path::PathBuf;
 use std::process::Command;
 

@@ -14,8 +14,8 @@ use startrack_core::tracker::StarFlags;
 use startrack_host::cli::accuracy_frames::monte_carlo::{
     BinStats, FrameMc, FrameMcRun, SNR_EDGES, build_args, csv, run, snr_of, stats,
 };
-use startrack_host::cli::calib_build::build;
 use startrack_host::cli::simulate::{HOT_RATES_E_PER_S, SceneMix, SimulateArgs};
+use startrack_lab::table_build::build;
 use std::sync::OnceLock;
 
 /// The target: RMS error / CRLB at most this, from a = 0.8 px against the known-width bound
@@ -364,8 +364,8 @@ fn a_field_of_widths_is_measured_and_modelled() {
     let g = startrack_core::geometry::ReadoutGeometry::CCD47_20_DUAL;
     for l in truth.lines().skip(1) {
         let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
-        let u = startrack_host::psf_model::norm(v[0], g.active_cols);
-        let w = startrack_host::psf_model::norm(v[1], g.active_rows);
+        let u = startrack_lab::psf_model::norm(v[0], g.active_cols);
+        let w = startrack_lab::psf_model::norm(v[1], g.active_rows);
         let a = 0.6 + 1.4 * (u * u + w * w) / 2.0;
         assert!(
             (v[3] - a).abs() < 1e-5,

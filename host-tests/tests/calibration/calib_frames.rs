@@ -7,8 +7,8 @@
 //! (`LabSet::ccd47_20`, the command in docs/calibration.md; minutes in release).
 
 use startrack_core::geometry::{ReadoutGeometry, Segment};
-use startrack_host::calib_frames::labset::LabSet;
-use startrack_host::calib_frames::{Products, calibrate};
+use startrack_lab::calib_frames::labset::LabSet;
+use startrack_lab::calib_frames::{Products, calibrate};
 use startrack_sim::sim::{Simulator, Star};
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -95,7 +95,7 @@ fn gain_and_read_noise_per_output_match_the_truth() {
 ///   `1 / sqrt(2 N m_min)` (two frames of N pixels at `m_min` e-), which the relative
 ///   deviation weighs most: 0.066 pp on the small set (5 000 e-, 8 192 pixels).
 fn assert_full_well_and_linearity(set: &LabSet, p: &Products) {
-    use startrack_host::calib_frames::ptc::{LINEARITY_RANGE, fit_line};
+    use startrack_lab::calib_frames::ptc::{LINEARITY_RANGE, fit_line};
     use startrack_sim::sim::SaturationLimit;
     let sim = set.sensor();
     let g = set.geometry;
@@ -446,7 +446,7 @@ fn telegraph_pixels_are_found() {
 fn report_directory_holds_every_product() {
     let r = run();
     let dir = tempfile::tempdir().unwrap();
-    let w = startrack_host::calib_frames::report::write(&r.products, dir.path()).unwrap();
+    let w = startrack_lab::calib_frames::report::write(&r.products, dir.path()).unwrap();
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).unwrap())
             .unwrap();
@@ -613,7 +613,7 @@ fn star_frames_with_the_built_table_match_the_true_table() {
 
 #[test]
 fn linearity_error_and_plateau_by_hand() {
-    use startrack_host::calib_frames::ptc::{PairPoint, linearity_error_pct, saturation};
+    use startrack_lab::calib_frames::ptc::{PairPoint, linearity_error_pct, saturation};
     let pt = |t: f64, m: f64| PairPoint {
         output: 0,
         exptime_s: t,

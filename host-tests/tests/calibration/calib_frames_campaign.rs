@@ -8,9 +8,9 @@
 
 use super::lab_campaign::{Campaign, Format};
 use startrack_core::geometry::{ReadoutGeometry, Segment};
-use startrack_host::calib_frames::labset::LabSet;
-use startrack_host::calib_frames::{Products, calibrate};
 use startrack_host::cli::calib_frames::fits_files;
+use startrack_lab::calib_frames::labset::LabSet;
+use startrack_lab::calib_frames::{Products, calibrate};
 use std::path::PathBuf;
 use std::sync::OnceLock;
 

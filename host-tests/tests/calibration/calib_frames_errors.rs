@@ -4,9 +4,9 @@
 //! itself on a good minimal set, and the keyword spellings it reads.
 
 use startrack_core::geometry::ReadoutGeometry;
-use startrack_host::calib_frames::labset::{LabSet, write_string_keys};
-use startrack_host::calib_frames::{FramesError, calibrate};
 use startrack_host::cli::calib_frames::{CalibFramesArgs, Sensor, run};
+use startrack_lab::calib_frames::labset::{LabSet, write_string_keys};
+use startrack_lab::calib_frames::{FramesError, calibrate};
 use startrack_sim::fits::{RawFrame, write_raw_frame};
 use std::path::{Path, PathBuf};
 
@@ -235,8 +235,8 @@ fn a_missing_temperature_names_the_file_and_the_keyword() {
 
 #[test]
 fn imagetyp_spellings_of_acquisition_programs() {
-    use startrack_host::calib_frames::FrameKind::{Bias, Dark, Flat, Light};
-    use startrack_host::calib_frames::read::frame_kind;
+    use startrack_lab::calib_frames::FrameKind::{Bias, Dark, Flat, Light};
+    use startrack_lab::calib_frames::read::frame_kind;
     for (s, k) in [
         ("BIAS", Bias),
         ("Bias Frame", Bias),

@@ -8,7 +8,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use startrack_core::geometry::{ReadoutGeometry, Segment};
-use startrack_host::calib_frames::rts::{
+use startrack_lab::calib_frames::rts::{
     FALSE_ALARM_PER_TEST, SeriesAccum, chi_square_upper_quantile, normal_tail,
     scan_threshold_sigma, variance_threshold_ratio,
 };

@@ -11,7 +11,7 @@ use startrack_test_support::table_fixtures;
 use startrack_test_support::field as common_field;
 
 use startrack_host::cli::calib_models::{CTI_SNRS, CalibCtiArgs, cti_trials, measure_cti};
-use startrack_host::cti::{CtiExperiment, DEFAULT_TRAPS, McCell, summarize};
+use startrack_lab::cti::{CtiExperiment, DEFAULT_TRAPS, McCell, summarize};
 use startrack_sim::sim::effects::ChargeTraps;
 use startrack_sim::sim::{Effects, SensorParams, Simulator, Star};
 
@@ -81,7 +81,7 @@ fn bias_grows_with_transfers_and_falls_with_signal() {
         b(2000.0, 300.3, 500.2),
         b(2000.0, 300.3, 1000.2),
     );
-    let per_row = |p: &startrack_host::cti::BiasPoint| p.bias_y_px / p.transfers_par;
+    let per_row = |p: &startrack_lab::cti::BiasPoint| p.bias_y_px / p.transfers_par;
     println!(
         "bias_y at rows 100 / 500 / 1000, 2000 e-: {:.4} / {:.4} / {:.4} px",
         near.bias_y_px, mid.bias_y_px, far.bias_y_px

@@ -6,10 +6,10 @@
 //! a few per cent and the exponent to a few hundredths. The bounds below are 2-3 times that.
 
 use startrack_core::geometry::ReadoutGeometry;
-use startrack_host::calib_frames::eper::{edge_response, fit};
-use startrack_host::calib_frames::labset::LabSet;
-use startrack_host::cli::calib_models::CTI_FIT_FLUXES_E;
-use startrack_host::cti::CtiExperiment;
+use startrack_lab::calib_frames::eper::{edge_response, fit};
+use startrack_lab::calib_frames::labset::LabSet;
+use startrack_lab::cti::CTI_FIT_FLUXES_E;
+use startrack_lab::cti::CtiExperiment;
 use startrack_sim::fits::RawFrame;
 use startrack_sim::sim::effects::ChargeTraps;
 

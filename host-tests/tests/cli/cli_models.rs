@@ -9,10 +9,10 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use startrack_core::table::CalibTable;
-use startrack_host::cli::calib_build::{CalibBuildArgs, build};
 use startrack_host::cli::calib_models::{PsfModelArgs, run_psf_model};
-use startrack_host::cti::{CtiCoeffsJson, CtiOutputJson};
-use startrack_host::psf_model::{PsfFitError, StarWidth, fit, norm, read_stars_csv};
+use startrack_lab::cti::{CtiCoeffsJson, CtiOutputJson};
+use startrack_lab::psf_model::{PsfFitError, StarWidth, fit, norm, read_stars_csv};
+use startrack_lab::table_build::{CalibBuildArgs, build};
 
 /// The true width field: a = 1.1 + 0.15 u - 0.1 v + 0.3 u^2 + 0.05 u v + 0.2 v^2 px.
 fn true_a(x: f64, y: f64) -> f64 {

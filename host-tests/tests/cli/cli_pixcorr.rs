@@ -9,9 +9,9 @@ use startrack_core::table::CalibTable;
 use startrack_core::tracker::CentroidMethod;
 use startrack_core::tracker::{StarFlags, StarRecord};
 use startrack_homes::home::Processed;
-use startrack_host::cli::calib_build::{CalibBuildArgs, build};
 use startrack_host::cli::process::{ProcessArgs, measure};
 use startrack_host::cli::simulate::{SimFiles, SimulateArgs};
+use startrack_lab::table_build::{CalibBuildArgs, build};
 use std::path::{Path, PathBuf};
 
 const SEED: u64 = 11;

@@ -67,7 +67,7 @@ fn every_shared_frame_solves_from_fits_and_tiff() {
     for i in &s.images {
         let sol = i.result.as_ref().unwrap_or_else(|e| panic!("{e}"));
         let rmse_arcsec = sol.rmse_rad.to_degrees() * 3600.0;
-        let fov = startrack_host::realsky::solve::fov_deg(i.size_px[0], sol.focal_length_px);
+        let fov = startrack_lab::realsky::solve::fov_deg(i.size_px[0], sol.focal_length_px);
         eprintln!(
             "{}: {} matched, RMS {rmse_arcsec:.2} arcsec, fov {fov:.4} deg, {:.0} ms",
             i.path.display(),
@@ -171,7 +171,7 @@ fn check_against_tetra3rs(
     images: &[startrack_host::cli::solve_image::ImageOutcome],
     as_committed: bool,
 ) {
-    use startrack_host::realsky::solve::{ra_dec_deg, roll_tetra3_deg};
+    use startrack_lab::realsky::solve::{ra_dec_deg, roll_tetra3_deg};
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("figures/realsky-tetra3rs.csv");
     let text = std::fs::read_to_string(&path).unwrap();
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));

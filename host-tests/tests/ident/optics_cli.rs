@@ -6,11 +6,10 @@ use startrack_test_support::cli as common_cli;
 
 use startrack_core::table::CalibTable;
 use startrack_host::cli::CliError;
-use startrack_host::cli::calib_build::{CalibBuildArgs, build};
-use startrack_host::cli::optics::{
-    CameraModelJson, OpticsCaseArgs, OpticsFitArgs, read_camera_model, run_case, run_fit,
-};
-use startrack_host::optics::simulated_truth;
+use startrack_host::cli::optics::{OpticsCaseArgs, OpticsFitArgs, run_case, run_fit};
+use startrack_lab::LabError;
+use startrack_lab::optics::{CameraModelJson, read_camera_model, simulated_truth};
+use startrack_lab::table_build::{CalibBuildArgs, build};
 
 fn calib_args(out: std::path::PathBuf, camera_model: Option<std::path::PathBuf>) -> CalibBuildArgs {
     CalibBuildArgs {
@@ -46,8 +45,8 @@ fn case_fit_and_table_end_to_end() {
     let m: CameraModelJson = serde_json::from_slice(&std::fs::read(&model_path).unwrap()).unwrap();
     // The file holds the reported model (JSON's decimal floats: to 1e-12).
     let (a, b) = (
-        startrack_host::optics::params_of(&m.camera()),
-        startrack_host::optics::params_of(&report.model.camera()),
+        startrack_lab::optics::params_of(&m.camera()),
+        startrack_lab::optics::params_of(&report.model.camera()),
     );
     for k in 0..8 {
         assert!(
@@ -59,8 +58,8 @@ fn case_fit_and_table_end_to_end() {
     }
     assert_eq!(m.sigma.len(), 8);
     // Within 4.5 formal sigmas of the truth on every parameter.
-    let truth = startrack_host::optics::params_of(&simulated_truth());
-    let got = startrack_host::optics::params_of(&m.camera());
+    let truth = startrack_lab::optics::params_of(&simulated_truth());
+    let got = startrack_lab::optics::params_of(&m.camera());
     for k in 0..8 {
         assert!(
             ((got[k] - truth[k]) / m.sigma[k]).abs() < 4.5,
@@ -105,7 +104,7 @@ fn bad_inputs_are_typed_errors() {
     std::fs::write(&folded, serde_json::to_string(&m).unwrap()).unwrap();
     let r = build(&calib_args(dir.path().join("t.bin"), Some(folded)));
     assert!(
-        matches!(r, Err(CliError::Usage(ref s)) if s.contains("no inverse")),
+        matches!(r, Err(LabError::Invalid(ref s)) if s.contains("no inverse")),
         "{r:?}"
     );
 
@@ -113,6 +112,6 @@ fn bad_inputs_are_typed_errors() {
     std::fs::write(&garbage, "{\"focal_length_px\": \"wide\"}").unwrap();
     assert!(matches!(
         read_camera_model(&garbage),
-        Err(CliError::Usage(_))
+        Err(LabError::Invalid(_))
     ));
 }

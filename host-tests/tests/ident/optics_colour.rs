@@ -16,7 +16,7 @@ use startrack_sim::sky::field::{self, FieldSpec};
 
 /// The simulated optics of `startrack optics case` (lateral colour 2.5e-4 per mag).
 fn optics() -> Camera {
-    startrack_host::optics::simulated_truth()
+    startrack_lab::optics::simulated_truth()
 }
 
 /// Identification's centroid sigma: at least 0.1 px, so that its 5-sigma cut keeps the

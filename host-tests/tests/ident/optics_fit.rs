@@ -16,7 +16,7 @@
 //! colour scale (probability 0.4 % a fit); the Monte Carlo measures that fraction.
 
 use startrack_core::catalog::Catalog;
-use startrack_host::optics::{self, FitOptions, PARAM_NAMES};
+use startrack_lab::optics::{self, FitOptions, PARAM_NAMES};
 use startrack_sim::sky::build::default_catalog;
 
 /// Frames a fit uses.

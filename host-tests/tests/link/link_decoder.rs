@@ -11,7 +11,7 @@ use startrack_core::link::telemetry::Reader;
 use startrack_core::link::{LinkService, NoWindows, Targets};
 use startrack_core::tracker::{Tracker, TrackerBuffers, TrackerConfig};
 use startrack_ground::{Tm, decode_tm, frame_telecommand};
-use startrack_homes::link_home::MemoryTables;
+use startrack_homes::memory_tables::MemoryTables;
 
 /// Runs `bytes` through a fresh link bound to a fresh tracker; returns the link and the
 /// telemetry it sent.

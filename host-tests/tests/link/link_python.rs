@@ -12,7 +12,7 @@ use startrack_core::tracker::{
     Tracker, TrackerBuffers, TrackerConfig,
 };
 use startrack_ground::{decode_tm, frame_telecommand};
-use startrack_homes::link_home::MemoryTables;
+use startrack_homes::memory_tables::MemoryTables;
 use std::process::Command;
 
 fn python_ready() -> Result<(), String> {

@@ -10,7 +10,7 @@ use startrack_core::link::{LinkService, Rejection};
 use startrack_core::safe::SetupFaults;
 use startrack_core::tracker::Mode;
 use startrack_ground::{Tm, decode_tm, frame_telecommand};
-use startrack_homes::link_home::MemoryTables;
+use startrack_homes::memory_tables::MemoryTables;
 
 /// Sends one telecommand to a standby link; returns its verdict (Ok, or the rejection code)
 /// and every telemetry packet it produced.

@@ -17,7 +17,7 @@ use startrack_core::tracker::{
 };
 use startrack_core::units::{ERatePerS, Kelvin};
 use startrack_homes::home::{FrameClock, SimLines, block_on};
-use startrack_homes::link_home::MemoryTables;
+use startrack_homes::memory_tables::MemoryTables;
 use startrack_sim::sim::effects::{DarkLaw as SimDarkLaw, Effects};
 use startrack_sim::sim::truth::TruthSections;
 use startrack_sim::sim::{SensorParams, Simulator};
@@ -213,10 +213,10 @@ fn the_running_ratio_follows_a_step_with_its_time_constant() {
 use startrack_test_support::cli;
 use startrack_test_support::table_fixtures;
 
-use startrack_host::calib_frames::calibrate;
-use startrack_host::calib_frames::labset::LabSet;
-use startrack_host::cli::CliError;
-use startrack_host::cli::calib_build;
+use startrack_lab::LabError;
+use startrack_lab::calib_frames::calibrate;
+use startrack_lab::calib_frames::labset::LabSet;
+use startrack_lab::table_build as calib_build;
 use std::sync::OnceLock;
 
 /// The small lab set (seed 11) and the table `calib frames` builds from it, once per binary.
@@ -357,7 +357,7 @@ fn calib_build_writes_a_users_dark_law() {
         ("20,x,6.5", "--dark-law"),
     ] {
         match with(bad) {
-            Err(CliError::Usage(m)) => assert!(m.contains(says), "{bad}: {m}"),
+            Err(LabError::Invalid(m)) => assert!(m.contains(says), "{bad}: {m}"),
             other => panic!("{bad}: {other:?}"),
         }
     }

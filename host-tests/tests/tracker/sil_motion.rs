@@ -3,9 +3,9 @@
 //! last two frames, against the truth at mid-exposure.
 
 use rand::SeedableRng;
+use startrack_analysis::sil_rates;
 use startrack_core::tracker::{Mode, Provenance};
 use startrack_homes::sil::{self, SilConfig, SilFrame};
-use startrack_host::sil_rates;
 use startrack_sim::sky::field::random_attitude;
 use startrack_sim::sky::motion::{ExposureMotion, RateProfile};
 use startrack_sim::sky::scene::SkyScene;

@@ -2,7 +2,7 @@
 //! highest and lowest value of each element left out once there are at least
 //! [`MINMAX_CLIP_FRAMES`] frames, so a cosmic-ray hit or a glitch in one frame cannot pull it)
 //! and from it the column bias against each line's over-scan level, computed by `calib
-//! build`'s own conversion ([`crate::cli::calib_build::column_bias_from_map`]).
+//! build`'s own conversion ([`crate::table_build::column_bias_from_map`]).
 //! Cost: three running maps (sum, min, max) of the full readout; one pass per bias frame.
 
 use startrack_core::geometry::ReadoutGeometry;

@@ -19,7 +19,7 @@
 //! Memory is bounded whatever the number of frames: each file is read once, whole, and
 //! folded into running sums (a few maps of the readout, one per dark temperature); one frame
 //! (2.2 MB for the CCD47-20) is held at a time. The table is encoded by `calib build`'s
-//! writer ([`crate::cli::calib_build::encode`]). Cost: reading each file plus a few
+//! writer ([`crate::table_build::encode`]). Cost: reading each file plus a few
 //! operations per sample; the darks add one median of the over-scan and one sort of the
 //! covered pixels per line (the core's own level and dark-scale code).
 
@@ -35,8 +35,8 @@ pub mod rts;
 
 pub use read::{FrameInfo, FrameKind, FramesError, Grouping, Inventory};
 
-use crate::cli::CliError;
-use crate::cli::calib_build::{column_bias_from_map, encode, flat_from_map};
+use crate::LabError;
+use crate::table_build::{column_bias_from_map, encode, flat_from_map};
 use dark::HotFit;
 use fixed::types::U8F8;
 use ptc::PairPoint;
@@ -123,7 +123,7 @@ fn level_table(
     gains: &[f64],
     column_bias: &[ColumnBiasAdu],
 ) -> Result<Vec<u8>, FramesError> {
-    let gains: Vec<GainEPerAdu> = crate::cli::calib_build::args::encode_gains(gains)
+    let gains: Vec<GainEPerAdu> = crate::table_build::args::encode_gains(gains)
         .map_err(|e| FramesError::Missing(e.to_string()))?;
     let spec = TableSpec {
         geometry: *g,
@@ -635,13 +635,13 @@ impl Products {
             geometry: self.geometry,
             ..crate::cti::CtiExperiment::flight(e.traps)
         };
-        x.fit(&x.bias_grid(&crate::cli::calib_models::CTI_FIT_FLUXES_E, &x.positions(4)))
+        x.fit(&x.bias_grid(&crate::cti::CTI_FIT_FLUXES_E, &x.positions(4)))
     }
 
     /// The calibration table (maps in tiles of 2^`tile_log2` pixels, 0: per pixel).
-    pub fn table(&self, tile_log2: u8) -> Result<Vec<u8>, CliError> {
+    pub fn table(&self, tile_log2: u8) -> Result<Vec<u8>, LabError> {
         let g = self.geometry;
-        let gains = crate::cli::calib_build::args::encode_gains(&self.gain_e_per_adu)?;
+        let gains = crate::table_build::args::encode_gains(&self.gain_e_per_adu)?;
         // A hot pixel's map value is its own dark over the regular one (up to hundreds):
         // the core uses its law instead, so the map holds the regular 1 there, as it would
         // for a pixel without a defect, and a tile is not pulled by its hot pixels.

@@ -13,7 +13,7 @@
 //! they are skipped with a reason. Cost: writing the maps, a few kilobytes else.
 
 use super::Products;
-use crate::cli::{CliError, write_file};
+use crate::{LabError, write_file};
 use startrack_analysis::figures::Written;
 use startrack_analysis::figures::plot::{Chart, Series, lines};
 use startrack_sim::fits::write_map;
@@ -58,20 +58,20 @@ pub fn json(p: &Products) -> serde_json::Value {
 
 /// Writes every file of the report into `dir` (created if needed); returns what was written
 /// and the PNGs skipped.
-pub fn write(p: &Products, dir: &Path) -> Result<Written, CliError> {
-    std::fs::create_dir_all(dir).map_err(|e| CliError::Io {
+pub fn write(p: &Products, dir: &Path) -> Result<Written, LabError> {
+    std::fs::create_dir_all(dir).map_err(|e| LabError::Io {
         path: dir.to_path_buf(),
         msg: e.to_string(),
     })?;
     let mut w = Written::default();
-    let put = |name: &str, bytes: &[u8], w: &mut Written| -> Result<(), CliError> {
+    let put = |name: &str, bytes: &[u8], w: &mut Written| -> Result<(), LabError> {
         let path = dir.join(name);
         write_file(&path, bytes)?;
         w.files.push(path);
         Ok(())
     };
     let text =
-        serde_json::to_string_pretty(&json(p)).map_err(|e| CliError::Usage(e.to_string()))?;
+        serde_json::to_string_pretty(&json(p)).map_err(|e| LabError::Invalid(e.to_string()))?;
     put("report.json", text.as_bytes(), &mut w)?;
     let mut hot = String::from(
         "col,row,rate_e_per_s_at_293k,doubling_k,rate_sigma_e_per_s,doubling_sigma_k\n",
@@ -96,11 +96,12 @@ pub fn write(p: &Products, dir: &Path) -> Result<Written, CliError> {
     put("rts.csv", rts.as_bytes(), &mut w)?;
     if let Some(e) = &p.eper {
         let t =
-            serde_json::to_string_pretty(&e.traps).map_err(|e| CliError::Usage(e.to_string()))?;
+            serde_json::to_string_pretty(&e.traps).map_err(|e| LabError::Invalid(e.to_string()))?;
         put("cti_traps.json", t.as_bytes(), &mut w)?;
         if let Some(c) = p.cti_coeffs() {
             let j = crate::cti::CtiCoeffsJson::from_coeffs(&c, p.geometry.outputs);
-            let t = serde_json::to_string_pretty(&j).map_err(|e| CliError::Usage(e.to_string()))?;
+            let t =
+                serde_json::to_string_pretty(&j).map_err(|e| LabError::Invalid(e.to_string()))?;
             put("cti.json", t.as_bytes(), &mut w)?;
         }
     }
@@ -118,8 +119,8 @@ pub fn write(p: &Products, dir: &Path) -> Result<Written, CliError> {
 }
 
 /// The report's PNGs.
-fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), CliError> {
-    let fig = |e: startrack_analysis::figures::FigureError| CliError::Io {
+fn figures(p: &Products, dir: &Path, w: &mut Written) -> Result<(), LabError> {
+    let fig = |e: startrack_analysis::figures::FigureError| LabError::Io {
         path: e.path,
         msg: e.message,
     };

@@ -23,6 +23,10 @@
 //! model's error in the image, which is what a star's direction depends on, is measured
 //! against the truth in simulations with [`model_error`] (best rotation removed).
 
+mod model_file;
+
+pub use model_file::{CameraModelJson, read_camera_model};
+
 use nalgebra::{DMatrix, DVector};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -14,7 +14,7 @@
 //! Cost: the decode, then one pass over the pixels; the image is held in memory (4 bytes a
 //! pixel).
 
-use crate::cli::CliError;
+use crate::LabError;
 use std::path::Path;
 
 /// Smallest side accepted, px: a star's fitting window (9 px) and two background tiles.
@@ -47,8 +47,8 @@ impl Picture {
             .unwrap_or(0.0)
     }
 
-    fn checked(self, path: &Path) -> Result<Self, CliError> {
-        let bad = |msg: String| Err(CliError::Usage(format!("{}: {msg}", path.display())));
+    fn checked(self, path: &Path) -> Result<Self, LabError> {
+        let bad = |msg: String| Err(LabError::Invalid(format!("{}: {msg}", path.display())));
         if self.width < MIN_SIDE_PX || self.height < MIN_SIDE_PX {
             return bad(format!(
                 "image of {} x {} px is too small (at least {MIN_SIDE_PX} x {MIN_SIDE_PX})",
@@ -95,7 +95,7 @@ fn is_fits(path: &Path) -> bool {
 }
 
 /// Reads `path` (see the module docs).
-pub fn load(path: &Path) -> Result<Picture, CliError> {
+pub fn load(path: &Path) -> Result<Picture, LabError> {
     let pic = if is_fits(path) {
         load_fits(path)?
     } else {
@@ -104,7 +104,7 @@ pub fn load(path: &Path) -> Result<Picture, CliError> {
     pic.checked(path)
 }
 
-fn load_fits(path: &Path) -> Result<Picture, CliError> {
+fn load_fits(path: &Path) -> Result<Picture, LabError> {
     let map = startrack_sim::fits::read_map(path, &["SATURATE"])?;
     let full_scale = startrack_sim::fits::full_scale(path)?;
     Ok(Picture {
@@ -115,10 +115,10 @@ fn load_fits(path: &Path) -> Result<Picture, CliError> {
     })
 }
 
-fn load_raster(path: &Path) -> Result<Picture, CliError> {
-    let bytes = crate::cli::read_file(path)?;
+fn load_raster(path: &Path) -> Result<Picture, LabError> {
+    let bytes = crate::read_file(path)?;
     let img = image::load_from_memory(&bytes)
-        .map_err(|e| CliError::Usage(format!("{}: not a readable image: {e}", path.display())))?;
+        .map_err(|e| LabError::Invalid(format!("{}: not a readable image: {e}", path.display())))?;
     let (width, height) = (img.width() as usize, img.height() as usize);
     use image::DynamicImage as D;
     let (data_adu, full): (Vec<f32>, f32) = match img {
@@ -139,7 +139,7 @@ fn load_raster(path: &Path) -> Result<Picture, CliError> {
             65535.0,
         ),
         other => {
-            return Err(CliError::Usage(format!(
+            return Err(LabError::Invalid(format!(
                 "{}: unsupported sample type {:?} (8 or 16-bit integer images only)",
                 path.display(),
                 other.color()

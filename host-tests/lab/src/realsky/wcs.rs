@@ -22,7 +22,7 @@
 use super::picture::Picture;
 use super::solve::{ImageSolution, ra_dec_deg};
 use super::stars::StarField;
-use crate::cli::CliError;
+use crate::LabError;
 use startrack_core::catalog::Catalog;
 use std::path::Path;
 
@@ -60,8 +60,8 @@ pub fn tan_wcs(sol: &ImageSolution, size_px: [usize; 2]) -> TanWcs {
 }
 
 /// Writes `wcs` as a header-only FITS file.
-pub fn write_wcs(path: &Path, wcs: &TanWcs) -> Result<(), CliError> {
-    let err = |e: fitsio::errors::Error| CliError::Io {
+pub fn write_wcs(path: &Path, wcs: &TanWcs) -> Result<(), LabError> {
+    let err = |e: fitsio::errors::Error| LabError::Io {
         path: path.to_path_buf(),
         msg: e.to_string(),
     };
@@ -101,7 +101,7 @@ pub fn write_annotated_png(
     sol: &ImageSolution,
     cat: &Catalog<'_>,
     hip_of: &dyn Fn([f64; 3]) -> u32,
-) -> Result<(), CliError> {
+) -> Result<(), LabError> {
     use plotters::prelude::*;
     let (w, h) = (pic.width, pic.height);
     // Stretch: the background-subtracted values over the robust sigma of the residual.
@@ -129,7 +129,7 @@ pub fn write_annotated_png(
         let red = RGBColor(240, 60, 60);
         let pt = |x: f64, y: f64| (x.round() as i32, y.round() as i32);
         let draw = |e: Result<(), DrawingAreaErrorKind<_>>| {
-            e.map_err(|e| CliError::Io {
+            e.map_err(|e| LabError::Io {
                 path: path.to_path_buf(),
                 msg: format!("drawing: {e}"),
             })
@@ -166,12 +166,12 @@ pub fn write_annotated_png(
         }
         draw(root.present())?;
     }
-    let img = image::RgbImage::from_raw(w as u32, h as u32, rgb).ok_or_else(|| CliError::Io {
+    let img = image::RgbImage::from_raw(w as u32, h as u32, rgb).ok_or_else(|| LabError::Io {
         path: path.to_path_buf(),
         msg: "image buffer size".into(),
     })?;
     img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| CliError::Io {
+        .map_err(|e| LabError::Io {
             path: path.to_path_buf(),
             msg: e.to_string(),
         })

@@ -1,9 +1,9 @@
 //! The options of `startrack calib build` and their validation: the clap arguments, the
 //! comma-separated lists (`--gains`, `--psf-a-px`, `--pixcorr-boxes`, `--pixcorr-powers`) and
-//! the gains' range. A bad value is a [`CliError::Usage`] naming the option. Cost: nothing
+//! the gains' range. A bad value is a [`LabError::Invalid`] naming the option. Cost: nothing
 //! beyond parsing a few numbers.
 
-use crate::cli::CliError;
+use crate::LabError;
 use fixed::types::U8F8;
 use startrack_core::table::DarkLaw;
 use startrack_core::table::MAX_TILE_LOG2;
@@ -97,9 +97,9 @@ impl CalibBuildArgs {
 
 /// The dark law of `--dark-law`: `RATE,TREF,DOUBLING[,LOW,HIGH]`, each in its section-11
 /// format and range (rate > 0 e-/px/s, TREF 100..=400 K, doubling 2..=20 K, LOW < HIGH).
-pub fn parse_dark_law(s: &str) -> Result<DarkLaw, CliError> {
+pub fn parse_dark_law(s: &str) -> Result<DarkLaw, LabError> {
     let v: Vec<f64> = parse_list("--dark-law", s)?;
-    let bad = |why: &str| CliError::Usage(format!("--dark-law {s}: {why}"));
+    let bad = |why: &str| LabError::Invalid(format!("--dark-law {s}: {why}"));
     let [rate, t_ref, doubling, band @ ..] = v.as_slice() else {
         return Err(bad("need RATE,TREF,DOUBLING[,LOW,HIGH]"));
     };
@@ -131,7 +131,7 @@ pub fn parse_dark_law(s: &str) -> Result<DarkLaw, CliError> {
 }
 
 /// A comma-separated list of numbers of option `name`.
-pub(super) fn parse_list<T: std::str::FromStr>(name: &str, s: &str) -> Result<Vec<T>, CliError>
+pub(super) fn parse_list<T: std::str::FromStr>(name: &str, s: &str) -> Result<Vec<T>, LabError>
 where
     T::Err: std::fmt::Display,
 {
@@ -139,20 +139,20 @@ where
         .map(|v| {
             v.trim()
                 .parse::<T>()
-                .map_err(|e| CliError::Usage(format!("{name} {s}: {e}")))
+                .map_err(|e| LabError::Invalid(format!("{name} {s}: {e}")))
         })
         .collect()
 }
 
 /// The gains of `--gains`, one per output.
-pub(super) fn parse_gains(s: &str, outputs: usize) -> Result<Vec<f64>, CliError> {
+pub(super) fn parse_gains(s: &str, outputs: usize) -> Result<Vec<f64>, LabError> {
     let g: Vec<f64> = s
         .split(',')
         .map(|v| v.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .map_err(|e| CliError::Usage(format!("--gains {s}: {e}")))?;
+        .map_err(|e| LabError::Invalid(format!("--gains {s}: {e}")))?;
     if g.len() != outputs {
-        return Err(CliError::Usage(format!(
+        return Err(LabError::Invalid(format!(
             "--gains {s}: need {outputs} values, one per output"
         )));
     }
@@ -160,13 +160,13 @@ pub(super) fn parse_gains(s: &str, outputs: usize) -> Result<Vec<f64>, CliError>
 }
 
 /// The gains as the table stores them; each must be in (0, 16) e-/ADU.
-pub fn encode_gains(g: &[f64]) -> Result<Vec<GainEPerAdu>, CliError> {
+pub fn encode_gains(g: &[f64]) -> Result<Vec<GainEPerAdu>, LabError> {
     g.iter()
         .map(|&v| {
             if v.is_finite() && v > 0.0 && v < 16.0 {
                 Ok(GainEPerAdu::saturating_from_num(v).max(GainEPerAdu::DELTA))
             } else {
-                Err(CliError::Usage(format!(
+                Err(LabError::Invalid(format!(
                     "gain {v} e-/ADU: must be above 0 and below 16"
                 )))
             }

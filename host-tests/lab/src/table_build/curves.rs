@@ -6,7 +6,7 @@
 //! pixel-integrated Gaussian (see [`startrack_sim::pixcorr`]).
 
 use super::args::{CalibBuildArgs, parse_list};
-use crate::cli::CliError;
+use crate::LabError;
 use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_sim::pixcorr::{Curve, CurveSpec, build_curve};
@@ -24,7 +24,7 @@ fn largest_correction_px(c: &Curve) -> f64 {
 
 /// The pixel-phase curves of `args` (empty without `--psf-a-px`) and one note per curve
 /// built or refused.
-pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String>), CliError> {
+pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String>), LabError> {
     let Some(list) = &args.psf_a_px else {
         return Ok((
             Vec::new(),
@@ -39,7 +39,7 @@ pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String
         .iter()
         .find(|a| !(a.is_finite() && (0.1..=50.0).contains(*a)))
     {
-        return Err(CliError::Usage(format!(
+        return Err(LabError::Invalid(format!(
             "--psf-a-px {a}: must be 0.1 to 50 px"
         )));
     }
@@ -48,7 +48,7 @@ pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String
         .iter()
         .find(|b| !(3..=29).contains(*b) || b.is_multiple_of(2))
     {
-        return Err(CliError::Usage(format!(
+        return Err(LabError::Invalid(format!(
             "--pixcorr-boxes: box {b} must be odd, 3 to 29"
         )));
     }
@@ -57,7 +57,7 @@ pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String
         .map(|p| match p {
             1 => Ok(CogPower::One),
             2 => Ok(CogPower::Two),
-            _ => Err(CliError::Usage(format!(
+            _ => Err(LabError::Invalid(format!(
                 "--pixcorr-powers: power {p} must be 1 or 2"
             ))),
         })
@@ -124,7 +124,7 @@ pub fn curves_from_args(args: &CalibBuildArgs) -> Result<(Vec<Curve>, Vec<String
         }
     }
     if curves.len() > MAX_CURVES {
-        return Err(CliError::Usage(format!(
+        return Err(LabError::Invalid(format!(
             "{} pixel-phase curves: the table holds at most {MAX_CURVES} (fewer widths, boxes or powers)",
             curves.len()
         )));

@@ -1,11 +1,11 @@
 //! The hot-pixel list of `calib build --hot`: a CSV of `col,row,dark_e` in full-readout
 //! coordinates (an optional header line, `#` comments) becomes the table's sorted hot-pixel
 //! entries, each corrected by its own dark law or excluded above `--hot-exclude-above-e`.
-//! A malformed line is a [`CliError::Csv`] with its line number. Cost: one pass over the
+//! A malformed line is a [`LabError::Csv`] with its line number. Cost: one pass over the
 //! file and a sort of the list.
 
 use super::args::CalibBuildArgs;
-use crate::cli::CliError;
+use crate::LabError;
 use fixed::types::U8F8;
 use startrack_core::geometry::{ReadoutGeometry, Segment};
 use startrack_core::table::{HotPixel, HotPolicy};
@@ -17,18 +17,18 @@ pub fn hot_from_csv(
     g: &ReadoutGeometry,
     path: &Path,
     args: &CalibBuildArgs,
-) -> Result<(Vec<HotPixel>, usize), CliError> {
-    let text = std::fs::read_to_string(path).map_err(|e| CliError::Io {
+) -> Result<(Vec<HotPixel>, usize), LabError> {
+    let text = std::fs::read_to_string(path).map_err(|e| LabError::Io {
         path: path.to_path_buf(),
         msg: e.to_string(),
     })?;
-    let bad = |line: usize, msg: String| CliError::Csv {
+    let bad = |line: usize, msg: String| LabError::Csv {
         path: path.to_path_buf(),
         line,
         msg,
     };
     if !(args.hot_exposure_s.is_finite() && args.hot_exposure_s > 0.0) {
-        return Err(CliError::Usage(format!(
+        return Err(LabError::Invalid(format!(
             "--hot-exposure-s {}: must be positive",
             args.hot_exposure_s
         )));
@@ -36,7 +36,7 @@ pub fn hot_from_csv(
     let doubling = U8F8::checked_from_num(args.hot_doubling_k)
         .filter(|d| *d > U8F8::ZERO)
         .ok_or_else(|| {
-            CliError::Usage(format!(
+            LabError::Invalid(format!(
                 "--hot-doubling-k {}: must be above 0 and below 256",
                 args.hot_doubling_k
             ))
@@ -91,7 +91,7 @@ pub fn hot_from_csv(
         .windows(2)
         .find(|w| (w[0].y, w[0].x) == (w[1].y, w[1].x))
     {
-        return Err(CliError::Csv {
+        return Err(LabError::Csv {
             path: path.to_path_buf(),
             line: 0,
             msg: format!(

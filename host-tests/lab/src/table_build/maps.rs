@@ -8,7 +8,7 @@
 
 use super::args::{CalibBuildArgs, encode_gains, parse_gains};
 use super::hot::hot_from_csv;
-use crate::cli::CliError;
+use crate::LabError;
 use startrack_core::geometry::{Output, ReadoutGeometry, Segment};
 use startrack_core::table::{HotPixel, HotPolicy};
 use startrack_core::units::{ColumnBiasAdu, DarkRel, FlatInv, GainEPerAdu};
@@ -33,7 +33,7 @@ pub(super) fn load_sections(
     g: &ReadoutGeometry,
     args: &CalibBuildArgs,
     notes: &mut Vec<String>,
-) -> Result<Sections, CliError> {
+) -> Result<Sections, LabError> {
     let (lines, len) = (usize::from(g.lines), g.line_len());
     let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
     let bias = args
@@ -72,7 +72,7 @@ pub(super) fn load_sections(
                 Some((p.clone()?, g?))
             });
             let Some((p, g)) = from_keys else {
-                return Err(CliError::Usage(
+                return Err(LabError::Invalid(
                     "no gains: give --gains G1,G2 or GAIN1/GAIN2 keywords in a map".into(),
                 ));
             };
@@ -240,7 +240,7 @@ pub fn dark_from_map(
     dark: &MapF32,
     tile_log2: u8,
     path: &Path,
-) -> Result<(Vec<DarkRel>, f64, usize), CliError> {
+) -> Result<(Vec<DarkRel>, f64, usize), LabError> {
     let (mut sum, mut n) = (0.0, 0usize);
     for line in 0..usize::from(g.lines) {
         for (s, e) in g.covered_cols() {
@@ -252,7 +252,7 @@ pub fn dark_from_map(
     }
     let mean = if n == 0 { 1.0 } else { sum / n as f64 };
     if !(mean.is_finite() && mean > 0.0) {
-        return Err(CliError::Usage(format!(
+        return Err(LabError::Invalid(format!(
             "{}: the covered columns' mean is {mean}: a relative dark map needs a positive one",
             path.display()
         )));

@@ -1,5 +1,5 @@
-//! `startrack calib build`: a calibration table (core/src/table) from maps a ground
-//! calibration measured, given as FITS images, and a hot-pixel CSV.
+//! The calibration table (core/src/table) from maps a ground calibration measured, given as
+//! FITS images, and a hot-pixel CSV: what `startrack calib build` runs.
 //!
 //! # Inputs and how each becomes a table section
 //! - Gains, e-/ADU per output: `--gains G1,G2`, else the `GAIN1`/`GAIN2` keywords of the
@@ -50,8 +50,8 @@
 //! - [`maps`]: loading the FITS maps and the gains, and each map's conversion ([`hot`]: the
 //!   hot-pixel CSV);
 //! - [`curves`]: the pixel-phase curves;
-//! - here: [`build`] assembles the sections and encodes the table, [`run`] writes it and
-//!   prints the notes.
+//! - here: [`build`] assembles the sections and encodes the table ([`encode`], also the
+//!   writer of [`crate::calib_frames`]); `startrack calib build` writes it and prints the notes.
 //!
 //! Cost: without `--psf-a-px`, reading the FITS maps (two full readouts and one active area)
 //! and one pass over each; with it, building the curves ([`curves`]) takes most of the run.
@@ -68,7 +68,7 @@ pub use curves::{MAX_CURVES, PIXCORR_KNOTS, curves_from_args};
 pub use hot::hot_from_csv;
 pub use maps::{column_bias_from_map, dark_from_map, flat_from_map};
 
-use super::{CliError, write_file};
+use crate::LabError;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::{MapSpec, TableSpec, write_table};
 use startrack_core::units::Kelvin;
@@ -84,7 +84,7 @@ pub struct BuildReport {
 }
 
 /// Builds the table bytes and the report (nothing written).
-pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> {
+pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), LabError> {
     let g = ReadoutGeometry::CCD47_20_DUAL;
     let mut notes = Vec::new();
     let maps::Sections {
@@ -95,7 +95,7 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
         hot,
     } = maps::load_sections(&g, args, &mut notes)?;
     let hot_ref_k = Kelvin::checked_from_num(args.hot_ref_k).ok_or_else(|| {
-        CliError::Usage(format!(
+        LabError::Invalid(format!(
             "--hot-ref-k {}: must be 0 to 65535",
             args.hot_ref_k
         ))
@@ -119,7 +119,7 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
         camera_model: args
             .camera_model
             .as_deref()
-            .map(super::optics::read_camera_model)
+            .map(crate::optics::read_camera_model)
             .transpose()?,
         cti: None,
         psf_model: None,
@@ -171,24 +171,13 @@ pub fn build(args: &CalibBuildArgs) -> Result<(Vec<u8>, BuildReport), CliError> 
 pub fn encode(
     spec: &TableSpec<'_>,
     curves: &[startrack_sim::pixcorr::Curve],
-) -> Result<Vec<u8>, CliError> {
+) -> Result<Vec<u8>, LabError> {
     if curves.is_empty() {
         let mut buf = vec![0u8; spec.encoded_len()];
-        let n = write_table(spec, &mut buf).map_err(CliError::TableWrite)?;
+        let n = write_table(spec, &mut buf).map_err(LabError::TableWrite)?;
         buf.truncate(n);
         Ok(buf)
     } else {
-        write_table_with_curves(spec, curves).map_err(CliError::TableWrite)
+        write_table_with_curves(spec, curves).map_err(LabError::TableWrite)
     }
-}
-
-/// Runs `startrack calib build`: writes the table and prints what each input became.
-pub fn run(args: &CalibBuildArgs) -> Result<BuildReport, CliError> {
-    let (bytes, report) = build(args)?;
-    write_file(&args.out, &bytes)?;
-    for n in &report.notes {
-        println!("{n}");
-    }
-    println!("wrote {} ({} bytes)", args.out.display(), report.bytes);
-    Ok(report)
 }

@@ -1,30 +1,30 @@
 //! The model sections of `calib build`: `--cti FILE` (the CTI coefficients as JSON, written by
 //! `startrack calib cti` or `calib frames`) becomes section 8, and `--psf-model FILE` (the
 //! field PSF model as JSON, written by `startrack calib psf-model`) section 9. A file that
-//! does not parse, or values out of the table's range, is a [`CliError::Usage`] naming the
+//! does not parse, or values out of the table's range, is a [`LabError::Invalid`] naming the
 //! file. Cost: reading two small files.
 
-use crate::cli::CliError;
+use crate::LabError;
 use crate::cti::CtiCoeffsJson;
 use crate::psf_model::PsfModelFit;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::{CtiCoeffs, PsfModel};
 use std::path::Path;
 
-fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|e| CliError::Io {
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, LabError> {
+    let text = std::fs::read_to_string(path).map_err(|e| LabError::Io {
         path: path.to_path_buf(),
         msg: e.to_string(),
     })?;
-    serde_json::from_str(&text).map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))
+    serde_json::from_str(&text).map_err(|e| LabError::Invalid(format!("{}: {e}", path.display())))
 }
 
 /// The CTI coefficients of `path` for geometry `g`, and the note for the report.
-pub fn cti_from_json(g: &ReadoutGeometry, path: &Path) -> Result<(CtiCoeffs, String), CliError> {
+pub fn cti_from_json(g: &ReadoutGeometry, path: &Path) -> Result<(CtiCoeffs, String), LabError> {
     let j: CtiCoeffsJson = read_json(path)?;
     let c = j
         .to_coeffs(g.outputs)
-        .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
+        .map_err(|e| LabError::Invalid(format!("{}: {e}", path.display())))?;
     let note = format!(
         "CTI: alpha {:.3}, F_0 {} e-, per transfer at {} e-: {}",
         j.alpha,
@@ -48,10 +48,10 @@ pub fn cti_from_json(g: &ReadoutGeometry, path: &Path) -> Result<(CtiCoeffs, Str
 pub fn psf_model_from_json(
     g: &ReadoutGeometry,
     path: &Path,
-) -> Result<(PsfModel, String), CliError> {
+) -> Result<(PsfModel, String), LabError> {
     let m: PsfModelFit = read_json(path)?;
     if (m.active_cols, m.active_rows) != (g.active_cols, g.active_rows) {
-        return Err(CliError::Usage(format!(
+        return Err(LabError::Invalid(format!(
             "{}: fitted on a {} x {} active area, the table's is {} x {}",
             path.display(),
             m.active_cols,
@@ -62,7 +62,7 @@ pub fn psf_model_from_json(
     }
     let t = m
         .to_table()
-        .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
+        .map_err(|e| LabError::Invalid(format!("{}: {e}", path.display())))?;
     let note = format!(
         "field PSF model: degree {}, {} stars, scatter {:.3} px, a = {:.3} px at the centre, {:.3} px in the corner (0, 0)",
         m.degree,

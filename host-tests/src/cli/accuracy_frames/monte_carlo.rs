@@ -37,13 +37,13 @@
 //! frame is measured.
 
 use crate::cli::CliError;
-use crate::cli::calib_build::{CalibBuildArgs, build};
 use crate::cli::calib_models::{PsfModelArgs, run_psf_model};
 use crate::cli::process::{ProcessArgs, measure};
 use crate::cli::simulate::{SceneMix, SimFiles, SimulateArgs, params};
 use startrack_analysis::accuracy::{crlb_x_px, crlb_x_width_free_px, rms_relative_se};
 use startrack_core::tracker::{StarFlags, StarRecord};
 use startrack_homes::home::write_csv;
+use startrack_lab::table_build::{CalibBuildArgs, build};
 use startrack_sim::sim::Simulator;
 use startrack_sim::sim::psf::sigma_of_a;
 use std::fmt::Write as _;
