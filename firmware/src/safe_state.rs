@@ -110,7 +110,14 @@ pub async fn standby_forever(faults: SetupFaults) -> ! {
         if ticks.is_multiple_of(per_log.max(1)) {
             update_health(|_| {});
             let h = HEALTH.lock(Cell::get);
-            defmt::warn!("standby housekeeping: {}", h);
+            defmt::warn!(
+                "standby housekeeping: set-up faults {}, record {}, {} frames, uptime {=u64} ms, {=f32} K",
+                h.setup_faults,
+                h.record,
+                h.frames,
+                h.uptime_ms,
+                h.temperature_k.map_or(f32::NAN, |t| t.to_num::<f32>())
+            );
         }
     }
 }

@@ -55,7 +55,6 @@ impl core::error::Error for LineError {}
 
 /// The bias level of each output on one line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LineLevels {
     /// Bias of each output, ADU (U28F4, 0..=65535); unused outputs hold 0.
     pub bias_adu: [BiasAdu; MAX_OUTPUTS],

@@ -89,7 +89,6 @@ impl From<LineError> for CalibError {
 
 /// What the frame's processing knows beyond the table.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FrameConditions {
     /// The covered pixels' mean dark signal (from [`super::DarkScaleEstimator`]), e-;
     /// clamped to ±[`DARK_SCALE_LIMIT_E`].

@@ -456,18 +456,24 @@ fn relabel(stars: &[Measured], tri: (usize, usize, usize)) -> (usize, usize, usi
     // longest first. The side (i, j) is the one opposite k, so k is opposite the middle
     // side and j opposite the shortest.
     let opposite = [d(tri.1, tri.2), d(tri.0, tri.2), d(tri.0, tri.1)];
-    let mut order = [0usize, 1, 2];
-    order.sort_unstable_by(|&x, &y| {
+    // Three compare-exchanges, each moving only a strictly longer side forward (stable).
+    let longer = |x: usize, y: usize| {
         let dx = opposite.get(x).copied().unwrap_or(0.0);
         let dy = opposite.get(y).copied().unwrap_or(0.0);
-        dy.total_cmp(&dx)
-    });
-    let at = |x: usize| {
-        v.get(order.get(x).copied().unwrap_or(0))
-            .copied()
-            .unwrap_or(0)
+        dy.total_cmp(&dx) == core::cmp::Ordering::Greater
     };
-    (at(0), at(2), at(1))
+    let (mut first, mut second, mut third) = (0usize, 1usize, 2usize);
+    if longer(first, second) {
+        core::mem::swap(&mut first, &mut second);
+    }
+    if longer(second, third) {
+        core::mem::swap(&mut second, &mut third);
+    }
+    if longer(first, second) {
+        core::mem::swap(&mut first, &mut second);
+    }
+    let at = |x: usize| v.get(x).copied().unwrap_or(0);
+    (at(first), at(third), at(second))
 }
 
 /// `stars` with their tangent-plane coordinates `(x/z, y/z)` divided by `scale` (the

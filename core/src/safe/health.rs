@@ -33,7 +33,6 @@ impl From<ActiveTable> for TableId {
 
 /// The housekeeping record.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Health {
     /// The last frame's mode (standby until a frame ran).
     pub mode: Mode,

@@ -237,7 +237,7 @@ impl<'a> ReadoutPlan<'a> {
                 let _ = runs.push(((len - c1) / b, (len - 1 - lo) / b + 1));
             }
         }
-        runs.sort_unstable();
+        crate::small_sort::sort_by(runs, Ord::cmp);
         // Merge in place.
         let mut merged = ShiftRuns::new();
         for &(s, e) in runs.iter() {

@@ -26,7 +26,6 @@ pub const CTI_OUTPUT_LEN: usize = 8;
 
 /// The shift per transfer of one output's charge, at the reference flux.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CtiOutput {
     /// Centroid shift per parallel (line) transfer, px, along +y (the deferred charge
     /// trails into lines read later).
@@ -37,7 +36,6 @@ pub struct CtiOutput {
 
 /// The CTI coefficients of a table (section 8).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CtiCoeffs {
     /// Flux at which the per-transfer shifts hold, e- (> 0).
     pub reference_flux_e: u32,

@@ -35,7 +35,6 @@ pub const REFERENCE_RANGE_K: [u16; 2] = [100, 400];
 /// The covered pixels' dark law from the lab, and the band the tracker's dark ratio may
 /// move in: `predicted_e = rate x exposure x 2^((T - T_ref) / doubling)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DarkLaw {
     /// Mean dark rate of the covered pixels at `reference_k`, e-/px/s (U16F16).
     pub rate_e_per_s: ERatePerS,

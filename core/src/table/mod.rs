@@ -128,7 +128,6 @@ pub enum HotPolicy {
 
 /// A pixel with abnormally high dark current and its own temperature law.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct HotPixel {
     /// Active column.
     pub x: u16,

@@ -87,7 +87,6 @@ impl PixCorrBackground {
 
 /// What a curve corrects.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CurveHeader {
     /// CoG weights.
     pub power: CogPower,

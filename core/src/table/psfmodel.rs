@@ -43,7 +43,6 @@ pub const fn psf_terms(degree: u8) -> usize {
 
 /// The field PSF model (section 9).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PsfModel {
     /// Total degree of the polynomial (0..=3).
     pub degree: u8,

@@ -280,7 +280,6 @@ pub enum TemperatureSource {
 
 /// What a frame produced besides its stars: its conditions and every loss, counted.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FrameSummary {
     /// The tracker's frame number (0 at start-up, one more each frame).
     pub frame: u32,
@@ -367,7 +366,6 @@ impl FrameSummary {
 
 /// What was made of one line.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum LineOutcome {
     /// An active row calibrated whole (an acquisition background row).
     Calibrated {
@@ -400,7 +398,6 @@ pub enum LineOutcome {
 
 /// The record of one line, reported every `line_summary_every`th line.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LineSummary {
     /// The tracker's frame number.
     pub frame: u32,
