@@ -73,6 +73,10 @@ pub struct PilConfig {
     /// A fault to make the firmware commit at a frame of its first boot (instead of that
     /// frame's lines).
     pub inject: Option<(u32, Fault)>,
+    /// Power on with the bank image a previous run left in `dir` (the firmware writes every
+    /// erase and program through to it, so a killed QEMU leaves it as a power cut would),
+    /// instead of a fresh bank with the SIL's table; a fresh one when there is none.
+    pub keep_bank: bool,
 }
 
 /// A fault the firmware commits on request (its line header), to test its safe states.
@@ -251,7 +255,9 @@ pub fn run(
         seed: config.sil.seed,
         ..SensorParams::default()
     };
-    write_bank(&config.sil, &params, dir)?;
+    if !(config.keep_bank && dir.join("pil-bank.bin").exists()) {
+        write_bank(&config.sil, &params, dir)?;
+    }
     let catalog_bytes = match config.sil.sky {
         Some(_) => committed_catalog()?,
         None => Vec::new(),
@@ -303,6 +309,9 @@ pub fn run(
         .stdin(Stdio::null())
         .stdout(log);
     let mut child = Qemu(qemu.spawn().map_err(|e| format!("qemu-system-arm: {e}"))?);
+    // For a test that cuts the emulated board's power (kills QEMU) mid-run.
+    std::fs::write(dir.join("qemu.pid"), child.0.id().to_string())
+        .map_err(|e| format!("qemu.pid: {e}"))?;
 
     // The firmware opens pil-req, then pil-lines: open them in that order, off this thread,
     // so that a QEMU that never gets there is seen exiting.
