@@ -12,7 +12,10 @@
 //! Time: `-icount shift=1` makes every instruction 2 ns of emulated time (500 M a second,
 //! close to the H743's 480 MHz at one instruction a cycle), so the firmware's timeouts fall
 //! as on the board; `sleep=off` lets the emulated clock jump over the core's sleeps (the
-//! exposures) at once. The firmware reports SysTick counts (40 ns each) since its time base
+//! exposures) at once. Each line reaches the firmware when the flight sequencer would have
+//! read it out ([`readout_times`]: after the exposure, at its last sample in the program the
+//! H7 compiles for that frame's plan), so a frame's emulated time is its exposure, frame
+//! transfer and readout. The firmware reports SysTick counts (40 ns each) since its time base
 //! started, and of them the counts its executor was busy: busy counts x 40 ns / 2 ns are the
 //! instructions it ran (the rest it slept). They are instructions, not cycles: QEMU models no
 //! pipeline, cache or wait state.
@@ -22,11 +25,16 @@
 
 use crate::home::SimLines;
 use crate::sil::{self, SilConfig};
+use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::readout::ReadoutRequest;
+use startrack_core::sequencer::{
+    Binning, CompileError, Limits, LineJobs, PinMap, ReadoutPlan, Step, Timing, compile,
+};
 use startrack_core::tracker::{LineSource, Mode};
 use startrack_core::window::Rect;
 use startrack_sim::sim::{SensorParams, Simulator};
 use startrack_sim::sky::scene::committed_catalog;
+use std::collections::HashMap;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -65,6 +73,10 @@ pub struct PilConfig {
     /// A fault to make the firmware commit at a frame of its first boot (instead of that
     /// frame's lines).
     pub inject: Option<(u32, Fault)>,
+    /// Power on with the bank image a previous run left in `dir` (the firmware writes every
+    /// erase and program through to it, so a killed QEMU leaves it as a power cut would),
+    /// instead of a fresh bank with the SIL's table; a fresh one when there is none.
+    pub keep_bank: bool,
 }
 
 /// A fault the firmware commits on request (its line header), to test its safe states.
@@ -243,7 +255,9 @@ pub fn run(
         seed: config.sil.seed,
         ..SensorParams::default()
     };
-    write_bank(&config.sil, &params, dir)?;
+    if !(config.keep_bank && dir.join("pil-bank.bin").exists()) {
+        write_bank(&config.sil, &params, dir)?;
+    }
     let catalog_bytes = match config.sil.sky {
         Some(_) => committed_catalog()?,
         None => Vec::new(),
@@ -295,6 +309,9 @@ pub fn run(
         .stdin(Stdio::null())
         .stdout(log);
     let mut child = Qemu(qemu.spawn().map_err(|e| format!("qemu-system-arm: {e}"))?);
+    // For a test that cuts the emulated board's power (kills QEMU) mid-run.
+    std::fs::write(dir.join("qemu.pid"), child.0.id().to_string())
+        .map_err(|e| format!("qemu.pid: {e}"))?;
 
     // The firmware opens pil-req, then pil-lines: open them in that order, off this thread,
     // so that a QEMU that never gets there is seen exiting.
@@ -405,8 +422,58 @@ fn read_f64(r: &mut impl Read) -> Result<f64, String> {
     Ok(f64::from_le_bytes(read_exact(r)?))
 }
 
+/// The flight sequencer's pixel rate (`firmware/src/board/stm32h743/sequencer.rs`).
+pub const PIXEL_RATE_HZ: u32 = 1_000_000;
+
+/// When the flight sequencer reads each line of a request out: the request compiled as the
+/// H7's sequencer compiles it (the core's plan and compiler, 1 MHz pixels, both outputs; a
+/// refused plan read as a full frame, as there), then each line's last-sample tick, us from
+/// the program's start (its frame transfer, at the end of the exposure); with the program's
+/// readout end (`Cost::frame_time_ns` after the frame transfer).
+pub fn readout_times(
+    request: &ReadoutRequest<'_>,
+    exposure_us: u32,
+) -> Result<(HashMap<u16, u32>, u32), String> {
+    let geometry = ReadoutGeometry::CCD47_20_DUAL;
+    let plan = ReadoutPlan::new(geometry, *request, Binning::X1, exposure_us)
+        .or_else(|_| {
+            ReadoutPlan::new(
+                geometry,
+                ReadoutRequest::FullFrame,
+                Binning::X1,
+                exposure_us,
+            )
+        })
+        .map_err(|e| format!("readout plan: {e}"))?;
+    let ticks = Timing::at_pixel_rate(PIXEL_RATE_HZ)
+        .validate(&Limits::CCD47_20)
+        .map_err(|e| format!("sequencer timing: {e}"))?;
+    let pins = PinMap::IN_ORDER;
+    let (mut words, mut steps) = (vec![0u32; 1024], vec![Step::EMPTY; 1024]);
+    loop {
+        match compile(&plan, &ticks, &pins, &mut words, &mut steps) {
+            Ok(_) => break,
+            Err(CompileError::Words { needed }) => words.resize(needed, 0),
+            Err(CompileError::Steps { needed }) => steps.resize(needed, Step::EMPTY),
+            Err(e) => return Err(format!("sequencer compile: {e}")),
+        }
+    }
+    let program = compile(&plan, &ticks, &pins, &mut words, &mut steps)
+        .map_err(|e| format!("sequencer compile: {e}"))?;
+    let tick_ps = u64::from(program.tick_ps());
+    let us = |tick: u64| u32::try_from(tick * tick_ps / 1_000_000).unwrap_or(u32::MAX);
+    let times = LineJobs::new(&program)
+        .map(|j| (j.line, us(j.end_tick)))
+        .collect::<HashMap<_, _>>();
+    let cost = startrack_core::sequencer::Cost::of(&program);
+    let end_ns =
+        cost.segment_ns(startrack_core::sequencer::SegmentId::FrameTransfer) + cost.frame_time_ns();
+    Ok((times, u32::try_from(end_ns / 1000).unwrap_or(u32::MAX)))
+}
+
 /// A request record (after its tag): the lines it reads, rendered and written, the last one
-/// marked; an end-of-frame header when it reads none.
+/// marked, each with the instant the flight sequencer reads it out ([`readout_times`]); an
+/// end-of-frame header, at the readout's end, when it reads none.
 fn serve_request<F: FnMut(u32) -> Simulator>(
     req: &mut impl Read,
     out: &mut impl Write,
@@ -414,7 +481,7 @@ fn serve_request<F: FnMut(u32) -> Simulator>(
     inject: Option<(u32, u16)>,
 ) -> Result<(), String> {
     let frame = read_u32(req)?;
-    let _exposure_us = read_u32(req)?;
+    let exposure_us = read_u32(req)?;
     let windowed = read_u8(req)? != 0;
     let n = read_u16(req)?;
     let mut rects = Vec::with_capacity(usize::from(n));
@@ -436,9 +503,10 @@ fn serve_request<F: FnMut(u32) -> Simulator>(
         && at == frame
     {
         let [a, b] = header.to_le_bytes();
-        out.write_all(&[a, b, 0, 0]).map_err(io)?;
+        out.write_all(&[a, b, 0, 0, 0, 0, 0, 0]).map_err(io)?;
         return out.flush().map_err(io);
     }
+    let (ready_us, end_us) = readout_times(&request, exposure_us)?;
     let Ok(()) = crate::home::block_on(source.start_frame(frame, &request));
     // One line held back, to mark the last.
     let mut held: Option<(u16, Vec<u16>)> = None;
@@ -447,7 +515,8 @@ fn serve_request<F: FnMut(u32) -> Simulator>(
         let Ok(next) = crate::home::block_on(source.next_line());
         let next = next.map(|l| (l.line, l.samples.to_vec()));
         if let Some((line, samples)) = held.take() {
-            write_line(out, line, next.is_none(), &samples).map_err(io)?;
+            let at_us = ready_us.get(&line).copied().unwrap_or(end_us);
+            write_line(out, line, next.is_none(), at_us, &samples).map_err(io)?;
             written += 1;
         }
         match next {
@@ -458,16 +527,24 @@ fn serve_request<F: FnMut(u32) -> Simulator>(
     if written == 0 {
         // No line at all (no window): the end of the frame.
         let [a, b] = END_OF_FRAME.to_le_bytes();
-        out.write_all(&[a, b, 0, 0]).map_err(io)?;
+        let [c, d, e, f] = end_us.to_le_bytes();
+        out.write_all(&[a, b, 0, 0, c, d, e, f]).map_err(io)?;
     }
     out.flush().map_err(io)
 }
 
-fn write_line(out: &mut impl Write, line: u16, last: bool, samples: &[u16]) -> std::io::Result<()> {
-    let mut b = Vec::with_capacity(4 + 2 * LINE_LEN);
+fn write_line(
+    out: &mut impl Write,
+    line: u16,
+    last: bool,
+    ready_us: u32,
+    samples: &[u16],
+) -> std::io::Result<()> {
+    let mut b = Vec::with_capacity(8 + 2 * LINE_LEN);
     b.extend_from_slice(&line.to_le_bytes());
     b.push(u8::from(last));
     b.push(0);
+    b.extend_from_slice(&ready_us.to_le_bytes());
     for i in 0..LINE_LEN {
         b.extend_from_slice(&samples.get(i).copied().unwrap_or(0).to_le_bytes());
     }

@@ -64,6 +64,10 @@ pub struct PilArgs {
     /// must follow).
     #[arg(long)]
     pub panic_at_frame: Option<u32>,
+    /// Power on with the bank image left in `--dir` by a previous run (a power cut's test:
+    /// the firmware writes the bank through to it), not a fresh one with the SIL's table.
+    #[arg(long, requires = "dir")]
+    pub keep_bank: bool,
     /// Longest run, wall-clock seconds.
     #[arg(long, default_value_t = 600)]
     pub timeout_s: u64,
@@ -178,6 +182,7 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
             .hang_at_frame
             .map(|n| (n, pil::Fault::Hang))
             .or(args.panic_at_frame.map(|n| (n, pil::Fault::Panic))),
+        keep_bank: args.keep_bank,
     };
     if let Some(p) = args.port {
         eprintln!("startrack pil: link on 127.0.0.1:{p}");

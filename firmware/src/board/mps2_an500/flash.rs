@@ -4,8 +4,14 @@
 //! that the core's store relies on: an erase is of whole sectors and sets 0xFF; a program is
 //! of whole aligned units, only into an erased unit (a second program of a unit between two
 //! erases is refused, as the H7's ECC would make it unreadable). Reads are plain loads (no
-//! ECC to fault: a power cut, which would tear a unit, is not modelled here; the host's flash
-//! model and its tests cover it, docs/storage.md).
+//! ECC to fault).
+//!
+//! Power cuts: every erase and program is also written through to the host's `pil-bank.bin`
+//! (semihosting, which stops the emulated CPU until the host has written it), so the file is
+//! the bank as it stands after each whole operation, and a QEMU killed at any instant leaves
+//! it as a power cut between two flash operations would (a unit torn inside one is not
+//! modelled here; the host's flash model and its tests cut inside units, docs/storage.md).
+//! The next power-on loads that file (`startrack pil --keep-bank`).
 //!
 //! A unit counts as erased when it reads all 0xFF; one programmed since boot is marked in a
 //! 4 KB bitmap, so that programming 0xFF words into it and then again is refused too.
@@ -28,6 +34,8 @@ const UNITS: usize = (H743_BANK_B / H743_PROGRAM_UNIT_B) as usize;
 pub struct RamBank {
     /// Units programmed since boot, a bit each.
     programmed: &'static mut [u32; UNITS / 32],
+    /// The host's bank image, written through (none: the bank lives in RAM only).
+    image: Option<semihosting::fs::File>,
 }
 
 /// Why an operation was refused.
@@ -57,7 +65,31 @@ impl NorFlashError for RamBankError {
 impl RamBank {
     /// The bank, with its programmed-unit bitmap.
     pub fn new(programmed: &'static mut [u32; UNITS / 32]) -> Self {
-        Self { programmed }
+        let image = semihosting::fs::File::options()
+            .read(true)
+            .write(true)
+            .open(c"pil-bank.bin")
+            .map_err(|_| defmt::warn!("pil: pil-bank.bin not writable: the bank is not kept"))
+            .ok();
+        Self { programmed, image }
+    }
+
+    /// Writes `start..end` of the bank to the host's image (the operation just done).
+    fn write_through(&mut self, start: usize, end: usize) {
+        use semihosting::io::{Seek, SeekFrom, Write};
+        let Some(mut image) = self.image.take() else {
+            return;
+        };
+        let written = match self.bytes().get(start..end) {
+            Some(bytes) => image
+                .seek(SeekFrom::Start(start as u64))
+                .and_then(|_| image.write_all(bytes)),
+            None => Ok(()),
+        };
+        match written {
+            Ok(()) => self.image = Some(image),
+            Err(_) => defmt::error!("pil: pil-bank.bin write failed: the bank is no longer kept"),
+        }
     }
 
     fn bytes(&self) -> &[u8] {
@@ -133,6 +165,7 @@ impl NorFlash for RamBank {
                 *w &= !(1 << (u % 32));
             }
         }
+        self.write_through(start, end);
         Ok(())
     }
 
@@ -164,6 +197,7 @@ impl NorFlash for RamBank {
                 *w |= 1 << (u % 32);
             }
         }
+        self.write_through(start, end);
         Ok(())
     }
 }

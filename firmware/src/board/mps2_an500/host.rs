@@ -18,7 +18,7 @@
 //! | boot | `b'B'`, reset cause u8, start-up SysTick counts u32 |
 //! | request | `b'Q'`, frame u32, exposure us u32, kind u8 (0 full frame, 1 windows), windows u16, per window x0, y0, width, height u16 |
 //! | outcome | `b'R'`, frame u32, mode u8, stars u16, SysTick counts since boot u64, of them busy u64, stack used bytes u32, attitude u8 (0 none, 1 fix, 2 refused), solve mode u8, matched u8, used u8, q f64 x 4, 1-sigma cross-boresight and roll rad f64, false-match probability f64, then per star x px, y px, flux e- f32, flags u32 |
-//! | line (host) | line u16 (0xFFFF: the frame reads no more; 0xFFFD, 0xFFFC: hang or panic, the fault tests), last u8, 0 u8, then the line's samples u16 x 1072 |
+//! | line (host) | line u16 (0xFFFF: the frame reads no more; 0xFFFD, 0xFFFC: hang or panic, the fault tests), last u8, 0 u8, ready us u32 (when the sequencer's program for this frame has taken the line's last sample, from the program's start at the end of the exposure; for 0xFFFF the program's end), then the line's samples u16 x 1072 |
 
 use crate::lines::{FrameRequest, LINE_LEN, LineBuf};
 use semihosting::fs::File;
@@ -57,6 +57,10 @@ pub struct LineHeader {
     pub line: u16,
     /// The frame's last line.
     pub last: bool,
+    /// When the line is read out, us from the start of the frame's program (the frame
+    /// transfer at the end of the exposure): its last sample's tick in the host's compile of
+    /// the frame's readout plan.
+    pub ready_us: u32,
 }
 
 impl HostChannel {
@@ -106,11 +110,12 @@ impl HostChannel {
 
     /// The next line's header.
     pub fn line_header(&mut self) -> Result<LineHeader, ChannelError> {
-        let mut h = [0u8; 4];
+        let mut h = [0u8; 8];
         self.lines.read_exact(&mut h)?;
         Ok(LineHeader {
             line: u16::from_le_bytes([h[0], h[1]]),
             last: h[2] != 0,
+            ready_us: u32::from_le_bytes([h[4], h[5], h[6], h[7]]),
         })
     }
 

@@ -11,7 +11,7 @@
 //! | catalog | 0x0020_0000, where the PIL loads it (`-device loader`) |
 //! | thermometer | none (the board has no sensor; housekeeping says so) |
 //! | link | CMSDK UART0 ([`uart`]) |
-//! | lines | from the host over semihosting ([`host`]), after each frame's exposure |
+//! | lines | from the host over semihosting ([`host`]): after each frame's exposure, each line when the sequencer's program for that frame's plan (compiled by the host) reads it out |
 //! | log | defmt over semihosting (`defmt-print -e ELF` decodes it) |
 //! | reset cause | a word kept over the reset in `.uninit`, written before each reset this firmware makes |
 //!
@@ -307,7 +307,9 @@ pub fn start_lines(spawner: Spawner, _lines: LinePath) -> bool {
 }
 
 /// Each request to the host, the frame's exposure waited, then the lines it sends into
-/// [`FILLED`], up to its end of frame. Without the host the frame gets no line (the
+/// [`FILLED`], each at the instant the flight sequencer would have read it out (the
+/// header's `ready_us` after the exposure's end: the frame transfer, then the readout of
+/// that frame's plan), up to its end of frame. Without the host the frame gets no line (the
 /// tracker's line source ends it at its timeout).
 #[embassy_executor::task]
 async fn host_lines_task() {
@@ -317,23 +319,34 @@ async fn host_lines_task() {
         if !matches!(sent, Some(Ok(()))) {
             continue;
         }
-        // The integration before the readout (the sequencer's exposure).
+        // The integration before the readout (the sequencer's exposure), then the program.
         embassy_time::Timer::after_micros(u64::from(req.exposure_us)).await;
+        let program_start = embassy_time::Instant::now();
         loop {
             let header = HOST.lock(|h| h.borrow_mut().as_mut().map(|ch| ch.line_header()));
             let Some(Ok(header)) = header else {
                 defmt::error!("pil: host channel lost at frame {}", req.frame);
                 break;
             };
+            // The line's last sample (or the program's end) on the sequencer's clock.
+            embassy_time::Timer::at(
+                program_start + embassy_time::Duration::from_micros(u64::from(header.ready_us)),
+            )
+            .await;
             if header.line == host::END_OF_FRAME {
                 break;
             }
             if header.line == host::INJECT_HANG {
-                // The fault test: the thread-mode loop stops here (interrupts still run), the
-                // tracker makes no more progress and the watchdog must reset.
+                // The fault test: the thread-mode loop stops here for good, waiting for an
+                // event that never comes (interrupts still run and return to this loop), the
+                // tracker makes no more progress and the watchdog must reset. It waits with
+                // WFI rather than spinning: under `-icount` QEMU ran a spinning loop at about
+                // 1.3 M instructions a wall-clock second (measured on a loaded 2-core host),
+                // so the watchdog's 8 s (4e9 instructions at `shift=1`) would take most of an
+                // hour; in WFI the emulated clock jumps to the next interrupt (`sleep=off`).
                 defmt::warn!("pil: hang injected at frame {}", req.frame);
                 loop {
-                    core::hint::spin_loop();
+                    cortex_m::asm::wfi();
                 }
             }
             if header.line == host::INJECT_PANIC {
