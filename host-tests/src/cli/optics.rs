@@ -11,7 +11,20 @@
 //! writes the model with each parameter's formal 1-sigma (`FILE`, JSON). When the case holds
 //! `camera_truth.json` and `truth.csv`, the report also gives each parameter's error against
 //! the truth, the model's image error and the colour residual after correction.
+//!
+//! `optics fit --images IMAGE... --fov-deg F --out FILE` does it from real night-sky images
+//! ([`crate::optics::sky`]): each image's stars found and identified as `solve-image` does
+//! them (its camera options: `--fov-deg`, `--focal-length-px`, `--principal-point`,
+//! `--camera`), then the model fitted over all images; the report gives each parameter with
+//! its 1-sigma and the residual RMS through the pinhole `solve-image` had and through the
+//! model, and with `--holdout` the model fitted on every other image and tested on the rest
+//! (and the reverse). `--hold` keeps parameters at their start values; `--csv` writes the
+//! figures. The file is the same JSON, for `calib build --camera-model` and `solve-image
+//! --camera`.
 
+pub mod images;
+
+use super::solve_image::ImageCameraArgs;
 use super::{CliError, read_file, write_file};
 use crate::optics::{self, FitOptions, PARAM_NAMES};
 use serde::{Deserialize, Serialize};
@@ -41,18 +54,96 @@ pub struct OpticsCaseArgs {
 #[derive(Clone, Debug, clap::Args)]
 pub struct OpticsFitArgs {
     /// Case folder: `case.json` and `fields/*.csv` (and optionally the truth).
-    #[arg(long)]
-    pub case: PathBuf,
+    #[arg(long, required_unless_present = "images", conflicts_with = "images")]
+    pub case: Option<PathBuf>,
+    /// Real night-sky images instead of a case (FITS, TIFF, PNG, JPEG), solved as
+    /// `solve-image` solves them.
+    #[arg(long, num_args = 1..)]
+    pub images: Vec<PathBuf>,
+    /// The images' camera and centroids (as `solve-image`'s).
+    #[command(flatten)]
+    pub sky: ImageCameraArgs,
     /// Output camera model (JSON).
     #[arg(long)]
     pub out: PathBuf,
-    /// Catalog file from `startrack catalog build` (default: built from the repo's list for
-    /// a 15 degree field).
+    /// Catalog file from `startrack catalog build` (default: for a case, built from the
+    /// repo's list for a 15 degree field; for images, as `solve-image` builds it).
     #[arg(long)]
     pub catalog: Option<PathBuf>,
-    /// Hold the lateral colour scale at 0 (to see what the colour term removes).
+    /// Star list of the images' default catalog (as `solve-image --list`).
+    #[arg(long)]
+    pub list: Option<PathBuf>,
+    /// Hold the lateral colour scale at its start value (0: to see what the colour term
+    /// removes).
     #[arg(long)]
     pub no_colour: bool,
+    /// Parameters held at their start values (comma-separated).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub hold: Vec<Param>,
+    /// Images only: also fit on every other image and test on the rest, and the reverse.
+    #[arg(long)]
+    pub holdout: bool,
+    /// Images only: write the report's figures as CSV (`quantity,value,sigma`).
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+}
+
+impl OpticsFitArgs {
+    /// Fits a simulated case, every parameter free.
+    pub fn case(case: PathBuf, out: PathBuf) -> Self {
+        Self {
+            case: Some(case),
+            images: Vec::new(),
+            sky: ImageCameraArgs::default(),
+            out,
+            catalog: None,
+            list: None,
+            no_colour: false,
+            hold: Vec::new(),
+            holdout: false,
+            csv: None,
+        }
+    }
+
+    /// Fits images of a horizontal field of view `fov_deg`, every parameter free.
+    pub fn images(images: Vec<PathBuf>, fov_deg: f64, out: PathBuf) -> Self {
+        Self {
+            case: None,
+            images,
+            sky: ImageCameraArgs::fov(fov_deg),
+            ..Self::case(PathBuf::new(), out)
+        }
+    }
+
+    fn options(&self) -> FitOptions {
+        let held = |p: Param| self.hold.contains(&p);
+        FitOptions {
+            focal_length: !held(Param::FocalLength),
+            principal_point: !held(Param::PrincipalPoint),
+            k1: !held(Param::K1),
+            k2: !held(Param::K2),
+            tangential: !held(Param::Tangential),
+            colour: !(self.no_colour || held(Param::Colour)),
+            ..FitOptions::default()
+        }
+    }
+}
+
+/// A camera parameter (group) of `optics fit --hold`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Param {
+    /// The focal length.
+    FocalLength,
+    /// The principal point (both coordinates).
+    PrincipalPoint,
+    /// The `r^2` radial term.
+    K1,
+    /// The `r^4` radial term.
+    K2,
+    /// The tangential terms `p1`, `p2`.
+    Tangential,
+    /// The lateral colour scale.
+    Colour,
 }
 
 /// The camera-model file: the model and, from a fit, how well it is known.
@@ -95,6 +186,10 @@ pub struct CameraModelJson {
     /// Frames the fit used.
     #[serde(default)]
     pub frames: Option<usize>,
+    /// Covariance of the fitted parameters, in the order of `sigma_names` (0 for a held
+    /// one).
+    #[serde(default)]
+    pub covariance: Vec<Vec<f64>>,
 }
 
 fn default_ref_bv() -> f64 {
@@ -118,6 +213,20 @@ impl CameraModelJson {
             residual_rms_px: None,
             stars: None,
             frames: None,
+            covariance: Vec::new(),
+        }
+    }
+
+    /// The file of a fit over `frames` frames.
+    pub fn of_fit(f: &optics::Fit, frames: usize) -> Self {
+        Self {
+            sigma: f.sigma.to_vec(),
+            sigma_names: PARAM_NAMES.iter().map(|s| (*s).to_string()).collect(),
+            residual_rms_px: Some(f.residual_rms_px),
+            stars: Some(f.stars),
+            frames: Some(frames),
+            covariance: f.covariance.iter().map(|r| r.to_vec()).collect(),
+            ..Self::of(&f.camera)
         }
     }
 
@@ -134,6 +243,29 @@ impl CameraModelJson {
             colour_ref_bv_mag: self.colour_ref_bv_mag,
         }
     }
+}
+
+/// Reads a camera model from a calibration table's camera section or from the JSON `optics
+/// fit` writes (a file whose first non-blank byte is `{`), unchecked: the caller checks it
+/// over its own frame.
+pub fn read_camera_file(path: &Path) -> Result<Camera, CliError> {
+    let bytes = read_file(path)?;
+    if bytes.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'{') {
+        let m: CameraModelJson = serde_json::from_slice(&bytes)
+            .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
+        return Ok(m.camera());
+    }
+    let table =
+        startrack_core::table::CalibTable::parse(&bytes).map_err(|err| CliError::Table {
+            path: path.to_path_buf(),
+            err,
+        })?;
+    table.camera_model().ok_or_else(|| {
+        CliError::Usage(format!(
+            "{}: the calibration table has no camera section",
+            path.display()
+        ))
+    })
 }
 
 /// Reads a camera-model file (as `optics fit` writes) and checks that the model is usable over
@@ -297,11 +429,20 @@ pub struct FitReport {
     pub model: CameraModelJson,
     /// The report's lines.
     pub text: String,
+    /// From images: the fit, and the holdout checks when asked for.
+    pub sky: Option<images::SkyReport>,
 }
 
-/// Fits the camera model to a case and writes it.
+/// Fits the camera model to a case or to images and writes it.
 pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
-    let json_path = args.case.join("case.json");
+    match &args.case {
+        Some(case) => run_fit_case(args, case),
+        None => images::run(args),
+    }
+}
+
+fn run_fit_case(args: &OpticsFitArgs, case_dir: &Path) -> Result<FitReport, CliError> {
+    let json_path = case_dir.join("case.json");
     let case: CaseJson = serde_json::from_slice(&read_file(&json_path)?)
         .map_err(|e| CliError::Usage(format!("{}: {e}", json_path.display())))?;
     if !(case.focal_length_px > 0.0 && case.centroid_sigma_px > 0.0) {
@@ -316,7 +457,7 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
     };
     let bytes = catalog_bytes(args.catalog.as_deref())?;
     let cat = Catalog::parse(&bytes).map_err(|e| CliError::Usage(format!("catalog: {e}")))?;
-    let fields_dir = args.case.join("fields");
+    let fields_dir = case_dir.join("fields");
     let mut names: Vec<PathBuf> = std::fs::read_dir(&fields_dir)
         .map_err(io(&fields_dir))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -327,19 +468,11 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
         .iter()
         .map(|p| read_field(p))
         .collect::<Result<Vec<_>, _>>()?;
-    let opts = FitOptions {
-        colour: !args.no_colour,
-        ..FitOptions::default()
-    };
+    let opts = args.options();
     let (frames, fit) =
         optics::identify_and_fit(&cat, &fields, &start, case.centroid_sigma_px, opts)
             .map_err(|e| CliError::Usage(e.to_string()))?;
-    let mut model = CameraModelJson::of(&fit.camera);
-    model.sigma = fit.sigma.to_vec();
-    model.sigma_names = PARAM_NAMES.iter().map(|s| (*s).to_string()).collect();
-    model.residual_rms_px = Some(fit.residual_rms_px);
-    model.stars = Some(fit.stars);
-    model.frames = Some(frames.len());
+    let model = CameraModelJson::of_fit(&fit, frames.len());
     let out = serde_json::to_string_pretty(&model).map_err(|e| CliError::Usage(e.to_string()))?;
     write_file(&args.out, out.as_bytes())?;
 
@@ -353,7 +486,7 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
         case.centroid_sigma_px
     );
     let got = optics::params_of(&fit.camera);
-    let truth_path = args.case.join("camera_truth.json");
+    let truth_path = case_dir.join("camera_truth.json");
     let truth = if truth_path.exists() {
         Some(read_camera_model(&truth_path)?)
     } else {
@@ -382,7 +515,7 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
             "model image error against the truth (best rotation removed): RMS {:.4} px, max {:.4} px",
             m.rms_px, m.max_px
         );
-        let truth_q = read_truth(&args.case.join("truth.csv"))?;
+        let truth_q = read_truth(&case_dir.join("truth.csv"))?;
         let c = optics::colour_error(&frames, &truth_q, &fit.camera, t);
         let _ = writeln!(
             text,
@@ -390,5 +523,9 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
             c.uncorrected_rms_px, c.uncorrected_max_px, c.residual_rms_px, c.residual_max_px
         );
     }
-    Ok(FitReport { model, text })
+    Ok(FitReport {
+        model,
+        text,
+        sky: None,
+    })
 }
