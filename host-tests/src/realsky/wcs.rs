@@ -19,8 +19,8 @@
 //! `AP_2_0 = 3 p2 / f`, `AP_0_2 = p2 / f`, `AP_1_1 = 2 p1 / f`, and `BP` the same with the
 //! axes and `p1`, `p2` swapped. `A`, `B` (order [`SIP_ORDER`]) are fitted by least squares
 //! to the model's inverse on a 33 x 25 grid over the image and a 5 % margin; the largest
-//! misfit on the grid is kept ([`Sip::fit_error_px`]). Cost: the grid's inversions and an
-//! 18-term least-squares solve, a millisecond.
+//! misfit on the grid is kept ([`Sip::fit_error_px`]). Cost: the grid's inversions and
+//! a 33-term least-squares solve, a millisecond.
 //!
 //! # Annotated PNG
 //! The background-subtracted image, stretched for the eye (square root between +2 and +60
@@ -40,7 +40,7 @@ use startrack_core::catalog::Catalog;
 use std::path::Path;
 
 /// Order of the fitted forward SIP polynomials `A`, `B`.
-pub const SIP_ORDER: usize = 5;
+pub const SIP_ORDER: usize = 7;
 
 /// SIP distortion terms: each polynomial as `(p, q, coefficient)`, the coefficient of
 /// `u^p v^q` (px, `u`, `v` in px from `CRPIX`).

@@ -209,7 +209,7 @@ fn sip_terms_are_the_camera_model() {
     };
     let sip = sip_of(&cam, [1024, 768]).unwrap();
     assert!(sip.fit_error_px < 1e-4, "{}", sip.fit_error_px);
-    assert_eq!((sip.order, sip.inv_order), (5, 5));
+    assert_eq!((sip.order, sip.inv_order), (7, 5));
     let poly = |t: &[(usize, usize, f64)], u: f64, v: f64| -> f64 {
         t.iter()
             .map(|&(p, q, c)| c * u.powi(p as i32) * v.powi(q as i32))
