@@ -151,10 +151,12 @@ impl SolveSpec {
     fn check(&self) -> Result<(), ImageSolveError> {
         let bad = |m: &str| Err(ImageSolveError::BadSpec(m.into()));
         let c = &self.camera;
-        if !(c.focal_length_px.is_finite() && c.focal_length_px > 0.0)
-            || !(0.0..0.5).contains(&self.focal_length_error)
-            || !(self.sigma_floor_px > 0.0 && self.sigma_floor_px.is_finite())
-        {
+        let ok = c.focal_length_px.is_finite()
+            && c.focal_length_px > 0.0
+            && (0.0..0.5).contains(&self.focal_length_error)
+            && self.sigma_floor_px > 0.0
+            && self.sigma_floor_px.is_finite();
+        if !ok {
             return bad(
                 "focal length must be positive, its error in 0..0.5, the sigma floor positive",
             );
