@@ -103,7 +103,8 @@ pub struct SolveImageArgs {
     #[command(flatten)]
     pub camera: ImageCameraArgs,
     /// Catalog file from `startrack catalog build` (default: built at the start of the run
-    /// from the star list, every star to Hp 7.5, for a square field of --fov-deg).
+    /// from the star list, every star to Hp 7.5, for a square field of --fov-deg, or of the
+    /// focal length's field without it).
     #[arg(long)]
     pub catalog: Option<PathBuf>,
     /// Star list (default: the repo's `host-tests/data/hip_7p5.csv`, Hp <= 7.5): the

@@ -8,8 +8,8 @@
 //! - Rounds: the model and the attitudes are fitted to the matches (weighted by the stars'
 //!   inverse variances, [`star_sigma_px`]); then every measured star of each image is
 //!   matched again to the nearest catalog star through the fitted model and that image's
-//!   fitted attitude (`solve-image`'s matching, radius `5 sigma_floor + 1` px, then a cut at 5 of the
-//!   star's own sigmas), and fitted again, until the matches stop changing (at most
+//!   fitted attitude (`solve-image`'s matching, radius `5 sigma_floor + 1` px, then a cut
+//!   at 5 of the star's own sigmas), and fitted again, until the matches stop changing (at most
 //!   [`MAX_ROUNDS`] fits). The first fit is to `solve-image`'s own matches at its own
 //!   attitudes, which agree with the camera it solved with whatever the start's principal
 //!   point: a principal point moved by `d` px looks like the attitude turned by `d / f`, so

@@ -346,3 +346,49 @@ fn astropy_rms_px(dir: &Path, stem: &str) -> f64 {
     );
     String::from_utf8_lossy(&out.stdout).trim().parse().unwrap()
 }
+
+/// `optics fit --images` with fewer than two images that solve, or without any focal
+/// length: one line and a non-zero exit.
+#[test]
+fn optics_fit_from_unsolvable_images_is_one_line_and_a_failure() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let tmp = tempfile::tempdir().unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let n = Normal::new(3000.0f64, 200.0).unwrap();
+    let noise_img = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(256, 192, |_, _| {
+        image::Luma([n.sample(&mut rng).round().clamp(0.0, 65535.0) as u16])
+    });
+    let noise = tmp.path().join("noise.png");
+    noise_img.save(&noise).unwrap();
+    let (p, m) = (
+        noise.to_str().unwrap(),
+        tmp.path().join("m.json").to_string_lossy().into_owned(),
+    );
+    for (args, what) in [
+        (
+            vec![
+                "optics",
+                "fit",
+                "--images",
+                p,
+                p,
+                "--fov-deg",
+                "11.4",
+                "--out",
+                &m,
+            ],
+            "0 of 2 images solved",
+        ),
+        (
+            vec!["optics", "fit", "--images", p, "--out", &m],
+            "focal length is needed",
+        ),
+    ] {
+        let (ok, _, err) = crate::common_cli::startrack(&args);
+        assert!(!ok, "{args:?}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(what), "{args:?}: {err}");
+    }
+    assert!(!tmp.path().join("m.json").exists());
+}
