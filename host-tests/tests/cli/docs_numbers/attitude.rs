@@ -200,3 +200,46 @@ fn realsky_time_per_image_is_its_csv() {
     let page = flat(&read("docs/attitude.md"));
     assert!(page.contains(&phrase), "docs/attitude.md lacks {phrase:?}");
 }
+
+/// What the prose derives from the fit (the holdout's gain, the principal point's offset from
+/// the centre of the 1024 x 768 frames, the terms' significance, the distortion at the
+/// farthest corner) is computed from `realsky-optics.csv`.
+#[test]
+fn realsky_optics_prose_is_its_csv() {
+    let csv = Csv::read(OPTICS);
+    let recs = csv.records();
+    let get = |q: &str, col: &str| -> f64 {
+        recs.iter()
+            .find(|r| r["quantity"] == q)
+            .unwrap_or_else(|| panic!("{OPTICS}: no {q}"))[col]
+            .parse()
+            .unwrap()
+    };
+    let v = |q: &str| get(q, "value");
+    let s = |q: &str| get(q, "sigma");
+    let gain = |n: u8| {
+        100.0
+            * (1.0
+                - v(&format!("holdout{n}_rms_model_px")) / v(&format!("holdout{n}_rms_pinhole_px")))
+    };
+    let (dx, dy) = (v("cx_px") - 511.5, v("cy_px") - 383.5);
+    // The corner farthest from the principal point, and the distortion's radial shift there.
+    let (cx, cy, f) = (v("cx_px"), v("cy_px"), v("focal_length_px"));
+    let r = [(0.0, 0.0), (1023.0, 0.0), (0.0, 767.0), (1023.0, 767.0)]
+        .iter()
+        .map(|(x, y): &(f64, f64)| (x - cx).hypot(y - cy))
+        .fold(0.0, f64::max);
+    let rn2 = (r / f).powi(2);
+    let corner_px = r * (v("k1") * rn2 + v("k2") * rn2 * rn2);
+    let phrase = format!(
+        "The model takes {:.0} % and {:.0} % of the residual off frames it was not fitted to. The principal point is {dx:.1} px right of and {dy:.1} px below the image centre ({:.1} and {:.1} sigma); `k1` is {:.1} sigma and `k2` {:.1}: together a pincushion of {corner_px:.1} px at the farthest corner.",
+        gain(1),
+        gain(2),
+        dx / s("cx_px"),
+        dy / s("cy_px"),
+        v("k1") / s("k1"),
+        v("k2").abs() / s("k2"),
+    );
+    let page = flat(&read("docs/attitude.md"));
+    assert!(page.contains(&phrase), "docs/attitude.md lacks {phrase:?}");
+}
