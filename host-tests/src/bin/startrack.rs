@@ -86,11 +86,14 @@ enum Command {
     Optics(OpticsCommand),
 }
 
+// Parsed once per run: the size of the largest variant does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum OpticsCommand {
     /// Write simulated frames through distorted optics with lateral colour, and the truth.
     Case(startrack_host::cli::optics::OpticsCaseArgs),
-    /// Fit the camera model to a case's identified stars and write it as JSON.
+    /// Fit the camera model to a case's or to real images' identified stars and write it as
+    /// JSON.
     Fit(startrack_host::cli::optics::OpticsFitArgs),
 }
 

@@ -11,7 +11,20 @@
 //! writes the model with each parameter's formal 1-sigma (`FILE`, JSON). When the case holds
 //! `camera_truth.json` and `truth.csv`, the report also gives each parameter's error against
 //! the truth, the model's image error and the colour residual after correction.
+//!
+//! `optics fit --images IMAGE... --fov-deg F --out FILE` does it from real night-sky images
+//! ([`startrack_lab::optics::sky`]): each image's stars found and identified as `solve-image` does
+//! them (its camera options: `--fov-deg`, `--focal-length-px`, `--principal-point`,
+//! `--camera`), then the model fitted over all images; the report gives each parameter with
+//! its 1-sigma and the residual RMS through the pinhole `solve-image` had and through the
+//! model, and with `--holdout` the model fitted on every other image and tested on the rest
+//! (and the reverse). `--hold` keeps parameters at their start values; `--csv` writes the
+//! figures. The file is the same JSON, for `calib build --camera-model` and `solve-image
+//! --camera`.
 
+pub mod images;
+
+use super::solve_image::ImageCameraArgs;
 use super::{CliError, read_file, write_file};
 use serde::Deserialize;
 use startrack_core::attitude::{Camera, Quat};
@@ -41,18 +54,96 @@ pub struct OpticsCaseArgs {
 #[derive(Clone, Debug, clap::Args)]
 pub struct OpticsFitArgs {
     /// Case folder: `case.json` and `fields/*.csv` (and optionally the truth).
-    #[arg(long)]
-    pub case: PathBuf,
+    #[arg(long, required_unless_present = "images", conflicts_with = "images")]
+    pub case: Option<PathBuf>,
+    /// Real night-sky images instead of a case (FITS, TIFF, PNG, JPEG), solved as
+    /// `solve-image` solves them.
+    #[arg(long, num_args = 1..)]
+    pub images: Vec<PathBuf>,
+    /// The images' camera and centroids (as `solve-image`'s).
+    #[command(flatten)]
+    pub sky: ImageCameraArgs,
     /// Output camera model (JSON).
     #[arg(long)]
     pub out: PathBuf,
-    /// Catalog file from `startrack catalog build` (default: built from the repo's list for
-    /// a 15 degree field).
+    /// Catalog file from `startrack catalog build` (default: for a case, built from the
+    /// repo's list for a 15 degree field; for images, as `solve-image` builds it).
     #[arg(long)]
     pub catalog: Option<PathBuf>,
-    /// Hold the lateral colour scale at 0 (to see what the colour term removes).
+    /// Star list of the images' default catalog (as `solve-image --list`).
+    #[arg(long)]
+    pub list: Option<PathBuf>,
+    /// Hold the lateral colour scale at its start value (0: to see what the colour term
+    /// removes).
     #[arg(long)]
     pub no_colour: bool,
+    /// Parameters held at their start values (comma-separated).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub hold: Vec<Param>,
+    /// Images only: also fit on every other image and test on the rest, and the reverse.
+    #[arg(long)]
+    pub holdout: bool,
+    /// Images only: write the report's figures as CSV (`quantity,value,sigma`).
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+}
+
+impl OpticsFitArgs {
+    /// Fits a simulated case, every parameter free.
+    pub fn case(case: PathBuf, out: PathBuf) -> Self {
+        Self {
+            case: Some(case),
+            images: Vec::new(),
+            sky: ImageCameraArgs::default(),
+            out,
+            catalog: None,
+            list: None,
+            no_colour: false,
+            hold: Vec::new(),
+            holdout: false,
+            csv: None,
+        }
+    }
+
+    /// Fits images of a horizontal field of view `fov_deg`, every parameter free.
+    pub fn images(images: Vec<PathBuf>, fov_deg: f64, out: PathBuf) -> Self {
+        Self {
+            case: None,
+            images,
+            sky: ImageCameraArgs::fov(fov_deg),
+            ..Self::case(PathBuf::new(), out)
+        }
+    }
+
+    fn options(&self) -> FitOptions {
+        let held = |p: Param| self.hold.contains(&p);
+        FitOptions {
+            focal_length: !held(Param::FocalLength),
+            principal_point: !held(Param::PrincipalPoint),
+            k1: !held(Param::K1),
+            k2: !held(Param::K2),
+            tangential: !held(Param::Tangential),
+            colour: !(self.no_colour || held(Param::Colour)),
+            ..FitOptions::default()
+        }
+    }
+}
+
+/// A camera parameter (group) of `optics fit --hold`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Param {
+    /// The focal length.
+    FocalLength,
+    /// The principal point (both coordinates).
+    PrincipalPoint,
+    /// The `r^2` radial term.
+    K1,
+    /// The `r^4` radial term.
+    K2,
+    /// The tangential terms `p1`, `p2`.
+    Tangential,
+    /// The lateral colour scale.
+    Colour,
 }
 
 fn catalog_bytes(path: Option<&Path>) -> Result<Vec<u8>, CliError> {
@@ -200,11 +291,20 @@ pub struct FitReport {
     pub model: CameraModelJson,
     /// The report's lines.
     pub text: String,
+    /// From images: the fit, and the holdout checks when asked for.
+    pub sky: Option<images::SkyReport>,
 }
 
-/// Fits the camera model to a case and writes it.
+/// Fits the camera model to a case or to images and writes it.
 pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
-    let json_path = args.case.join("case.json");
+    match &args.case {
+        Some(case) => run_fit_case(args, case),
+        None => images::run(args),
+    }
+}
+
+fn run_fit_case(args: &OpticsFitArgs, case_dir: &Path) -> Result<FitReport, CliError> {
+    let json_path = case_dir.join("case.json");
     let case: CaseJson = serde_json::from_slice(&read_file(&json_path)?)
         .map_err(|e| CliError::Usage(format!("{}: {e}", json_path.display())))?;
     if !(case.focal_length_px > 0.0 && case.centroid_sigma_px > 0.0) {
@@ -219,7 +319,7 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
     };
     let bytes = catalog_bytes(args.catalog.as_deref())?;
     let cat = Catalog::parse(&bytes).map_err(|e| CliError::Usage(format!("catalog: {e}")))?;
-    let fields_dir = args.case.join("fields");
+    let fields_dir = case_dir.join("fields");
     let mut names: Vec<PathBuf> = std::fs::read_dir(&fields_dir)
         .map_err(io(&fields_dir))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -230,19 +330,11 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
         .iter()
         .map(|p| read_field(p))
         .collect::<Result<Vec<_>, _>>()?;
-    let opts = FitOptions {
-        colour: !args.no_colour,
-        ..FitOptions::default()
-    };
+    let opts = args.options();
     let (frames, fit) =
         optics::identify_and_fit(&cat, &fields, &start, case.centroid_sigma_px, opts)
             .map_err(|e| CliError::Usage(e.to_string()))?;
-    let mut model = CameraModelJson::of(&fit.camera);
-    model.sigma = fit.sigma.to_vec();
-    model.sigma_names = PARAM_NAMES.iter().map(|s| (*s).to_string()).collect();
-    model.residual_rms_px = Some(fit.residual_rms_px);
-    model.stars = Some(fit.stars);
-    model.frames = Some(frames.len());
+    let model = CameraModelJson::of_fit(&fit, frames.len());
     let out = serde_json::to_string_pretty(&model).map_err(|e| CliError::Usage(e.to_string()))?;
     write_file(&args.out, out.as_bytes())?;
 
@@ -256,7 +348,7 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
         case.centroid_sigma_px
     );
     let got = optics::params_of(&fit.camera);
-    let truth_path = args.case.join("camera_truth.json");
+    let truth_path = case_dir.join("camera_truth.json");
     let truth = if truth_path.exists() {
         Some(read_camera_model(&truth_path)?)
     } else {
@@ -285,7 +377,7 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
             "model image error against the truth (best rotation removed): RMS {:.4} px, max {:.4} px",
             m.rms_px, m.max_px
         );
-        let truth_q = read_truth(&args.case.join("truth.csv"))?;
+        let truth_q = read_truth(&case_dir.join("truth.csv"))?;
         let c = optics::colour_error(&frames, &truth_q, &fit.camera, t);
         let _ = writeln!(
             text,
@@ -293,5 +385,9 @@ pub fn run_fit(args: &OpticsFitArgs) -> Result<FitReport, CliError> {
             c.uncorrected_rms_px, c.uncorrected_max_px, c.residual_rms_px, c.residual_max_px
         );
     }
-    Ok(FitReport { model, text })
+    Ok(FitReport {
+        model,
+        text,
+        sky: None,
+    })
 }

@@ -1,5 +1,13 @@
 //! `startrack solve-image IMAGE... --fov-deg F [--fov-max-error E] [--focal-length-px P]
-//! [--catalog FILE] [--out DIR]`: real images to attitudes ([`startrack_lab::realsky`]).
+//! [--principal-point X,Y] [--camera FILE] [--catalog FILE] [--out DIR]`: real images to
+//! attitudes ([`startrack_lab::realsky`]).
+//!
+//! The camera: a pinhole about the image centre with the focal length from `--fov-deg`
+//! (the horizontal field), or the model of `--camera` (a calibration table with a camera
+//! section, or the JSON `optics fit` writes: focal length, principal point, distortion), with
+//! `--focal-length-px` and `--principal-point` replacing those parts of either. The focal
+//! length is then searched within `--fov-max-error` of that and refit per image; the
+//! principal point and the distortion are held.
 //!
 //! `DIR/solutions.csv` gets one row per image:
 //! `image,solved,ra_deg,dec_deg,roll_deg,fov_deg,matched,rmse_arcsec,time_ms`, with RA and
@@ -16,7 +24,7 @@
 //! and the command then exits non-zero.
 
 use super::{CliError, read_file, write_file};
-use startrack_core::attitude::angle_between;
+use startrack_core::attitude::{Camera, angle_between};
 use startrack_core::catalog::Catalog;
 use startrack_lab::realsky::picture;
 use startrack_lab::realsky::solve::{self, ImageSolution, SolveSpec};
@@ -27,23 +35,76 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// What an image command is told about the camera and the centroids (shared by
+/// `solve-image` and `optics fit --images`).
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct ImageCameraArgs {
+    /// Horizontal field of view (across the columns), deg (needed unless --focal-length-px
+    /// or --camera gives the focal length).
+    #[arg(long)]
+    pub fov_deg: Option<f64>,
+    /// Relative error of the focal length (0.1: 10 %); focal lengths within it are tried.
+    #[arg(long, default_value_t = 0.1)]
+    pub fov_max_error: f64,
+    /// Focal length, px (instead of the one from --fov-deg or --camera).
+    #[arg(long)]
+    pub focal_length_px: Option<f64>,
+    /// Principal point, px: column,row, 0-based (default: the image centre, or --camera's).
+    #[arg(long, value_parser = parse_point)]
+    pub principal_point: Option<[f64; 2]>,
+    /// Camera model: a calibration table with a camera section (`calib build
+    /// --camera-model`) or the JSON `optics fit` writes.
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// Pixel values times this are taken as electrons (the fit's shot-noise term).
+    #[arg(long, default_value_t = 1.0)]
+    pub gain_e_per_adu: f64,
+    /// Smallest centroid sigma believed, px (optics and catalog errors).
+    #[arg(long, default_value_t = 0.5)]
+    pub sigma_floor_px: f64,
+}
+
+impl ImageCameraArgs {
+    /// The defaults with a field of view.
+    pub fn fov(fov_deg: f64) -> Self {
+        Self {
+            fov_deg: Some(fov_deg),
+            fov_max_error: 0.1,
+            gain_e_per_adu: 1.0,
+            sigma_floor_px: 0.5,
+            ..Self::default()
+        }
+    }
+}
+
+/// `X,Y` as two finite numbers.
+fn parse_point(s: &str) -> Result<[f64; 2], String> {
+    let v: Vec<&str> = s.split(',').collect();
+    let [x, y] = v[..] else {
+        return Err(format!("{s:?}: expected X,Y"));
+    };
+    let num = |t: &str| -> Result<f64, String> {
+        t.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("{t:?} is not a finite number"))
+    };
+    Ok([num(x)?, num(y)?])
+}
+
 /// Options of `startrack solve-image`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct SolveImageArgs {
     /// Images: FITS (any BITPIX), TIFF (8/16-bit), PNG, JPEG.
     #[arg(required = true)]
     pub images: Vec<PathBuf>,
-    /// Horizontal field of view (across the columns), deg.
-    #[arg(long)]
-    pub fov_deg: f64,
-    /// Relative error of the field of view (0.1: 10 %); focal lengths within it are tried.
-    #[arg(long, default_value_t = 0.1)]
-    pub fov_max_error: f64,
-    /// Focal length, px (instead of the one from --fov-deg).
-    #[arg(long)]
-    pub focal_length_px: Option<f64>,
+    /// The camera and the centroids.
+    #[command(flatten)]
+    pub camera: ImageCameraArgs,
     /// Catalog file from `startrack catalog build` (default: built at the start of the run
-    /// from the star list, every star to Hp 7.5, for a square field of --fov-deg).
+    /// from the star list, every star to Hp 7.5, for a square field of --fov-deg, or of the
+    /// focal length's field without it).
     #[arg(long)]
     pub catalog: Option<PathBuf>,
     /// Star list (default: the repo's `host-tests/data/hip_7p5.csv`, Hp <= 7.5): the
@@ -53,12 +114,6 @@ pub struct SolveImageArgs {
     /// Output folder (created if needed).
     #[arg(long, default_value = "solve-image-out")]
     pub out: PathBuf,
-    /// Pixel values times this are taken as electrons (the fit's shot-noise term).
-    #[arg(long, default_value_t = 1.0)]
-    pub gain_e_per_adu: f64,
-    /// Smallest centroid sigma believed, px (optics and catalog errors).
-    #[arg(long, default_value_t = 0.5)]
-    pub sigma_floor_px: f64,
 }
 
 /// Faintest star of the default catalog, Hp: an 11 degree field holds a dozen stars to 6.5
@@ -117,12 +172,14 @@ fn hip_of(list: &[SkyStar], dir: [f64; 3]) -> Option<&SkyStar> {
         .map(|(s, _)| s)
 }
 
-/// Checks the options (one line for each misuse).
-pub fn check(args: &SolveImageArgs) -> Result<(), CliError> {
-    if !(args.fov_deg > 0.5 && args.fov_deg < 60.0) {
+/// Checks the options (one line for each misuse) and reads `--camera`: the model it
+/// gives, if any.
+pub fn check(args: &ImageCameraArgs) -> Result<Option<Camera>, CliError> {
+    if let Some(fov) = args.fov_deg
+        && !(fov > 0.5 && fov < 60.0)
+    {
         return Err(CliError::Usage(format!(
-            "--fov-deg {} out of range (0.5 < F < 60 deg)",
-            args.fov_deg
+            "--fov-deg {fov} out of range (0.5 < F < 60 deg)"
         )));
     }
     if !(0.0..0.5).contains(&args.fov_max_error) {
@@ -139,35 +196,101 @@ pub fn check(args: &SolveImageArgs) -> Result<(), CliError> {
     if !(args.sigma_floor_px.is_finite() && args.sigma_floor_px > 0.0) {
         return Err(CliError::Usage("--sigma-floor-px must be positive".into()));
     }
-    Ok(())
+    let camera = args
+        .camera
+        .as_deref()
+        .map(startrack_lab::optics::read_camera_file)
+        .transpose()?;
+    if args.fov_deg.is_none() && args.focal_length_px.is_none() && camera.is_none() {
+        return Err(CliError::Usage(
+            "the focal length is needed: --fov-deg, --focal-length-px or --camera".into(),
+        ));
+    }
+    Ok(camera)
+}
+
+impl ImageCameraArgs {
+    /// The solver's spec for an image of `size_px`, `camera` the model `--camera` gave.
+    pub fn spec(&self, camera: Option<&Camera>, size_px: [usize; 2]) -> SolveSpec {
+        let base = match (camera, self.fov_deg) {
+            (Some(c), _) => *c,
+            (None, Some(fov)) => Camera::pinhole(
+                solve::focal_length_px(size_px[0], fov),
+                solve::centre(size_px),
+            ),
+            // `check` refuses this unless --focal-length-px is given (set below).
+            (None, None) => Camera::pinhole(1.0, solve::centre(size_px)),
+        };
+        let mut cam = base;
+        if let Some(f) = self.focal_length_px {
+            cam.focal_length_px = f;
+        }
+        if let Some(p) = self.principal_point {
+            cam.principal_point_px = p;
+        }
+        SolveSpec {
+            size_px,
+            camera: cam,
+            focal_length_error: self.fov_max_error,
+            sigma_floor_px: self.sigma_floor_px,
+        }
+    }
+
+    /// The field of view the default catalog is built for, deg: `--fov-deg`, else the
+    /// horizontal field of the focal length over an image of `width_px`.
+    pub fn catalog_fov_deg(&self, camera: Option<&Camera>, width_px: usize) -> f64 {
+        self.fov_deg.unwrap_or_else(|| {
+            let f = self
+                .focal_length_px
+                .or(camera.map(|c| c.focal_length_px))
+                .unwrap_or(1.0);
+            solve::fov_deg(width_px, f)
+        })
+    }
+}
+
+/// The catalog `bytes` of `--catalog`, or the default one built for a square field of
+/// `fov_deg` from `list`, every star to [`DEFAULT_MAG_LIMIT`].
+pub fn catalog_bytes(
+    catalog: Option<&Path>,
+    list: &[SkyStar],
+    fov_deg: f64,
+) -> Result<Vec<u8>, CliError> {
+    match catalog {
+        Some(p) => read_file(p),
+        None => {
+            let spec = super::catalog::spec(&super::catalog::CatalogBuildArgs {
+                out: PathBuf::new(),
+                list: None,
+                mag_limit: DEFAULT_MAG_LIMIT,
+                fov_deg,
+                max_separation_deg: 12.0,
+            })?;
+            Ok(startrack_sim::sky::build::build(list, &spec)
+                .map_err(|e| CliError::Usage(e.to_string()))?
+                .bytes)
+        }
+    }
+}
+
+/// The star list of `--list` (default [`deep_list_path`]).
+pub fn read_star_list(path: Option<&Path>) -> Result<Vec<SkyStar>, CliError> {
+    let list_path = path.map_or_else(deep_list_path, Path::to_path_buf);
+    read_list(&list_path).map_err(|e| CliError::Csv {
+        path: e.path.clone(),
+        line: e.line,
+        msg: e.msg,
+    })
 }
 
 /// Solves every image and writes the outputs (see the module docs). `Err` only for what
 /// stops the whole run (options, catalog, output folder); an image's failure is in its
 /// outcome.
 pub fn run(args: &SolveImageArgs) -> Result<SolveImageSummary, CliError> {
-    check(args)?;
-    let list_path = args.list.clone().unwrap_or_else(deep_list_path);
-    let list = read_list(&list_path).map_err(|e| CliError::Csv {
-        path: e.path.clone(),
-        line: e.line,
-        msg: e.msg,
-    })?;
-    let bytes = match &args.catalog {
-        Some(p) => read_file(p)?,
-        None => {
-            let spec = super::catalog::spec(&super::catalog::CatalogBuildArgs {
-                out: PathBuf::new(),
-                list: None,
-                mag_limit: DEFAULT_MAG_LIMIT,
-                fov_deg: args.fov_deg,
-                max_separation_deg: 12.0,
-            })?;
-            startrack_sim::sky::build::build(&list, &spec)
-                .map_err(|e| CliError::Usage(e.to_string()))?
-                .bytes
-        }
-    };
+    let camera = check(&args.camera)?;
+    let list = read_star_list(args.list.as_deref())?;
+    let fov_deg = catalog_fov(&args.camera, camera.as_ref(), &args.images);
+    let bytes = catalog_bytes(args.catalog.as_deref(), &list, fov_deg)?;
     let cat = Catalog::parse(&bytes).map_err(|e| CliError::Usage(format!("catalog: {e}")))?;
     std::fs::create_dir_all(&args.out).map_err(|e| CliError::Io {
         path: args.out.clone(),
@@ -178,7 +301,7 @@ pub fn run(args: &SolveImageArgs) -> Result<SolveImageSummary, CliError> {
     let mut images = Vec::new();
     for path in &args.images {
         let t0 = Instant::now();
-        let outcome = solve_one(path, args, &cat);
+        let outcome = solve_one(path, &args.camera, camera.as_ref(), &cat);
         let time_ms = t0.elapsed().as_secs_f64() * 1e3;
         let (pic, field, size_px, result) = match outcome {
             Ok((pic, field, r)) => {
@@ -196,11 +319,12 @@ pub fn run(args: &SolveImageArgs) -> Result<SolveImageSummary, CliError> {
         }
         match &result {
             Ok(sol) => {
-                let (ra, dec) = solve::ra_dec_deg(sol.attitude.q.rotate_inv([0.0, 0.0, 1.0]));
+                let q = solve::centre_attitude(sol.attitude.q, &sol.camera, size_px);
+                let (ra, dec) = solve::ra_dec_deg(q.rotate_inv([0.0, 0.0, 1.0]));
                 let _ = writeln!(
                     csv,
                     "{name},1,{ra:.6},{dec:.6},{:.6},{:.5},{},{:.2},{time_ms:.1}",
-                    solve::roll_tetra3_deg(sol.attitude.q),
+                    solve::roll_tetra3_deg(q),
                     solve::fov_deg(size_px[0], sol.focal_length_px),
                     sol.matches.len(),
                     sol.rmse_rad.to_degrees() * 3600.0,
@@ -244,17 +368,30 @@ pub fn run(args: &SolveImageArgs) -> Result<SolveImageSummary, CliError> {
 
 type Solved = (picture::Picture, StarField, Result<ImageSolution, String>);
 
-fn solve_one(path: &Path, args: &SolveImageArgs, cat: &Catalog<'_>) -> Result<Solved, CliError> {
+/// The field of view of the default catalog (see [`ImageCameraArgs::catalog_fov_deg`]),
+/// the width from the first image that reads when `--fov-deg` is not given.
+pub fn catalog_fov(args: &ImageCameraArgs, camera: Option<&Camera>, images: &[PathBuf]) -> f64 {
+    let width = if args.fov_deg.is_some() {
+        0
+    } else {
+        images
+            .iter()
+            .find_map(|p| picture::load(p).ok())
+            .map_or(1024, |p| p.width)
+    };
+    args.catalog_fov_deg(camera, width)
+}
+
+/// Reads, finds the stars of and solves one image.
+pub fn solve_one(
+    path: &Path,
+    args: &ImageCameraArgs,
+    camera: Option<&Camera>,
+    cat: &Catalog<'_>,
+) -> Result<Solved, CliError> {
     let pic = picture::load(path)?;
     let field = stars::find_stars(&pic, args.gain_e_per_adu);
-    let spec = SolveSpec {
-        size_px: [pic.width, pic.height],
-        focal_length_px: args
-            .focal_length_px
-            .unwrap_or_else(|| solve::focal_length_px(pic.width, args.fov_deg)),
-        focal_length_error: args.fov_max_error,
-        sigma_floor_px: args.sigma_floor_px,
-    };
+    let spec = args.spec(camera, [pic.width, pic.height]);
     let r = solve::solve(cat, &field.stars, &spec).map_err(|e| format!("{}: {e}", path.display()));
     Ok((pic, field, r))
 }

@@ -14,12 +14,15 @@
 //!   formulas here, independent of the code that wrote it), and the annotated PNG is there
 //!   at the frame's size; docs/attitude.md quotes the range of those RMS.
 //! - Bad input gets one line on stderr and a non-zero exit: a truncated TIFF, a 1 x 1
-//!   image, an image of nothing but noise, a field of view of 0 or 180 degrees.
+//!   image, a 16-bit PNG with a colour map (a bit depth PNG forbids for palette images),
+//!   an image of nothing but noise, a field of view of 0 or 180 degrees; and of the camera
+//!   options: no focal length at all, a principal point outside the image, a `--camera`
+//!   file that is neither a table nor a model, a table without a camera section.
 
 use crate::common_cli::startrack;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use startrack_host::cli::solve_image::{SolveImageArgs, run};
+use startrack_host::cli::solve_image::{ImageCameraArgs, SolveImageArgs, run};
 use std::path::{Path, PathBuf};
 
 /// The shared frames, if present.
@@ -31,14 +34,10 @@ pub fn realsky_dir() -> Option<PathBuf> {
 fn args(images: Vec<PathBuf>, out: PathBuf) -> SolveImageArgs {
     SolveImageArgs {
         images,
-        fov_deg: 11.4,
-        fov_max_error: 0.1,
-        focal_length_px: None,
+        camera: ImageCameraArgs::fov(11.4),
         catalog: None,
         list: None,
         out,
-        gain_e_per_adu: 1.0,
-        sigma_floor_px: 0.5,
     }
 }
 
@@ -167,11 +166,11 @@ fn unit(ra_deg: f64, dec_deg: f64) -> [f64; 3] {
 
 /// The fresh solutions against the committed comparison (see the module docs).
 /// With `as_committed`, also RA, Dec and roll as the CSV writes them.
-fn check_against_tetra3rs(
+pub fn check_against_tetra3rs(
     images: &[startrack_host::cli::solve_image::ImageOutcome],
     as_committed: bool,
 ) {
-    use startrack_lab::realsky::solve::{ra_dec_deg, roll_tetra3_deg};
+    use startrack_lab::realsky::solve::{centre_attitude, ra_dec_deg, roll_tetra3_deg};
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("figures/realsky-tetra3rs.csv");
     let text = std::fs::read_to_string(&path).unwrap();
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
@@ -188,7 +187,8 @@ fn check_against_tetra3rs(
             .iter()
             .find(|r| r[0] == name)
             .expect("frame in the CSV");
-        let q = i.result.as_ref().unwrap().attitude.q;
+        let sol = i.result.as_ref().unwrap();
+        let q = centre_attitude(sol.attitude.q, &sol.camera, i.size_px);
         let (ra, dec) = ra_dec_deg(q.rotate_inv([0.0, 0.0, 1.0]));
         let roll = roll_tetra3_deg(q);
         // As committed (written with 6 decimals).
@@ -237,7 +237,7 @@ fn fov_seven_percent_off_gives_the_same_solutions() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let s = run(&SolveImageArgs {
-        fov_deg: 10.6,
+        camera: ImageCameraArgs::fov(10.6),
         ..args(frames(&dir, "fits"), tmp.path().to_path_buf())
     })
     .unwrap();
@@ -252,6 +252,130 @@ fn fov_seven_percent_off_gives_the_same_solutions() {
         assert!(sol.trials > 1, "the nominal focal length is 7 % off");
     }
     check_against_tetra3rs(&s.images, false);
+}
+
+/// PNG chunk: length, type, data, CRC-32 of type and data.
+fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+    let mut d = crc.digest();
+    d.update(kind);
+    d.update(data);
+    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+    out.extend_from_slice(kind);
+    out.extend_from_slice(data);
+    out.extend_from_slice(&d.finalize().to_be_bytes());
+}
+
+/// A PNG of colour type 3 (a colour map) at 16 bits a sample, otherwise well formed: a
+/// two-entry palette and rows of zeros in a stored (uncompressed) zlib stream.
+fn palette_png_16bit(width: u32, height: u32) -> Vec<u8> {
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend_from_slice(&width.to_be_bytes());
+    ihdr.extend_from_slice(&height.to_be_bytes());
+    ihdr.extend_from_slice(&[16, 3, 0, 0, 0]);
+    chunk(&mut png, b"IHDR", &ihdr);
+    chunk(&mut png, b"PLTE", &[0, 0, 0, 255, 255, 255]);
+    let raw = vec![0u8; (height * (1 + 2 * width)) as usize];
+    let mut z = vec![0x78, 0x01, 0x01];
+    let len = raw.len() as u16;
+    z.extend_from_slice(&len.to_le_bytes());
+    z.extend_from_slice(&(!len).to_le_bytes());
+    z.extend_from_slice(&raw);
+    let (mut a, mut b) = (1u32, 0u32);
+    for &v in &raw {
+        a = (a + u32::from(v)) % 65521;
+        b = (b + a) % 65521;
+    }
+    z.extend_from_slice(&((b << 16) | a).to_be_bytes());
+    chunk(&mut png, b"IDAT", &z);
+    chunk(&mut png, b"IEND", &[]);
+    png
+}
+
+#[test]
+fn bad_camera_options_are_one_line_and_a_failure() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let img = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(64, 48, |x, y| {
+        image::Luma([(1000 + x + y) as u16])
+    });
+    let png = tmp.path().join("flat.png");
+    img.save(&png).unwrap();
+    let garbage = tmp.path().join("garbage.bin");
+    std::fs::write(&garbage, b"not a table").unwrap();
+    let bad_json = tmp.path().join("bad.json");
+    std::fs::write(&bad_json, "{\"focal_length_px\": \"long\"}").unwrap();
+    let table = tmp.path().join("plain.bin");
+    let (bytes, _) =
+        startrack_lab::table_build::build(&startrack_lab::table_build::CalibBuildArgs {
+            gains: Some("1.0,1.0".into()),
+            dark_law: None,
+            ..startrack_test_support::cli::bare_args(table.clone())
+        })
+        .unwrap();
+    std::fs::write(&table, bytes).unwrap();
+    let p = png.to_str().unwrap();
+    let o = out.to_str().unwrap();
+    let cases: [(&[&str], &str); 6] = [
+        (&["solve-image", p, "--out", o], "focal length is needed"),
+        (
+            &["solve-image", p, "--focal-length-px", "0.5", "--out", o],
+            "--focal-length-px",
+        ),
+        (
+            &[
+                "solve-image",
+                p,
+                "--fov-deg",
+                "11.4",
+                "--principal-point",
+                "500,20",
+                "--out",
+                o,
+            ],
+            "principal point",
+        ),
+        (
+            &[
+                "solve-image",
+                p,
+                "--camera",
+                garbage.to_str().unwrap(),
+                "--out",
+                o,
+            ],
+            "garbage.bin",
+        ),
+        (
+            &[
+                "solve-image",
+                p,
+                "--camera",
+                bad_json.to_str().unwrap(),
+                "--out",
+                o,
+            ],
+            "bad.json",
+        ),
+        (
+            &[
+                "solve-image",
+                p,
+                "--camera",
+                table.to_str().unwrap(),
+                "--out",
+                o,
+            ],
+            "no camera section",
+        ),
+    ];
+    for (args, what) in cases {
+        let (ok, _, err) = startrack(args);
+        assert!(!ok, "{args:?}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(what), "{args:?}: {err}");
+    }
 }
 
 /// Runs the binary on `images` with `fov`: (success, stderr).
@@ -289,7 +413,9 @@ fn bad_input_is_one_line_and_a_failure() {
     });
     let noise = tmp.path().join("noise.png");
     noise_img.save(&noise).unwrap();
-    for p in [&cut, &one, &noise] {
+    let palette = tmp.path().join("palette16.png");
+    std::fs::write(&palette, palette_png_16bit(64, 48)).unwrap();
+    for p in [&cut, &one, &palette, &noise] {
         let (ok, err) = cli(&[p], "11.4", &out);
         assert!(!ok, "{}", p.display());
         assert_eq!(err.trim_end().lines().count(), 1, "{}: {err}", p.display());

@@ -5,6 +5,7 @@
 
 mod cli_commands;
 mod cli_models;
+mod cli_optics_sky;
 mod cli_pil_faults;
 mod cli_pixcorr;
 mod cli_sil_motion;

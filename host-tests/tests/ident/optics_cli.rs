@@ -32,13 +32,7 @@ fn case_fit_and_table_end_to_end() {
     })
     .unwrap();
     let model_path = dir.path().join("model.json");
-    let report = run_fit(&OpticsFitArgs {
-        case: case.clone(),
-        out: model_path.clone(),
-        catalog: None,
-        no_colour: false,
-    })
-    .unwrap();
+    let report = run_fit(&OpticsFitArgs::case(case.clone(), model_path.clone())).unwrap();
     print!("{}", report.text);
     assert!(report.text.contains("after correction"), "{}", report.text);
     assert!(report.model.frames.unwrap_or(0) >= 36);
@@ -89,12 +83,10 @@ fn case_fit_and_table_end_to_end() {
 #[test]
 fn bad_inputs_are_typed_errors() {
     let dir = tempfile::tempdir().unwrap();
-    let missing = run_fit(&OpticsFitArgs {
-        case: dir.path().join("nothing"),
-        out: dir.path().join("m.json"),
-        catalog: None,
-        no_colour: false,
-    });
+    let missing = run_fit(&OpticsFitArgs::case(
+        dir.path().join("nothing"),
+        dir.path().join("m.json"),
+    ));
     assert!(matches!(missing, Err(CliError::Io { .. })), "{missing:?}");
 
     // A model that folds the image inside the frame is refused before any table is built.

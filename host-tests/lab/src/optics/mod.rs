@@ -24,8 +24,9 @@
 //! against the truth in simulations with [`model_error`] (best rotation removed).
 
 mod model_file;
+pub mod sky;
 
-pub use model_file::{CameraModelJson, read_camera_model};
+pub use model_file::{CameraModelJson, read_camera_file, read_camera_model};
 
 use nalgebra::{DMatrix, DVector};
 use rand::SeedableRng;
@@ -71,6 +72,9 @@ pub struct IdStar {
     pub bv_mag: f64,
     /// Catalog index.
     pub catalog: u16,
+    /// The position's 1-sigma per axis, px: the star's residuals are weighted by its inverse
+    /// square.
+    pub sigma_px: f64,
 }
 
 /// One frame's identified stars and its attitude from the identification.
@@ -143,6 +147,7 @@ pub fn identify_from(
                     icrs: s.dir,
                     bv_mag: f64::from(s.bv_mmag) / 1000.0,
                     catalog: m.catalog,
+                    sigma_px,
                 })
             })
             .collect();
@@ -155,21 +160,66 @@ pub fn identify_from(
     out
 }
 
-/// What the fit estimates.
+/// What the fit estimates; a parameter not fitted is held at the start value.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FitOptions {
-    /// Fit the lateral colour scale (false: held at the start value).
+    /// Fit the focal length.
+    pub focal_length: bool,
+    /// Fit the principal point.
+    pub principal_point: bool,
+    /// Fit `k1`.
+    pub k1: bool,
+    /// Fit `k2`.
+    pub k2: bool,
+    /// Fit the tangential distortion `p1`, `p2`.
+    pub tangential: bool,
+    /// Fit the lateral colour scale.
     pub colour: bool,
     /// Most Levenberg-Marquardt iterations.
     pub max_iterations: usize,
 }
 
 impl Default for FitOptions {
+    /// Every parameter fitted.
     fn default() -> Self {
         Self {
+            focal_length: true,
+            principal_point: true,
+            k1: true,
+            k2: true,
+            tangential: true,
             colour: true,
             max_iterations: 60,
         }
+    }
+}
+
+impl FitOptions {
+    /// Only the frames' attitudes fitted, the camera held (a model tested on other frames).
+    pub fn attitudes_only() -> Self {
+        Self {
+            focal_length: false,
+            principal_point: false,
+            k1: false,
+            k2: false,
+            tangential: false,
+            colour: false,
+            ..Self::default()
+        }
+    }
+
+    /// Which of [`PARAM_NAMES`] are fitted.
+    pub fn free(&self) -> [bool; 8] {
+        [
+            self.focal_length,
+            self.principal_point,
+            self.principal_point,
+            self.k1,
+            self.k2,
+            self.tangential,
+            self.tangential,
+            self.colour,
+        ]
     }
 }
 
@@ -178,13 +228,18 @@ impl Default for FitOptions {
 pub struct Fit {
     /// The model.
     pub camera: Camera,
-    /// Formal 1-sigma of each parameter of [`PARAM_NAMES`] (0 when held), scaled by the
-    /// residuals' own RMS.
+    /// Formal 1-sigma of each parameter of [`PARAM_NAMES`] (0 when held): from the normal
+    /// equations' inverse, scaled by the chi-square per degree of freedom.
     pub sigma: [f64; 8],
+    /// Their covariance, in the order of [`PARAM_NAMES`] (0 for a held parameter).
+    pub covariance: [[f64; 8]; 8],
     /// Each frame's fitted attitude.
     pub attitudes: Vec<Quat>,
-    /// RMS of the residuals per axis, px.
+    /// RMS of the residuals per axis, px (unweighted).
     pub residual_rms_px: f64,
+    /// The weighted residuals' chi-square per degree of freedom (1 when every star's sigma
+    /// is right).
+    pub chi2_per_dof: f64,
     /// Identified stars used.
     pub stars: usize,
     /// Iterations taken.
@@ -254,33 +309,48 @@ struct State {
     rots: Vec<[f64; 3]>,
 }
 
-fn cost(frames: &[Frame], st: &State, colour_ref: f64) -> Option<f64> {
+/// The weight of a star's residuals: its inverse variance (1 for a sigma that is not
+/// positive and finite).
+fn weight(s: &IdStar) -> f64 {
+    if s.sigma_px.is_finite() && s.sigma_px > 0.0 {
+        1.0 / (s.sigma_px * s.sigma_px)
+    } else {
+        1.0
+    }
+}
+
+/// The weighted sum of squares (chi-square) and the plain one, px^2.
+fn cost(frames: &[Frame], st: &State, colour_ref: f64) -> Option<(f64, f64)> {
     let cam = camera_of(&st.params, colour_ref);
-    let mut sum = 0.0;
+    let (mut chi2, mut sum) = (0.0, 0.0);
     for (f, rot) in frames.iter().zip(&st.rots) {
         for s in &f.stars {
             let r = residual(&cam, f.attitude, *rot, s)?;
-            sum += r[0] * r[0] + r[1] * r[1];
+            let r2 = r[0] * r[0] + r[1] * r[1];
+            chi2 += weight(s) * r2;
+            sum += r2;
         }
     }
-    Some(sum)
+    Some((chi2, sum))
 }
 
-/// Fits the camera model to `frames`, starting from `start` (its colour reference is kept).
+/// Fits the camera model to `frames`, starting from `start` (its colour reference is kept):
+/// weighted least squares, each star's residuals by its inverse variance.
 pub fn fit(frames: &[Frame], start: &Camera, opts: FitOptions) -> Result<Fit, FitError> {
     let n_frames = frames.len();
     let n = 8 + 3 * n_frames;
     let n_stars: usize = frames.iter().map(|f| f.stars.len()).sum();
-    if 2 * n_stars <= n + 1 {
+    let free = opts.free();
+    let held = free.iter().filter(|f| !**f).count();
+    if 2 * n_stars <= n - held + 1 {
         return Err(FitError::TooFewStars);
     }
     let colour_ref = start.colour_ref_bv_mag;
-    let free: [bool; 8] = [true, true, true, true, true, true, true, opts.colour];
     let mut st = State {
         params: params_of(start),
         rots: vec![[0.0; 3]; n_frames],
     };
-    let mut c0 = cost(frames, &st, colour_ref).ok_or(FitError::BadStart)?;
+    let (mut c0, mut sum0) = cost(frames, &st, colour_ref).ok_or(FitError::BadStart)?;
     let mut lambda = 1e-3;
     let mut iterations = 0;
     let mut jtj = DMatrix::<f64>::zeros(n, n);
@@ -312,10 +382,11 @@ pub fn fit(frames: &[Frame], start: &Camera, opts: FitOptions) -> Result<Fit, Fi
                 }
             }
             match cost(frames, &trial, colour_ref) {
-                Some(c) if c < c0 => {
+                Some((c, sum)) if c < c0 => {
                     let rel = (c0 - c) / c0.max(1e-300);
                     st = trial;
                     c0 = c;
+                    sum0 = sum;
                     lambda = (lambda / 10.0).max(1e-12);
                     improved = rel > 1e-12;
                     break;
@@ -327,14 +398,22 @@ pub fn fit(frames: &[Frame], start: &Camera, opts: FitOptions) -> Result<Fit, Fi
             break;
         }
     }
-    // Formal covariance: s^2 (J^T J)^-1 over the free parameters, s^2 from the residuals.
-    let dof = (2 * n_stars).saturating_sub(n - free.iter().filter(|f| !**f).count());
-    let s2 = c0 / dof.max(1) as f64;
+    // Formal covariance: (J^T W J)^-1 over the free parameters, scaled by the chi-square
+    // per degree of freedom (so that a sigma too small or too large for every star cancels).
+    let dof = (2 * n_stars).saturating_sub(n - held);
+    let chi2_per_dof = c0 / dof.max(1) as f64;
     let cov = jtj.cholesky().ok_or(FitError::Singular)?.inverse();
     let mut sigma = [0.0; 8];
-    for (k, s) in sigma.iter_mut().enumerate() {
-        if free[k] {
-            *s = (s2 * cov[(k, k)]).sqrt();
+    let mut covariance = [[0.0; 8]; 8];
+    for k in 0..8 {
+        if !free[k] {
+            continue;
+        }
+        sigma[k] = (chi2_per_dof * cov[(k, k)]).sqrt();
+        for l in 0..8 {
+            if free[l] {
+                covariance[k][l] = chi2_per_dof * cov[(k, l)];
+            }
         }
     }
     let attitudes = frames
@@ -345,14 +424,16 @@ pub fn fit(frames: &[Frame], start: &Camera, opts: FitOptions) -> Result<Fit, Fi
     Ok(Fit {
         camera: camera_of(&st.params, colour_ref),
         sigma,
+        covariance,
         attitudes,
-        residual_rms_px: (c0 / (2 * n_stars) as f64).sqrt(),
+        residual_rms_px: (sum0 / (2 * n_stars) as f64).sqrt(),
+        chi2_per_dof,
         stars: n_stars,
         iterations,
     })
 }
 
-/// `J^T J` and `J^T r` at `st`; a held parameter gets an identity row and no gradient.
+/// `J^T W J` and `J^T W r` at `st`; a held parameter gets an identity row and no gradient.
 fn normal_equations(
     frames: &[Frame],
     st: &State,
@@ -377,6 +458,7 @@ fn normal_equations(
             let Some(r) = residual(&cam, f.attitude, *rot, s) else {
                 continue;
             };
+            let w = weight(s);
             // 11 columns: the 8 camera parameters, then this frame's 3 rotations.
             let mut cols = [[0.0f64; 2]; 11];
             let mut idx = [0usize; 11];
@@ -405,9 +487,9 @@ fn normal_equations(
                 ];
             }
             for p in 0..11 {
-                g[idx[p]] += cols[p][0] * r[0] + cols[p][1] * r[1];
+                g[idx[p]] += w * (cols[p][0] * r[0] + cols[p][1] * r[1]);
                 for q in 0..11 {
-                    a[(idx[p], idx[q])] += cols[p][0] * cols[q][0] + cols[p][1] * cols[q][1];
+                    a[(idx[p], idx[q])] += w * (cols[p][0] * cols[q][0] + cols[p][1] * cols[q][1]);
                 }
             }
         }

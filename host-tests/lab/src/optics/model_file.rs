@@ -1,6 +1,7 @@
 //! The camera-model file (JSON): the model `optics fit` measures and `calib build
 //! --camera-model` and `solve-image --camera` read, with how well the fit knows each parameter.
 
+use super::PARAM_NAMES;
 use crate::{LabError, read_file};
 use serde::{Deserialize, Serialize};
 use startrack_core::attitude::Camera;
@@ -46,6 +47,10 @@ pub struct CameraModelJson {
     /// Frames the fit used.
     #[serde(default)]
     pub frames: Option<usize>,
+    /// Covariance of the fitted parameters, in the order of `sigma_names` (0 for a held
+    /// one).
+    #[serde(default)]
+    pub covariance: Vec<Vec<f64>>,
 }
 
 fn default_ref_bv() -> f64 {
@@ -69,6 +74,20 @@ impl CameraModelJson {
             residual_rms_px: None,
             stars: None,
             frames: None,
+            covariance: Vec::new(),
+        }
+    }
+
+    /// The file of a fit over `frames` frames.
+    pub fn of_fit(f: &super::Fit, frames: usize) -> Self {
+        Self {
+            sigma: f.sigma.to_vec(),
+            sigma_names: PARAM_NAMES.iter().map(|s| (*s).to_string()).collect(),
+            residual_rms_px: Some(f.residual_rms_px),
+            stars: Some(f.stars),
+            frames: Some(frames),
+            covariance: f.covariance.iter().map(|r| r.to_vec()).collect(),
+            ..Self::of(&f.camera)
         }
     }
 
@@ -85,6 +104,29 @@ impl CameraModelJson {
             colour_ref_bv_mag: self.colour_ref_bv_mag,
         }
     }
+}
+
+/// Reads a camera model from a calibration table's camera section or from the JSON `optics
+/// fit` writes (a file whose first non-blank byte is `{`), unchecked: the caller checks it
+/// over its own frame.
+pub fn read_camera_file(path: &Path) -> Result<Camera, LabError> {
+    let bytes = read_file(path)?;
+    if bytes.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'{') {
+        let m: CameraModelJson = serde_json::from_slice(&bytes)
+            .map_err(|e| LabError::Invalid(format!("{}: {e}", path.display())))?;
+        return Ok(m.camera());
+    }
+    let table =
+        startrack_core::table::CalibTable::parse(&bytes).map_err(|err| LabError::Table {
+            path: path.to_path_buf(),
+            err,
+        })?;
+    table.camera_model().ok_or_else(|| {
+        LabError::Invalid(format!(
+            "{}: the calibration table has no camera section",
+            path.display()
+        ))
+    })
 }
 
 /// Reads a camera-model file (as `optics fit` writes) and checks that the model is usable over

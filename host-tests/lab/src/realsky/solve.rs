@@ -2,6 +2,9 @@
 //! core's lost-in-space identification tried over a ladder of focal lengths, then every
 //! measured star matched and the attitude and focal length refit from all of them.
 //!
+//! - Camera: a pinhole about the image centre with the focal length from the horizontal
+//!   field of view, or a given model (focal length, principal point, distortion: a table's
+//!   camera section or `optics fit`'s file), whose directions the identification uses.
 //! - Scale search: the nominal focal length `f0` (from the horizontal field of view, or
 //!   given) is known to a relative error `E`. Lost in space is tried at `f0 (1 + k s)`,
 //!   `k = 0, +1, -1, +2, ...` within `+-E`, with `s` = [`SCALE_STEP`] (1 %), the pair
@@ -14,7 +17,7 @@
 //!   looks at) is matched to the nearest catalog star within the match radius (a catalog
 //!   star taken once, by its nearest measured star), the attitude solved by the core's
 //!   q-method from every match, the focal length fitted by least squares to the matched
-//!   pixels (principal point held at the image centre), and again, three rounds; a match
+//!   pixels (principal point and distortion held), and again, three rounds; a match
 //!   whose residual exceeds 5 of its sigmas is dropped. A refined attitude more than 0.1
 //!   degree from the identified one, or a focal length outside `f0 (1 +- E)`, is no
 //!   solution (never a wrong attitude).
@@ -36,7 +39,7 @@ const ROUNDS: usize = 3;
 /// A refined attitude this far from the identified one is rejected, rad (0.1 degree).
 const MAX_REFINE_MOVE_RAD: f64 = 0.1 * std::f64::consts::PI / 180.0;
 /// Residual cut of a match, its own sigmas.
-const CUT_SIGMAS: f64 = 5.0;
+pub(crate) const CUT_SIGMAS: f64 = 5.0;
 /// Fewest matches of a solution.
 const MIN_MATCHED: usize = 4;
 
@@ -45,9 +48,11 @@ const MIN_MATCHED: usize = 4;
 pub struct SolveSpec {
     /// Image columns and rows.
     pub size_px: [usize; 2],
-    /// Nominal focal length, px.
-    pub focal_length_px: f64,
-    /// Its relative uncertainty (0.1: 10 %).
+    /// The camera model believed; its focal length is the nominal one, known to
+    /// [`Self::focal_length_error`] (the colour terms are not used: the colours are not
+    /// known before identification).
+    pub camera: Camera,
+    /// The focal length's relative uncertainty (0.1: 10 %).
     pub focal_length_error: f64,
     /// Smallest centroid sigma believed, px (systematic errors: optics, catalog): each
     /// star's sigma is its fit's or this, whichever is larger; saturated stars get twice it.
@@ -117,7 +122,66 @@ impl std::fmt::Display for ImageSolveError {
     }
 }
 
-fn centre(size_px: [usize; 2]) -> [f64; 2] {
+impl SolveSpec {
+    /// A pinhole of focal length `focal_length_px` about the image centre.
+    pub fn pinhole(
+        size_px: [usize; 2],
+        focal_length_px: f64,
+        focal_length_error: f64,
+        sigma_floor_px: f64,
+    ) -> Self {
+        Self {
+            size_px,
+            camera: Camera::pinhole(focal_length_px, centre(size_px)),
+            focal_length_error,
+            sigma_floor_px,
+        }
+    }
+
+    /// The model at focal length `f_px`, the rest as given.
+    fn camera_at(&self, f_px: f64) -> Camera {
+        Camera {
+            focal_length_px: f_px,
+            ..self.camera
+        }
+    }
+
+    /// Checks the spec: a positive focal length, its error in 0..0.5, a positive sigma
+    /// floor, the principal point inside the image and the model invertible over it.
+    fn check(&self) -> Result<(), ImageSolveError> {
+        let bad = |m: &str| Err(ImageSolveError::BadSpec(m.into()));
+        let c = &self.camera;
+        let ok = c.focal_length_px.is_finite()
+            && c.focal_length_px > 0.0
+            && (0.0..0.5).contains(&self.focal_length_error)
+            && self.sigma_floor_px > 0.0
+            && self.sigma_floor_px.is_finite();
+        if !ok {
+            return bad(
+                "focal length must be positive, its error in 0..0.5, the sigma floor positive",
+            );
+        }
+        let [w, h] = self.size_px.map(|v| v as f64);
+        let [cx, cy] = c.principal_point_px;
+        if !((-0.5..w - 0.5).contains(&cx) && (-0.5..h - 0.5).contains(&cy)) {
+            return bad(&format!(
+                "principal point ({cx}, {cy}) is outside the {w} x {h} px image"
+            ));
+        }
+        let (Ok(cols), Ok(rows)) = (
+            u16::try_from(self.size_px[0]),
+            u16::try_from(self.size_px[1]),
+        ) else {
+            return bad("image too large");
+        };
+        let bv = c.colour_ref_bv_mag;
+        c.check_over(cols, rows, [bv, bv])
+            .or_else(|e| bad(&format!("camera model unusable over the image: {e}")))
+    }
+}
+
+/// The image centre, px: the principal point of a pinhole with nothing better known.
+pub fn centre(size_px: [usize; 2]) -> [f64; 2] {
     [
         (size_px[0] as f64 - 1.0) / 2.0,
         (size_px[1] as f64 - 1.0) / 2.0,
@@ -125,13 +189,19 @@ fn centre(size_px: [usize; 2]) -> [f64; 2] {
 }
 
 fn sigma_px(s: &ImageStar, spec: &SolveSpec) -> f64 {
+    star_sigma_px(s, spec.sigma_floor_px)
+}
+
+/// A star's 1-sigma per axis with a floor of `floor_px`, px: its fit's sigma or the floor,
+/// whichever is larger; at least twice the floor for a saturated star.
+pub fn star_sigma_px(s: &ImageStar, floor_px: f64) -> f64 {
     let base = if s.sigma_px.is_finite() {
-        s.sigma_px.max(spec.sigma_floor_px)
+        s.sigma_px.max(floor_px)
     } else {
-        spec.sigma_floor_px
+        floor_px
     };
     if s.saturated() {
-        base.max(2.0 * spec.sigma_floor_px)
+        base.max(2.0 * floor_px)
     } else {
         base
     }
@@ -152,19 +222,30 @@ fn measured(stars: &[ImageStar], camera: &Camera, spec: &SolveSpec) -> Vec<Measu
 
 /// The ladder of focal lengths: nominal first, then alternately longer and shorter.
 pub fn ladder(spec: &SolveSpec) -> Vec<f64> {
+    let f0 = spec.camera.focal_length_px;
     let k_max = (spec.focal_length_error / SCALE_STEP).floor() as i64;
-    let mut out = vec![spec.focal_length_px];
+    let mut out = vec![f0];
     for k in 1..=k_max {
         for s in [1.0, -1.0] {
-            out.push(spec.focal_length_px * (1.0 + s * k as f64 * SCALE_STEP));
+            out.push(f0 * (1.0 + s * k as f64 * SCALE_STEP));
         }
     }
     // The ladder's ends reach the error bound itself.
     if spec.focal_length_error > k_max as f64 * SCALE_STEP + 1e-12 {
-        out.push(spec.focal_length_px * (1.0 + spec.focal_length_error));
-        out.push(spec.focal_length_px * (1.0 - spec.focal_length_error));
+        out.push(f0 * (1.0 + spec.focal_length_error));
+        out.push(f0 * (1.0 - spec.focal_length_error));
     }
     out
+}
+
+/// The distance from the principal point to the farthest corner of the image, px.
+fn corner_px(spec: &SolveSpec) -> f64 {
+    let [cx, cy] = spec.camera.principal_point_px;
+    let [w, h] = spec.size_px.map(|v| v as f64 - 1.0);
+    [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
+        .iter()
+        .map(|(x, y)| (x - cx).hypot(y - cy))
+        .fold(0.0, f64::max)
 }
 
 /// Identifies and refines (see the module docs). `stars` brightest first.
@@ -173,25 +254,15 @@ pub fn solve(
     stars: &[ImageStar],
     spec: &SolveSpec,
 ) -> Result<ImageSolution, ImageSolveError> {
-    let ok = spec.focal_length_px.is_finite()
-        && spec.focal_length_px > 0.0
-        && (0.0..0.5).contains(&spec.focal_length_error)
-        && spec.sigma_floor_px > 0.0
-        && spec.sigma_floor_px.is_finite();
-    if !ok {
-        return Err(ImageSolveError::BadSpec(
-            "focal length must be positive, its error in 0..0.5, the sigma floor positive".into(),
-        ));
-    }
+    spec.check()?;
     if stars.len() < MIN_MATCHED {
         return Err(ImageSolveError::TooFewStars(stars.len()));
     }
-    let pp = centre(spec.size_px);
-    let corner_px = (pp[0] * pp[0] + pp[1] * pp[1]).sqrt();
+    let corner_px = corner_px(spec);
     let mut hypotheses = 0u32;
     let ladder = ladder(spec);
     for (trial, &f) in ladder.iter().enumerate() {
-        let camera = Camera::pinhole(f, pp);
+        let camera = spec.camera_at(f);
         let meas = measured(stars, &camera, spec);
         let half_step = if spec.focal_length_error > 0.0 {
             SCALE_STEP / 2.0
@@ -226,8 +297,9 @@ pub fn solve(
     })
 }
 
-/// Matches every star to the catalog through `q` and `camera`.
-fn match_all(
+/// Matches every star to the catalog through `q` and `camera`: each star to its nearest
+/// catalog star within `radius_px`, a catalog star kept for its nearest star only.
+pub(crate) fn match_all(
     cat: &Catalog<'_>,
     stars: &[ImageStar],
     q: Quat,
@@ -273,13 +345,13 @@ fn refine(
     trials: usize,
     false_probability: f64,
 ) -> Result<ImageSolution, ImageSolveError> {
-    let pp = centre(spec.size_px);
+    let pp = spec.camera.principal_point_px;
     let radius_px = 5.0 * spec.sigma_floor_px + 1.0;
     let mut q = q_ident;
     let mut f = f_ident;
     let mut result = None;
     for _ in 0..ROUNDS {
-        let camera = Camera::pinhole(f, pp);
+        let camera = spec.camera_at(f);
         let mut matches = match_all(cat, stars, q, &camera, radius_px + SCALE_STEP);
         // Drop a match beyond its own 5 sigmas.
         matches.retain(|m| {
@@ -307,7 +379,8 @@ fn refine(
         let att = attitude::solve(&obs)
             .map_err(|e| ImageSolveError::Unconfirmed(format!("attitude: {e}")))?;
         q = att.q;
-        // Focal length by least squares on the matched pixels, principal point held.
+        // Focal length by least squares on the matched pixels, principal point and
+        // distortion held: the pixel is pp + f (x_d, y_d).
         let (mut num, mut den) = (0.0, 0.0);
         for m in &matches {
             let (Some(icrs), s) = (cat.dir(m.catalog), &stars[m.star]) else {
@@ -317,7 +390,7 @@ fn refine(
             if c[2] <= 0.0 {
                 continue;
             }
-            let (u, v) = (c[0] / c[2], c[1] / c[2]);
+            let [u, v] = camera.distort(c[0] / c[2], c[1] / c[2]);
             num += (s.x_px - pp[0]) * u + (s.y_px - pp[1]) * v;
             den += u * u + v * v;
         }
@@ -329,8 +402,9 @@ fn refine(
     let Some((att, _)) = result else {
         return Err(ImageSolveError::Unconfirmed("no refinement round".into()));
     };
-    let lo = spec.focal_length_px * (1.0 - spec.focal_length_error - SCALE_STEP);
-    let hi = spec.focal_length_px * (1.0 + spec.focal_length_error + SCALE_STEP);
+    let f0 = spec.camera.focal_length_px;
+    let lo = f0 * (1.0 - spec.focal_length_error - SCALE_STEP);
+    let hi = f0 * (1.0 + spec.focal_length_error + SCALE_STEP);
     if !(lo..=hi).contains(&f) {
         return Err(ImageSolveError::Unconfirmed(format!(
             "fitted focal length {f:.1} px outside {lo:.1}..{hi:.1}"
@@ -347,7 +421,7 @@ fn refine(
         )));
     }
     // Final residuals through the final attitude and focal length.
-    let camera = Camera::pinhole(f, pp);
+    let camera = spec.camera_at(f);
     let mut matches = Vec::new();
     let mut sum2 = 0.0;
     for m in match_all(cat, stars, att.q, &camera, radius_px) {
@@ -373,6 +447,22 @@ fn refine(
         trials,
         false_probability,
     })
+}
+
+/// The attitude of the frame whose boresight is the image centre's direction, the
+/// reference of RA, Dec and roll ([`roll_tetra3_deg`]): `q` followed by the smallest
+/// rotation taking the centre's camera-frame direction to +z; `q` itself when the principal
+/// point is the image centre.
+pub fn centre_attitude(q: Quat, camera: &Camera, size_px: [usize; 2]) -> Quat {
+    let [x, y] = centre(size_px);
+    let d = camera.direction(x, y);
+    // d x z = (d_y, -d_x, 0), of length sin(angle).
+    let s = d[0].hypot(d[1]);
+    if s == 0.0 {
+        return q;
+    }
+    let angle = s.atan2(d[2]);
+    Quat::from_rotation_vector([d[1] / s * angle, -d[0] / s * angle, 0.0]) * q
 }
 
 /// Right ascension and declination of a unit vector, deg (RA in 0..360).

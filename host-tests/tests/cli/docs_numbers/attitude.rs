@@ -74,3 +74,172 @@ fn realsky_table_is_its_csv() {
     );
     assert!(page.contains(&phrase), "docs/attitude.md lacks {phrase:?}");
 }
+
+const OPTICS: &str = "host-tests/figures/realsky-optics.csv";
+
+/// The camera model fitted to the shared frames: docs/attitude.md's two tables are
+/// `host-tests/figures/realsky-optics.csv` (which `cli_optics_sky` checks against a fresh
+/// `optics fit --images`).
+#[test]
+fn realsky_optics_tables_are_their_csv() {
+    let csv = Csv::read(OPTICS);
+    let recs = csv.records();
+    let get = |q: &str| -> (&str, &str) {
+        let r = recs
+            .iter()
+            .find(|r| r["quantity"] == q)
+            .unwrap_or_else(|| panic!("{OPTICS}: no {q}"));
+        (r["value"], r["sigma"])
+    };
+    const PARAMS: [(&str, &str); 6] = [
+        ("focal length, px", "focal_length_px"),
+        ("principal point column, px", "cx_px"),
+        ("principal point row, px", "cy_px"),
+        ("`k1`", "k1"),
+        ("`k2`", "k2"),
+        ("`p1`, `p2`", "p1"),
+    ];
+    let (_, body) = table("docs/attitude.md", "realsky-optics");
+    assert_eq!(body.len(), PARAMS.len());
+    for (row, (name, q)) in body.iter().zip(PARAMS) {
+        assert_eq!(row[0], name);
+        let (v, s) = get(q);
+        if s == "held" {
+            assert!(matches(&row[1], v), "{row:?}");
+            assert_eq!(row[2], "held", "{row:?}");
+        } else {
+            assert!(matches(&row[1], v), "{row:?}: {v}");
+            assert!(matches(&row[2], s), "{row:?}: {s}");
+        }
+    }
+    let (_, body) = table("docs/attitude.md", "realsky-optics-residuals");
+    let rows = [
+        ("stars", "rms_pinhole_px", "rms_model_px"),
+        (
+            "holdout1_stars",
+            "holdout1_rms_pinhole_px",
+            "holdout1_rms_model_px",
+        ),
+        (
+            "holdout2_stars",
+            "holdout2_rms_pinhole_px",
+            "holdout2_rms_model_px",
+        ),
+    ];
+    assert_eq!(body.len(), rows.len());
+    for (row, (n, a, b)) in body.iter().zip(rows) {
+        assert_eq!(row[1], get(n).0, "{row:?}");
+        assert!(matches(&row[2], get(a).0), "{row:?}");
+        assert!(matches(&row[3], get(b).0), "{row:?}");
+    }
+}
+
+/// The prose's figures of the variants (`k2` held, the tangential terms and the colour
+/// scale fitted) are their committed CSVs'.
+#[test]
+fn realsky_optics_variants_are_their_csvs() {
+    let value = |rel: &str, q: &str| -> (f64, String) {
+        let csv = Csv::read(rel);
+        let recs = csv.records();
+        let r = recs
+            .iter()
+            .find(|r| r["quantity"] == q)
+            .unwrap_or_else(|| panic!("{rel}: no {q}"));
+        (r["value"].parse().unwrap(), r["sigma"].to_string())
+    };
+    let f = |rel: &str, q: &str| value(rel, q).0;
+    let s = |rel: &str, q: &str| value(rel, q).1.parse::<f64>().unwrap();
+    let no_k2 = "host-tests/figures/realsky-optics-no-k2.csv";
+    let tan = "host-tests/figures/realsky-optics-tangential.csv";
+    let col = "host-tests/figures/realsky-optics-colour.csv";
+    let page = flat(&read("docs/attitude.md"));
+    let phrases = [
+        format!(
+            "Without `k2` the holdout residuals are {:.4} and {:.4} px",
+            f(no_k2, "holdout1_rms_model_px"),
+            f(no_k2, "holdout2_rms_model_px")
+        ),
+        format!(
+            "(fitted: `p1` {:.1e} +- {:.1e}, `p2` {:.1e} +- {:.1e}) make both holdouts worse ({:.4} and {:.4} px) and the principal point's sigma grows from {:.1} to {:.1} px",
+            f(tan, "p1"),
+            s(tan, "p1"),
+            f(tan, "p2"),
+            s(tan, "p2"),
+            f(tan, "holdout1_rms_model_px"),
+            f(tan, "holdout2_rms_model_px"),
+            s(OPTICS, "cx_px"),
+            s(tan, "cx_px"),
+        ),
+        format!(
+            "The lateral colour scale fits to {:.1e} +- {:.1e} per mag",
+            f(col, "colour_scale_per_mag"),
+            s(col, "colour_scale_per_mag")
+        ),
+    ];
+    for p in &phrases {
+        assert!(page.contains(p.as_str()), "docs/attitude.md lacks {p:?}");
+    }
+    // The chosen model beats each variant on both holdouts or is within 0.001 px of it.
+    for v in [no_k2, tan, col] {
+        for h in ["holdout1_rms_model_px", "holdout2_rms_model_px"] {
+            assert!(f(OPTICS, h) <= f(v, h) + 0.001, "{v}: {h}");
+        }
+    }
+}
+
+/// The release timing of `solve-image`: the docs' range and median are the committed run's.
+#[test]
+fn realsky_time_per_image_is_its_csv() {
+    let csv = Csv::read("host-tests/figures/realsky-solve-release.csv");
+    let c = csv.col("time_ms");
+    let mut t: Vec<f64> = csv.rows.iter().map(|r| r[c].parse().unwrap()).collect();
+    assert_eq!(t.len(), 8);
+    t.sort_by(f64::total_cmp);
+    let median = (t[3] + t[4]) / 2.0;
+    let phrase = format!("was {:.1} to {:.1} ms, median {median:.1} ms", t[0], t[7]);
+    let page = flat(&read("docs/attitude.md"));
+    assert!(page.contains(&phrase), "docs/attitude.md lacks {phrase:?}");
+}
+
+/// What the prose derives from the fit (the holdout's gain, the principal point's offset from
+/// the centre of the 1024 x 768 frames, the terms' significance, the distortion at the
+/// farthest corner) is computed from `realsky-optics.csv`.
+#[test]
+fn realsky_optics_prose_is_its_csv() {
+    let csv = Csv::read(OPTICS);
+    let recs = csv.records();
+    let get = |q: &str, col: &str| -> f64 {
+        recs.iter()
+            .find(|r| r["quantity"] == q)
+            .unwrap_or_else(|| panic!("{OPTICS}: no {q}"))[col]
+            .parse()
+            .unwrap()
+    };
+    let v = |q: &str| get(q, "value");
+    let s = |q: &str| get(q, "sigma");
+    let gain = |n: u8| {
+        100.0
+            * (1.0
+                - v(&format!("holdout{n}_rms_model_px")) / v(&format!("holdout{n}_rms_pinhole_px")))
+    };
+    let (dx, dy) = (v("cx_px") - 511.5, v("cy_px") - 383.5);
+    // The corner farthest from the principal point, and the distortion's radial shift there.
+    let (cx, cy, f) = (v("cx_px"), v("cy_px"), v("focal_length_px"));
+    let r = [(0.0, 0.0), (1023.0, 0.0), (0.0, 767.0), (1023.0, 767.0)]
+        .iter()
+        .map(|(x, y): &(f64, f64)| (x - cx).hypot(y - cy))
+        .fold(0.0, f64::max);
+    let rn2 = (r / f).powi(2);
+    let corner_px = r * (v("k1") * rn2 + v("k2") * rn2 * rn2);
+    let phrase = format!(
+        "The model takes {:.0} % and {:.0} % of the residual off frames it was not fitted to. The principal point is {dx:.1} px right of and {dy:.1} px below the image centre ({:.1} and {:.1} sigma); `k1` is {:.1} sigma and `k2` {:.1}: together a pincushion of {corner_px:.1} px at the farthest corner.",
+        gain(1),
+        gain(2),
+        dx / s("cx_px"),
+        dy / s("cy_px"),
+        v("k1") / s("k1"),
+        v("k2").abs() / s("k2"),
+    );
+    let page = flat(&read("docs/attitude.md"));
+    assert!(page.contains(&phrase), "docs/attitude.md lacks {phrase:?}");
+}

@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 23] = [
+const CHECKED: [&str; 25] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -47,6 +47,8 @@ const CHECKED: [&str; 23] = [
     "sil-rates",
     "ident-tetra3rs",
     "realsky-tetra3rs",
+    "realsky-optics",
+    "realsky-optics-residuals",
     "pil-figures",
 ];
 
