@@ -9,6 +9,7 @@ pub mod calib_frames;
 pub mod cli;
 pub mod cti;
 pub mod exposure_chart;
+pub mod first_attitude;
 pub mod optics;
 pub mod psf_model;
 pub mod realsky;

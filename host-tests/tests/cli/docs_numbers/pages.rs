@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 23] = [
+const CHECKED: [&str; 24] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -45,6 +45,7 @@ const CHECKED: [&str; 23] = [
     "accuracy-frames-field",
     "trail-bound",
     "sil-rates",
+    "first-attitude",
     "ident-tetra3rs",
     "realsky-tetra3rs",
     "pil-figures",
