@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 24] = [
+const CHECKED: [&str; 25] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -46,6 +46,7 @@ const CHECKED: [&str; 24] = [
     "trail-bound",
     "sil-rates",
     "first-attitude",
+    "exposure-chart",
     "ident-tetra3rs",
     "realsky-tetra3rs",
     "pil-figures",

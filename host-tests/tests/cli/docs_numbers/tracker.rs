@@ -174,3 +174,49 @@ fn first_attitude_table_is_its_csv() {
         assert!(matches(&row[2], rec["ms"]), "{row:?} vs {rec:?}");
     }
 }
+
+const EXPOSURE_CHART: &str = "host-tests/figures/exposure-chart.csv";
+
+/// docs/tracker.md's exposure table is `host-tests/figures/exposure-chart.csv`'s points with
+/// an attitude, row for row.
+#[test]
+fn exposure_table_is_the_chart_csv() {
+    use super::helpers::{Csv, matches};
+    let csv = Csv::read(EXPOSURE_CHART);
+    let recs: Vec<_> = csv
+        .records()
+        .into_iter()
+        .filter(|r| r["solved"] != "0")
+        .collect();
+    let (header, body) = table("docs/tracker.md", "exposure-chart");
+    assert_eq!(
+        header,
+        [
+            "rate, deg/s",
+            "exposure, ms",
+            "trail, px",
+            "frames",
+            "with attitude",
+            "cross-boresight, arcsec",
+            "roll, arcsec"
+        ]
+    );
+    assert_eq!(
+        body.len(),
+        recs.len(),
+        "{EXPOSURE_CHART}: one row a solved point"
+    );
+    for (row, rec) in body.iter().zip(&recs) {
+        for (i, col) in [
+            (0, "rate_deg_s"),
+            (1, "exposure_ms"),
+            (2, "trail_px"),
+            (3, "frames"),
+            (4, "solved"),
+            (5, "cross_arcsec"),
+            (6, "roll_arcsec"),
+        ] {
+            assert!(matches(&row[i], rec[col]), "{col}: {row:?} vs {rec:?}");
+        }
+    }
+}
