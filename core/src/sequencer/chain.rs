@@ -11,8 +11,8 @@
 //!
 //! The chain's word table is the program's segments followed by a run of rest words
 //! ([`Chain::new`]'s `rest_run`): the exposure padding is the one segment repeated millions
-//! of times (an `Idle` tick repeated 8 M times for a second at 125 ns), so it is played as
-//! blocks of that run (a run of 256 words makes a node of up to 1 M ticks, 131 ms) rather
+//! of times (an `Idle` tick repeated 20 M times for a second at 50 ns), so it is played as
+//! blocks of that run (a run of 256 words makes a node of up to 1 M ticks, 52 ms) rather
 //! than as thousands of one-word nodes. Every other step is one link, or one per
 //! [`MAX_BLOCKS`] repeats.
 //!

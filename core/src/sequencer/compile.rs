@@ -9,7 +9,7 @@
 //! | `LineTransfer` | store one row into the register, image held at P12 (integrating) | 3 `line_state` |
 //! | `RowDump` | store one row with the dump gate high (the row is drained) | 3 `dump_row_state` |
 //! | `ReadPixel` | `binning` register shifts into the summing well (reset gate high), reset settle, CONVST (reset level), summing well low, signal settle, CONVST (signal level) | `read_px_ticks(b)` |
-//! | `SkipPixel` | one register shift, summing well low, reset gate high (charge drained at the node) | 3 `serial_state` |
+//! | `SkipPixel` | one register shift, summing well low, reset gate high (charge drained at the node) | 3 `skip_state` |
 //! | `RegisterDump` | dump gate high: the rest of the register is drained | `dump_register` |
 //! | `Idle` | the rest state (exposure padding) | 1 |
 //!
@@ -20,10 +20,12 @@
 //! that make the exposure. Rows after the last read group are not clocked: the next frame
 //! transfer flushes them through the register with the dump gate high.
 //!
-//! Every phase change of a three-phase group shares a high phase with the state before (the
-//! overlap); [`super::check`] verifies it on the words. Cost: O(words + steps) to write; the
-//! segments are ~1,000 words, a full frame ~2,100 steps, a tracking frame with 30 windows
-//! ~1,500.
+//! Each segment's states last its own number of ticks ([`Ticks`]: at 1 MHz on the CCD47-20's
+//! limits a 50 ns tick, a skipped element 150 ns, a read pixel 1 us, a dumped row 3 us, a line
+//! transfer 40 us). Every phase change of a three-phase group shares a high phase with the
+//! state before (the overlap); [`super::check`] verifies it on the words. Cost: O(words +
+//! steps) to write; the segments are ~1,100 words at 1 MHz, a full frame ~2,100 steps, a
+//! tracking frame with 30 windows ~1,700.
 
 use super::lines::{Line, LineSet, Phases, PinMap};
 use super::plan::{ReadoutPlan, ShiftRuns};
@@ -348,7 +350,7 @@ fn segment_words(
         }
         SegmentId::SkipPixel => {
             for s in register_shift(rest, outputs) {
-                emit(s, t.serial_state);
+                emit(s, t.skip_state);
             }
         }
         SegmentId::RegisterDump => emit(rest.with(Line::Dg), t.dump_register),
@@ -363,7 +365,7 @@ pub(crate) fn segment_ticks(id: SegmentId, t: &Ticks, binning: u16) -> u32 {
         SegmentId::LineTransfer => 3 * t.line_state,
         SegmentId::RowDump => 3 * t.dump_row_state,
         SegmentId::ReadPixel => t.read_px_ticks(u32::from(binning)),
-        SegmentId::SkipPixel => 3 * t.serial_state,
+        SegmentId::SkipPixel => 3 * t.skip_state,
         SegmentId::RegisterDump => t.dump_register,
         SegmentId::Idle => 1,
     }

@@ -2,8 +2,8 @@
 //! DMA's ring of BSRR words full. A DMA stream cannot jump from one `(segment, repeat)` step
 //! to the next within one tick, so the CPU writes the words of the program, in play order,
 //! into the half of the ring the DMA has just played; the cursor remembers where it stopped
-//! (step, repeat, word). Cost: one word copy per tick played (a tick of 125 ns at 1 MHz
-//! pixels is 60 core cycles of the 480 MHz M7); 6.0 instructions a word on QEMU's M7 for a
+//! (step, repeat, word). Cost: one word copy per tick played (a tick of 50 ns at 1 MHz
+//! pixels is 24 core cycles of the 480 MHz M7); 5.2 instructions a word on QEMU's M7 for a
 //! 30-window tracking frame (`cargo m7-bench`, `sequencer_feed_words`).
 
 use super::compile::Program;

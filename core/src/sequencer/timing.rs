@@ -5,45 +5,58 @@
 //! One tick is one BSRR word, so every duration is a whole number of ticks. The tick is set
 //! by the pixel rate: an unbinned read pixel is [`Ticks::read_px_ticks`] ticks (three
 //! register states, the reset settle, the reset sample, the signal settle, the signal
-//! sample). Cost: a few integer divisions, once per plan.
+//! sample). Each segment holds its states for its own number of ticks, at its own limit:
+//! the skipped register element's states at the serial minimum, the dumped row's at the
+//! parallel minimum, the line and frame transfers at their steps' minima. Cost: a few
+//! integer divisions, once per plan.
 
-/// The sensor's and the board's limits. Every default marked "check against datasheet" is an
-/// assumption taken from public controller code or from typical CCD practice, not from the
-/// CCD47-20 datasheet; the HIL steps in docs/hardware.md measure the board ones.
+/// The sensor's and the board's limits. The CCD47-20 notes the project works from
+/// (`sensor-ccd47-20.md`: facts gathered from public sources, its clocking section marked
+/// "verify against the datasheet") give no clock timing minimum of the sensor's own; the
+/// two row steps are the gcam controller's operating values those notes quote. Every field
+/// says where its value comes from and is to be checked on hardware (the HIL steps in
+/// docs/hardware.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Limits {
-    /// Fastest pixel rate of the output amplifier and ADC, Hz (check against datasheet:
-    /// "a few MHz").
+    /// Fastest pixel rate of the output amplifier and ADC, Hz. The notes: "maximum pixel
+    /// rate a few MHz" (Signal chain, marked verify); 3 MHz taken. To check on hardware.
     pub max_pixel_rate_hz: u32,
     /// Shortest tick the timer-paced DMA can write to the GPIO port, ps (board: 20 MHz
-    /// assumed for DMA1 into AHB4 GPIO; measure with the logic analyser).
+    /// assumed for DMA1 into AHB4 GPIO, not in the notes; to check on hardware with the
+    /// logic analyser).
     pub min_tick_ps: u32,
-    /// Shortest state of a serial register phase pattern, ns (check against datasheet).
+    /// Shortest state of a serial register phase pattern, ns: 40 ns assumed (typical CCD
+    /// practice, not in the notes; to check on hardware). The skipped elements run at it.
     pub min_serial_state_ns: u32,
-    /// Shortest reset gate pulse, ns (check against datasheet).
+    /// Shortest reset gate pulse, ns (assumed, not in the notes; to check on hardware).
     pub min_reset_gate_ns: u32,
     /// Settling of the video after the reset gate falls, before the reset-level sample, ns
-    /// (check against datasheet and the preamp's bandwidth).
+    /// (assumed, not in the notes; to check on hardware with the preamp's bandwidth).
     pub min_reset_settle_ns: u32,
-    /// Settling after the summing well falls, before the signal-level sample, ns (check
-    /// against datasheet and the preamp's bandwidth).
+    /// Settling after the summing well falls, before the signal-level sample, ns (assumed,
+    /// not in the notes; to check on hardware with the preamp's bandwidth).
     pub min_signal_settle_ns: u32,
-    /// Shortest image/store phase state, ns (check against datasheet).
+    /// Shortest image/store phase state, ns: 1 us assumed (not in the notes; to check on
+    /// hardware). The dumped rows run at it (three states a row); that a row clocked this
+    /// fast leaves no charge behind for the next row read is part of the check.
     pub min_parallel_state_ns: u32,
-    /// Shortest frame-transfer step (one row, three states), ns (gcam uses 10 us; check
-    /// against datasheet).
+    /// Shortest frame-transfer step (one row, three states), ns. The notes: gcam "holds
+    /// about 10 us per frame-transfer step" (Clocking, marked verify); the sensor's own
+    /// minimum is not in them. To check on hardware.
     pub min_ft_step_ns: u32,
-    /// Shortest line-transfer step into the serial register, ns (gcam uses 40 us; check
-    /// against datasheet).
+    /// Shortest line-transfer step into the serial register, ns. The notes: gcam holds
+    /// "40 us per parallel (line) step" (Clocking, marked verify); the sensor's own minimum
+    /// is not in them. To check on hardware.
     pub min_line_step_ns: u32,
-    /// Shortest dump gate pulse that empties the serial register, ns (check against
-    /// datasheet).
+    /// Shortest dump gate pulse that empties the serial register, ns. The notes: the dump
+    /// gate "drains the serial register in a few states" (Clocking, marked verify); 1 us
+    /// assumed. To check on hardware.
     pub min_dump_ns: u32,
 }
 
 impl Limits {
-    /// The CCD47-20 on the reference board (assumptions as marked on each field).
+    /// The CCD47-20 on the reference board (sources as marked on each field).
     pub const CCD47_20: Self = Self {
         max_pixel_rate_hz: 3_000_000,
         min_tick_ps: 50_000,
@@ -64,8 +77,12 @@ impl Limits {
 pub struct Timing {
     /// Unbinned read pixels per second on each output, Hz.
     pub pixel_rate_hz: u32,
-    /// Ticks per serial register state (three states move a packet one element).
+    /// Ticks per serial register state of a read pixel (three states move a packet one
+    /// element).
     pub serial_state_ticks: u8,
+    /// Ticks per serial register state of a skipped element (shifted to the reset drain
+    /// unsampled: nothing settles, so it runs at the serial minimum).
+    pub skip_state_ticks: u8,
     /// Ticks from the reset gate falling to the reset-level sample.
     pub reset_settle_ticks: u8,
     /// Ticks from the summing well falling to the signal-level sample.
@@ -81,18 +98,36 @@ pub struct Timing {
 }
 
 impl Timing {
-    /// The defaults at `pixel_rate_hz`: 8 ticks a pixel, the gcam row steps, dumped rows at
-    /// the frame-transfer speed.
+    /// The defaults at `pixel_rate_hz`: the read pixel cut into as many ticks as the
+    /// CCD47-20 board's shortest DMA tick allows (20 of 50 ns at 1 MHz: register states of
+    /// 150 ns, reset settle 150 ns, signal settle 300 ns, each CONVST one tick), the skipped
+    /// elements one tick a state, the gcam row steps for the line and frame transfers, dumped
+    /// rows at three parallel minimum states. Below 8 ticks a pixel (above 2.5 MHz) the
+    /// 8-tick pixel, which [`Self::validate`] then holds to the limits.
     pub const fn at_pixel_rate(pixel_rate_hz: u32) -> Self {
+        let limits = Limits::CCD47_20;
+        let px_ps = if pixel_rate_hz == 0 {
+            0
+        } else {
+            1_000_000_000_000u64 / pixel_rate_hz as u64
+        };
+        let n = px_ps / limits.min_tick_ps as u64;
+        let (serial, reset, signal) = if n < 8 || n > 200 {
+            (1, 1, 2)
+        } else {
+            let third = if n * 3 / 20 > 1 { n * 3 / 20 } else { 1 };
+            (third, third, n - 4 * third - 2)
+        };
         Self {
             pixel_rate_hz,
-            serial_state_ticks: 1,
-            reset_settle_ticks: 1,
-            signal_settle_ticks: 2,
-            ft_step_ns: 10_000,
-            line_step_ns: 40_000,
-            dump_row_step_ns: 10_000,
-            dump_register_ns: 1_000,
+            serial_state_ticks: serial as u8,
+            skip_state_ticks: 1,
+            reset_settle_ticks: reset as u8,
+            signal_settle_ticks: signal as u8,
+            ft_step_ns: limits.min_ft_step_ns,
+            line_step_ns: limits.min_line_step_ns,
+            dump_row_step_ns: 3 * limits.min_parallel_state_ns,
+            dump_register_ns: limits.min_dump_ns,
         }
     }
 
@@ -113,7 +148,10 @@ impl Timing {
                 max_hz: limits.max_pixel_rate_hz,
             });
         }
-        if self.serial_state_ticks == 0 || self.reset_settle_ticks == 0 {
+        if self.serial_state_ticks == 0
+            || self.skip_state_ticks == 0
+            || self.reset_settle_ticks == 0
+        {
             return Err(TimingError::ZeroTicks);
         }
         let px_ps = 1_000_000_000_000u64 / u64::from(self.pixel_rate_hz);
@@ -138,9 +176,10 @@ impl Timing {
             }
         };
         let serial_state = u32::from(self.serial_state_ticks);
+        let skip_state = u32::from(self.skip_state_ticks);
         at_least(
             Limit::SerialState,
-            ns(serial_state),
+            ns(serial_state.min(skip_state)),
             limits.min_serial_state_ns,
         )?;
         // The reset gate is high over the register's three states of the pixel's shift.
@@ -170,11 +209,6 @@ impl Timing {
             limits.min_line_step_ns,
         )?;
         at_least(
-            Limit::DumpRowStep,
-            u64::from(self.dump_row_step_ns),
-            limits.min_ft_step_ns,
-        )?;
-        at_least(
             Limit::DumpRegister,
             u64::from(self.dump_register_ns),
             limits.min_dump_ns,
@@ -190,12 +224,20 @@ impl Timing {
         for t in [ft_state, line_state, dump_row_state] {
             at_least(Limit::ParallelState, ns(t), limits.min_parallel_state_ns)?;
         }
+        // A dumped row's charge goes to the drain: its step is held to three parallel
+        // states, not to a transfer's step.
+        at_least(
+            Limit::DumpRowStep,
+            u64::from(self.dump_row_step_ns),
+            limits.min_parallel_state_ns.saturating_mul(3),
+        )?;
         let dump_register =
             u32::try_from((u64::from(self.dump_register_ns) * 1000).div_ceil(u64::from(tick_ps)))
                 .map_err(|_| TimingError::TooSlow)?;
         Ok(Ticks {
             tick_ps,
             serial_state: serial_state.max(1),
+            skip_state: skip_state.max(1),
             reset_settle: u32::from(self.reset_settle_ticks),
             signal_settle: u32::from(self.signal_settle_ticks),
             ft_state,
@@ -296,8 +338,10 @@ impl core::error::Error for TimingError {}
 pub struct Ticks {
     /// One tick, ps.
     pub tick_ps: u32,
-    /// Ticks per serial register state.
+    /// Ticks per serial register state of a read pixel.
     pub serial_state: u32,
+    /// Ticks per serial register state of a skipped element.
+    pub skip_state: u32,
     /// Ticks from the reset gate falling to the reset sample.
     pub reset_settle: u32,
     /// Ticks from the summing well falling to the signal sample.
@@ -328,14 +372,18 @@ mod tests {
         let limits = Limits::CCD47_20;
         let t = Timing::at_pixel_rate(1_000_000).validate(&limits);
         let ticks = t.ok();
-        assert_eq!(ticks.map(|t| t.tick_ps), Some(125_000));
-        assert_eq!(ticks.map(|t| t.read_px_ticks(1)), Some(8));
+        assert_eq!(ticks.map(|t| t.tick_ps), Some(50_000));
+        assert_eq!(ticks.map(|t| t.read_px_ticks(1)), Some(20));
+        // 0.5 and 2 MHz keep the 50 ns tick; 2.5 MHz and above fall back to 8 ticks.
+        for (hz, n) in [(500_000, 40), (2_000_000, 10), (3_000_000, 8)] {
+            assert_eq!(Timing::at_pixel_rate(hz).read_px_ticks(), n, "{hz} Hz");
+        }
         assert!(matches!(
             Timing::at_pixel_rate(4_000_000).validate(&limits),
             Err(TimingError::PixelRate { .. })
         ));
         let fast_dma = Limits {
-            min_tick_ps: 100_000,
+            min_tick_ps: 200_000,
             ..limits
         };
         assert!(matches!(

@@ -26,7 +26,9 @@ use startrack_core::units::Electrons;
 use startrack_core::units::Kelvin;
 use startrack_core::window::Rect;
 use startrack_sim::sim::Simulator;
+use std::cell::Cell;
 use std::convert::Infallible;
+use std::rc::Rc;
 
 /// Stars a frame the host's tracker keeps (the board: 32): room for any field, so that a
 /// miss is a detection miss, not a full list; losses are still counted.
@@ -200,6 +202,11 @@ pub struct SimLines<F: FnMut(u32) -> Simulator> {
     buf: Vec<u16>,
     /// Samples rendered so far (what a readout would have digitised).
     pub samples_rendered: u64,
+    /// The current frame's readout on the board, us ([`board_readout_us`]): 0 from the
+    /// frame's start until its last line has been given, then the readout. A
+    /// [`ReadoutClock`] sharing it reads the time the frame's lines end.
+    pub readout_done_us: Rc<Cell<u64>>,
+    readout_us: u64,
 }
 
 impl<F: FnMut(u32) -> Simulator> SimLines<F> {
@@ -212,6 +219,36 @@ impl<F: FnMut(u32) -> Simulator> SimLines<F> {
             next: 0,
             buf: Vec::new(),
             samples_rendered: 0,
+            readout_done_us: Rc::new(Cell::new(0)),
+            readout_us: 0,
+        }
+    }
+}
+
+/// The board's readout of `request` on `geometry`, us: its program compiled as the board's
+/// sequencer compiles it (1 MHz pixels, `Limits::CCD47_20`, no exposure padding), from the
+/// start of its frame transfer to its last sample. A request the plan refuses is read as a
+/// full frame, as the board does.
+pub fn board_readout_us(geometry: &ReadoutGeometry, request: &ReadoutRequest<'_>) -> u64 {
+    use startrack_core::sequencer::{
+        Binning, CompileError, Cost, Limits, PinMap, ReadoutPlan, SegmentId, Step, Timing, compile,
+    };
+    let Ok(ticks) = Timing::at_pixel_rate(1_000_000).validate(&Limits::CCD47_20) else {
+        return 0;
+    };
+    let plan = ReadoutPlan::new(*geometry, *request, Binning::X1, 0)
+        .or_else(|_| ReadoutPlan::new(*geometry, ReadoutRequest::FullFrame, Binning::X1, 0));
+    let Ok(plan) = plan else { return 0 };
+    let (mut words, mut steps) = (vec![0u32; 2048], vec![Step::EMPTY; 4096]);
+    loop {
+        match compile(&plan, &ticks, &PinMap::IN_ORDER, &mut words, &mut steps) {
+            Ok(p) => {
+                let c = Cost::of(&p);
+                return (c.segment_ns(SegmentId::FrameTransfer) + c.frame_time_ns()) / 1000;
+            }
+            Err(CompileError::Words { needed }) => words.resize(needed, 0),
+            Err(CompileError::Steps { needed }) => steps.resize(needed, Step::EMPTY),
+            Err(_) => return 0,
         }
     }
 }
@@ -268,11 +305,14 @@ impl<F: FnMut(u32) -> Simulator> LineSource for SimLines<F> {
         self.buf = vec![0; g.line_len()];
         self.sim = Some(sim);
         self.next = 0;
+        self.readout_us = board_readout_us(&g, request);
+        self.readout_done_us.set(0);
         Ok(())
     }
 
     async fn next_line(&mut self) -> Result<Option<SourceLine<'_>>, Infallible> {
         let (Some(sim), Some((line, spans))) = (&self.sim, self.lines.get(self.next)) else {
+            self.readout_done_us.set(self.readout_us);
             return Ok(None);
         };
         self.next += 1;
@@ -302,6 +342,26 @@ pub struct FrameClock {
 impl Clock for FrameClock {
     fn now_us(&mut self) -> u64 {
         u64::from(self.frame) * self.period_us
+    }
+}
+
+/// A clock that reads frame number x frame period, plus the frame's board readout once its
+/// last line has been given ([`SimLines::readout_done_us`]): a report made after the lines
+/// reads the time the board's lines would end. The host's own processing time is not in
+/// it (it is not the M7's).
+#[derive(Clone, Debug)]
+pub struct ReadoutClock {
+    /// The current frame.
+    pub frame: u32,
+    /// Frame period, us.
+    pub period_us: u64,
+    /// The source's readout once the frame's lines have ended, us.
+    pub readout_done_us: Rc<Cell<u64>>,
+}
+
+impl Clock for ReadoutClock {
+    fn now_us(&mut self) -> u64 {
+        u64::from(self.frame) * self.period_us + self.readout_done_us.get()
     }
 }
 

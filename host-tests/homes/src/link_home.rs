@@ -20,7 +20,7 @@
 //! Cost: the frames' (see [`crate::sil`]); the link adds a few us a packet; a sky scene adds
 //! the attitude stage's per frame and one 128-byte report (a 151-byte packet).
 
-use crate::home::{FrameClock, SimLines, block_on, host_health};
+use crate::home::{ReadoutClock, SimLines, block_on, host_health};
 use crate::memory_tables::MemoryTables;
 use crate::sil::{self, SilConfig};
 use crate::sim_windows::SimWindows;
@@ -303,9 +303,11 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
                 }
             }
             // The frame.
-            let mut clock = FrameClock {
+            source.readout_done_us.set(0);
+            let mut clock = ReadoutClock {
                 frame,
                 period_us: sc.period_us,
+                readout_done_us: source.readout_done_us.clone(),
             };
             cycle.set_link_time(start.elapsed().as_micros() as u64);
             let table_in_force = tables.active(TABLE_KIND_CALIBRATION);

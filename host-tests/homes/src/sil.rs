@@ -19,7 +19,7 @@
 //! over-scan and covered columns plus its windows per star; ~1 s and ~0.02 s in release
 //! (`time startrack sil --frames N` for a few N measures both).
 
-use crate::home::{FrameClock, Recorder, SimLines, block_on, host_health};
+use crate::home::{ReadoutClock, Recorder, SimLines, block_on, host_health};
 use rand::{RngExt, SeedableRng};
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
@@ -427,9 +427,13 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
         let _ = cycle.transmit(&mut [0u8; 256]);
     }
     for k in 0..config.frames {
-        let mut clock = FrameClock {
+        // The frame's start reads the frame's instant; its report, after its lines, that
+        // instant plus the board's readout of what it read.
+        source.readout_done_us.set(0);
+        let mut clock = ReadoutClock {
             frame: k,
             period_us: config.period_us,
+            readout_done_us: source.readout_done_us.clone(),
         };
         if let Some(line) = pps.as_mut() {
             line.advance_to(u64::from(k) * config.period_us);

@@ -9,6 +9,7 @@ pub mod calib_frames;
 pub mod calib_models;
 pub mod catalog;
 pub mod figures;
+pub mod first_attitude;
 pub mod gse;
 pub mod optics;
 pub mod pil;

@@ -24,19 +24,20 @@ fn every_limit_is_checked() {
     // (limit, what the default timing gives in ns, the limits with that minimum set to v)
     type Set = fn(u32) -> Limits;
     let cases: [(Limit, u32, Set); 8] = [
-        (Limit::SerialState, 125, |v| Limits {
+        // The shorter serial state: a skipped element's, one 50 ns tick.
+        (Limit::SerialState, 50, |v| Limits {
             min_serial_state_ns: v,
             ..BASE
         }),
-        (Limit::ResetGate, 375, |v| Limits {
+        (Limit::ResetGate, 450, |v| Limits {
             min_reset_gate_ns: v,
             ..BASE
         }),
-        (Limit::ResetSettle, 125, |v| Limits {
+        (Limit::ResetSettle, 150, |v| Limits {
             min_reset_settle_ns: v,
             ..BASE
         }),
-        (Limit::SignalSettle, 250, |v| Limits {
+        (Limit::SignalSettle, 300, |v| Limits {
             min_signal_settle_ns: v,
             ..BASE
         }),
@@ -52,9 +53,9 @@ fn every_limit_is_checked() {
             min_dump_ns: v,
             ..BASE
         }),
-        // A parallel state is a third of the shortest row step, rounded up to ticks:
-        // 10 us / 3 -> 27 ticks of 125 ns = 3,375 ns.
-        (Limit::ParallelState, 3_375, |v| Limits {
+        // A parallel state is a third of the shortest row step, rounded up to ticks: the
+        // dumped row's 3 us / 3 -> 20 ticks of 50 ns = 1,000 ns.
+        (Limit::ParallelState, 1_000, |v| Limits {
             min_parallel_state_ns: v,
             ..BASE
         }),
@@ -75,9 +76,10 @@ fn every_limit_is_checked() {
             other => panic!("{what:?}: {other:?}"),
         }
     }
-    // The dumped-row step is held to the frame-transfer minimum.
+    // The dumped-row step is held to three parallel states (its states, rounded up to
+    // whole ticks, would pass).
     let slow_dump_rows = Timing {
-        dump_row_step_ns: 9_000,
+        dump_row_step_ns: 2_900,
         ..t
     };
     assert!(matches!(
@@ -97,14 +99,14 @@ fn every_limit_is_checked() {
         Err(TimingError::PixelRate { .. })
     ));
     let slow_dma = Limits {
-        min_tick_ps: 125_001,
+        min_tick_ps: 50_001,
         ..BASE
     };
     assert_eq!(
         t.validate(&slow_dma),
         Err(TimingError::TickTooShort {
-            tick_ps: 125_000,
-            min_ps: 125_001
+            tick_ps: 50_000,
+            min_ps: 50_001
         })
     );
     assert_eq!(

@@ -59,7 +59,7 @@ impl LineSource for ModelLines<'_> {
         self.windowed += 1;
         let plan = ReadoutPlan::new(g, *request, Binning::X1, 100_000);
         let plan = plan.unwrap_or_else(|e| unreachable!("{e}"));
-        let (mut w, mut s) = (vec![0; 1024], vec![Step::EMPTY; 4096]);
+        let (mut w, mut s) = (vec![0; BOARD_MAX_WORDS], vec![Step::EMPTY; BOARD_MAX_STEPS]);
         let program = compile(&plan, &self.ticks, &PinMap::IN_ORDER, &mut w, &mut s);
         let program = program.unwrap_or_else(|e| unreachable!("{e}"));
         let mut model = CcdModel::new(&g, PinMap::IN_ORDER, &self.ticks);
@@ -209,7 +209,7 @@ fn same_bits(
 
 /// `firmware/src/board/stm32h743/sequencer.rs`'s `MAX_WORDS` and `MAX_STEPS` (the firmware crate does not
 /// build for the host; keep them equal).
-const BOARD_MAX_WORDS: usize = 1024;
+const BOARD_MAX_WORDS: usize = 1152;
 const BOARD_MAX_STEPS: usize = 4096;
 
 /// Every plan the board compiles (1 MHz, both outputs, binning 1: a full frame, or up to the

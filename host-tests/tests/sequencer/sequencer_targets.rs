@@ -63,17 +63,78 @@ fn full_frame_both_outputs_1mhz_within_0_6_s() {
     assert_eq!(c.cost.segment_ns(SegmentId::ReadPixel), 553_688_000);
 }
 
-/// Tracking: 30 windows of 11 x 11 at 1 MHz at least 10 updates a second. What bounds it is
-/// printed (the segment with the most time) and held: the serial skips to the windows.
+/// Tracking: 30 windows of 11 x 11 at 1 MHz, both outputs, every segment at its own limit
+/// (skipped elements 150 ns, dumped rows 3 us, line transfers 40 us, the frame transfer
+/// 10 us a row): 19.5 updates a second from the compiled program, a 51.27 ms cycle. 20 Hz
+/// (50 ms) is not reached within `Limits::CCD47_20` at 1 MHz: the gap, 1.27 ms, is printed
+/// and held. What bounds it (the segment with the most time) is the serial skips.
 #[test]
-fn thirty_windows_1mhz_at_least_10_hz() {
+fn thirty_windows_1mhz_19_5_hz() {
     let c = cost(&args(Mode::Windows, 1_000_000, 30, 2));
     println!("{}\n{}\n{}", HEADER, c.row, breakdown(&c.cost));
     let hz = c.cost.update_rate_mhz() as f64 / 1e3;
-    assert!(hz >= 10.0, "30 windows: {hz} Hz");
+    let cycle_ns = c.cost.cycle_ns();
+    println!(
+        "30 windows at 1 MHz: {:.3} ms cycle, {hz:.2} Hz; {:.3} ms over the 50 ms of 20 Hz",
+        cycle_ns as f64 / 1e6,
+        (cycle_ns as f64 - 50e6) / 1e6
+    );
+    assert!(hz >= 19.5, "30 windows: {hz} Hz");
+    assert!(
+        (51_200_000..51_300_000).contains(&cycle_ns),
+        "{cycle_ns} ns"
+    );
     assert_eq!(c.cost.bound_by(), SegmentId::SkipPixel);
+    // Each segment at its limit: 91,839 skipped elements of 150 ns, 330 line transfers of
+    // 3 x 267 ticks, 671 dumped rows of 3 us, 330 register dumps of 1 us.
+    assert_eq!(c.cost.segment_ns(SegmentId::SkipPixel), 91_839 * 150);
+    assert_eq!(c.cost.segment_ns(SegmentId::LineTransfer), 330 * 40_050);
+    assert_eq!(c.cost.segment_ns(SegmentId::RowDump), 671 * 3_000);
+    assert_eq!(c.cost.segment_ns(SegmentId::RegisterDump), 330 * 1_000);
     // Every window row is read once: 30 windows of 11 rows in separate bands.
     assert_eq!(c.cost.pixels_digitised, 30 * 11 * (24 + 11) * 2);
+}
+
+/// What 20 Hz with 30 windows takes, each from a compiled program: the 2 MHz pixel rate
+/// (within `Limits::CCD47_20`, at the output's higher read noise), or at 1 MHz a line step
+/// of 36 us instead of gcam's 40 us (a limit to relax only once it is checked on hardware).
+#[test]
+fn thirty_windows_20_hz_needs_2_mhz_or_a_shorter_line_step() {
+    let c = cost(&args(Mode::Windows, 2_000_000, 30, 2));
+    let hz = c.cost.update_rate_mhz() as f64 / 1e3;
+    println!("30 windows at 2 MHz: {hz:.2} Hz");
+    assert!(hz >= 20.0, "{hz}");
+    let rects = cost(&args(Mode::Windows, 1_000_000, 30, 2)).rects;
+    let plan = ReadoutPlan::new(
+        ReadoutGeometry::CCD47_20_DUAL,
+        ReadoutRequest::Windows(&rects),
+        Binning::X1,
+        0,
+    )
+    .unwrap_or_else(|e| unreachable!("{e}"));
+    let short_line = Timing {
+        line_step_ns: 36_000,
+        ..Timing::at_pixel_rate(1_000_000)
+    };
+    // Refused at the limits as they stand, compiled once the line step's limit is 36 us.
+    assert!(short_line.validate(&Limits::CCD47_20).is_err());
+    let relaxed = Limits {
+        min_line_step_ns: 36_000,
+        ..Limits::CCD47_20
+    };
+    let t = short_line
+        .validate(&relaxed)
+        .unwrap_or_else(|e| unreachable!("{e}"));
+    let (mut w, mut s) = (vec![0; 4096], vec![Step::EMPTY; 8192]);
+    let p = compile(&plan, &t, &PinMap::IN_ORDER, &mut w, &mut s)
+        .unwrap_or_else(|e| unreachable!("{e}"));
+    let c = Cost::of(&p);
+    let hz = c.update_rate_mhz() as f64 / 1e3;
+    println!(
+        "30 windows at 1 MHz, 36 us line step: {:.3} ms, {hz:.2} Hz",
+        c.cycle_ns() as f64 / 1e6
+    );
+    assert!(c.cycle_ns() <= 50_000_000, "{}", c.cycle_ns());
 }
 
 /// The largest tables `readout-plan` makes (full frame and 10/30/60 windows, 0.5-2 MHz, one
@@ -202,14 +263,16 @@ fn m7_stage(stage: &str) -> f64 {
 }
 
 /// The M7 work of a 30-window tracking frame on the board against its cycle at 1 MHz
-/// (76.8 ms), counting one QEMU instruction a cycle of the 480 MHz core (QEMU counts
+/// (51.3 ms), counting one QEMU instruction a cycle of the 480 MHz core (QEMU counts
 /// instructions, not cycles): the tracker fed the 330 lines the windows cross
 /// (`tracker_tracking_frame_windowed`), the frame's compile, the MDMA nodes of its chain
-/// (`sequencer_chain_nodes`) and its line jobs: under 25 %. The word feed the chain
-/// replaces (`sequencer_feed_words`) and the tracker fed every line are printed beside it:
-/// that sum was over 25 %.
+/// (`sequencer_chain_nodes`) and its line jobs: 26.5 %. The quarter this work was held to
+/// at the 76.8 ms cycle of the one-tick tables is missed at the faster cycle (flagged in
+/// docs/sequencer.md): the work did not grow, the cycle shrank. Held here under 27 % so
+/// that a growth of the work shows. The word feed the chain replaces
+/// (`sequencer_feed_words`) and the tracker fed every line are printed beside it.
 #[test]
-fn tracking_frame_m7_work_under_a_quarter_of_the_frame() {
+fn tracking_frame_m7_work_share_of_the_cycle() {
     let c = cost(&args(Mode::Windows, 1_000_000, 30, 2));
     let cycle_ns = c.cost.cycle_ns() as f64;
     let share = |stages: &[&str]| {
@@ -237,7 +300,7 @@ fn tracking_frame_m7_work_under_a_quarter_of_the_frame() {
         before / 1e6,
         before_share * 100.0
     );
-    assert!(board_share < 0.25, "{board_share}");
+    assert!(board_share < 0.27, "{board_share}");
     // The tracker alone fed every line (a readout that digitises whole lines while
     // tracking) is not under a quarter since the width-free fit and the in-flight defect
     // watch (25.8 % when last measured): the quarter holds only with the windowed readout,

@@ -149,3 +149,63 @@ fn rate_table_writes_its_csv() {
     std::fs::write(&path, &text).unwrap();
     eprint!("{text}");
 }
+
+/// The exposure chart's CSV, beside the rate table's.
+pub const EXPOSURE_CSV: &str = "host-tests/figures/exposure-chart.csv";
+
+/// The exposure chart: every exposure of [`exposure_chart::EXPOSURES_MS`] at every rate of
+/// [`exposure_chart::RATES_DEG_S`], one seeded attitude (seed 200) of
+/// [`exposure_chart::FRAMES`] frames a point, written to [`EXPOSURE_CSV`] and its PNG beside
+/// it. Minutes in the test profile:
+/// `cargo test -p startrack-host --test tracker sil_motion::exposure_chart -- --ignored --nocapture`.
+#[test]
+#[ignore = "Monte Carlo over 36 points, minutes; its CSV and PNG are committed"]
+fn exposure_chart_writes_its_csv_and_png() {
+    use startrack_analysis::exposure_chart;
+    let mut points = Vec::new();
+    for &rate in &exposure_chart::RATES_DEG_S {
+        for &ms in &exposure_chart::EXPOSURES_MS {
+            let p = exposure_chart::run_point(rate, ms, 200, exposure_chart::FRAMES).unwrap();
+            eprintln!("{p:?}");
+            points.push(p);
+        }
+    }
+    let text = exposure_chart::csv(
+        &points,
+        &[
+            "The SIL over the sky turning across the boresight during exposures back to back, one seeded attitude (seed 200) of 6 frames a point; a point trailing more than 30 px an exposure is not run (0 frames).",
+            "cargo test -p startrack-host --test tracker sil_motion::exposure_chart -- --ignored --nocapture",
+        ],
+    );
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    std::fs::write(root.join(EXPOSURE_CSV), &text).unwrap();
+    let written = exposure_chart::plot(
+        &points,
+        &root.join("host-tests/figures"),
+        "exposure-chart.png",
+    )
+    .unwrap();
+    eprintln!("{written:?}");
+    eprint!("{text}");
+}
+
+/// The star signal follows the exposure: the same still sky over a 50 ms exposure gives each
+/// star half the electrons of the 100 ms reference's.
+#[test]
+fn star_signal_scales_with_the_exposure() {
+    let bytes = startrack_sim::sky::scene::committed_catalog().unwrap();
+    let cat = startrack_core::catalog::Catalog::parse(&bytes).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let q0 = random_attitude(&mut rng);
+    let scene = |exposure_s: f64| {
+        let profile = RateProfile::constant([0.0; 3]);
+        let motion = ExposureMotion::new(profile, exposure_s, exposure_s).unwrap();
+        SkyScene::ccd47_15deg_moving(q0, motion)
+    };
+    let (long, short) = (scene(0.1), scene(0.05));
+    let (a, b) = (long.stars(&cat, 0, 1.2), short.stars(&cat, 0, 1.2));
+    assert!(a.len() > 10 && a.len() == b.len());
+    for (s, t) in a.iter().zip(&b) {
+        assert!((t.signal_e - 0.5 * s.signal_e).abs() < 1e-9 * s.signal_e);
+    }
+}

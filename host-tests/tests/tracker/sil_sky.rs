@@ -446,3 +446,48 @@ fn velocity_command_removes_the_aberration() {
         );
     }
 }
+
+/// The SIL's reports carry the latency from mid-exposure to the report: half the exposure
+/// plus the board's readout of what the frame read (its compiled program at 1 MHz, frame
+/// transfer included): a full frame's 605.4 ms in acquisition, a few tens of ms for the
+/// tracking windows. The host's processing time is not in it. The first frame starts at
+/// the counter's 0, so its mid-exposure clamps there and its latency is the readout alone.
+#[test]
+fn sil_reports_latency_from_mid_exposure_through_the_readout() {
+    use startrack_core::geometry::ReadoutGeometry;
+    use startrack_core::readout::ReadoutRequest;
+    use startrack_core::tracker::{Mode, TrackerConfig};
+    use startrack_homes::home::board_readout_us;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+    let q0 = random_attitude(&mut rng);
+    let config = SilConfig {
+        frames: 3,
+        sky: Some(SkyScene::ccd47_15deg(q0, [0.0; 3])),
+        period_us: 1_000_000,
+        ..SilConfig::default()
+    };
+    let report = sil::run(&config).unwrap();
+    let half_us = u64::from(TrackerConfig::FLIGHT.exposure_ms) * 500;
+    let full_us = board_readout_us(&ReadoutGeometry::CCD47_20_DUAL, &ReadoutRequest::FullFrame);
+    assert_eq!(full_us, 605_441, "{full_us}");
+    let mut modes = Vec::new();
+    for fr in &report.frames {
+        let r = fr.attitude.as_ref().and_then(|c| c.report).unwrap();
+        let latency = u64::from(r.latency_us);
+        modes.push(fr.summary.mode);
+        let half = half_us.min(fr.summary.start_us);
+        match fr.summary.mode {
+            Mode::Acquisition => assert_eq!(latency, half + full_us),
+            Mode::Tracking => assert!(
+                (half + 10_000..half + 200_000).contains(&latency),
+                "frame {}: {latency} us",
+                fr.summary.frame
+            ),
+            Mode::Standby => {}
+        }
+    }
+    assert!(
+        modes.contains(&Mode::Acquisition) && modes.contains(&Mode::Tracking),
+        "{modes:?}"
+    );
+}

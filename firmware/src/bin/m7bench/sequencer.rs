@@ -39,7 +39,7 @@ pub fn run(out: &mut Out, bench: &Bench) -> Result<(), &'static str> {
     let ticks = Timing::at_pixel_rate(1_000_000)
         .validate(&Limits::CCD47_20)
         .map_err(|_| "sequencer: timing refused")?;
-    let mut words = [0u32; 1024];
+    let mut words = [0u32; MAX_WORDS];
     let mut steps = [Step::EMPTY; 4096];
     let mut parts = None;
     let t_compile = bench.measure(|| {
@@ -97,8 +97,10 @@ pub fn run(out: &mut Out, bench: &Bench) -> Result<(), &'static str> {
     Ok(())
 }
 
+/// The board's segment table, words (the firmware's `MAX_WORDS`).
+const MAX_WORDS: usize = 1152;
 /// The board's chain table: the largest program's words and the rest run.
-const CHAIN_WORDS: usize = 1024 + REST_RUN as usize;
+const CHAIN_WORDS: usize = MAX_WORDS + REST_RUN as usize;
 /// The rest run's words.
 const REST_RUN: u32 = 256;
 /// Nodes in the board's ring.

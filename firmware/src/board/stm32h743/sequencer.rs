@@ -2,7 +2,7 @@
 //! port by a DMA that repeats each segment itself.
 //!
 //! # How
-//! TIM6 (a basic timer, nothing else uses it) overflows once a tick (`Ticks::tick_ps`, 125 ns
+//! TIM6 (a basic timer, nothing else uses it) overflows once a tick (`Ticks::tick_ps`, 50 ns
 //! at 1 MHz pixels); each update event requests one transfer of DMA1 stream 1 (routed by
 //! DMAMUX1, circular, one item, no interrupt), which writes 0 into GPIOE's BSRR (a word that
 //! changes no line) and so raises the stream's transfer-complete flag once a tick. That flag
@@ -57,7 +57,7 @@
 //!
 //! # What only a board can show
 //! The waveforms have not been seen on a board (docs/hardware.md has the HIL steps), nor
-//! whether the MDMA serves each request within a tick (at 125 ns: the HIL step counts the
+//! whether the MDMA serves each request within a tick (at 50 ns: the HIL step counts the
 //! ticks on the analyser).
 
 use crate::lines::{FrameRequest, REQUESTS};
@@ -96,12 +96,12 @@ const NODE_BATCH: usize = NODE_RING / 2;
 const AHEAD_US: u64 = 2_000;
 
 /// Words of rest state at the end of each chain table: a node of the exposure padding plays
-/// up to 256 x 4096 ticks (131 ms at 125 ns).
+/// up to 256 x 4096 ticks (52 ms at 50 ns).
 pub const REST_RUN: u32 = 256;
 
-/// Words of the segment table (the largest plan the board makes needs 503, host test
+/// Words of the segment table (the largest plan the board makes needs 1,106, host test
 /// `sequencer_route`).
-pub const MAX_WORDS: usize = 1024;
+pub const MAX_WORDS: usize = 1152;
 
 /// Words of a chain table: the segments and the rest run.
 pub const CHAIN_WORDS: usize = MAX_WORDS + REST_RUN as usize;

@@ -6,7 +6,13 @@
 //! and `w` is the turn per frame in the camera frame (x, y across the boresight, z roll).
 //! Every catalog star within the field (plus a margin of [`EDGE_MARGIN_PX`], so stars at the
 //! edges are rendered cut) becomes a simulator star at its projected position with
-//! `flux_e_at_mag0 10^(-0.4 Hp)` electrons. Positions are exact: the tracker's error is what
+//! `flux_e_at_mag0 10^(-0.4 Hp)` electrons in a [`REFERENCE_EXPOSURE_S`] exposure, scaled by
+//! the motion's exposure over it when the scene has one (a still scene's exposures are the
+//! reference's). The photometric model: 2.0e7 e-/s at Hp = 0 (2.0e6 e- in 100 ms). For
+//! scale: the figure usually quoted from Liebe (IEEE AES Magazine 10(6), 1995), about 19,100
+//! photons s^-1 mm^-2 from a magnitude 0 G2 star, through the 15 degree camera's 50.5 mm
+//! lens at f/1.2 (about 1,390 mm^2) with 0.75 for optics and quantum efficiency gives 2.0e7 e-/s
+//! (the aperture and the efficiency are this model's assumptions, not a lens's data). Positions are exact: the tracker's error is what
 //! the run measures.
 //!
 //! With a motion during the exposure ([`SkyScene::motion`], [`super::motion`]) the attitude
@@ -40,7 +46,7 @@ pub struct SkyScene {
     pub rate_rad_per_frame: [f64; 3],
     /// The camera that images the sky on the active area.
     pub camera: Camera,
-    /// Electrons from a star of Hp = 0.
+    /// Electrons from a star of Hp = 0 in a [`REFERENCE_EXPOSURE_S`] exposure.
     pub flux_e_at_mag0: f64,
     /// Active columns and rows.
     pub active_px: [u16; 2],
@@ -48,6 +54,9 @@ pub struct SkyScene {
     /// attitude steps between frames and stands still during each (instantaneous) exposure.
     pub motion: Option<ExposureMotion>,
 }
+
+/// The exposure [`SkyScene::flux_e_at_mag0`] is given for, s (the SIL's 100 ms frame).
+pub const REFERENCE_EXPOSURE_S: f64 = 0.1;
 
 impl SkyScene {
     /// The CCD47-20 (1024 x 1024 active) behind the 15 degree camera of
@@ -71,6 +80,16 @@ impl SkyScene {
             motion: Some(motion),
             ..Self::ccd47_15deg(attitude0, [0.0; 3])
         }
+    }
+
+    /// Electrons in one exposure from a star of Hp `hp`: the reference exposure's, scaled by
+    /// the motion's exposure when there is one.
+    pub fn flux_e_at_hp(&self, hp: f64) -> f64 {
+        let scale = self
+            .motion
+            .as_ref()
+            .map_or(1.0, |m| m.exposure_s / REFERENCE_EXPOSURE_S);
+        self.flux_e_at_mag0 * scale * 10f64.powf(-0.4 * hp)
     }
 
     /// Frame `frame`'s mid-exposure, s: with a motion its own timing, else the frame's
@@ -151,12 +170,7 @@ impl SkyScene {
                     return None;
                 }
                 let hp = f64::from(catalog.star(idx)?.hp_mmag) / 1000.0;
-                TrailedImage::along(
-                    &path,
-                    self.flux_e_at_mag0 * 10f64.powf(-0.4 * hp),
-                    sigma,
-                    active,
-                )
+                TrailedImage::along(&path, self.flux_e_at_hp(hp), sigma, active)
             })
             .collect()
     }
@@ -190,7 +204,7 @@ impl SkyScene {
                 inside.then(|| Star {
                     x_px: p[0],
                     y_px: p[1],
-                    signal_e: self.flux_e_at_mag0 * 10f64.powf(-0.4 * hp),
+                    signal_e: self.flux_e_at_hp(hp),
                     a_px,
                 })
             })

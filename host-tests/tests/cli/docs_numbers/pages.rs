@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 25] = [
+const CHECKED: [&str; 27] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -45,6 +45,8 @@ const CHECKED: [&str; 25] = [
     "accuracy-frames-field",
     "trail-bound",
     "sil-rates",
+    "first-attitude",
+    "exposure-chart",
     "ident-tetra3rs",
     "realsky-tetra3rs",
     "realsky-optics",
