@@ -75,6 +75,10 @@ pub(crate) const MAX_CANDIDATES: usize = 16;
 /// A final match's residual is at most this many of its sigmas (a 2-D Gaussian passes
 /// 5 sigma with probability 1 - 4e-6).
 pub(crate) const TIGHT_SIGMAS: f64 = 5.0;
+/// The matching is widened by the fit's covariance only when some star's 3-sigma predicted
+/// position exceeds this fraction of the match radius (below it, the widened matching finds
+/// what the rounds found).
+pub(crate) const WIDEN_FROM: f64 = 0.25;
 /// Most match-and-refit rounds of a hypothesis (they stop when the matches stop changing).
 pub(crate) const MAX_REFITS: usize = 6;
 /// Fewest matched stars in a solution (three for the triangle and one more).
@@ -655,7 +659,7 @@ fn hypothesis(
         o.icrs = cat.dir(c.into())?;
     }
     let first = attitude::solve(&obs).ok()?;
-    let (mut matches, _) = match_all(cat, &scaled, n, first.q, cfg.match_radius_rad);
+    let (matches, _) = match_all(cat, &scaled, n, first.q, cfg.match_radius_rad, None);
     if matches.len() < MIN_MATCHES {
         return None;
     }
@@ -665,31 +669,34 @@ fn hypothesis(
     // matches stop changing. A triangle's attitude and scale can be off enough that the
     // stars far from it fall outside the match radius, or on a neighbour, until a round
     // brings them in. The largest set seen is kept.
-    let mut best: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
-    let (mut s, mut q) = (scale, first.q);
-    for _ in 0..MAX_REFITS {
-        let refit = fit(cat, stars, &matches, s, Some(q))?;
-        let scaled = rescaled(stars, n, refit.scale.value);
-        let (all, _) = match_all(cat, &scaled, n, refit.attitude.q, cfg.match_radius_rad);
-        let refit = fit(cat, stars, &all, refit.scale.value, Some(refit.attitude.q))?;
-        q = refit.attitude.q;
-        s = refit.scale.value;
-        let scaled = rescaled(stars, n, s);
-        let next = keep_consistent(cat, &scaled, &all, refit.attitude.q);
-        let same = next == matches;
-        matches = next;
-        if matches.len() > best.len() {
-            best = matches.clone();
-        }
-        if same || matches.len() < MIN_MATCHES {
-            break;
+    let (mut matches, s, _) = rounds(cat, stars, n, matches, scale, first.q, cfg)?;
+    let mut joint = fit(cat, stars, &matches, s, None)?;
+    // A fit from few or clustered stars can be loose enough (its roll, mostly) that the
+    // other stars of the field are predicted beyond the match radius: they are matched
+    // again within the radius widened by 3 of their predicted sigmas, and the rounds run
+    // again from there. What is kept still passes the rounds' TIGHT_SIGMAS test.
+    let scaled = rescaled(stars, n, s);
+    let loose = |st: &Measured| {
+        3.0 * predicted_sigma(st.dir, &joint.cov, s) > WIDEN_FROM * cfg.match_radius_rad
+    };
+    if matches.len() < n && scaled.iter().any(loose) {
+        let spread = Some((&joint.cov, s));
+        let (wide, _) = match_all(
+            cat,
+            &scaled,
+            n,
+            joint.attitude.q,
+            cfg.match_radius_rad,
+            spread,
+        );
+        if wide.len() > matches.len()
+            && let Some((grown, s2, _)) = rounds(cat, stars, n, wide, s, joint.attitude.q, cfg)
+            && grown.len() > matches.len()
+            && let Some(j) = fit(cat, stars, &grown, s2, None)
+        {
+            (matches, joint) = (grown, j);
         }
     }
-    let matches = best;
-    if matches.len() < MIN_MATCHES {
-        return None;
-    }
-    let joint = fit(cat, stars, &matches, s, None)?;
     // The field's density at the basis's own attitude: it depends on the triangle only,
     // not on the stars the bound counts.
     let false_probability = false_match_bound(cat, n, matches.len(), cfg, first.q);
@@ -707,6 +714,48 @@ fn hypothesis(
         hypotheses: hyps,
         scale: joint.scale,
     })
+}
+
+/// The match-and-refit rounds of [`hypothesis`] from `matches` at scale `scale` and attitude
+/// `q`: the largest consistent set seen, with the scale and attitude of the last round.
+#[allow(clippy::too_many_arguments)]
+fn rounds(
+    cat: &Catalog<'_>,
+    stars: &[Measured],
+    n: usize,
+    mut matches: heapless::Vec<Match, MAX_STARS>,
+    scale: f64,
+    q: Quat,
+    cfg: &IdentConfig,
+) -> Option<(heapless::Vec<Match, MAX_STARS>, f64, Quat)> {
+    let mut best: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
+    let (mut s, mut q) = (scale, q);
+    for _ in 0..MAX_REFITS {
+        let refit = fit(cat, stars, &matches, s, Some(q))?;
+        let scaled = rescaled(stars, n, refit.scale.value);
+        let (all, _) = match_all(
+            cat,
+            &scaled,
+            n,
+            refit.attitude.q,
+            cfg.match_radius_rad,
+            None,
+        );
+        let refit = fit(cat, stars, &all, refit.scale.value, Some(refit.attitude.q))?;
+        q = refit.attitude.q;
+        s = refit.scale.value;
+        let scaled = rescaled(stars, n, s);
+        let next = keep_consistent(cat, &scaled, &all, refit.attitude.q);
+        let same = next == matches;
+        matches = next;
+        if matches.len() > best.len() {
+            best = matches.clone();
+        }
+        if same || matches.len() < MIN_MATCHES {
+            break;
+        }
+    }
+    (best.len() >= MIN_MATCHES).then_some((best, s, q))
 }
 
 /// Non-basis stars the quick check of a hypothesis looks at (the brightest).
@@ -817,39 +866,105 @@ pub fn bound_with_field_stars(
     (f64::from(cfg.max_hypotheses) * tail).min(1.0)
 }
 
-/// Every measured star matched to its nearest catalog star within `radius` under `q` (a
-/// catalog star is used once).
+/// Every measured star matched to its nearest catalog star within `radius` under `q`; a
+/// catalog star is matched once, to the measured star nearest it (a false star or a
+/// companion next to a true star does not take its place by being brighter). With
+/// `spread` (the covariance of a fit of the rotation and the scale, and the scale), a star's
+/// radius is widened by 3 of its position sigmas predicted from it.
 fn match_all(
     cat: &Catalog<'_>,
     stars: &[Measured],
     n: usize,
     q: Quat,
     radius: f64,
+    spread: Option<(&[[f64; 4]; 4], f64)>,
 ) -> (heapless::Vec<Match, MAX_STARS>, usize) {
-    let mut out = heapless::Vec::new();
+    let mut out: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
+    let mut near = [0.0f64; MAX_STARS];
     for (m, s) in stars.iter().enumerate().take(n) {
+        let r = match spread {
+            Some((cov, scale)) => radius + 3.0 * predicted_sigma(s.dir, cov, scale),
+            None => radius,
+        };
         let sky = q.rotate_inv(s.dir);
         let mut best: Option<(usize, f64)> = None;
-        for (idx, v) in cat.cone(sky, radius) {
+        for (idx, v) in cat.cone(sky, r) {
             let d = dot(sky, v);
             if best.is_none_or(|(_, bd)| d > bd) {
                 best = Some((idx, d));
             }
         }
-        let Some((idx, _)) = best else { continue };
-        let Ok(catalog) = u16::try_from(idx) else {
+        let Some((idx, d)) = best else { continue };
+        let (Ok(catalog), Ok(star)) = (u16::try_from(idx), u8::try_from(m)) else {
             continue;
         };
-        if out.iter().any(|x: &Match| x.catalog == catalog) {
-            continue;
+        if let Some(at) = out.iter().position(|x| x.catalog == catalog) {
+            if near.get(at).is_none_or(|&o| o >= d) {
+                continue;
+            }
+            let _ = out.remove(at);
+            near.copy_within(at + 1.., at);
         }
-        let _ = out.push(Match {
-            star: u8::try_from(m).unwrap_or(u8::MAX),
-            catalog,
-        });
+        if let Some(x) = near.get_mut(out.len()) {
+            *x = d;
+        }
+        let _ = out.push(Match { star, catalog });
     }
     let len = out.len();
     (out, len)
+}
+
+/// The 1-sigma of a star's position (rad, tangent plane, the root of the trace of its 2 x 2
+/// covariance) at direction `dir` predicted from the covariance `cov` of a fit's rotation and
+/// scale at scale `scale`.
+fn predicted_sigma(dir: [f64; 3], cov: &[[f64; 4]; 4], scale: f64) -> f64 {
+    let Some((ju, jw, _)) = jacobian(dir, scale) else {
+        return 0.0;
+    };
+    let mut var = 0.0;
+    for (a, row) in cov.iter().enumerate() {
+        for (b, c) in row.iter().enumerate() {
+            let (ua, wa) = (
+                ju.get(a).copied().unwrap_or(0.0),
+                jw.get(a).copied().unwrap_or(0.0),
+            );
+            let (ub, wb) = (
+                ju.get(b).copied().unwrap_or(0.0),
+                jw.get(b).copied().unwrap_or(0.0),
+            );
+            var += (ua * ub + wa * wb) * c;
+        }
+    }
+    libm::sqrt(var.max(0.0))
+}
+
+/// The derivatives of the tangent-plane coordinates `s (v_x, v_y) / v_z` of the camera-frame
+/// direction `v` by a small rotation `e` (camera frame, `v' = v + e x v`) and by the scale
+/// `s`, with `(v_x, v_y) / v_z`; `None` behind or at the edge of the tangent plane.
+fn jacobian(v: [f64; 3], s: f64) -> Option<([f64; 4], [f64; 4], [f64; 2])> {
+    let [vx, vy, vz] = v;
+    if vz <= 1e-6 {
+        return None;
+    }
+    let (u, w) = (vx / vz, vy / vz);
+    // d v / d e: the rows of the x, y and z components, by e_x, e_y, e_z.
+    let (dx, dy, dz) = ([0.0, vz, -vy], [-vz, 0.0, vx], [vy, -vx, 0.0]);
+    let mut ju = [0.0f64; 4];
+    let mut jw = [0.0f64; 4];
+    for c in 0..3 {
+        let (x, y, z) = (
+            dx.get(c).copied().unwrap_or(0.0),
+            dy.get(c).copied().unwrap_or(0.0),
+            dz.get(c).copied().unwrap_or(0.0),
+        );
+        if let (Some(a), Some(b)) = (ju.get_mut(c), jw.get_mut(c)) {
+            *a = s * (x - u * z) / vz;
+            *b = s * (y - w * z) / vz;
+        }
+    }
+    ju[3] = u;
+    jw[3] = w;
+    Some((ju, jw, [u, w]))
 }
 
 /// A match stays when its residual under `q` is within [`TIGHT_SIGMAS`] of its sigma.
@@ -876,6 +991,8 @@ fn keep_consistent(
 struct Joint {
     attitude: Attitude,
     scale: FocalScale,
+    /// Covariance of the small rotation (rad, camera frame) and the scale.
+    cov: [[f64; 4]; 4],
 }
 
 /// Gauss-Newton steps of the joint fit (it starts from the q-method at the given scale or
@@ -929,29 +1046,7 @@ fn fit(
             if bz <= 1e-6 {
                 return None;
             }
-            let v = q.rotate(r);
-            let [vx, vy, vz] = v;
-            if vz <= 1e-6 {
-                return None;
-            }
-            let (u, w) = (vx / vz, vy / vz);
-            // d v / d e for v' = v + e x v: columns e_x, e_y, e_z.
-            let dv = [[0.0, vz, -vy], [-vz, 0.0, vx], [vy, -vx, 0.0]];
-            let mut ju = [0.0f64; 4];
-            let mut jw = [0.0f64; 4];
-            for c in 0..3 {
-                let (dx, dy, dz) = (
-                    dv.first().and_then(|r| r.get(c)).copied().unwrap_or(0.0),
-                    dv.get(1).and_then(|r| r.get(c)).copied().unwrap_or(0.0),
-                    dv.get(2).and_then(|r| r.get(c)).copied().unwrap_or(0.0),
-                );
-                if let (Some(a), Some(b)) = (ju.get_mut(c), jw.get_mut(c)) {
-                    *a = s * (dx - u * dz) / vz;
-                    *b = s * (dy - w * dz) / vz;
-                }
-            }
-            ju[3] = u;
-            jw[3] = w;
+            let (ju, jw, [u, w]) = jacobian(q.rotate(r), s)?;
             let sigma_t = meas.sigma_rad / (bz * libm::sqrt(bz));
             let wt = 1.0 / (sigma_t * sigma_t);
             let (ru, rw) = (bx / bz - s * u, by / bz - s * w);
@@ -991,6 +1086,7 @@ fn fit(
     Some(Joint {
         attitude: Attitude { q, cov_rad2 },
         scale: FocalScale { value: s, sigma },
+        cov,
     })
 }
 
