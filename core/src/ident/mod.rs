@@ -33,7 +33,13 @@
 //! stop changing) the attitude and the scale are refit from the matches (Gauss-Newton on
 //! four parameters from the q-method's start), every star matched again, refit, and a match
 //! whose residual exceeds `TIGHT_SIGMAS` of its own sigma dropped (an attitude pulled by a
-//! false star or a wrong neighbour loses it here). The solution's attitude covariance is
+//! false star or a wrong neighbour loses it here). A catalog star goes to the measured star
+//! nearest it, and two measured stars within twice the match radius of each other are
+//! matched only to two catalog stars (a false star beside a true one would take its catalog
+//! star and pull the fit). When the fit is loose (few or clustered stars: some star's
+//! predicted position 3-sigma above a quarter of the match radius), every star is matched
+//! again within the radius widened by 3 of its sigmas predicted from the fit's covariance,
+//! and the rounds run again from there. The solution's attitude covariance is
 //! the marginal one of that fit (the scale's uncertainty included), and its scale is
 //! reported with its sigma ([`FocalScale`]); a fitted scale outside the searched range is
 //! no solution.
@@ -308,6 +314,7 @@ pub fn lost_in_space(
     cfg: &IdentConfig,
 ) -> Result<Solution, IdentError> {
     let n = check_input(stars, cfg)?;
+    let crowd = crowding(stars, n, cfg.match_radius_rad);
     let np = n.min(cfg.pattern_stars);
     let tol = cfg.pair_tolerance_rad;
     // The model's focal length within 1 +- ds of the true one: s = f_true / f_model.
@@ -424,7 +431,8 @@ pub fn lost_in_space(
                     }
                     hyps += 1;
                     let basis = [(i, a), (j, b), (k, c)];
-                    if let Some(sol) = hypothesis(cat, stars, n, basis, s, (s_lo, s_hi), cfg, hyps)
+                    if let Some(sol) =
+                        hypothesis(cat, stars, n, &crowd, basis, s, (s_lo, s_hi), cfg, hyps)
                     {
                         return Ok(sol);
                     }
@@ -524,6 +532,7 @@ pub fn track_scaled(
     cfg: &IdentConfig,
 ) -> Result<Solution, IdentError> {
     let n = check_input(stars, cfg)?;
+    let crowd = crowding(stars, n, cfg.match_radius_rad);
     if !(0.0..0.2).contains(&prior_error_rad) || !(0.9..=1.1).contains(&prior_scale) {
         return Err(IdentError::BadInput);
     }
@@ -588,7 +597,8 @@ pub fn track_scaled(
                     let d_cat =
                         angle_between(ra, rb) + angle_between(ra, rc) + angle_between(rb, rc);
                     let s = prior_scale * (dij + dik + djk) / d_cat;
-                    if let Some(sol) = hypothesis(cat, stars, n, basis, s, range, cfg, hyps) {
+                    if let Some(sol) = hypothesis(cat, stars, n, &crowd, basis, s, range, cfg, hyps)
+                    {
                         return Ok(sol);
                     }
                     if hyps >= cfg.max_hypotheses {
@@ -632,6 +642,7 @@ fn hypothesis(
     cat: &Catalog<'_>,
     stars: &[Measured],
     n: usize,
+    crowd: &Crowd,
     basis: [(usize, u16); 3],
     scale: f64,
     range: (f64, f64),
@@ -659,7 +670,7 @@ fn hypothesis(
         o.icrs = cat.dir(c.into())?;
     }
     let first = attitude::solve(&obs).ok()?;
-    let (matches, _) = match_all(cat, &scaled, n, first.q, cfg.match_radius_rad, None);
+    let (matches, _) = match_all(cat, &scaled, n, crowd, first.q, cfg.match_radius_rad, None);
     if matches.len() < MIN_MATCHES {
         return None;
     }
@@ -669,7 +680,7 @@ fn hypothesis(
     // matches stop changing. A triangle's attitude and scale can be off enough that the
     // stars far from it fall outside the match radius, or on a neighbour, until a round
     // brings them in. The largest set seen is kept.
-    let (mut matches, s, _) = rounds(cat, stars, n, matches, scale, first.q, cfg)?;
+    let (mut matches, s, _) = rounds(cat, stars, n, crowd, matches, scale, first.q, cfg)?;
     let mut joint = fit(cat, stars, &matches, s, None)?;
     // A fit from few or clustered stars can be loose enough (its roll, mostly) that the
     // other stars of the field are predicted beyond the match radius: they are matched
@@ -685,12 +696,14 @@ fn hypothesis(
             cat,
             &scaled,
             n,
+            crowd,
             joint.attitude.q,
             cfg.match_radius_rad,
             spread,
         );
         if wide.len() > matches.len()
-            && let Some((grown, s2, _)) = rounds(cat, stars, n, wide, s, joint.attitude.q, cfg)
+            && let Some((grown, s2, _)) =
+                rounds(cat, stars, n, crowd, wide, s, joint.attitude.q, cfg)
             && grown.len() > matches.len()
             && let Some(j) = fit(cat, stars, &grown, s2, None)
         {
@@ -723,6 +736,7 @@ fn rounds(
     cat: &Catalog<'_>,
     stars: &[Measured],
     n: usize,
+    crowd: &Crowd,
     mut matches: heapless::Vec<Match, MAX_STARS>,
     scale: f64,
     q: Quat,
@@ -737,6 +751,7 @@ fn rounds(
             cat,
             &scaled,
             n,
+            crowd,
             refit.attitude.q,
             cfg.match_radius_rad,
             None,
@@ -866,22 +881,51 @@ pub fn bound_with_field_stars(
     (f64::from(cfg.max_hypotheses) * tail).min(1.0)
 }
 
+/// For each measured star, the others within twice the match radius of it (bit `m` for
+/// star `m`): either of two such stars could be the image of a catalog star between them.
+pub(crate) type Crowd = [u32; MAX_STARS];
+
+/// The [`Crowd`] of the first `n` stars (`n (n - 1) / 2` dot products, once per
+/// identification).
+fn crowding(stars: &[Measured], n: usize, match_radius_rad: f64) -> Crowd {
+    let mut crowd = [0u32; MAX_STARS];
+    let near = libm::cos(2.0 * match_radius_rad);
+    for (a, sa) in stars.iter().enumerate().take(n.min(MAX_STARS)) {
+        for (b, sb) in stars.iter().enumerate().take(n.min(MAX_STARS)).skip(a + 1) {
+            if dot(sa.dir, sb.dir) > near {
+                if let Some(x) = crowd.get_mut(a) {
+                    *x |= 1 << b;
+                }
+                if let Some(x) = crowd.get_mut(b) {
+                    *x |= 1 << a;
+                }
+            }
+        }
+    }
+    crowd
+}
+
 /// Every measured star matched to its nearest catalog star within `radius` under `q`; a
-/// catalog star is matched once, to the measured star nearest it (a false star or a
-/// companion next to a true star does not take its place by being brighter). With
-/// `spread` (the covariance of a fit of the rotation and the scale, and the scale), a star's
-/// radius is widened by 3 of its position sigmas predicted from it.
+/// catalog star is matched once, to the measured star nearest it. A star with another
+/// measured star within twice the match radius ([`Crowd`]) is matched only when each of
+/// them has a catalog star of its own: a false star (or an uncatalogued companion) next to
+/// a true star would otherwise take its catalog star and pull the fit off it, far enough
+/// that the true star no longer falls in the radius. With `spread` (the covariance of a fit
+/// of the rotation and the scale, and the scale), a star's radius is widened by 3 of its
+/// position sigmas predicted from it.
+#[allow(clippy::too_many_arguments)]
 fn match_all(
     cat: &Catalog<'_>,
     stars: &[Measured],
     n: usize,
+    crowd: &Crowd,
     q: Quat,
     radius: f64,
     spread: Option<(&[[f64; 4]; 4], f64)>,
 ) -> (heapless::Vec<Match, MAX_STARS>, usize) {
-    let mut out: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
-    let mut near = [0.0f64; MAX_STARS];
-    for (m, s) in stars.iter().enumerate().take(n) {
+    // Each star's nearest catalog star and its cosine.
+    let mut nearest = [None::<(u16, f64)>; MAX_STARS];
+    for (s, slot) in stars.iter().zip(nearest.iter_mut()).take(n) {
         let r = match spread {
             Some((cov, scale)) => radius + 3.0 * predicted_sigma(s.dir, cov, scale),
             None => radius,
@@ -894,21 +938,28 @@ fn match_all(
                 best = Some((idx, d));
             }
         }
-        let Some((idx, d)) = best else { continue };
-        let (Ok(catalog), Ok(star)) = (u16::try_from(idx), u8::try_from(m)) else {
-            continue;
-        };
-        if let Some(at) = out.iter().position(|x| x.catalog == catalog) {
-            if near.get(at).is_none_or(|&o| o >= d) {
-                continue;
-            }
-            let _ = out.remove(at);
-            near.copy_within(at + 1.., at);
+        *slot = best.and_then(|(idx, d)| Some((u16::try_from(idx).ok()?, d)));
+    }
+    let mut out: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
+    for (m, &this) in nearest.iter().enumerate().take(n) {
+        let Some((catalog, d)) = this else { continue };
+        let Ok(star) = u8::try_from(m) else { continue };
+        let mut others = crowd.get(m).copied().unwrap_or(0);
+        let mut alone = true;
+        while others != 0 {
+            let o = others.trailing_zeros() as usize;
+            others &= others - 1;
+            let theirs = nearest.get(o).copied().flatten();
+            alone &= theirs.is_some_and(|(c, _)| c != catalog);
         }
-        if let Some(x) = near.get_mut(out.len()) {
-            *x = d;
+        // The nearest measured star takes a catalog star claimed by several.
+        let taken = nearest
+            .iter()
+            .take(n)
+            .any(|x| x.is_some_and(|(c, od)| c == catalog && od > d));
+        if alone && !taken {
+            let _ = out.push(Match { star, catalog });
         }
-        let _ = out.push(Match { star, catalog });
     }
     let len = out.len();
     (out, len)
