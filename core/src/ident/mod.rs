@@ -690,7 +690,8 @@ fn hypothesis(
     let loose = |st: &Measured| {
         3.0 * predicted_sigma(st.dir, &joint.cov, s) > WIDEN_FROM * cfg.match_radius_rad
     };
-    if matches.len() < n && scaled.iter().any(loose) {
+    let was_loose = scaled.iter().any(loose);
+    if matches.len() < n && was_loose {
         let spread = Some((&joint.cov, s));
         let (wide, _) = match_all(
             cat,
@@ -709,6 +710,14 @@ fn hypothesis(
         {
             (matches, joint) = (grown, j);
         }
+    }
+    // A star the fit follows almost wholly (one far from a cluster, which carries the roll
+    // and the scale: two parameters for its two coordinates) is checked by no other star:
+    // a false star there passes the rounds with a small residual and a wrong attitude.
+    // Such a hypothesis is no solution (another triangle, or no attitude). Only a loose
+    // fit can have one: a tight fit's stars are all below a quarter of LEVERAGE_MAX.
+    if was_loose && high_leverage(stars, n, &matches, &joint) {
+        return None;
     }
     // The field's density at the basis's own attitude: it depends on the triangle only,
     // not on the stars the bound counts.
@@ -963,6 +972,25 @@ fn match_all(
     }
     let len = out.len();
     (out, len)
+}
+
+/// A matched star whose leverage in the fit exceeds this is followed by the fit rather than
+/// checked against it (leverage: the star's predicted position variance per axis over its
+/// own variance; the leverages of a fit sum to its 4 parameters over `2 m` coordinates,
+/// 0.5 a star at the 4-star minimum).
+pub(crate) const LEVERAGE_MAX: f64 = 0.9;
+
+/// Whether some matched star has a leverage above [`LEVERAGE_MAX`] in `joint`, the fit of
+/// `matches`.
+fn high_leverage(stars: &[Measured], n: usize, matches: &[Match], joint: &Joint) -> bool {
+    let s = joint.scale.value;
+    let scaled = rescaled(stars, n, s);
+    matches.iter().any(|m| {
+        scaled.get(usize::from(m.star)).is_some_and(|st| {
+            let p = predicted_sigma(st.dir, &joint.cov, s);
+            0.5 * p * p > LEVERAGE_MAX * st.sigma_rad * st.sigma_rad
+        })
+    })
 }
 
 /// The 1-sigma of a star's position (rad, tangent plane, the root of the trace of its 2 x 2
