@@ -33,7 +33,13 @@
 //! stop changing) the attitude and the scale are refit from the matches (Gauss-Newton on
 //! four parameters from the q-method's start), every star matched again, refit, and a match
 //! whose residual exceeds `TIGHT_SIGMAS` of its own sigma dropped (an attitude pulled by a
-//! false star or a wrong neighbour loses it here). The solution's attitude covariance is
+//! false star or a wrong neighbour loses it here). A catalog star goes to the measured star
+//! nearest it, and two measured stars within twice the match radius of each other are
+//! matched only to two catalog stars (a false star beside a true one would take its catalog
+//! star and pull the fit). When the fit is loose (few or clustered stars: some star's
+//! predicted position 3-sigma above a quarter of the match radius), every star is matched
+//! again within the radius widened by 3 of its sigmas predicted from the fit's covariance,
+//! and the rounds run again from there. The solution's attitude covariance is
 //! the marginal one of that fit (the scale's uncertainty included), and its scale is
 //! reported with its sigma ([`FocalScale`]); a fitted scale outside the searched range is
 //! no solution.
@@ -60,8 +66,8 @@
 //! scale range, a few thousand), a hypothesis a quick check of a few cone searches and, for
 //! the few that pass it, a 3-star q-method, `n` cone searches and rounds of the joint fit; a
 //! tracking triangle a few dozen angle checks. On the Cortex-M7 (`cargo m7-bench`, 15 degree
-//! fields) lost in space takes about 3.3 M instructions a field (median) and 15.7 M at the
-//! 99th percentile, tracking 0.61 M.
+//! fields) lost in space takes about 3.4 M instructions a field (median) and 15.8 M at the
+//! 99th percentile, tracking 0.67 M.
 
 use crate::attitude::{self, Attitude, Observation, Quat, angle_between, cross, dot};
 use crate::catalog::Catalog;
@@ -75,6 +81,10 @@ pub(crate) const MAX_CANDIDATES: usize = 16;
 /// A final match's residual is at most this many of its sigmas (a 2-D Gaussian passes
 /// 5 sigma with probability 1 - 4e-6).
 pub(crate) const TIGHT_SIGMAS: f64 = 5.0;
+/// The matching is widened by the fit's covariance only when some star's 3-sigma predicted
+/// position exceeds this fraction of the match radius (below it, the widened matching finds
+/// what the rounds found).
+pub(crate) const WIDEN_FROM: f64 = 0.25;
 /// Most match-and-refit rounds of a hypothesis (they stop when the matches stop changing).
 pub(crate) const MAX_REFITS: usize = 6;
 /// Fewest matched stars in a solution (three for the triangle and one more).
@@ -304,6 +314,7 @@ pub fn lost_in_space(
     cfg: &IdentConfig,
 ) -> Result<Solution, IdentError> {
     let n = check_input(stars, cfg)?;
+    let crowd = crowding(stars, n, cfg.match_radius_rad);
     let np = n.min(cfg.pattern_stars);
     let tol = cfg.pair_tolerance_rad;
     // The model's focal length within 1 +- ds of the true one: s = f_true / f_model.
@@ -420,7 +431,8 @@ pub fn lost_in_space(
                     }
                     hyps += 1;
                     let basis = [(i, a), (j, b), (k, c)];
-                    if let Some(sol) = hypothesis(cat, stars, n, basis, s, (s_lo, s_hi), cfg, hyps)
+                    if let Some(sol) =
+                        hypothesis(cat, stars, n, &crowd, basis, s, (s_lo, s_hi), cfg, hyps)
                     {
                         return Ok(sol);
                     }
@@ -526,6 +538,7 @@ pub fn track_scaled(
     cfg: &IdentConfig,
 ) -> Result<Solution, IdentError> {
     let n = check_input(stars, cfg)?;
+    let crowd = crowding(stars, n, cfg.match_radius_rad);
     if !(0.0..0.2).contains(&prior_error_rad) || !(0.9..=1.1).contains(&prior_scale) {
         return Err(IdentError::BadInput);
     }
@@ -590,7 +603,8 @@ pub fn track_scaled(
                     let d_cat =
                         angle_between(ra, rb) + angle_between(ra, rc) + angle_between(rb, rc);
                     let s = prior_scale * (dij + dik + djk) / d_cat;
-                    if let Some(sol) = hypothesis(cat, stars, n, basis, s, range, cfg, hyps) {
+                    if let Some(sol) = hypothesis(cat, stars, n, &crowd, basis, s, range, cfg, hyps)
+                    {
                         return Ok(sol);
                     }
                     if hyps >= cfg.max_hypotheses {
@@ -634,6 +648,7 @@ fn hypothesis(
     cat: &Catalog<'_>,
     stars: &[Measured],
     n: usize,
+    crowd: &Crowd,
     basis: [(usize, u16); 3],
     scale: f64,
     range: (f64, f64),
@@ -661,7 +676,7 @@ fn hypothesis(
         o.icrs = cat.dir(c.into())?;
     }
     let first = attitude::solve(&obs).ok()?;
-    let (mut matches, _) = match_all(cat, &scaled, n, first.q, cfg.match_radius_rad);
+    let (matches, _) = match_all(cat, &scaled, n, crowd, first.q, cfg.match_radius_rad, None);
     if matches.len() < MIN_MATCHES {
         return None;
     }
@@ -671,31 +686,45 @@ fn hypothesis(
     // matches stop changing. A triangle's attitude and scale can be off enough that the
     // stars far from it fall outside the match radius, or on a neighbour, until a round
     // brings them in. The largest set seen is kept.
-    let mut best: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
-    let (mut s, mut q) = (scale, first.q);
-    for _ in 0..MAX_REFITS {
-        let refit = fit(cat, stars, &matches, s, Some(q))?;
-        let scaled = rescaled(stars, n, refit.scale.value);
-        let (all, _) = match_all(cat, &scaled, n, refit.attitude.q, cfg.match_radius_rad);
-        let refit = fit(cat, stars, &all, refit.scale.value, Some(refit.attitude.q))?;
-        q = refit.attitude.q;
-        s = refit.scale.value;
-        let scaled = rescaled(stars, n, s);
-        let next = keep_consistent(cat, &scaled, &all, refit.attitude.q);
-        let same = next == matches;
-        matches = next;
-        if matches.len() > best.len() {
-            best = matches.clone();
-        }
-        if same || matches.len() < MIN_MATCHES {
-            break;
+    let (mut matches, s, _) = rounds(cat, stars, n, crowd, matches, scale, first.q, cfg)?;
+    let mut joint = fit(cat, stars, &matches, s, None)?;
+    // A fit from few or clustered stars can be loose enough (its roll, mostly) that the
+    // other stars of the field are predicted beyond the match radius: they are matched
+    // again within the radius widened by 3 of their predicted sigmas, and the rounds run
+    // again from there. What is kept still passes the rounds' TIGHT_SIGMAS test.
+    let scaled = rescaled(stars, n, s);
+    let loose = |st: &Measured| {
+        3.0 * predicted_sigma(st.dir, &joint.cov, s) > WIDEN_FROM * cfg.match_radius_rad
+    };
+    let was_loose = scaled.iter().any(loose);
+    if matches.len() < n && was_loose {
+        let spread = Some((&joint.cov, s));
+        let (wide, _) = match_all(
+            cat,
+            &scaled,
+            n,
+            crowd,
+            joint.attitude.q,
+            cfg.match_radius_rad,
+            spread,
+        );
+        if wide.len() > matches.len()
+            && let Some((grown, s2, _)) =
+                rounds(cat, stars, n, crowd, wide, s, joint.attitude.q, cfg)
+            && grown.len() > matches.len()
+            && let Some(j) = fit(cat, stars, &grown, s2, None)
+        {
+            (matches, joint) = (grown, j);
         }
     }
-    let matches = best;
-    if matches.len() < MIN_MATCHES {
+    // A star the fit follows almost wholly (one far from a cluster, which carries the roll
+    // and the scale: two parameters for its two coordinates) is checked by no other star:
+    // a false star there passes the rounds with a small residual and a wrong attitude.
+    // Such a hypothesis is no solution (another triangle, or no attitude). Only a loose
+    // fit can have one: a tight fit's stars are all below a quarter of LEVERAGE_MAX.
+    if was_loose && high_leverage(stars, n, &matches, &joint) {
         return None;
     }
-    let joint = fit(cat, stars, &matches, s, None)?;
     // The field's density at the basis's own attitude: it depends on the triangle only,
     // not on the stars the bound counts.
     let false_probability = false_match_bound(cat, n, matches.len(), cfg, first.q);
@@ -713,6 +742,50 @@ fn hypothesis(
         hypotheses: hyps,
         scale: joint.scale,
     })
+}
+
+/// The match-and-refit rounds of [`hypothesis`] from `matches` at scale `scale` and attitude
+/// `q`: the largest consistent set seen, with the scale and attitude of the last round.
+#[allow(clippy::too_many_arguments)]
+fn rounds(
+    cat: &Catalog<'_>,
+    stars: &[Measured],
+    n: usize,
+    crowd: &Crowd,
+    mut matches: heapless::Vec<Match, MAX_STARS>,
+    scale: f64,
+    q: Quat,
+    cfg: &IdentConfig,
+) -> Option<(heapless::Vec<Match, MAX_STARS>, f64, Quat)> {
+    let mut best: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
+    let (mut s, mut q) = (scale, q);
+    for _ in 0..MAX_REFITS {
+        let refit = fit(cat, stars, &matches, s, Some(q))?;
+        let scaled = rescaled(stars, n, refit.scale.value);
+        let (all, _) = match_all(
+            cat,
+            &scaled,
+            n,
+            crowd,
+            refit.attitude.q,
+            cfg.match_radius_rad,
+            None,
+        );
+        let refit = fit(cat, stars, &all, refit.scale.value, Some(refit.attitude.q))?;
+        q = refit.attitude.q;
+        s = refit.scale.value;
+        let scaled = rescaled(stars, n, s);
+        let next = keep_consistent(cat, &scaled, &all, refit.attitude.q);
+        let same = next == matches;
+        matches = next;
+        if matches.len() > best.len() {
+            best = matches.clone();
+        }
+        if same || matches.len() < MIN_MATCHES {
+            break;
+        }
+    }
+    (best.len() >= MIN_MATCHES).then_some((best, s, q))
 }
 
 /// Non-basis stars the quick check of a hypothesis looks at (the brightest).
@@ -823,39 +896,160 @@ pub fn bound_with_field_stars(
     (f64::from(cfg.max_hypotheses) * tail).min(1.0)
 }
 
-/// Every measured star matched to its nearest catalog star within `radius` under `q` (a
-/// catalog star is used once).
+/// For each measured star, the others within twice the match radius of it (bit `m` for
+/// star `m`): either of two such stars could be the image of a catalog star between them.
+pub(crate) type Crowd = [u32; MAX_STARS];
+
+/// The [`Crowd`] of the first `n` stars (`n (n - 1) / 2` dot products, once per
+/// identification).
+fn crowding(stars: &[Measured], n: usize, match_radius_rad: f64) -> Crowd {
+    let mut crowd = [0u32; MAX_STARS];
+    let near = libm::cos(2.0 * match_radius_rad);
+    for (a, sa) in stars.iter().enumerate().take(n.min(MAX_STARS)) {
+        for (b, sb) in stars.iter().enumerate().take(n.min(MAX_STARS)).skip(a + 1) {
+            if dot(sa.dir, sb.dir) > near {
+                if let Some(x) = crowd.get_mut(a) {
+                    *x |= 1 << b;
+                }
+                if let Some(x) = crowd.get_mut(b) {
+                    *x |= 1 << a;
+                }
+            }
+        }
+    }
+    crowd
+}
+
+/// Every measured star matched to its nearest catalog star within `radius` under `q`; a
+/// catalog star is matched once, to the measured star nearest it. A star with another
+/// measured star within twice the match radius ([`Crowd`]) is matched only when each of
+/// them has a catalog star of its own: a false star (or an uncatalogued companion) next to
+/// a true star would otherwise take its catalog star and pull the fit off it, far enough
+/// that the true star no longer falls in the radius. With `spread` (the covariance of a fit
+/// of the rotation and the scale, and the scale), a star's radius is widened by 3 of its
+/// position sigmas predicted from it.
+#[allow(clippy::too_many_arguments)]
 fn match_all(
     cat: &Catalog<'_>,
     stars: &[Measured],
     n: usize,
+    crowd: &Crowd,
     q: Quat,
     radius: f64,
+    spread: Option<(&[[f64; 4]; 4], f64)>,
 ) -> (heapless::Vec<Match, MAX_STARS>, usize) {
-    let mut out = heapless::Vec::new();
-    for (m, s) in stars.iter().enumerate().take(n) {
+    // Each star's nearest catalog star and its cosine.
+    let mut nearest = [None::<(u16, f64)>; MAX_STARS];
+    for (s, slot) in stars.iter().zip(nearest.iter_mut()).take(n) {
+        let r = match spread {
+            Some((cov, scale)) => radius + 3.0 * predicted_sigma(s.dir, cov, scale),
+            None => radius,
+        };
         let sky = q.rotate_inv(s.dir);
         let mut best: Option<(usize, f64)> = None;
-        for (idx, v) in cat.cone(sky, radius) {
+        for (idx, v) in cat.cone(sky, r) {
             let d = dot(sky, v);
             if best.is_none_or(|(_, bd)| d > bd) {
                 best = Some((idx, d));
             }
         }
-        let Some((idx, _)) = best else { continue };
-        let Ok(catalog) = u16::try_from(idx) else {
-            continue;
-        };
-        if out.iter().any(|x: &Match| x.catalog == catalog) {
-            continue;
+        *slot = best.and_then(|(idx, d)| Some((u16::try_from(idx).ok()?, d)));
+    }
+    let mut out: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
+    for (m, &this) in nearest.iter().enumerate().take(n) {
+        let Some((catalog, d)) = this else { continue };
+        let Ok(star) = u8::try_from(m) else { continue };
+        let mut others = crowd.get(m).copied().unwrap_or(0);
+        let mut alone = true;
+        while others != 0 {
+            let o = others.trailing_zeros() as usize;
+            others &= others - 1;
+            let theirs = nearest.get(o).copied().flatten();
+            alone &= theirs.is_some_and(|(c, _)| c != catalog);
         }
-        let _ = out.push(Match {
-            star: u8::try_from(m).unwrap_or(u8::MAX),
-            catalog,
-        });
+        // The nearest measured star takes a catalog star claimed by several.
+        let taken = nearest
+            .iter()
+            .take(n)
+            .any(|x| x.is_some_and(|(c, od)| c == catalog && od > d));
+        if alone && !taken {
+            let _ = out.push(Match { star, catalog });
+        }
     }
     let len = out.len();
     (out, len)
+}
+
+/// A matched star whose leverage in the fit exceeds this is followed by the fit rather than
+/// checked against it (leverage: the star's predicted position variance per axis over its
+/// own variance; the leverages of a fit sum to its 4 parameters over `2 m` coordinates,
+/// 0.5 a star at the 4-star minimum).
+pub(crate) const LEVERAGE_MAX: f64 = 0.9;
+
+/// Whether some matched star has a leverage above [`LEVERAGE_MAX`] in `joint`, the fit of
+/// `matches`.
+fn high_leverage(stars: &[Measured], n: usize, matches: &[Match], joint: &Joint) -> bool {
+    let s = joint.scale.value;
+    let scaled = rescaled(stars, n, s);
+    matches.iter().any(|m| {
+        scaled.get(usize::from(m.star)).is_some_and(|st| {
+            let p = predicted_sigma(st.dir, &joint.cov, s);
+            0.5 * p * p > LEVERAGE_MAX * st.sigma_rad * st.sigma_rad
+        })
+    })
+}
+
+/// The 1-sigma of a star's position (rad, tangent plane, the root of the trace of its 2 x 2
+/// covariance) at direction `dir` predicted from the covariance `cov` of a fit's rotation and
+/// scale at scale `scale`.
+fn predicted_sigma(dir: [f64; 3], cov: &[[f64; 4]; 4], scale: f64) -> f64 {
+    let Some((ju, jw, _)) = jacobian(dir, scale) else {
+        return 0.0;
+    };
+    let mut var = 0.0;
+    for (a, row) in cov.iter().enumerate() {
+        for (b, c) in row.iter().enumerate() {
+            let (ua, wa) = (
+                ju.get(a).copied().unwrap_or(0.0),
+                jw.get(a).copied().unwrap_or(0.0),
+            );
+            let (ub, wb) = (
+                ju.get(b).copied().unwrap_or(0.0),
+                jw.get(b).copied().unwrap_or(0.0),
+            );
+            var += (ua * ub + wa * wb) * c;
+        }
+    }
+    libm::sqrt(var.max(0.0))
+}
+
+/// The derivatives of the tangent-plane coordinates `s (v_x, v_y) / v_z` of the camera-frame
+/// direction `v` by a small rotation `e` (camera frame, `v' = v + e x v`) and by the scale
+/// `s`, with `(v_x, v_y) / v_z`; `None` behind or at the edge of the tangent plane.
+fn jacobian(v: [f64; 3], s: f64) -> Option<([f64; 4], [f64; 4], [f64; 2])> {
+    let [vx, vy, vz] = v;
+    if vz <= 1e-6 {
+        return None;
+    }
+    let (u, w) = (vx / vz, vy / vz);
+    // d v / d e: the rows of the x, y and z components, by e_x, e_y, e_z.
+    let (dx, dy, dz) = ([0.0, vz, -vy], [-vz, 0.0, vx], [vy, -vx, 0.0]);
+    let mut ju = [0.0f64; 4];
+    let mut jw = [0.0f64; 4];
+    for c in 0..3 {
+        let (x, y, z) = (
+            dx.get(c).copied().unwrap_or(0.0),
+            dy.get(c).copied().unwrap_or(0.0),
+            dz.get(c).copied().unwrap_or(0.0),
+        );
+        if let (Some(a), Some(b)) = (ju.get_mut(c), jw.get_mut(c)) {
+            *a = s * (x - u * z) / vz;
+            *b = s * (y - w * z) / vz;
+        }
+    }
+    ju[3] = u;
+    jw[3] = w;
+    Some((ju, jw, [u, w]))
 }
 
 /// A match stays when its residual under `q` is within [`TIGHT_SIGMAS`] of its sigma.
@@ -882,6 +1076,8 @@ fn keep_consistent(
 struct Joint {
     attitude: Attitude,
     scale: FocalScale,
+    /// Covariance of the small rotation (rad, camera frame) and the scale.
+    cov: [[f64; 4]; 4],
 }
 
 /// Gauss-Newton steps of the joint fit (it starts from the q-method at the given scale or
@@ -935,29 +1131,7 @@ fn fit(
             if bz <= 1e-6 {
                 return None;
             }
-            let v = q.rotate(r);
-            let [vx, vy, vz] = v;
-            if vz <= 1e-6 {
-                return None;
-            }
-            let (u, w) = (vx / vz, vy / vz);
-            // d v / d e for v' = v + e x v: columns e_x, e_y, e_z.
-            let dv = [[0.0, vz, -vy], [-vz, 0.0, vx], [vy, -vx, 0.0]];
-            let mut ju = [0.0f64; 4];
-            let mut jw = [0.0f64; 4];
-            for c in 0..3 {
-                let (dx, dy, dz) = (
-                    dv.first().and_then(|r| r.get(c)).copied().unwrap_or(0.0),
-                    dv.get(1).and_then(|r| r.get(c)).copied().unwrap_or(0.0),
-                    dv.get(2).and_then(|r| r.get(c)).copied().unwrap_or(0.0),
-                );
-                if let (Some(a), Some(b)) = (ju.get_mut(c), jw.get_mut(c)) {
-                    *a = s * (dx - u * dz) / vz;
-                    *b = s * (dy - w * dz) / vz;
-                }
-            }
-            ju[3] = u;
-            jw[3] = w;
+            let (ju, jw, [u, w]) = jacobian(q.rotate(r), s)?;
             let sigma_t = meas.sigma_rad / (bz * libm::sqrt(bz));
             let wt = 1.0 / (sigma_t * sigma_t);
             let (ru, rw) = (bx / bz - s * u, by / bz - s * w);
@@ -997,6 +1171,7 @@ fn fit(
     Some(Joint {
         attitude: Attitude { q, cov_rad2 },
         scale: FocalScale { value: s, sigma },
+        cov,
     })
 }
 

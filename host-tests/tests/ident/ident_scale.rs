@@ -49,6 +49,51 @@ pub struct Tally {
     pub min_matched: usize,
     /// Unsolved fields by their count of true (catalog) stars, 0 to 15 and more.
     pub unsolved_by_stars: [usize; 16],
+    /// Solutions with a matched star that is not its true star (nor a companion within
+    /// 2 px the sensor cannot split).
+    pub misidentified: usize,
+    /// Solutions whose attitude error is beyond their own covariance: normalised error
+    /// squared above [`NEES_WRONG`].
+    pub beyond_covariance: usize,
+    /// Mean normalised error squared of the solutions (3 expected).
+    pub mean_nees: f64,
+    /// Solutions more than 1 mrad off (counted in `wrong`) and, of them, the largest
+    /// normalised error squared.
+    pub worst_wrong_nees: f64,
+}
+
+/// A normalised attitude error squared (3 degrees of freedom) beyond this is an attitude its
+/// covariance does not cover: a chi-square with 3 degrees of freedom exceeds 30 with
+/// probability 1.4e-6.
+const NEES_WRONG: f64 = 30.0;
+
+/// `e^T P^-1 e`: the error rotation vector `e` normalised by the covariance `p`.
+pub(crate) fn nees(p: [[f64; 3]; 3], e: [f64; 3]) -> f64 {
+    let det = p[0][0] * (p[1][1] * p[2][2] - p[1][2] * p[2][1])
+        - p[0][1] * (p[1][0] * p[2][2] - p[1][2] * p[2][0])
+        + p[0][2] * (p[1][0] * p[2][1] - p[1][1] * p[2][0]);
+    let mut s = 0.0;
+    for i in 0..3 {
+        for j in 0..3 {
+            let (a, b, c, d) = ((j + 1) % 3, (j + 2) % 3, (i + 1) % 3, (i + 2) % 3);
+            let inv_ij = (p[a][c] * p[b][d] - p[a][d] * p[b][c]) / det;
+            s += e[i] * inv_ij * e[j];
+        }
+    }
+    s
+}
+
+/// Matched stars that are not the star they were rendered from nor within 2 px of it.
+fn misidentified(cat: &Catalog<'_>, sol: &ident::Solution, stars: &[FieldStar]) -> usize {
+    let two_px = 2.0 / FieldSpec::ccd47_15deg(0.0).camera.focal_length_px;
+    sol.matches
+        .iter()
+        .filter(|m| {
+            let t = stars.get(usize::from(m.star)).and_then(|s| s.truth);
+            !t.and_then(|t| Some((cat.dir(t.into())?, cat.dir(m.catalog.into())?)))
+                .is_some_and(|(a, b)| startrack_core::attitude::angle_between(a, b) < two_px)
+        })
+        .count()
 }
 
 /// `fields` fields, each with a focal error drawn uniformly in `+-max_focal_error`, the
@@ -69,6 +114,8 @@ fn run_lis(
         ..Tally::default()
     };
     for f in 0..fields {
+        // Where the field starts in the generator's stream: `replay` draws it again.
+        let word_pos = rng.get_word_pos();
         let q = field::random_attitude(&mut rng);
         let focal_error = max_focal_error * (2.0 * rng.random::<f64>() - 1.0);
         let stars = brighter_than(field::render(&cat, q, spec, &mut rng), mag_limit);
@@ -81,11 +128,17 @@ fn run_lis(
                 t.max_hyps = t.max_hyps.max(sol.hypotheses);
                 t.worst_bound = t.worst_bound.max(sol.false_probability);
                 t.min_matched = t.min_matched.min(sol.matches.len());
+                let z2 = nees(sol.attitude.cov_rad2, sol.attitude.q.error_vector(q));
+                t.mean_nees += z2;
+                t.beyond_covariance += usize::from(z2 > NEES_WRONG);
+                t.misidentified += usize::from(misidentified(&cat, &sol, &stars) > 0);
                 if !is_right(&sol, q) {
                     t.wrong += 1;
+                    t.worst_wrong_nees = t.worst_wrong_nees.max(z2);
                     println!(
-                        "wrong: field {f}, focal error {focal_error:+.4}, error {:?} rad, {} matched, bound {:e}",
+                        "beyond 1 mrad: field {f} (word {word_pos}), focal error {focal_error:+.4}, error {:?} rad, roll sigma {:.2e} rad, NEES {z2:.1}, {} matched, bound {:e}",
                         sol.attitude.q.error_vector(q),
+                        sol.attitude.cov_rad2[2][2].sqrt(),
                         sol.matches.len(),
                         sol.false_probability
                     );
@@ -106,6 +159,7 @@ fn run_lis(
             Err(e) => panic!("{e}"),
         }
     }
+    t.mean_nees /= t.solved.max(1) as f64;
     t
 }
 
@@ -125,6 +179,10 @@ fn print(name: &str, t: &Tally) {
     println!(
         "  unsolved fields by their true stars (0..15+): {:?}",
         t.unsolved_by_stars
+    );
+    println!(
+        "  misidentified {}, beyond their covariance (NEES > {NEES_WRONG}) {}, mean NEES {:.3}, worst NEES of those beyond 1 mrad {:.1}",
+        t.misidentified, t.beyond_covariance, t.mean_nees, t.worst_wrong_nees
     );
 }
 
@@ -299,8 +357,72 @@ fn tracking_follows_a_scale_drift() {
     assert!(worst_sigmas < 5.0, "{worst_sigmas}");
 }
 
+/// The sparse fields of the 20,000-field run (`long_runs`, seed 3051) that came out more
+/// than 1 mrad off, each from where it starts in the generator's stream, with what was
+/// wrong: one where a false star 2.7 px from a true star took its catalog star and pulled
+/// the roll 1.05 mrad (4.4 of its sigmas), one solved from a cluster of 9 stars at the
+/// field's edge whose roll (6.7 mrad, sigma 3 mrad) left the other 9 true stars beyond the
+/// match radius; and three roll errors of 1.01 to 1.08 mrad that all their true stars and
+/// only those made, 2.3 to 3.5 of their own roll sigmas (0.29 to 0.47 mrad).
+const SPARSE_REPLAYS: [(u128, bool); 5] = [
+    (59_220, true),
+    (219_082, true),
+    (3_900_832, false),
+    (6_260_388, false),
+    (6_447_678, false),
+];
+
+/// The field that starts at word `word_pos` of seed `seed`'s stream, as `run_lis` draws it.
+fn replay(
+    seed: u64,
+    word_pos: u128,
+    spec: &FieldSpec,
+    mag_limit: f64,
+) -> (Quat, Vec<FieldStar>, Vec<Measured>) {
+    let cat = catalog();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_word_pos(word_pos);
+    let q = field::random_attitude(&mut rng);
+    let focal_error = 0.02 * (2.0 * rng.random::<f64>() - 1.0);
+    let stars = brighter_than(field::render(&cat, q, spec, &mut rng), mag_limit);
+    let meas = field::measured(&stars, &told(&spec.camera, focal_error), spec.sigma_px);
+    (q, stars, meas)
+}
+
+#[test]
+fn sparse_fields_once_beyond_1_mrad_are_right_or_within_their_covariance() {
+    let cat = catalog();
+    let spec = sparse_spec();
+    let cfg = IdentConfig::for_camera(spec.camera.focal_length_px, spec.sigma_px);
+    for (word_pos, was_a_defect) in SPARSE_REPLAYS {
+        let (q, stars, meas) = replay(3051, word_pos, &spec, 5.5);
+        let sol = ident::lost_in_space(&cat, &meas, &cfg)
+            .unwrap_or_else(|e| panic!("word {word_pos}: {e}"));
+        let e = sol.attitude.q.error_vector(q);
+        let z2 = nees(sol.attitude.cov_rad2, e);
+        let roll_sigmas = e[2].abs() / sol.attitude.cov_rad2[2][2].sqrt();
+        println!(
+            "word {word_pos}: {} of {} matched, error {:.3?} mrad, roll {roll_sigmas:.2} sigma, NEES {z2:.1}",
+            sol.matches.len(),
+            meas.len(),
+            e.map(|x| x * 1e3)
+        );
+        assert_eq!(misidentified(&cat, &sol, &stars), 0, "word {word_pos}");
+        // The chi-square (3 degrees of freedom) 0.999 quantile.
+        assert!(z2 < 16.27, "word {word_pos}: NEES {z2}");
+        if was_a_defect {
+            assert!(is_right(&sol, q), "word {word_pos}: {e:?}");
+        } else {
+            assert!(roll_sigmas < 4.0, "word {word_pos}: {roll_sigmas}");
+        }
+    }
+}
+
 /// `IDENT_FIELDS=100000 cargo test --release -p startrack-host --test ident ident_scale::
-/// -- --ignored --nocapture`
+/// -- --ignored --nocapture`. Nominal fields: none more than 1 mrad off nor beyond its
+/// covariance. Sparse fields: no attitude beyond its own covariance (NEES above
+/// [`NEES_WRONG`]); the attitudes more than 1 mrad off are printed and counted (a roll sigma
+/// of a few tenths of a mrad in a field of 7 to 10 stars makes some).
 #[test]
 #[ignore]
 fn long_runs() {
@@ -311,7 +433,39 @@ fn long_runs() {
     let t = run_lis(fields, 3031, &nominal_spec(), 0.02, 99.0);
     print("lost in space, focal length off by up to 2 %", &t);
     assert_eq!(t.wrong, 0);
+    // A false star can fall on a catalog star that dropped out, indistinguishable from it
+    // (10 % dropped): counted, not failed.
+    assert_eq!(t.beyond_covariance, 0);
     let s = run_lis(fields, 3051, &sparse_spec(), 0.02, 5.5);
     print("sparse (Hp <= 5.5), focal length off by up to 2 %", &s);
-    assert_eq!(s.wrong, 0);
+    // The cut at Hp 5.5 hides the catalog's fainter stars as dropouts do: a false star on one
+    // is counted, not failed.
+    assert_eq!(s.beyond_covariance, 0);
+    assert!(s.worst_wrong_nees < NEES_WRONG, "{}", s.worst_wrong_nees);
+}
+
+/// The nominal field of the 100,000-field run (`long_runs`, seed 3031) that came out wrong:
+/// field 98736, from word 34,905,592 of the stream. Its triangle's two close stars and one
+/// far false star (12 px from a true star, and brighter) fixed the tilt, roll and scale;
+/// a cluster of 8 true stars around the close pair agreed, and the far false star, the only
+/// one fixing roll and scale, was followed by the fit rather than checked: 2.3 mrad off,
+/// NEES 1645, 11 matched.
+#[test]
+fn the_nominal_field_once_wrong_is_right() {
+    let cat = catalog();
+    let spec = nominal_spec();
+    let cfg = IdentConfig::for_camera(spec.camera.focal_length_px, spec.sigma_px);
+    let (q, stars, meas) = replay(3031, 34_905_592, &spec, 99.0);
+    let sol = ident::lost_in_space(&cat, &meas, &cfg).expect("the field solves");
+    let e = sol.attitude.q.error_vector(q);
+    let z2 = nees(sol.attitude.cov_rad2, e);
+    println!(
+        "{} of {} matched, error {:.3?} mrad, NEES {z2:.1}",
+        sol.matches.len(),
+        meas.len(),
+        e.map(|x| x * 1e3)
+    );
+    assert_eq!(misidentified(&cat, &sol, &stars), 0);
+    assert!(is_right(&sol, q), "{e:?}");
+    assert!(z2 < 16.27, "NEES {z2}");
 }
