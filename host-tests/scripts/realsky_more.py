@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 import tetra3rs
 from PIL import Image
+from tetra3rs_realsky import unit, write_csv  # this folder is on the path of a script run
 
 SOLVERS = ("st", "t3rs", "t3st", "cs")
 OTHERS = ("t3rs", "t3st", "cs")
@@ -51,11 +52,6 @@ OTHERS = ("t3rs", "t3st", "cs")
 
 def luminance(path):
     return np.asarray(Image.open(path).convert("L"), dtype=np.float32)
-
-
-def unit(ra_deg, dec_deg):
-    ra, dec = math.radians(ra_deg), math.radians(dec_deg)
-    return np.array([math.cos(dec) * math.cos(ra), math.cos(dec) * math.sin(ra), math.sin(dec)])
 
 
 def sep_arcsec(a, b):
@@ -233,13 +229,8 @@ def main():
     fields.insert(fields.index("st_rmse_arcsec") + 1, "st_wcs_rms_px")
     for k in OTHERS:
         fields += [f"{k}_boresight_diff_arcsec", f"{k}_roll_diff_arcsec"]
-    with open(out_csv, "w", newline="") as f:
-        f.write("# host-tests/scripts/realsky_more.py over host-tests/data/realsky-more.csv; "
-                "tetra3rs " + tetra3rs.__version__ + ", cedar-solve 0.5.1\n")
-        w = csv.DictWriter(f, fieldnames=fields, lineterminator="\n")
-        w.writeheader()
-        for row in rows:
-            w.writerow(row)
+    write_csv(out_csv, "host-tests/scripts/realsky_more.py over host-tests/data/realsky-more.csv; "
+              "tetra3rs " + tetra3rs.__version__ + ", cedar-solve 0.5.1", fields, rows)
 
 
 if __name__ == "__main__":
