@@ -167,13 +167,32 @@ fn unit(ra_deg: f64, dec_deg: f64) -> [f64; 3] {
     [dec.cos() * ra.cos(), dec.cos() * ra.sin(), dec.sin()]
 }
 
+/// RA and Dec of the image centre and roll (tetra3's), deg, of a solution of an image of
+/// `size_px`.
+fn centre_ra_dec_roll(
+    sol: &startrack_lab::realsky::solve::ImageSolution,
+    size_px: [usize; 2],
+) -> [f64; 3] {
+    use startrack_lab::realsky::solve::{centre_attitude, ra_dec_deg, roll_tetra3_deg};
+    let q = centre_attitude(sol.attitude.q, &sol.camera, size_px);
+    let (ra, dec) = ra_dec_deg(q.rotate_inv([0.0, 0.0, 1.0]));
+    [ra, dec, roll_tetra3_deg(q)]
+}
+
+/// The boresight separation and the roll difference (wrapped to +-180 degrees) of two
+/// `[ra, dec, roll]` in degrees, arcsec.
+fn differences_arcsec(a: [f64; 3], b: [f64; 3]) -> (f64, f64) {
+    let sep = startrack_core::attitude::angle_between(unit(a[0], a[1]), unit(b[0], b[1]));
+    let droll = (a[2] - b[2] + 180.0).rem_euclid(360.0) - 180.0;
+    (sep.to_degrees() * 3600.0, droll * 3600.0)
+}
+
 /// The fresh solutions against the committed comparison (see the module docs).
 /// With `as_committed`, also RA, Dec and roll as the CSV writes them.
 pub fn check_against_tetra3rs(
     images: &[startrack_host::cli::solve_image::ImageOutcome],
     as_committed: bool,
 ) {
-    use startrack_lab::realsky::solve::{centre_attitude, ra_dec_deg, roll_tetra3_deg};
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("figures/realsky-tetra3rs.csv");
     let text = std::fs::read_to_string(&path).unwrap();
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
@@ -191,9 +210,7 @@ pub fn check_against_tetra3rs(
             .find(|r| r[0] == name)
             .expect("frame in the CSV");
         let sol = i.result.as_ref().unwrap();
-        let q = centre_attitude(sol.attitude.q, &sol.camera, i.size_px);
-        let (ra, dec) = ra_dec_deg(q.rotate_inv([0.0, 0.0, 1.0]));
-        let roll = roll_tetra3_deg(q);
+        let [ra, dec, roll] = centre_ra_dec_roll(sol, i.size_px);
         // As committed (written with 6 decimals).
         for (v, c) in [
             (ra, "st_ra_deg"),
@@ -208,14 +225,14 @@ pub fn check_against_tetra3rs(
                 "{name}: {c} {v} is not the CSV's"
             );
         }
-        let sep_arcsec = startrack_core::attitude::angle_between(
-            unit(ra, dec),
-            unit(get(r, "t3_ra_deg"), get(r, "t3_dec_deg")),
-        )
-        .to_degrees()
-            * 3600.0;
-        let droll_arcsec =
-            ((roll - get(r, "t3_roll_deg") + 180.0).rem_euclid(360.0) - 180.0) * 3600.0;
+        let (sep_arcsec, droll_arcsec) = differences_arcsec(
+            [ra, dec, roll],
+            [
+                get(r, "t3_ra_deg"),
+                get(r, "t3_dec_deg"),
+                get(r, "t3_roll_deg"),
+            ],
+        );
         assert!(
             sep_arcsec < 10.0,
             "{name}: boresight {sep_arcsec:.2} arcsec from tetra3rs"
@@ -266,7 +283,6 @@ fn fov_seven_percent_off_gives_the_same_solutions() {
 /// unsolved frame gives no attitude.
 #[test]
 fn openstartracker_frames_are_the_committed_comparison() {
-    use startrack_lab::realsky::solve::{centre_attitude, ra_dec_deg, roll_tetra3_deg};
     const FOLDER: &str = "tests/science_cam_may8_0.1sec_gain40/samples";
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../shared/realsky-more/openstartracker")
@@ -318,9 +334,7 @@ fn openstartracker_frames_are_the_committed_comparison() {
             continue;
         };
         assert_eq!(col(r, "st_solved"), "1", "{name}: unsolved as committed");
-        let q = centre_attitude(sol.attitude.q, &sol.camera, i.size_px);
-        let (ra, dec) = ra_dec_deg(q.rotate_inv([0.0, 0.0, 1.0]));
-        let roll = roll_tetra3_deg(q);
+        let [ra, dec, roll] = centre_ra_dec_roll(sol, i.size_px);
         for (v, c) in [
             (ra, "st_ra_deg"),
             (dec, "st_dec_deg"),
@@ -328,14 +342,14 @@ fn openstartracker_frames_are_the_committed_comparison() {
         ] {
             assert!((v - num(r, c)).abs() <= 5.1e-7, "{name}: {c} {v}");
         }
-        let sep_arcsec = startrack_core::attitude::angle_between(
-            unit(ra, dec),
-            unit(num(r, "t3st_ra_deg"), num(r, "t3st_dec_deg")),
-        )
-        .to_degrees()
-            * 3600.0;
-        let droll_arcsec =
-            ((roll - num(r, "t3st_roll_deg") + 180.0).rem_euclid(360.0) - 180.0) * 3600.0;
+        let (sep_arcsec, droll_arcsec) = differences_arcsec(
+            [ra, dec, roll],
+            [
+                num(r, "t3st_ra_deg"),
+                num(r, "t3st_dec_deg"),
+                num(r, "t3st_roll_deg"),
+            ],
+        );
         eprintln!(
             "{name}: {} matched, {sep_arcsec:.2} arcsec and roll {droll_arcsec:.1} arcsec from tetra3rs",
             sol.matches.len()
