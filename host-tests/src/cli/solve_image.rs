@@ -249,8 +249,18 @@ impl ImageCameraArgs {
     }
 }
 
+/// The pattern-star cap radius of the default catalog for a field of `fov_deg`, deg: the
+/// 15 degree build's 4 degrees (at most three pattern stars a cap) down to a 10 degree
+/// field, then in proportion to the field, so that a narrower field holds as many pattern
+/// stars as a 10 degree one (about four in a 4:3 field; with 4 degree caps a 6 degree field
+/// holds under two, and lost in space needs three).
+pub fn pattern_cap_deg(fov_deg: f64) -> f64 {
+    4.0 * (fov_deg / 10.0).min(1.0)
+}
+
 /// The catalog `bytes` of `--catalog`, or the default one built for a square field of
-/// `fov_deg` from `list`, every star to [`DEFAULT_MAG_LIMIT`].
+/// `fov_deg` from `list`, every star to [`DEFAULT_MAG_LIMIT`], its pattern stars
+/// [`pattern_cap_deg`] apart.
 pub fn catalog_bytes(
     catalog: Option<&Path>,
     list: &[SkyStar],
@@ -259,13 +269,16 @@ pub fn catalog_bytes(
     match catalog {
         Some(p) => read_file(p),
         None => {
-            let spec = super::catalog::spec(&super::catalog::CatalogBuildArgs {
-                out: PathBuf::new(),
-                list: None,
-                mag_limit: DEFAULT_MAG_LIMIT,
-                fov_deg,
-                max_separation_deg: 12.0,
-            })?;
+            let spec = startrack_sim::sky::build::BuildSpec {
+                pattern_cap_rad: pattern_cap_deg(fov_deg).to_radians(),
+                ..super::catalog::spec(&super::catalog::CatalogBuildArgs {
+                    out: PathBuf::new(),
+                    list: None,
+                    mag_limit: DEFAULT_MAG_LIMIT,
+                    fov_deg,
+                    max_separation_deg: 12.0,
+                })?
+            };
             Ok(startrack_sim::sky::build::build(list, &spec)
                 .map_err(|e| CliError::Usage(e.to_string()))?
                 .bytes)

@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 27] = [
+const CHECKED: [&str; 28] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -51,6 +51,7 @@ const CHECKED: [&str; 27] = [
     "realsky-tetra3rs",
     "realsky-optics",
     "realsky-optics-residuals",
+    "realsky-more",
     "pil-figures",
 ];
 
