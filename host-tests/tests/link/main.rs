@@ -8,6 +8,7 @@ mod link_decoder;
 mod link_flash_power_cut;
 mod link_flash_upload;
 mod link_pil_power_cut;
+mod link_pipe;
 mod link_protocol_doc;
 mod link_python;
 mod link_sil;
