@@ -7,6 +7,7 @@
 mod link_decoder;
 mod link_flash_power_cut;
 mod link_flash_upload;
+mod link_ground_upload;
 mod link_pil_power_cut;
 mod link_pipe;
 mod link_protocol_doc;
