@@ -1,9 +1,9 @@
 //! The ground tool's table upload over a downlink that loses a chunk's acceptance: the
 //! tracker stored the chunk, and the chunks after it, but the ground never heard so. The
 //! ground must find where the store stands from the out-of-order refusals of what it sends
-//! again, up to the table's end when every chunk is in, and commit. (Before, a store that
-//! stood at the table's end matched no chunk start, and the ground resumed at the lost
-//! chunk until it gave up: "the upload stalled at chunk 8 after 64 resumptions".)
+//! again, up to the table's end when every chunk is in (an offset that is no chunk's
+//! start), and commit; not resume at the lost chunk until it gives up ("the upload stalled
+//! at chunk 8 after 64 resumptions").
 //!
 //! The tracker here is the core's link service in its standby (the table commands are the
 //! same) over an in-memory store, on TCP, with one acceptance taken out of its telemetry.

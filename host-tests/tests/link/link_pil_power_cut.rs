@@ -4,8 +4,7 @@
 //! what the cut left. After a cut while `startrack gse upload-table` runs, the tracker boots
 //! with the old table or the new one in force (`gse status`), never none and never another;
 //! after an upload that ends, a reboot has the new one. Needs `qemu-system-arm` and `cargo
-//! pil-fw`; about a minute of wall clock, so ignored in the default run. Known to fail today
-//! at an upload (not at a cut: docs/hardware.md).
+//! pil-fw`; about a minute of wall clock, so ignored in the default run.
 //!
 //! ```sh
 //! cargo pil-fw && cargo test -p startrack-host --test link pil_power_cut -- --ignored
@@ -178,7 +177,7 @@ fn cut_during_upload(pil: Pil, port: u16, bank: &Path, file: &Path) {
 }
 
 #[test]
-#[ignore = "QEMU, and known to fail: cargo pil-fw, then cargo test -p startrack-host --test link pil_power_cut -- --ignored"]
+#[ignore = "QEMU: cargo pil-fw, then cargo test -p startrack-host --test link pil_power_cut -- --ignored"]
 fn pil_power_cut_during_an_upload_leaves_the_old_or_the_new_table() {
     let (dir, old, a, b) = tables();
     let run = dir.path().join("run");
@@ -223,12 +222,10 @@ fn pil_power_cut_during_an_upload_leaves_the_old_or_the_new_table() {
     drop(pil);
 }
 
-/// The same cut with the fresh bank's large 8x8-tiled table in force. Known to fail
-/// today, as the test above, at an upload rather than at the cut: uploads to the emulated
-/// tracker often stall near their end ("the upload stalled at chunk 9 after 64
-/// resumptions"), mostly the first one after a power-on (docs/hardware.md).
+/// The same cut with the fresh bank's large 8x8-tiled table in force, then the upload again
+/// to its end.
 #[test]
-#[ignore = "QEMU, and known to fail: cargo pil-fw, then cargo test -p startrack-host --test link pil_power_cut -- --ignored"]
+#[ignore = "QEMU: cargo pil-fw, then cargo test -p startrack-host --test link pil_power_cut -- --ignored"]
 fn pil_power_cut_with_the_fresh_table_then_an_upload() {
     let (dir, old, a, _) = tables();
     let run = dir.path().join("run");

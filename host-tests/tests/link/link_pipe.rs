@@ -1,9 +1,9 @@
 //! The firmware's writes into its link pipes (`firmware/src/pipe.rs`, included here as the
 //! firmware builds it): a write that wraps around the end of an embassy-sync `Pipe`'s ring
-//! goes in whole, and only a full pipe refuses bytes. Before it, the firmware read
-//! `Pipe::try_write`'s short count at the ring's end as "full": the received bytes' tail was
-//! counted dropped and the telemetry's tail lost, so table uploads to the emulated tracker
-//! stalled (docs/hardware.md, "Processor in the loop").
+//! goes in whole, and only a full pipe refuses bytes. `Pipe::try_write` alone stops at the
+//! ring's end; its short count read as "full" drops the received bytes' tail and the
+//! telemetry's, and table uploads to the emulated tracker stall near their end
+//! (docs/hardware.md, "Processor in the loop").
 
 #[path = "../../../firmware/src/pipe.rs"]
 mod pipe;
