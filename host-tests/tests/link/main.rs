@@ -15,6 +15,7 @@ mod link_python;
 mod link_sil;
 mod link_soak;
 mod link_standby;
+mod served;
 mod store_api;
 mod store_power_cut;
 mod store_props;
