@@ -7,8 +7,8 @@
 //! (`target/pil/thumbv7em-none-eabihf/release/startrack-firmware`), built first unless
 //! `--no-build`.
 
-use super::CliError;
 use super::sil::{SceneArgs, SilArgs};
+use super::{CliError, LabError};
 use startrack_homes::pil::{self, PilConfig, PilFrame, PilReport};
 use std::io::Write;
 use std::path::PathBuf;
@@ -213,7 +213,7 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
         comparison = Some(c);
     }
     if let Some(p) = &args.figures {
-        let io = |e: std::io::Error| CliError::Io {
+        let io = |e: std::io::Error| LabError::Io {
             path: p.clone(),
             msg: e.to_string(),
         };
@@ -227,13 +227,13 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
     if let (Some(p), Some(sky)) = (&args.attitude, sil.sky) {
         let mut f = std::fs::File::create(p)
             .map(std::io::BufWriter::new)
-            .map_err(|e| CliError::Io {
+            .map_err(|e| LabError::Io {
                 path: p.clone(),
                 msg: e.to_string(),
             })?;
         write_attitude(&mut f, &report, &sky)
             .and_then(|()| f.flush())
-            .map_err(|e| CliError::Io {
+            .map_err(|e| LabError::Io {
                 path: p.clone(),
                 msg: e.to_string(),
             })?;

@@ -21,7 +21,7 @@
 //! With `--port P` it serves the link instead ([`startrack_homes::link_home::serve`]); with `--sky` too,
 //! each frame's attitude report (`TM[134,2]`) is sent as the board sends it.
 
-use super::CliError;
+use super::{CliError, LabError};
 use startrack_core::tracker::{Event, Mode, TrackerConfig};
 use startrack_homes::home::csv_row;
 use startrack_homes::sil::{self, SilConfig, SilReport};
@@ -303,10 +303,11 @@ fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>, CliError> {
 }
 
 fn io_error(path: &Path, e: &std::io::Error) -> CliError {
-    CliError::Io {
+    LabError::Io {
         path: path.to_path_buf(),
         msg: e.to_string(),
     }
+    .into()
 }
 
 /// Writes the telemetry CSV of `report`.
