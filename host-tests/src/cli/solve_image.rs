@@ -23,7 +23,7 @@
 //! An image that cannot be read or solved gets a row with `solved` 0 and one line on stderr,
 //! and the command then exits non-zero.
 
-use super::{CliError, read_file, write_file};
+use super::{CliError, LabError, read_file, write_file};
 use startrack_core::attitude::{Camera, angle_between};
 use startrack_core::catalog::Catalog;
 use startrack_lab::realsky::picture;
@@ -289,10 +289,13 @@ pub fn catalog_bytes(
 /// The star list of `--list` (default [`deep_list_path`]).
 pub fn read_star_list(path: Option<&Path>) -> Result<Vec<SkyStar>, CliError> {
     let list_path = path.map_or_else(deep_list_path, Path::to_path_buf);
-    read_list(&list_path).map_err(|e| CliError::Csv {
-        path: e.path.clone(),
-        line: e.line,
-        msg: e.msg,
+    read_list(&list_path).map_err(|e| {
+        LabError::Csv {
+            path: e.path.clone(),
+            line: e.line,
+            msg: e.msg,
+        }
+        .into()
     })
 }
 
@@ -305,7 +308,7 @@ pub fn run(args: &SolveImageArgs) -> Result<SolveImageSummary, CliError> {
     let fov_deg = catalog_fov(&args.camera, camera.as_ref(), &args.images);
     let bytes = catalog_bytes(args.catalog.as_deref(), &list, fov_deg)?;
     let cat = Catalog::parse(&bytes).map_err(|e| CliError::Usage(format!("catalog: {e}")))?;
-    std::fs::create_dir_all(&args.out).map_err(|e| CliError::Io {
+    std::fs::create_dir_all(&args.out).map_err(|e| LabError::Io {
         path: args.out.clone(),
         msg: e.to_string(),
     })?;
