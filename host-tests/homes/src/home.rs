@@ -12,7 +12,7 @@ use startrack_core::calib::{
     CalibError, DarkScaleEstimator, FrameCalibration, LineLevels, PixelFlags,
 };
 use startrack_core::cycle::{CyclePorts, FrameCycle};
-use startrack_core::geometry::{ReadoutGeometry, Segment};
+use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::LinkService;
 use startrack_core::readout::ReadoutRequest;
 use startrack_core::safe::{FaultRecord, Health, SetupFaults};
@@ -254,7 +254,7 @@ pub fn board_readout_us(geometry: &ReadoutGeometry, request: &ReadoutRequest<'_>
 }
 
 /// The raw column spans `[start, end)` of line `line` that `request` reads: the whole line,
-/// or the over-scan and covered columns plus the windows' pixels. Empty when the line is
+/// or the over-scan and the covered columns the request reads plus the windows' pixels. Empty when the line is
 /// not read.
 pub fn read_spans(
     geometry: &ReadoutGeometry,
@@ -269,10 +269,8 @@ pub fn read_spans(
         return vec![(0, len)];
     };
     let first = geometry.first_active_col();
-    let mut spans: Vec<(usize, usize)> = (0..len)
-        .filter(|&c| !matches!(geometry.segment(c), Some(Segment::Active)))
-        .map(|c| (c, c + 1))
-        .collect();
+    let edge = request.edge_px(geometry);
+    let mut spans: Vec<(usize, usize)> = vec![(0, edge), (len - edge, len)];
     for r in rects.iter().filter(|r| r.contains(r.x0, line)) {
         let s = first + usize::from(r.x0);
         spans.push((s, s + usize::from(r.width)));
