@@ -268,14 +268,12 @@ fn m7_stage(stage: &str) -> f64 {
 }
 
 /// The M7 work of a 30-window tracking frame on the board against its cycle at 1 MHz
-/// (51.3 ms), counting one QEMU instruction a cycle of the 480 MHz core (QEMU counts
+/// (49.0 ms), counting one QEMU instruction a cycle of the 480 MHz core (QEMU counts
 /// instructions, not cycles): the tracker fed the 330 lines the windows cross
 /// (`tracker_tracking_frame_windowed`), the frame's compile, the MDMA nodes of its chain
-/// (`sequencer_chain_nodes`) and its line jobs: 26.5 %. The quarter this work was held to
-/// at the 76.8 ms cycle of the one-tick tables is missed at the faster cycle (flagged in
-/// docs/sequencer.md): the work did not grow, the cycle shrank. Held here under 27 % so
-/// that a growth of the work shows. The word feed the chain replaces
-/// (`sequencer_feed_words`) and the tracker fed every line are printed beside it.
+/// (`sequencer_chain_nodes`) and its line jobs, under a quarter of the cycle. The word
+/// feed the chain replaces (`sequencer_feed_words`) and the tracker fed every line are
+/// printed beside it.
 #[test]
 fn tracking_frame_m7_work_share_of_the_cycle() {
     let c = cost(&args(Mode::Windows, 1_000_000, 30, 2));
@@ -305,10 +303,10 @@ fn tracking_frame_m7_work_share_of_the_cycle() {
         before / 1e6,
         before_share * 100.0
     );
-    assert!(board_share < 0.27, "{board_share}");
+    assert!(board_share <= 0.25, "{board_share}");
     // The tracker alone fed every line (a readout that digitises whole lines while
     // tracking) is not under a quarter since the width-free fit and the in-flight defect
-    // watch (25.8 % when last measured): the quarter holds only with the windowed readout,
+    // watch (30.1 % when last measured): the quarter holds only with the windowed readout,
     // which is what the board's sequencer does. Printed, so the margin stays visible.
     let (_, tracker_share) = share(&["tracker_tracking_frame"]);
     println!(
