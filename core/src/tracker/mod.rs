@@ -70,8 +70,8 @@ pub use drift::DarkDrift;
 pub use measure::select_curve;
 pub use modes::CommandError;
 pub use ports::{
-    Clock, FixedTable, FixedTemperature, LineSource, Ports, SourceLine, TableStore, TelemetrySink,
-    Thermometer,
+    Clock, FixedTable, FixedTemperature, Integration, LineSource, Ports, SourceLine, TableStore,
+    TelemetrySink, Thermometer,
 };
 pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Provenance, StarFlags,
