@@ -38,16 +38,15 @@ use startrack_core::safe::SetupFaults;
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Clock, FixedTable, Integration, LineSource, SourceLine, Tracker, TrackerBuffers,
-    TrackerConfig,
+    Clock, FixedTable, Integration, LineSource, SourceLine, Tracker, TrackerBuffers, TrackerConfig,
 };
 
 /// Stars a frame the board keeps (candidates, windows, reported stars).
 pub const MAX_STARS: usize = 32;
 
-/// The exposure at start-up, ms: the flight configuration's (1 s), so that every frame's
-/// integration is the configured one (a full frame reads in 0.55 s, docs/sequencer.md); a
-/// command sets a shorter one to reach the tracking rate.
+/// The exposure at start-up, ms: the flight configuration's (39 ms: a 30-window tracking
+/// frame integrates for it and cycles in 49.4 ms; a full frame, read in 0.6 s, integrates
+/// for its readout, docs/sequencer.md); a command sets another.
 const EXPOSURE_MS: u32 = TrackerConfig::FLIGHT.exposure_ms;
 
 /// How long a line may take beyond the exposure before the frame is ended without it (a

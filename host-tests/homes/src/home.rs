@@ -19,9 +19,9 @@ use startrack_core::safe::{FaultRecord, Health, SetupFaults};
 use startrack_core::table::CalibTable;
 use startrack_core::table::pixcorr::{CurveHeader, PixCorrBackground};
 use startrack_core::tracker::{
-    Clock, Event, FixedTable, FixedTemperature, FrameSummary, Integration, LineSource,
-    LineSummary, Mode, SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers,
-    TrackerConfig, select_curve,
+    Clock, Event, FixedTable, FixedTemperature, FrameSummary, Integration, LineSource, LineSummary,
+    Mode, SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
+    select_curve,
 };
 use startrack_core::units::Electrons;
 use startrack_core::units::Kelvin;

@@ -6,7 +6,7 @@ use rand::SeedableRng;
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
 use startrack_core::solver::{SolveError, SolveMode, Solver, SolverConfig};
-use startrack_core::tracker::{Provenance, StarFlags, StarRecord};
+use startrack_core::tracker::{Provenance, StarFlags, StarRecord, TrackerConfig};
 use startrack_homes::sil::{self, SilConfig};
 use startrack_sim::sky::field::{FieldSpec, random_attitude, render};
 use startrack_sim::sky::scene::{SkyScene, committed_catalog};
@@ -301,12 +301,19 @@ fn sil_reports_mid_exposure_in_spacecraft_time_within_its_bound() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let q0 = random_attitude(&mut rng);
     let f = FieldSpec::ccd47_15deg(0.0).camera.focal_length_px;
+    // 1 s exposures: each mid-exposure half a second after its frame's start, so the first
+    // synchronised frames are tagged well past their pulse, where the unmeasured rate's
+    // 200 ppm shows in the bound.
     let config = SilConfig {
         frames: 12,
         period_us: 250_000,
         sky: Some(SkyScene::ccd47_15deg(q0, [0.2 / f, 0.3 / f, 1e-5])),
         spacecraft_epoch_us: Some(sil::SIL_EPOCH_US),
         counter_rate_ppm: -80.0,
+        tracker: TrackerConfig {
+            exposure_ms: 1000,
+            ..TrackerConfig::FLIGHT
+        },
         ..SilConfig::default()
     };
     let report = sil::run(&config).unwrap();
@@ -456,7 +463,7 @@ fn velocity_command_removes_the_aberration() {
 fn sil_reports_latency_from_mid_exposure_through_the_readout() {
     use startrack_core::geometry::ReadoutGeometry;
     use startrack_core::readout::ReadoutRequest;
-    use startrack_core::tracker::{Mode, TrackerConfig};
+    use startrack_core::tracker::Mode;
     use startrack_homes::home::board_readout_us;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
     let q0 = random_attitude(&mut rng);

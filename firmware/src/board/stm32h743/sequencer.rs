@@ -445,7 +445,8 @@ impl Sequencer {
         let ft_start = if frame_start >= played {
             now + tick_us(frame_start - played)
         } else {
-            now.checked_sub(tick_us(played - frame_start)).unwrap_or(now)
+            now.checked_sub(tick_us(played - frame_start))
+                .unwrap_or(now)
         };
         let ft_ticks = program
             .steps()
