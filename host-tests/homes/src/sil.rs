@@ -481,12 +481,18 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
     })
 }
 
-/// When the SIL's frames are taken: one every `period_us`, each integrating for the
-/// tracker's configured exposure from its start, as the simulator renders it.
+/// When the SIL's frames are taken: one every `period_us`, each integrating from its start
+/// for the exposure the simulator renders: a sky scene's motion's when it has one
+/// ([`SkyScene::motion`]), else the tracker's configured exposure.
 pub fn frame_timing(config: &SilConfig) -> FrameTiming {
+    let motion_us = config
+        .sky
+        .as_ref()
+        .and_then(|s| s.motion.as_ref())
+        .map(|m| (m.exposure_s * 1e6).round() as u64);
     FrameTiming {
         period_us: config.period_us,
-        exposure_us: u64::from(config.tracker.exposure_ms) * 1000,
+        exposure_us: motion_us.unwrap_or(u64::from(config.tracker.exposure_ms) * 1000),
     }
 }
 
