@@ -112,7 +112,7 @@ fn first_attitude_now() -> String {
     startrack_host::cli::first_attitude::csv(
         &m7,
         &[
-            "Time to the first attitude after power-on, at the flight exposure and at 40 ms (startrack_host::cli::first_attitude).",
+            "Time to the first attitude after power-on, at 1 s and at the flight exposure (startrack_host::cli::first_attitude).",
             "cargo test -p startrack-host --test cli docs_numbers::tracker::first_attitude_writes -- --ignored",
         ],
     )
