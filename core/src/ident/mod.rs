@@ -72,6 +72,10 @@
 use crate::attitude::{self, Attitude, Observation, Quat, angle_between, cross, dot};
 use crate::catalog::Catalog;
 
+mod bound;
+
+pub use bound::{GATE_SIGMAS, bound_with_field_stars, level_share};
+
 /// Most measured stars looked at (the brightest; the rest are ignored).
 pub const MAX_STARS: usize = 32;
 /// Most pattern stars (triangle vertices).
@@ -617,29 +621,6 @@ pub fn track_scaled(
     Err(IdentError::NoMatch { hypotheses: hyps })
 }
 
-/// Probability that `Binomial(n, p)` is at least `m`.
-pub(crate) fn binomial_tail(n: usize, m: usize, p: f64) -> f64 {
-    if m == 0 {
-        return 1.0;
-    }
-    if m > n || p <= 0.0 {
-        return 0.0;
-    }
-    let p = p.min(1.0);
-    // term_j = C(n, j) p^j (1-p)^(n-j), built up from j = 0.
-    let mut term = libm::pow(1.0 - p, n as f64);
-    let mut tail = 0.0;
-    for j in 0..=n {
-        if j >= m {
-            tail += term;
-        }
-        if j < n {
-            term *= (n - j) as f64 / (j + 1) as f64 * p / (1.0 - p).max(f64::MIN_POSITIVE);
-        }
-    }
-    tail.min(1.0)
-}
-
 /// Verifies the triangle `basis` (measured index, catalog index) with `scale` its
 /// focal-length scale: the solution when its false-match bound passes and its fitted scale
 /// lies in `range` (widened by 3 of its sigmas).
@@ -727,7 +708,19 @@ fn hypothesis(
     }
     // The field's density at the basis's own attitude: it depends on the triangle only,
     // not on the stars the bound counts.
-    let false_probability = false_match_bound(cat, n, matches.len(), cfg, first.q);
+    let false_probability = bound::false_match_bound(
+        cat,
+        cfg,
+        &bound::Verified {
+            stars,
+            n,
+            basis,
+            matches: &matches,
+            joint: &joint,
+            triangle_q: first.q,
+            j: hyps,
+        },
+    );
     if false_probability > cfg.max_false_probability {
         return None;
     }
@@ -849,51 +842,6 @@ fn precheck(
         }
     }
     looked == 0
-}
-
-/// `H_max T(n - 3, matched - 3, p)`: the bound in the module documentation, with `p`
-/// from the densest field of the sky (the catalog header's `N_max`) or, when that does not
-/// pass, from the field the hypothesis's triangle points at (`q`, its 3-star attitude: the
-/// catalog stars within the field radius plus the match radius of its boresight). Under a
-/// wrong hypothesis the other measured stars fall on that field's sky, so its own star
-/// count bounds their chance of a match as `N_max` does for any field; the count costs one
-/// cone scan (about 1,000 stars), paid only when the densest-field bound fails.
-pub(crate) fn false_match_bound(
-    cat: &Catalog<'_>,
-    n: usize,
-    matched: usize,
-    cfg: &IdentConfig,
-    q: Quat,
-) -> f64 {
-    let densest = bound_with_field_stars(cat, n, matched, cfg, f64::from(cat.max_field_stars()));
-    if densest <= cfg.max_false_probability {
-        return densest;
-    }
-    let boresight = q.rotate_inv([0.0, 0.0, 1.0]);
-    let local = cat
-        .cone(boresight, cat.field_radius_rad() + cfg.match_radius_rad)
-        .count();
-    // Never above the densest field's count: the bound is at most the global one.
-    let local = (local as f64).min(f64::from(cat.max_field_stars()));
-    bound_with_field_stars(cat, n, matched, cfg, local)
-}
-
-/// The false-match bound of a solution with `matched` of `n` measured stars matched in a
-/// field holding `field_stars` catalog stars (the densest field's is the catalog header's
-/// `max_field_stars`): what a field needs to be solved, so the floor of sparse fields can
-/// be computed.
-pub fn bound_with_field_stars(
-    cat: &Catalog<'_>,
-    n: usize,
-    matched: usize,
-    cfg: &IdentConfig,
-    field_stars: f64,
-) -> f64 {
-    let cap = 1.0 - libm::cos(cfg.match_radius_rad);
-    let field = 1.0 - libm::cos(cat.field_radius_rad());
-    let p = (field_stars * cap / field).min(1.0);
-    let tail = binomial_tail(n.saturating_sub(3), matched.saturating_sub(3), p);
-    (f64::from(cfg.max_hypotheses) * tail).min(1.0)
 }
 
 /// For each measured star, the others within twice the match radius of it (bit `m` for

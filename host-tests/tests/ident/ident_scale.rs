@@ -189,7 +189,7 @@ fn print(name: &str, t: &Tally) {
 
 /// The floors docs/attitude.md states, for fields of 30, 60, 100, 150 and the densest
 /// field's catalog stars (0.3 px, 10^-9, at most 5,000 hypotheses).
-const FLOORS: [usize; 5] = [7, 8, 8, 8, 9];
+const FLOORS: [usize; 5] = [6, 6, 6, 6, 7];
 
 /// 0.3 px, 10 % of the stars dropped, 3 false stars.
 fn nominal_spec() -> FieldSpec {
@@ -324,7 +324,8 @@ fn sparse_fields_solve_or_say_no_and_are_never_wrong() {
 fn floor(cat: &Catalog<'_>, cfg: &IdentConfig, field_stars: f64) -> usize {
     (4..=ident::MAX_STARS)
         .find(|&m| {
-            ident::bound_with_field_stars(cat, m, m, cfg, field_stars) <= cfg.max_false_probability
+            ident::bound_with_field_stars(cat, cfg, m, field_stars, 0.3 / 3889.0, 1)
+                <= cfg.max_false_probability
         })
         .unwrap_or(usize::MAX)
 }
