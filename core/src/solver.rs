@@ -303,6 +303,7 @@ impl<'c> Solver<'c> {
         Some(Measured {
             dir,
             sigma_rad: sigma_px * z * libm::sqrt(z) / cam.focal_length_px,
+            inst_mag: Measured::inst_mag_of(f64::from(s.flux_e)),
         })
     }
 }

@@ -14,12 +14,12 @@
 //! # The hypotheses: a level spent along the search
 //! The search tries hypotheses one after the other and stops at the first accepted, after at
 //! most `H_max` ([`IdentConfig::max_hypotheses`]). The `j`-th is accepted only when its tail
-//! is at most `alpha s_j`, `s_j = 1 / (2 j (j + 1)) + 1 / (2 H_max)`: a wrong acceptance is
-//! some wrong `j`-th hypothesis passing, so its probability is at most
-//! `alpha sum_j s_j <= alpha (1/2 + 1/2)`, whatever the order and however many the search
-//! tries. A hypothesis early in the search (the true triangle of a field is among its first
-//! few dozen in most fields) is held to a level up to 1,250 times looser than the flat
-//! `alpha / H_max`, a late one to half of it.
+//! is at most `alpha s_j`, `s_j = 1 / (2 j L) + 1 / (2 H_max)`, `L` an upper bound of the
+//! harmonic number `H_{H_max}` (9.1 for 5,000): a wrong acceptance is some wrong `j`-th
+//! hypothesis passing, so its probability is at most `alpha sum_j s_j <= alpha`, whatever
+//! the order and however many the search tries. The true triangle of a sparse field comes
+//! 30th in the median and 100th at the 90th percentile; the 30th is held to a level 9
+//! times looser than the flat `alpha / H_max`, the 100th 3.7 times, the last to half of it.
 //!
 //! # Two counts, each held to half the level
 //! - Wide: the matches of the verification, at the match radius
@@ -58,11 +58,13 @@ const TIERS: f64 = 2.0;
 pub const GATE_SIGMAS: f64 = 4.0;
 
 /// The share of the level spent on the `j`-th hypothesis (from 1) of a search of at most
-/// `h_max`: `1 / (2 j (j + 1)) + 1 / (2 h_max)`; the shares of `h_max` hypotheses sum to at
-/// most 1.
+/// `h_max`: `1 / (2 j L) + 1 / (2 h_max)`, `L` an upper bound of the harmonic number
+/// `H_{h_max}` (9.1 for 5,000); the shares of `h_max` hypotheses sum to at most 1.
 pub fn level_share(j: u32, h_max: u32) -> f64 {
-    let j = f64::from(j.max(1));
-    0.5 / (j * (j + 1.0)) + 0.5 / f64::from(h_max.max(1))
+    let (j, h) = (f64::from(j.max(1)), f64::from(h_max.max(1)));
+    // ln h + Euler's gamma + 1 / (2 h): above the harmonic number H_h = sum 1 / k.
+    let harmonic = libm::log(h) + 0.577_215_664_901_532_9 + 0.5 / h;
+    0.5 / (j * harmonic) + 0.5 / h
 }
 
 /// Probability that `Binomial(n, p)` is at least `m`.
@@ -158,17 +160,94 @@ pub(crate) fn false_match_bound(cat: &Catalog<'_>, cfg: &IdentConfig, h: &Verifi
         return densest;
     }
     let boresight = h.triangle_q.rotate_inv([0.0, 0.0, 1.0]);
-    let local = cat
-        .cone(boresight, cat.field_radius_rad() + cfg.match_radius_rad)
-        .count();
+    let mut by_mag = MagHistogram::default();
+    for (idx, _) in cat.cone(boresight, cat.field_radius_rad() + cfg.match_radius_rad) {
+        by_mag.add(cat.star(idx).map_or(i16::MAX, |s| s.hp_mmag));
+    }
     // Never above the densest field's count: the bound is at most the densest one.
-    let local = (local as f64).min(densest_stars);
-    wide(local).min(gated(cat, cfg, h, local))
+    let local = f64::from(by_mag.total).min(densest_stars);
+    wide(local).min(gated(cat, cfg, h, local, &by_mag))
+}
+
+/// Bins of [`MagHistogram`], 0.1 mag each from Hp -2 (the last holds everything fainter than
+/// Hp 10.7).
+const MAG_BINS: usize = 128;
+
+/// The catalog stars of a field counted by Hp, 0.1 mag a bin from Hp -2.
+struct MagHistogram {
+    bins: [u16; MAG_BINS],
+    total: u32,
+}
+
+impl Default for MagHistogram {
+    fn default() -> Self {
+        Self {
+            bins: [0; MAG_BINS],
+            total: 0,
+        }
+    }
+}
+
+impl MagHistogram {
+    fn bin(hp_mmag: i32) -> usize {
+        usize::try_from((hp_mmag + 2000).div_euclid(100))
+            .unwrap_or(0)
+            .min(MAG_BINS - 1)
+    }
+
+    fn add(&mut self, hp_mmag: i16) {
+        if let Some(b) = self.bins.get_mut(Self::bin(i32::from(hp_mmag))) {
+            *b = b.saturating_add(1);
+        }
+        self.total = self.total.saturating_add(1);
+    }
+
+    /// The stars in every bin that overlaps `[lo, hi]` mag (so at least those within it).
+    fn within(&self, lo_mag: f64, hi_mag: f64) -> u32 {
+        let mmag = |m: f64| (m * 1000.0).clamp(-1e6, 1e6) as i32;
+        let (a, b) = (Self::bin(mmag(lo_mag)), Self::bin(mmag(hi_mag)));
+        self.bins
+            .get(a..=b.max(a))
+            .map_or(0, |s| s.iter().map(|&x| u32::from(x)).sum())
+    }
+}
+
+/// The zero point of the hypothesis's triangle: catalog Hp minus instrumental magnitude, the
+/// median of its three stars (the mean of two when one has no magnitude; `None` with fewer).
+fn zero_point(cat: &Catalog<'_>, h: &Verified<'_>) -> Option<f64> {
+    let mut d = [0.0f64; 3];
+    let mut k = 0;
+    for &(m, c) in &h.basis {
+        let (Some(inst), Some(s)) = (h.stars.get(m).and_then(|s| s.inst_mag), cat.star(c.into()))
+        else {
+            continue;
+        };
+        if let Some(x) = d.get_mut(k) {
+            *x = f64::from(s.hp_mmag) / 1000.0 - f64::from(inst);
+            k += 1;
+        }
+    }
+    match k {
+        3 => {
+            let [a, b, c] = d;
+            Some(a.max(b).min(a.min(b).max(c)))
+        }
+        2 => Some(0.5 * (d[0] + d[1])),
+        _ => None,
+    }
 }
 
 /// The gated count's bound (module documentation) with `field_stars` catalog stars in the
 /// field.
-fn gated(cat: &Catalog<'_>, cfg: &IdentConfig, h: &Verified<'_>, field_stars: f64) -> f64 {
+fn gated(
+    cat: &Catalog<'_>,
+    cfg: &IdentConfig,
+    h: &Verified<'_>,
+    field_stars: f64,
+    by_mag: &MagHistogram,
+) -> f64 {
+    let zp = zero_point(cat, h);
+    let tol = cfg.photometric_tolerance_mag;
     let s = h.joint.scale.value;
     let scaled = rescaled(h.stars, h.n, s);
     let q = h.joint.attitude.q;
@@ -181,6 +260,18 @@ fn gated(cat: &Catalog<'_>, cfg: &IdentConfig, h: &Verified<'_>, field_stars: f6
         let var = st.sigma_rad * st.sigma_rad;
         let ps = predicted_sigma(st.dir, &h.joint.cov, s);
         let v_pred = 0.5 * ps * ps;
+        // The catalog Hp the star's brightness predicts, when both are known: only the
+        // field's stars that agree with it can match.
+        let predicted_hp = zp.zip(st.inst_mag).map(|(z, m)| z + f64::from(m));
+        let agreeing = predicted_hp.map_or(field_stars, |c| {
+            f64::from(by_mag.within(c - tol, c + tol).max(1)).min(field_stars)
+        });
+        let agrees = |catalog: u16| {
+            predicted_hp.is_none_or(|c| {
+                cat.star(catalog.into())
+                    .is_some_and(|x| (f64::from(x.hp_mmag) / 1000.0 - c).abs() <= tol)
+            })
+        };
         let matched = h.matches.iter().find(|m| usize::from(m.star) == i);
         let gate = match matched {
             Some(m) => {
@@ -192,15 +283,15 @@ fn gated(cat: &Catalog<'_>, cfg: &IdentConfig, h: &Verified<'_>, field_stars: f6
                     let resid = cat
                         .dir(m.catalog.into())
                         .map_or(f64::INFINITY, |r| angle_between(q.rotate(r), st.dir));
-                    counted +=
-                        usize::from(resid <= GATE_SIGMAS * st.sigma_rad * libm::sqrt(1.0 - lev));
+                    let inside = resid <= GATE_SIGMAS * st.sigma_rad * libm::sqrt(1.0 - lev);
+                    counted += usize::from(inside && agrees(m.catalog));
                     GATE_SIGMAS * st.sigma_rad / libm::sqrt(1.0 - lev)
                 }
             }
             None => GATE_SIGMAS * libm::sqrt(var + v_pred),
         };
         if let Some(x) = p.get_mut(len) {
-            *x = gate_probability(field_stars, gate, cat.field_radius_rad());
+            *x = gate_probability(agreeing, gate, cat.field_radius_rad());
             len += 1;
         }
     }

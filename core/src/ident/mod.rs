@@ -113,6 +113,10 @@ pub struct IdentConfig {
     /// Largest change of the focal length from the prior's in tracking, as a fraction of it
     /// (0 to 0.05): the drift between two solved frames.
     pub track_scale_error: f64,
+    /// A star's catalog Hp agrees with its instrumental magnitude plus the hypothesis's zero
+    /// point within this, mag (0.1 to 5): the noise, the camera band's colour terms against
+    /// Hp and the zero point's error together.
+    pub photometric_tolerance_mag: f64,
 }
 
 impl IdentConfig {
@@ -120,7 +124,9 @@ impl IdentConfig {
     /// `sigma_px`: pair tolerance 6 sigma of a separation (two stars' errors) plus 1 px of
     /// catalog and model error, match radius 5 sigma plus 1 px, 10^-9 false-match bound;
     /// lost in space tolerates a focal length off by up to 2 %, tracking a drift of 0.5 %
-    /// from the prior's scale.
+    /// from the prior's scale; a star's brightness agrees with its catalog Hp within 1 mag
+    /// (3 sigma of 0.1 mag of noise, colour terms up to 0.2 mag a magnitude of B-V against
+    /// Hp, and the zero point's error from three stars).
     pub fn for_camera(focal_length_px: f64, sigma_px: f64) -> Self {
         let sep_sigma_px = sigma_px * core::f64::consts::SQRT_2;
         Self {
@@ -131,6 +137,7 @@ impl IdentConfig {
             max_hypotheses: 5000,
             max_scale_error: 0.02,
             track_scale_error: 0.005,
+            photometric_tolerance_mag: 1.0,
         }
     }
 }
@@ -142,6 +149,18 @@ pub struct Measured {
     pub dir: [f64; 3],
     /// 1-sigma angular error across the line of sight, rad.
     pub sigma_rad: f64,
+    /// Instrumental magnitude, `-2.5 log10` of the measured flux in any fixed unit (the zero
+    /// point is found per hypothesis), `None` when not measured or saturated: the star is
+    /// then counted by its position only.
+    pub inst_mag: Option<f32>,
+}
+
+impl Measured {
+    /// The instrumental magnitude of a flux in any fixed unit (`None` unless finite and
+    /// positive).
+    pub fn inst_mag_of(flux: f64) -> Option<f32> {
+        (flux.is_finite() && flux > 0.0).then(|| (-2.5 * libm::log10(flux)) as f32)
+    }
 }
 
 /// A measured star and the catalog star it is.
@@ -277,7 +296,8 @@ fn check_input(stars: &[Measured], cfg: &IdentConfig) -> Result<usize, IdentErro
         && cfg.max_false_probability.is_finite()
         && (3..=MAX_PATTERN).contains(&cfg.pattern_stars)
         && (0.0..=0.05).contains(&cfg.max_scale_error)
-        && (0.0..=0.05).contains(&cfg.track_scale_error);
+        && (0.0..=0.05).contains(&cfg.track_scale_error)
+        && (0.1..=5.0).contains(&cfg.photometric_tolerance_mag);
     if !stars_ok || !cfg_ok {
         return Err(IdentError::BadInput);
     }
@@ -502,6 +522,7 @@ fn rescaled(stars: &[Measured], n: usize, scale: f64) -> heapless::Vec<Measured,
         .map(|s| Measured {
             dir: rescale_dir(s.dir, k),
             sigma_rad: s.sigma_rad * k,
+            inst_mag: s.inst_mag,
         })
         .collect()
 }
@@ -1210,6 +1231,7 @@ pub fn colour_corrected(
         let o = Measured {
             dir,
             sigma_rad: sigma_px / camera.focal_length_px * libm::pow(dir[2], 1.5),
+            inst_mag: None,
         };
         if meas.push(o).is_err()
             || matches

@@ -189,6 +189,7 @@ pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
                 Measured {
                     dir,
                     sigma_rad: case.centroid_sigma_px / case.focal_length_px * dir[2].powf(1.5),
+                    inst_mag: Measured::inst_mag_of(s[2]),
                 }
             })
             .collect();

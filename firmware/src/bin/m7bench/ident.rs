@@ -80,6 +80,7 @@ fn render(
         *o = Measured {
             dir,
             sigma_rad: SIGMA_PX / FOCAL_PX * dir[2],
+            inst_mag: Some(f32::from(s.0) / 1000.0),
         };
         m += 1;
     }
@@ -149,6 +150,7 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
     let mut meas = [Measured {
         dir: [0.0, 0.0, 1.0],
         sigma_rad: 1.0,
+        inst_mag: None,
     }; MAX_STARS];
     for (l, t) in lis.iter_mut().zip(trk.iter_mut()) {
         let q = random_quat(rng);

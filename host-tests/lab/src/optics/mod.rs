@@ -124,6 +124,7 @@ pub fn identify_from(
                 Measured {
                     dir,
                     sigma_rad: sigma_px / camera.focal_length_px * dir[2].powf(1.5),
+                    inst_mag: None,
                 }
             })
             .collect();

@@ -215,6 +215,12 @@ fn measured(stars: &[ImageStar], camera: &Camera, spec: &SolveSpec) -> Vec<Measu
             Measured {
                 dir,
                 sigma_rad: sigma_px(s, spec) / camera.focal_length_px * dir[2].powf(1.5),
+                // A saturated star's flux is a lower bound: no magnitude.
+                inst_mag: if s.saturated() {
+                    None
+                } else {
+                    Measured::inst_mag_of(s.flux_e)
+                },
             }
         })
         .collect()

@@ -139,6 +139,7 @@ pub fn measured(stars: &[FieldStar], camera: &Camera, sigma_px: f64) -> Vec<Meas
             Measured {
                 dir,
                 sigma_rad: sigma_px / camera.focal_length_px * dir[2].powf(1.5),
+                inst_mag: Measured::inst_mag_of(s.flux_e),
             }
         })
         .collect()
