@@ -43,15 +43,15 @@
 //! the marginal one of that fit (the scale's uncertainty included), and its scale is
 //! reported with its sigma ([`FocalScale`]); a fitted scale outside the searched range is
 //! no solution.
-//! If the hypothesis is wrong, each of the `n - 3` non-basis stars
-//! matches by chance with probability at most `p = N_max (1 - cos r) / (1 - cos R)`, `N_max`
-//! the most catalog stars in any field cone of radius `R` (from the catalog header), `r` the
-//! match radius; when that fails, `N_max` is replaced by the count of catalog stars in the
-//! field the triangle's own attitude points at (a sparse field's sky is sparse for a wrong
-//! hypothesis too, and the count depends on the triangle only). The chance that a wrong hypothesis matches `m` or more of them is the
-//! binomial tail `T(n - 3, m, p)`, and over at most [`IdentConfig::max_hypotheses`]
-//! hypotheses the false-match probability is at most `H_max T`. A solution is accepted only
-//! when that bound is at most [`IdentConfig::max_false_probability`]; the bound is reported.
+//! The false-match bound (its model in `ident/bound.rs`): under a wrong hypothesis each
+//! non-basis star's gate holds a catalog star with probability `p` (the field's catalog
+//! stars times the gate's area over the field's), the chance that `c` or more match is a
+//! Poisson binomial tail `T`, counted twice (at the match radius; and in gates of
+//! [`GATE_SIGMAS`] of each star's leave-one-out error with the photometry agreeing), each
+//! held to half the level, and the level `alpha` spent along the search, `s_j` of it on the
+//! `j`-th hypothesis, the shares summing to at most 1 over
+//! [`IdentConfig::max_hypotheses`]. A solution is accepted only when `2 T / s_j` is at most
+//! [`IdentConfig::max_false_probability`]; that bound is reported.
 //!
 //! # Tracking
 //! The prior attitude maps each pattern star to the sky; its candidates are the catalog
@@ -105,7 +105,8 @@ pub struct IdentConfig {
     pub max_false_probability: f64,
     /// Brightest measured stars used as triangle vertices (at most `MAX_PATTERN`, 16).
     pub pattern_stars: usize,
-    /// Most hypotheses verified in one identification (the union bound's count).
+    /// Most hypotheses verified in one identification (the false-match level is spent over
+    /// them).
     pub max_hypotheses: u32,
     /// Largest focal-length error lost in space searches: the camera model's focal length
     /// is within `1 +- max_scale_error` times the true one (0 to 0.05).
