@@ -33,6 +33,7 @@ pub mod detect;
 pub mod geometry;
 pub mod ident;
 pub mod link;
+pub mod predict;
 pub mod readout;
 pub mod safe;
 pub mod sequencer;

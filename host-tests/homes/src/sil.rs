@@ -177,6 +177,9 @@ pub struct SilFrame {
     pub missed: Vec<Star>,
     /// Samples the sensor rendered for it.
     pub samples_read: u64,
+    /// Its windows the attitude stage predicted from the catalog (0: none; the tracker's
+    /// own windows, or a full frame).
+    pub predicted_windows: usize,
     /// The attitude stage's result and the truth (sky scenes only).
     pub attitude: Option<AttitudeCheck>,
 }
@@ -197,6 +200,8 @@ pub struct AttitudeCheck {
     /// The true spacecraft time at mid-exposure, s since the CUC epoch (`None` without a
     /// spacecraft clock).
     pub true_time_s: Option<f64>,
+    /// Stars of the fix identified by their predicted identities (0: searched, or none).
+    pub identified: u8,
 }
 
 impl AttitudeCheck {
@@ -447,6 +452,7 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
             telemetry: &mut recorder,
         };
         let before = source.samples_rendered;
+        let predicted_windows = cycle.predicted();
         let Ok(outcome) = block_on(cycle.run_frame(&mut source, &mut ports));
         let summary = outcome.summary;
         let truth = stars_of(summary.frame);
@@ -457,6 +463,11 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
             &params,
             source.samples_rendered - before,
         );
+        frame.predicted_windows = if summary.mode == Mode::Tracking {
+            predicted_windows
+        } else {
+            0
+        };
         if let (Some(fix), Some((scene, _))) = (outcome.attitude, sky.as_ref()) {
             let mid_us = outcome.report.map_or(0, |r| r.mid_exposure_us);
             frame.attitude = Some(AttitudeCheck {
@@ -468,6 +479,7 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
                 true_time_s: pps
                     .as_ref()
                     .map(|l| l.spacecraft_us_at(mid_us as f64) * 1e-6),
+                identified: cycle.solver().map_or(0, |s| s.identified()),
             });
         }
         frames.push(frame);
@@ -634,6 +646,7 @@ fn match_frame(
         stars,
         missed,
         samples_read,
+        predicted_windows: 0,
         attitude: None,
     }
 }

@@ -5,6 +5,7 @@
 //! One module per subject, each with its own module docs; the shared f64 references and table
 //! fixtures come from `startrack-test-support`.
 
+mod catalog_windows;
 mod dark_drift;
 mod demo;
 mod frame_cycle;
