@@ -33,7 +33,7 @@
 //! `MAX_CANDIDATES^2 / 2` distance tests, a few thousand in a median field), and three more
 //! projections and the sigma (~200 flops) for each predicted star. No allocation: about
 //! 2.6 KB of candidates on the stack. The M7 count is `cargo m7-bench`'s
-//! `predict_catalog_windows` (docs/tracker.md).
+//! `predict_catalog_windows_p99` (docs/tracker.md).
 
 use crate::attitude::{Attitude, Camera, Quat, Rate};
 use crate::catalog::Catalog;

@@ -15,7 +15,9 @@
 //!                 pass the threshold and every background row whole; each closed blob's
 //!                 centroid window is cut from the ring once its last row is in,
 //!                 calibrated and measured (acquire.rs)
-//!   tracking      the rows of the windows placed on the last frame's stars are copied;
+//!   tracking      the rows of the windows placed on the catalog's stars the attitude
+//!                 stage predicted ([`Tracker::predict_next`]), else on the last frame's
+//!                 stars, are copied;
 //!                 a window whose last row is in is calibrated, tested for its star
 //!                 (detect::track) and the centroid window around the star's peak
 //!                 measured (track.rs)
@@ -35,9 +37,10 @@
 //! All in `modes.rs`, asked by [`Tracker::begin_frame`] and [`Tracker::end_frame`]: a
 //! command takes effect at the next frame; no table means standby; acquisition hands over
 //! to tracking with at least `min_track_stars` usable centroids, tracking goes back with
-//! fewer or every `reacquire_every` frames; a prediction of the next frame's stars from the
-//! attitude stage ([`Tracker::predict_next`]) keeps it tracking on the catalog's stars and
-//! never reacquires. Every change is an [`Event::ModeChange`] with its [`ModeReason`].
+//! fewer or every `reacquire_every` frames on its own stars; a prediction of the next
+//! frame's stars from the attitude stage ([`Tracker::predict_next`]) keeps it tracking on
+//! the catalog's stars and never reacquires. Every change is an [`Event::ModeChange`] with
+//! its [`ModeReason`].
 //!
 //! # Memory
 //! [`TrackerBuffers`] (the line ring, the tracking windows, the fused CoG's plans) lives
