@@ -143,6 +143,20 @@ struct Candidate {
     out: bool,
 }
 
+/// `q0` turned by the rate `w` (rad/s) for `dt` s: `exp(w dt) q0`.
+#[inline(never)]
+fn turned(q0: Quat, w: [f64; 3], dt: f64) -> Quat {
+    Quat::from_rotation_vector(w.map(|c| c * dt)) * q0
+}
+
+/// The pixel position of the catalog direction `dir` of colour `bv_mmag` at attitude `q`
+/// (one copy of the projection for the four uses, to keep the flash image small).
+#[inline(never)]
+fn project(cam: &Camera, q: Quat, dir: [f64; 3], bv_mmag: i16) -> Option<[f64; 2]> {
+    cam.project_of(q.rotate(dir), f64::from(bv_mmag) / 1000.0)
+        .ok()
+}
+
 fn finite3(v: &[f64; 3]) -> bool {
     v.iter().all(|c| c.is_finite())
 }
@@ -154,6 +168,7 @@ fn finite33(m: &[[f64; 3]; 3]) -> bool {
 /// The catalog stars `from` predicts on an active area of `active_px` (columns, rows)
 /// through `camera`, chosen by `cfg`, into `out` (cleared first); returns how many. An empty
 /// cone or a field with no star whose window fits gives none (`Ok(0)`).
+#[inline(never)]
 pub fn predict(
     cat: &Catalog<'_>,
     camera: &Camera,
@@ -190,7 +205,7 @@ pub fn predict(
         return Err(PredictError::TooOld);
     }
     let w = from.rate.w_rad_s;
-    let turn = |dt: f64| -> Quat { Quat::from_rotation_vector(w.map(|c| c * dt)) * q0 };
+    let turn = |dt: f64| turned(q0, w, dt);
     let q = turn(from.interval_s);
     let cam = Camera {
         focal_length_px: camera.focal_length_px * from.scale,
@@ -211,8 +226,7 @@ pub fn predict(
         let (Some(star), Ok(index)) = (cat.star(idx), u16::try_from(idx)) else {
             continue;
         };
-        let bv = f64::from(star.bv_mmag) / 1000.0;
-        let Ok(p) = cam.project_of(q.rotate(dir), bv) else {
+        let Some(p) = project(&cam, q, dir, star.bv_mmag) else {
             continue;
         };
         // The still window must fit: a star entering the field joins once it does.
@@ -275,8 +289,7 @@ pub fn predict(
     // A candidate's prediction, if its window (bound and trail) fits on the active area.
     let make = |c: &Candidate| -> Option<PredictedStar> {
         let dir = cat.dir(usize::from(c.index))?;
-        let bv = f64::from(c.bv_mmag) / 1000.0;
-        let at = |qq: Quat| cam.project_of(qq.rotate(dir), bv).ok();
+        let at = |qq: Quat| project(&cam, qq, dir, c.bv_mmag);
         let (ps, pe, pn) = (at(q_start)?, at(q_end)?, at(q_next)?);
         let sigma_px = camera.focal_length_px * predicted_sigma(q.rotate(dir), &cov4, from.scale);
         let p = PredictedStar {

@@ -640,6 +640,7 @@ pub(crate) const CONFIRM_MAX_DROPPED: usize = 8;
 /// module documentation, for `n` stars of which the kept ones matched, must pass. Any
 /// failure is an error (the caller then searches: [`track_scaled`], [`lost_in_space`]).
 /// Cost: a joint fit of the stars (three Gauss-Newton steps, ~100 flops a star) per round.
+#[inline(never)]
 pub fn confirm(
     cat: &Catalog<'_>,
     stars: &[Measured],
@@ -688,7 +689,8 @@ pub fn confirm(
             })
             .max_by(|a, b| a.1.total_cmp(&b.1));
         match worst {
-            Some((k, z)) if !(z <= TIGHT_SIGMAS) => {
+            // A NaN residual is no agreement either.
+            Some((k, z)) if z.is_nan() || z > TIGHT_SIGMAS => {
                 if dropped == CONFIRM_MAX_DROPPED {
                     return Err(no_match);
                 }

@@ -153,7 +153,8 @@ fn trail_of(velocity_px: Option<(f32, f32)>) -> Option<(f32, f32)> {
 /// Whether a trail of `trail_px` (px, exposure start to end) is longer than `rect` holds: a
 /// component beyond the window's side less 1 px, so that no end of it is in the window.
 fn trail_clipped(trail_px: (f32, f32), rect: Rect) -> bool {
-    let beyond = |t: f32, side: u16| !(t.abs() <= f32::from(side.saturating_sub(1)));
+    // A NaN trail is no trail the window holds.
+    let beyond = |t: f32, side: u16| t.is_nan() || t.abs() > f32::from(side.saturating_sub(1));
     beyond(trail_px.0, rect.width) || beyond(trail_px.1, rect.height)
 }
 
