@@ -1,6 +1,7 @@
 //! The tracker on a turning sky ([`startrack_sim::sky::motion`]): stars trailed during the
-//! exposure, measured by the trailed-star fit once the tracker knows their motion from the
-//! last two frames, against the truth at mid-exposure.
+//! exposure, measured by the trailed-star fit once the tracker knows their motion (from the
+//! last two frames, or from the attitude's prediction of the catalog's windows), against the
+//! truth at mid-exposure; the rate table and a slew held on the catalog's windows.
 
 use rand::SeedableRng;
 use startrack_analysis::sil_rates;
@@ -122,7 +123,7 @@ fn rate_table_in_short_has_no_wrong_attitude() {
 }
 
 /// The full rate table: every rate of [`sil_rates::RATE_CASES`] over 3 seeded attitudes of
-/// 20 frames, written to [`RATES_CSV`]. About ten minutes in the test profile:
+/// 20 frames, written to [`RATES_CSV`]. About six minutes in the test profile:
 /// `cargo test -p startrack-host --test tracker sil_motion::rate_table -- --ignored --nocapture`.
 #[test]
 #[ignore = "Monte Carlo over six rates, minutes; its CSV is committed"]
@@ -210,26 +211,35 @@ fn star_signal_scales_with_the_exposure() {
     }
 }
 
+/// The rate table's run of seed 100 ([`sil_rates::config`]) slewing from rest across the
+/// boresight at `accel_deg_s2` to `rate_deg_s`, exposures of `exposure_ms` every 100 ms (the
+/// tracker told them), `frames` frames.
+fn slew(rate_deg_s: f64, accel_deg_s2: f64, exposure_ms: u32, frames: u32) -> SilConfig {
+    let case = sil_rates::RateCase {
+        motion: "cross",
+        rate_deg_s,
+    };
+    let mut config = sil_rates::config(&case, 100, frames);
+    if let Some(m) = config.sky.as_mut().and_then(|s| s.motion.as_mut()) {
+        m.profile.accel_rad_s2 = accel_deg_s2.to_radians();
+        m.exposure_s = f64::from(exposure_ms) * 1e-3;
+    }
+    config.tracker.exposure_ms = exposure_ms;
+    config
+}
+
 /// A slew from rest to 3 deg/s across the boresight (2 deg/s^2, the rate reached at 1.5 s),
 /// 40 ms exposures every 100 ms (8 px trails at 3 deg/s, 20 px of motion between frames):
 /// from the first frame's lost-in-space attitude the tracker never acquires again; every
 /// frame has an attitude and none is wrong ([`sil_rates::is_wrong`]: while the rate changes
 /// a trailed star's centroid is its mean position over the exposure, not its position at
 /// mid-exposure, `alpha T^2 / 24` off, 0.5 arcsec here); and once at the rate (from frame
-/// 18, the rate filter once again predicting) every frame tracks the catalog's predicted windows, its attitude from their
-/// identities and within 5 of its sigmas on each axis. About 15 s in the test profile.
+/// 18, the rate filter predicting again) every frame tracks the catalog's predicted
+/// windows, its attitude from their identities and within 5 of its sigmas on each axis.
+/// About 15 s in the test profile.
 #[test]
 fn catalog_windows_hold_a_slew_to_3_deg_s() {
-    let case = sil_rates::RateCase {
-        motion: "cross",
-        rate_deg_s: 3.0,
-    };
-    let mut config = sil_rates::config(&case, 100, 25);
-    if let Some(m) = config.sky.as_mut().and_then(|s| s.motion.as_mut()) {
-        m.profile.accel_rad_s2 = 2f64.to_radians();
-        m.exposure_s = 0.04;
-    }
-    config.tracker.exposure_ms = 40;
+    let config = slew(3.0, 2.0, 40, 25);
     let report = sil::run(&config).unwrap();
     for f in &report.frames {
         let n = f.summary.frame;
@@ -271,14 +281,7 @@ fn catalog_windows_hold_a_slew_to_3_deg_s() {
 #[test]
 #[ignore = "prints a slew's frames for docs/tracker.md; asserts nothing"]
 fn slew_frames_at_100_ms() {
-    let case = sil_rates::RateCase {
-        motion: "cross",
-        rate_deg_s: 2.0,
-    };
-    let mut config = sil_rates::config(&case, 100, 30);
-    if let Some(m) = config.sky.as_mut().and_then(|s| s.motion.as_mut()) {
-        m.profile.accel_rad_s2 = 1f64.to_radians();
-    }
+    let config = slew(2.0, 1.0, 100, 30);
     let report = sil::run(&config).unwrap();
     for f in &report.frames {
         let c = f.attitude.as_ref().unwrap();
