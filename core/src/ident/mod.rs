@@ -632,8 +632,9 @@ pub(crate) const CONFIRM_MAX_DROPPED: usize = 8;
 /// the catalog predicted), the attitude near `prior` with focal-length scale near
 /// `prior_scale`. Nothing is searched; the identities are verified: the attitude and the
 /// scale are fitted to them as in verification (Gauss-Newton from `prior`), the star whose
-/// residual is largest beyond [`TIGHT_SIGMAS`] of its own sigma is dropped and the fit
-/// repeated until every residual is within (a false star or a hot pixel measured in a
+/// studentised residual (its residual over its own sigma and `sqrt(1 - h)`, `h` the share
+/// of its position the fit follows) is largest beyond [`TIGHT_SIGMAS`] is dropped and the
+/// fit repeated until every residual is within (a false star or a hot pixel measured in a
 /// predicted window cannot stay in the attitude), at most [`CONFIRM_MAX_DROPPED`] times;
 /// the fit must not follow one star alone (leverage, as in verification), its scale must
 /// be within `cfg.track_scale_error` of `prior_scale`, and the false-match bound of the
@@ -678,14 +679,20 @@ pub fn confirm(
         let joint = fit(cat, stars, &matches, s, Some(q)).ok_or(no_match)?;
         (q, s) = (joint.attitude.q, joint.scale.value);
         let scaled = rescaled(stars, n, s);
-        // The largest residual in its own sigmas.
+        // The largest residual in its own sigmas, studentised: a residual's variance is the
+        // star's own less what the fit follows of it (its leverage `h`), so a star the fit
+        // follows (a heavy one: a hot pixel's spike measured with a tiny sigma) shows its
+        // disagreement rather than hiding it in the others' residuals.
         let worst = matches
             .iter()
             .enumerate()
             .filter_map(|(k, m)| {
                 let st = scaled.get(usize::from(m.star))?;
                 let r = cat.dir(usize::from(m.catalog))?;
-                Some((k, angle_between(q.rotate(r), st.dir) / st.sigma_rad))
+                let p = predicted_sigma(st.dir, &joint.cov, s);
+                let h = (0.5 * p * p / (st.sigma_rad * st.sigma_rad)).min(1.0 - 1e-6);
+                let z = angle_between(q.rotate(r), st.dir) / st.sigma_rad;
+                Some((k, z / libm::sqrt(1.0 - h)))
             })
             .max_by(|a, b| a.1.total_cmp(&b.1));
         match worst {

@@ -91,6 +91,12 @@ pub struct SilConfig {
     /// time of its first pulse) before its first frame, so the attitude stage removes the
     /// aberration; `false` leaves the attitude apparent (for comparison).
     pub send_velocity: bool,
+    /// Point sources in no catalog, still, rendered besides the scene's stars in every
+    /// frame from `false_stars_from`: false stars, or with a narrow PSF (`a_px` 0.3) a hot
+    /// pixel's or a cosmic ray's spike. They are not in the frames' truth.
+    pub false_stars: Vec<Star>,
+    /// The first frame with the false stars.
+    pub false_stars_from: u32,
 }
 
 /// The spacecraft time the SIL's commands take at counter 0 (`--spacecraft-time`'s
@@ -112,6 +118,8 @@ impl Default for SilConfig {
             counter_rate_ppm: 0.0,
             velocity_m_s: None,
             send_velocity: true,
+            false_stars: Vec::new(),
+            false_stars_from: 0,
         }
     }
 }
@@ -510,7 +518,8 @@ pub fn frame_stars(
 }
 
 /// The simulated sensor of frame `frame`: [`frame_stars`] still, or with a sky scene that
-/// turns during the exposure its stars along their paths ([`SkyScene::trails`]).
+/// turns during the exposure its stars along their paths ([`SkyScene::trails`]); and the
+/// configuration's false stars.
 pub fn frame_simulator(
     config: &SilConfig,
     params: &SensorParams,
@@ -524,12 +533,23 @@ pub fn frame_simulator(
         return Simulator {
             frame,
             trails: sky.trails(cat, frame, f64::from(config.tracker.psf_a_px)),
-            ..Simulator::new(params.clone(), Vec::new())
+            ..Simulator::new(params.clone(), false_stars(config, frame))
         };
     }
+    let mut stars = frame_stars(config, base, catalog, frame);
+    stars.extend(false_stars(config, frame));
     Simulator {
         frame,
-        ..Simulator::new(params.clone(), frame_stars(config, base, catalog, frame))
+        ..Simulator::new(params.clone(), stars)
+    }
+}
+
+/// The false stars of frame `frame` ([`SilConfig::false_stars`]).
+fn false_stars(config: &SilConfig, frame: u32) -> Vec<Star> {
+    if frame >= config.false_stars_from {
+        config.false_stars.clone()
+    } else {
+        Vec::new()
     }
 }
 
