@@ -127,7 +127,7 @@ pub struct FrameCycle<'t, 'b, 'c, 'l, const N: usize> {
     last_rate: Option<crate::attitude::Rate>,
     /// Whether the attitude stage predicts the next frame's windows.
     predicting: bool,
-    /// Stars predicted for the current frame.
+    /// Stars the tracker took from the last prediction, for its next frame.
     predicted: usize,
 }
 

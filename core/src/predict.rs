@@ -5,7 +5,7 @@
 //! What it is for: with an attitude, tracking needs neither the last frame's stars nor a
 //! full frame to find stars entering the field. The attitude `q` of the last fix (at its
 //! mid-exposure) is propagated by the rate `w` over the interval `dt` to the next frame's
-//! mid-exposure, `q' = exp(w dt) q` (the convention of [`crate::attitude::rate`]); the
+//! mid-exposure, `q' = exp(w dt) q` (the convention of [`crate::attitude::RateFilter`]); the
 //! catalog stars in the field cone around its boresight are projected through the camera
 //! model with the focal-length scale identification fitted ([`crate::ident::FocalScale`])
 //! and each star's colour; those whose window fits on the active area are kept, the

@@ -633,9 +633,9 @@ pub(crate) const CONFIRM_MAX_DROPPED: usize = 8;
 /// `prior_scale`. Nothing is searched; the identities are verified: the attitude and the
 /// scale are fitted to them as in verification (Gauss-Newton from `prior`), the star whose
 /// studentised residual (its residual over its own sigma and `sqrt(1 - h)`, `h` the share
-/// of its position the fit follows) is largest beyond [`TIGHT_SIGMAS`] is dropped and the
+/// of its position the fit follows) is largest beyond `TIGHT_SIGMAS` (5) is dropped and the
 /// fit repeated until every residual is within (a false star or a hot pixel measured in a
-/// predicted window cannot stay in the attitude), at most [`CONFIRM_MAX_DROPPED`] times;
+/// predicted window cannot stay in the attitude), at most `CONFIRM_MAX_DROPPED` (8) times;
 /// the fit must not follow one star alone (leverage, as in verification), its scale must
 /// be within `cfg.track_scale_error` of `prior_scale`, and the false-match bound of the
 /// module documentation, for `n` stars of which the kept ones matched, must pass. Any

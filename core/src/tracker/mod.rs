@@ -296,7 +296,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
 
     /// Takes the attitude stage's prediction of the next frame's stars (between frames;
     /// replacing any, an empty slice clears it): the next frame tracks one window on each
-    /// valid star ([`PredictedStar::is_valid`], the first [`TRACK_WINDOWS`]) instead of the
+    /// valid star ([`PredictedStar::is_valid`], the first 32) instead of the
     /// last frame's stars, even where the mode rules would have acquired
     /// ([`ModeReason::Predicted`]). A commanded acquisition or standby drops it. Returns
     /// the stars taken.
