@@ -416,3 +416,65 @@ fn a_hot_pixel_or_a_false_star_on_the_sensor_does_not_move_the_attitude() {
         }
     }
 }
+
+/// Any value of any input (attitude, covariances, rate, scale, times, as raw f64 bits:
+/// NaN, infinities, denormals, huge): the prediction returns, never panics, and every star
+/// it gives is valid, on the sensor with its whole window, and at most 32.
+#[test]
+fn any_input_predicts_valid_stars_or_an_error() {
+    use proptest::prelude::*;
+    let bytes = committed_catalog().unwrap();
+    let cat = Catalog::parse(&bytes).unwrap();
+    let any = || {
+        prop_oneof![
+            4 => -1.0f64..1.0,
+            1 => any::<u64>().prop_map(f64::from_bits),
+        ]
+    };
+    let mut runner = proptest::test_runner::TestRunner::new(proptest::test_runner::Config {
+        cases: 300,
+        ..Default::default()
+    });
+    runner
+        .run(
+            &(
+                proptest::array::uniform4(any()),
+                proptest::array::uniform3(any()),
+                proptest::array::uniform3(any()),
+                any(),
+                any(),
+                any(),
+            ),
+            |(q, cov, w, scale, interval, exposure)| {
+                let s2 = |s: f64| [[s, 0.0, 0.0], [0.0, s, 0.0], [0.0, 0.0, s]];
+                let f = PredictFrom {
+                    attitude: Attitude {
+                        q: Quat(q),
+                        cov_rad2: s2(cov[0] * 1e-10),
+                    },
+                    rate: Rate {
+                        w_rad_s: w,
+                        cov_rad2_s2: s2(cov[1] * 1e-10),
+                    },
+                    scale: 1.0 + 0.05 * scale,
+                    interval_s: interval,
+                    exposure_s: exposure,
+                    period_s: 0.1,
+                };
+                if let Ok(stars) = predicted(&cat, &f) {
+                    prop_assert!(stars.len() <= 32);
+                    for p in &stars {
+                        prop_assert!(p.is_valid());
+                        let side = startrack_core::tracker::predicted_window_side(
+                            7, p.bound_px, p.trail_px,
+                        );
+                        let half = f32::from(side / 2);
+                        prop_assert!(p.x_px >= half && p.x_px <= 1023.0 - half, "{p:?}");
+                        prop_assert!(p.y_px >= half && p.y_px <= 1023.0 - half, "{p:?}");
+                    }
+                }
+                Ok(())
+            },
+        )
+        .unwrap();
+}
