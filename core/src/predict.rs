@@ -6,9 +6,10 @@
 //! full frame to find stars entering the field. The attitude `q` of the last fix (at its
 //! mid-exposure) is propagated by the rate `w` over the interval `dt` to the next frame's
 //! mid-exposure, `q' = exp(w dt) q` (the convention of [`crate::attitude::RateFilter`]); the
-//! catalog stars in the field cone around its boresight are projected through the camera
-//! model with the focal-length scale identification fitted ([`crate::ident::FocalScale`])
-//! and each star's colour; those whose window fits on the active area are kept, the
+//! catalog stars in the field cone around its boresight (aberrated for the observer's
+//! velocity when the attitude is of the ICRF) are projected through the camera model with
+//! the focal-length scale identification fitted ([`crate::ident::FocalScale`]) and each
+//! star's colour; those whose window fits on the active area are kept, the
 //! brightest [`MAX_CANDIDATES`].
 //!
 //! Choice: a star with a catalog neighbour within [`PredictConfig::blend_px`] that is not
@@ -35,7 +36,7 @@
 //! 2.6 KB of candidates on the stack. The M7 count is `cargo m7-bench`'s
 //! `predict_catalog_windows_p99` (docs/tracker.md).
 
-use crate::attitude::{Attitude, Camera, Quat, Rate};
+use crate::attitude::{Attitude, Camera, Quat, Rate, aberrate};
 use crate::catalog::Catalog;
 use crate::ident::predicted_sigma;
 use crate::tracker::{PredictedStar, predicted_window_side};
@@ -106,6 +107,12 @@ pub struct PredictFrom {
     pub exposure_s: f64,
     /// The frame interval after the next frame, s (for each star's motion).
     pub period_s: f64,
+    /// The observer's velocity (ICRF, barycentric, m/s) when the attitude is of the ICRF,
+    /// stellar aberration removed ([`crate::solver::Solver::update_at_velocity`]): the
+    /// catalog directions are then aberrated ([`crate::attitude::aberrate`]) before they
+    /// are projected, so the stars fall where the camera sees them. `None`: the attitude is
+    /// of the apparent sky.
+    pub velocity_m_s: Option<[f64; 3]>,
 }
 
 /// Why nothing was predicted.
@@ -189,6 +196,7 @@ pub fn predict(
         && from.exposure_s >= 0.0
         && from.period_s.is_finite()
         && from.period_s >= 0.0
+        && from.velocity_m_s.is_none_or(|v| finite3(&v))
         && cfg.bound_sigmas.is_finite()
         && cfg.floor_px.is_finite()
         && cfg.floor_px > 0.0
@@ -222,7 +230,12 @@ pub fn predict(
     let [cols, rows] = active_px.map(f64::from);
     let mut cands: heapless::Vec<Candidate, MAX_CANDIDATES> = heapless::Vec::new();
     let boresight = q.rotate_inv([0.0, 0.0, 1.0]);
+    let seen = |dir: [f64; 3]| match from.velocity_m_s {
+        Some(v) => aberrate(dir, v),
+        None => dir,
+    };
     for (idx, dir) in cat.cone(boresight, cat.field_radius_rad()) {
+        let dir = seen(dir);
         let (Some(star), Ok(index)) = (cat.star(idx), u16::try_from(idx)) else {
             continue;
         };
@@ -288,7 +301,7 @@ pub fn predict(
     }
     // A candidate's prediction, if its window (bound and trail) fits on the active area.
     let make = |c: &Candidate| -> Option<PredictedStar> {
-        let dir = cat.dir(usize::from(c.index))?;
+        let dir = seen(cat.dir(usize::from(c.index))?);
         let at = |qq: Quat| project(&cam, qq, dir, c.bv_mmag);
         let (ps, pe, pn) = (at(q_start)?, at(q_end)?, at(q_next)?);
         let sigma_px = camera.focal_length_px * predicted_sigma(q.rotate(dir), &cov4, from.scale);

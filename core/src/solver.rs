@@ -131,6 +131,9 @@ pub struct Solver<'c> {
     scale: Option<FocalScale>,
     /// Stars of the last fix identified by their predicted identities (0: searched).
     identified: u8,
+    /// The velocity the last fix's aberration was removed for (its attitude is then of the
+    /// ICRF), m/s.
+    prior_velocity: Option<[f64; 3]>,
 }
 
 impl<'c> Solver<'c> {
@@ -142,6 +145,7 @@ impl<'c> Solver<'c> {
             prior: None,
             scale: None,
             identified: 0,
+            prior_velocity: None,
         }
     }
 
@@ -165,7 +169,8 @@ impl<'c> Solver<'c> {
     }
 
     /// The catalog stars of the next frame ([`predict::predict`]): the last fix (its
-    /// attitude, covariance and focal-length scale, at its time) propagated by `rate` to
+    /// attitude, covariance and focal-length scale, at its time, and the velocity its
+    /// aberration was removed for) propagated by `rate` to
     /// `next_mid_us`, the next frame's mid-exposure, its stars trailed over `exposure_s` and
     /// moving over `period_s` after it, on an active area of `active_px` (columns, rows),
     /// into `out`. No fix, a fix after `next_mid_us` or older than the configuration allows
@@ -196,6 +201,7 @@ impl<'c> Solver<'c> {
             interval_s: (next_mid_us - t) as f64 * 1e-6,
             exposure_s,
             period_s,
+            velocity_m_s: self.prior_velocity,
         };
         predict::predict(
             &self.catalog,
@@ -363,11 +369,13 @@ impl<'c> Solver<'c> {
             },
         };
         let mut attitude = solution.attitude;
+        self.prior_velocity = None;
         if let Some(v) = velocity_m_s
             && let Ok(a) = self.aberrated(basis, &solution, v)
         {
             attitude = a;
             *applied = true;
+            self.prior_velocity = Some(v);
         }
         self.prior = Some((attitude, time_us));
         self.scale = Some(solution.scale);

@@ -43,6 +43,7 @@ fn from(q: Quat, w_deg_s: [f64; 3], interval_s: f64) -> PredictFrom {
         interval_s,
         exposure_s: 0.1,
         period_s: 0.1,
+        velocity_m_s: None,
     }
 }
 
@@ -417,9 +418,9 @@ fn a_hot_pixel_or_a_false_star_on_the_sensor_does_not_move_the_attitude() {
     }
 }
 
-/// Any value of any input (attitude, covariances, rate, scale, times, as raw f64 bits:
-/// NaN, infinities, denormals, huge): the prediction returns, never panics, and every star
-/// it gives is valid, on the sensor with its whole window, and at most 32.
+/// Any value of any input (attitude, covariances, rate, scale, times, velocity, as raw f64
+/// bits: NaN, infinities, denormals, huge): the prediction returns, never panics, and every
+/// star it gives is valid, on the sensor with its whole window, and at most 32.
 #[test]
 fn any_input_predicts_valid_stars_or_an_error() {
     use proptest::prelude::*;
@@ -460,6 +461,7 @@ fn any_input_predicts_valid_stars_or_an_error() {
                     interval_s: interval,
                     exposure_s: exposure,
                     period_s: 0.1,
+                    velocity_m_s: (scale > 0.5).then_some(w.map(|c| c * 3.0e5)),
                 };
                 if let Ok(stars) = predicted(&cat, &f) {
                     prop_assert!(stars.len() <= 32);
@@ -477,4 +479,37 @@ fn any_input_predicts_valid_stars_or_an_error() {
             },
         )
         .unwrap();
+}
+
+/// With the observer's velocity (the attitude of the ICRF, aberration removed) each star is
+/// predicted where the camera sees it, its catalog direction aberrated (to 1e-3 px): at
+/// 300 km/s, the velocity command's limit, up to 4 px from where the ICRF direction falls.
+#[test]
+fn an_icrf_attitude_predicts_the_aberrated_stars() {
+    let bytes = committed_catalog().unwrap();
+    let cat = Catalog::parse(&bytes).unwrap();
+    let q = random_attitude(&mut rand_chacha::ChaCha8Rng::seed_from_u64(25));
+    let v = [3.0e5, -1.0e5, 0.5e5];
+    let f = PredictFrom {
+        velocity_m_s: Some(v),
+        ..from(q, [0.0; 3], 0.1)
+    };
+    let camera = FieldSpec::ccd47_15deg(0.0).camera;
+    let stars = predicted(&cat, &f).unwrap();
+    let still = predicted(&cat, &from(q, [0.0; 3], 0.1)).unwrap();
+    assert!(stars.len() >= 8);
+    let mut largest = 0.0f64;
+    for p in &stars {
+        let s = cat.star(usize::from(p.catalog)).unwrap();
+        let seen = startrack_core::attitude::aberrate(s.dir, v);
+        let want = camera
+            .project_of(q.rotate(seen), f64::from(s.bv_mmag) / 1000.0)
+            .unwrap();
+        let d = (f64::from(p.x_px) - want[0]).hypot(f64::from(p.y_px) - want[1]);
+        assert!(d < 1e-3, "star {}: {d} px", p.catalog);
+        if let Some(o) = still.iter().find(|o| o.catalog == p.catalog) {
+            largest = largest.max(f64::from((o.x_px - p.x_px).hypot(o.y_px - p.y_px)));
+        }
+    }
+    assert!(largest > 1.0 && largest < 5.0, "{largest}");
 }

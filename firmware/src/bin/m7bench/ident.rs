@@ -212,6 +212,7 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
             interval_s: 0.1,
             exposure_s: 0.1,
             period_s: 0.1,
+            velocity_m_s: None,
         };
         let mut next = PredictedStars::new();
         let pcfg = PredictConfig::flight(7);
