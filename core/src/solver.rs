@@ -2,7 +2,8 @@
 //! its covariance out, and the prior it keeps from one frame to the next.
 //!
 //! Each frame, the usable stars ([`StarRecord::is_centroid`], not saturated, their trail
-//! not unknown ([`StarFlags::TRAIL_UNKNOWN`]), with a finite
+//! neither unknown nor clipped ([`StarFlags::TRAIL_UNKNOWN`], [`StarFlags::TRAIL_CLIPPED`]),
+//! with a finite
 //! positive sigma) are turned into camera-frame directions by the [`Camera`], brightest
 //! first, at most [`ident::MAX_STARS`]. With a prior no older than
 //! [`SolverConfig::max_prior_age_us`], [`ident::track`] identifies them near it; without one,
@@ -26,10 +27,11 @@
 //! percentile) plus a sort of at most 32 stars; no allocation, about 1 KB of state beyond
 //! identification's stack.
 
-use crate::attitude::{self, Attitude, AttitudeError, Camera, Observation, Quat, aberrate};
+use crate::attitude::{self, Attitude, AttitudeError, Camera, Observation, Quat, Rate, aberrate};
 use crate::catalog::Catalog;
 use crate::ident::{self, FocalScale, IdentConfig, IdentError, Measured};
-use crate::tracker::{StarFlags, StarRecord};
+use crate::predict::{self, PredictConfig, PredictError, PredictFrom};
+use crate::tracker::{PredictedStar, StarFlags, StarRecord};
 
 /// How the attitude stage identifies and when it trusts its prior.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -125,8 +127,13 @@ impl core::error::Error for SolveError {}
 pub struct Solver<'c> {
     catalog: Catalog<'c>,
     config: SolverConfig,
-    prior: Option<(Quat, u64)>,
+    prior: Option<(Attitude, u64)>,
     scale: Option<FocalScale>,
+    /// Stars of the last fix identified by their predicted identities (0: searched).
+    identified: u8,
+    /// The velocity the last fix's aberration was removed for (its attitude is then of the
+    /// ICRF), m/s.
+    prior_velocity: Option<[f64; 3]>,
 }
 
 impl<'c> Solver<'c> {
@@ -137,6 +144,8 @@ impl<'c> Solver<'c> {
             config,
             prior: None,
             scale: None,
+            identified: 0,
+            prior_velocity: None,
         }
     }
 
@@ -149,13 +158,66 @@ impl<'c> Solver<'c> {
 
     /// The attitude of the last solved frame and its time, us.
     pub fn prior(&self) -> Option<(Quat, u64)> {
-        self.prior
+        self.prior.map(|(a, t)| (a.q, t))
+    }
+
+    /// How many stars of the last fix were identified by the identities the catalog
+    /// predicted for them ([`Self::update_with_identities`]): 0 when the fix was searched
+    /// (tracking's triangles, lost in space) or there was none.
+    pub fn identified(&self) -> u8 {
+        self.identified
+    }
+
+    /// The catalog stars of the next frame ([`predict::predict`]): the last fix (its
+    /// attitude, covariance and focal-length scale, at its time, and the velocity its
+    /// aberration was removed for) propagated by `rate` to
+    /// `next_mid_us`, the next frame's mid-exposure, its stars trailed over `exposure_s` and
+    /// moving over `period_s` after it, on an active area of `active_px` (columns, rows),
+    /// into `out`. No fix, a fix after `next_mid_us` or older than the configuration allows
+    /// is an error, as are bad inputs.
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the prediction's inputs, each plain"
+    )]
+    pub fn predict(
+        &self,
+        rate: &Rate,
+        next_mid_us: u64,
+        exposure_s: f64,
+        period_s: f64,
+        active_px: [u16; 2],
+        cfg: &PredictConfig,
+        out: &mut predict::PredictedStars,
+    ) -> Result<usize, PredictError> {
+        out.clear();
+        let (attitude, t) = self.prior.ok_or(PredictError::TooOld)?;
+        if next_mid_us < t {
+            return Err(PredictError::BadInput);
+        }
+        let from = PredictFrom {
+            attitude,
+            rate: *rate,
+            scale: self.scale.map_or(1.0, |s| s.value),
+            interval_s: (next_mid_us - t) as f64 * 1e-6,
+            exposure_s,
+            period_s,
+            velocity_m_s: self.prior_velocity,
+        };
+        predict::predict(
+            &self.catalog,
+            &self.config.camera,
+            &from,
+            active_px,
+            cfg,
+            out,
+        )
     }
 
     /// Forgets the prior (the next frame is lost in space).
     pub fn forget(&mut self) {
         self.prior = None;
         self.scale = None;
+        self.identified = 0;
     }
 
     /// The attitude of the frame at `time_us` whose tracker reported `stars`, of the apparent
@@ -177,37 +239,80 @@ impl<'c> Solver<'c> {
         time_us: u64,
         velocity_m_s: Option<[f64; 3]>,
     ) -> (Result<Fix, SolveError>, bool) {
+        self.update_with_identities(stars, core::iter::empty(), time_us, velocity_m_s)
+    }
+
+    /// [`Self::update_at_velocity`] for stars measured in windows the catalog predicted:
+    /// `identities` gives each star of `stars`, in order, the prediction it was measured for
+    /// (the tracker's [`crate::tracker::Tracker::identities`]; `None`, or a shorter
+    /// iterator, for a star found otherwise). A usable star within its prediction's bound
+    /// ([`PredictedStar::matches`]) keeps its catalog identity; with a fresh prior and at
+    /// least four such stars, [`ident::confirm`] verifies them (a star off its prediction,
+    /// or inconsistent with the others' attitude, is dropped, so a false star cannot enter
+    /// the attitude), and only when that fails does identification search (tracking's
+    /// triangles, then lost in space) on every usable star. Cost: the joint fit of the
+    /// identified stars, a few thousand flops, instead of the search.
+    pub fn update_with_identities<'p>(
+        &mut self,
+        stars: &[StarRecord],
+        identities: impl IntoIterator<Item = Option<&'p PredictedStar>>,
+        time_us: u64,
+        velocity_m_s: Option<[f64; 3]>,
+    ) -> (Result<Fix, SolveError>, bool) {
         let mut applied = false;
-        let result = self.identify(stars, time_us, velocity_m_s, &mut applied);
+        let mut ids = identities.into_iter();
+        let result = self.identify(
+            stars,
+            &mut |_| ids.next().flatten().copied(),
+            time_us,
+            velocity_m_s,
+            &mut applied,
+        );
         (result, applied)
     }
 
     fn identify(
         &mut self,
         stars: &[StarRecord],
+        identity: &mut dyn FnMut(usize) -> Option<PredictedStar>,
         time_us: u64,
         velocity_m_s: Option<[f64; 3]>,
         applied: &mut bool,
     ) -> Result<Fix, SolveError> {
-        let mut measured: heapless::Vec<(f32, Measured), { ident::MAX_STARS }> =
+        self.identified = 0;
+        // Each usable star's flux, direction and the catalog star it was predicted to be
+        // (when it lies within its prediction's bound).
+        let mut measured: heapless::Vec<(f32, Measured, Option<u16>), { ident::MAX_STARS }> =
             heapless::Vec::new();
-        for s in stars.iter().filter(|s| usable(s)) {
+        for (k, s) in stars.iter().enumerate() {
+            let id = identity(k)
+                .filter(|p| p.matches(s.x_px, s.y_px))
+                .map(|p| p.catalog);
+            if !usable(s) {
+                continue;
+            }
             // A position the camera model cannot invert (a fold) is not used.
             let Some(m) = self.measure(s) else { continue };
             if measured.len() < ident::MAX_STARS {
-                let _ = measured.push((s.flux_e, m));
+                let _ = measured.push((s.flux_e, m, id));
             } else if let Some(dimmest) = measured
                 .iter_mut()
                 .min_by(|a, b| a.0.total_cmp(&b.0))
                 .filter(|d| d.0 < s.flux_e)
             {
-                *dimmest = (s.flux_e, m);
+                *dimmest = (s.flux_e, m, id);
             }
         }
         crate::small_sort::sort_by(&mut measured, |a, b| b.0.total_cmp(&a.0));
         let mut dirs: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
-        for (_, m) in &measured {
+        let mut known: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
+        let mut known_ids: heapless::Vec<u16, { ident::MAX_STARS }> = heapless::Vec::new();
+        for (_, m, id) in &measured {
             let _ = dirs.push(*m);
+            if let Some(c) = id {
+                let _ = known.push(*m);
+                let _ = known_ids.push(*c);
+            }
         }
         let used = dirs.len() as u8;
         if dirs.len() < ident::MIN_MATCHES {
@@ -218,37 +323,61 @@ impl<'c> Solver<'c> {
             .prior
             .filter(|&(_, t)| time_us >= t && time_us - t <= cfg.max_prior_age_us);
         let prior_scale = self.scale.map_or(1.0, |s| s.value);
-        let tracked = fresh.and_then(|(q, _)| {
-            ident::track_scaled(
-                &self.catalog,
-                &dirs,
-                q,
-                prior_scale,
-                cfg.prior_error_rad,
-                &cfg.ident,
-            )
-            .ok()
-        });
-        let (solution, mode) = match tracked {
-            Some(s) => (s, SolveMode::Tracking),
-            None => (
-                ident::lost_in_space(&self.catalog, &dirs, &cfg.ident).map_err(|error| {
-                    SolveError::Ident {
-                        usable: used,
-                        error,
-                    }
-                })?,
-                SolveMode::LostInSpace,
-            ),
+        let confirmed = fresh
+            .filter(|_| known.len() >= ident::MIN_MATCHES)
+            .and_then(|(a, _)| {
+                ident::confirm(
+                    &self.catalog,
+                    &known,
+                    &known_ids,
+                    a.q,
+                    prior_scale,
+                    &cfg.ident,
+                )
+                .ok()
+            });
+        let tracked = || {
+            fresh.and_then(|(a, _)| {
+                ident::track_scaled(
+                    &self.catalog,
+                    &dirs,
+                    a.q,
+                    prior_scale,
+                    cfg.prior_error_rad,
+                    &cfg.ident,
+                )
+                .ok()
+            })
+        };
+        let (solution, mode, basis) = match confirmed {
+            Some(s) => {
+                self.identified = s.matches.len() as u8;
+                (s, SolveMode::Tracking, &known)
+            }
+            None => match tracked() {
+                Some(s) => (s, SolveMode::Tracking, &dirs),
+                None => (
+                    ident::lost_in_space(&self.catalog, &dirs, &cfg.ident).map_err(|error| {
+                        SolveError::Ident {
+                            usable: used,
+                            error,
+                        }
+                    })?,
+                    SolveMode::LostInSpace,
+                    &dirs,
+                ),
+            },
         };
         let mut attitude = solution.attitude;
+        self.prior_velocity = None;
         if let Some(v) = velocity_m_s
-            && let Ok(a) = self.aberrated(&dirs, &solution, v)
+            && let Ok(a) = self.aberrated(basis, &solution, v)
         {
             attitude = a;
             *applied = true;
+            self.prior_velocity = Some(v);
         }
-        self.prior = Some((attitude.q, time_us));
+        self.prior = Some((attitude, time_us));
         self.scale = Some(solution.scale);
         Ok(Fix {
             attitude,
@@ -307,12 +436,15 @@ impl<'c> Solver<'c> {
     }
 }
 
-/// A star whose position identification may use: a centroid, not saturated, its trail not
-/// unknown, with a finite position and a finite positive sigma.
+/// A star whose position identification may use: a centroid, not saturated, its trail
+/// neither unknown nor clipped, with a finite position and a finite positive sigma.
 fn usable(s: &StarRecord) -> bool {
     s.is_centroid()
         && !s.flags.intersects(
-            StarFlags::SATURATED | StarFlags::DETECT_SATURATED | StarFlags::TRAIL_UNKNOWN,
+            StarFlags::SATURATED
+                | StarFlags::DETECT_SATURATED
+                | StarFlags::TRAIL_UNKNOWN
+                | StarFlags::TRAIL_CLIPPED,
         )
         && s.x_px.is_finite()
         && s.y_px.is_finite()

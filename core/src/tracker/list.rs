@@ -5,6 +5,7 @@
 //! (at most `N` compares) per extra star.
 
 use super::measure::StarBackground;
+use super::predicted::PredictedStar;
 use super::record::StarRecord;
 
 /// What a star carries to the next tracking frame besides its position.
@@ -18,6 +19,8 @@ pub(crate) struct Carry {
     pub(crate) velocity_px: Option<(f32, f32)>,
     /// Tracking frames in a row that measured it (0 from acquisition), saturating.
     pub(crate) tracked_frames: u8,
+    /// The attitude stage's prediction it was measured for (its catalog identity).
+    pub(crate) predicted: Option<PredictedStar>,
 }
 
 /// Up to `N` stars, of which at most `limit` are kept.
@@ -53,6 +56,11 @@ impl<const N: usize> StarList<N> {
 
     pub(crate) fn iter(&self) -> impl Iterator<Item = (&StarRecord, &Carry)> {
         self.records.iter().zip(self.carries.iter())
+    }
+
+    /// Each record's carry, in the records' order.
+    pub(crate) fn carries(&self) -> &[Carry] {
+        &self.carries
     }
 
     /// Adds a star; when the list is full the faintest is replaced by a brighter one.

@@ -15,7 +15,9 @@
 //!                 pass the threshold and every background row whole; each closed blob's
 //!                 centroid window is cut from the ring once its last row is in,
 //!                 calibrated and measured (acquire.rs)
-//!   tracking      the rows of the windows placed on the last frame's stars are copied;
+//!   tracking      the rows of the windows placed on the catalog's stars the attitude
+//!                 stage predicted ([`Tracker::predict_next`]), else on the last frame's
+//!                 stars, are copied;
 //!                 a window whose last row is in is calibrated, tested for its star
 //!                 (detect::track) and the centroid window around the star's peak
 //!                 measured (track.rs)
@@ -35,7 +37,9 @@
 //! All in `modes.rs`, asked by [`Tracker::begin_frame`] and [`Tracker::end_frame`]: a
 //! command takes effect at the next frame; no table means standby; acquisition hands over
 //! to tracking with at least `min_track_stars` usable centroids, tracking goes back with
-//! fewer or every `reacquire_every` frames. Every change is an [`Event::ModeChange`] with
+//! fewer or every `reacquire_every` frames on its own stars; a prediction of the next
+//! frame's stars from the attitude stage ([`Tracker::predict_next`]) keeps it tracking on
+//! the catalog's stars and never reacquires. Every change is an [`Event::ModeChange`] with
 //! its [`ModeReason`].
 //!
 //! # Memory
@@ -62,6 +66,7 @@ mod list;
 mod measure;
 mod modes;
 mod ports;
+mod predicted;
 mod record;
 mod track;
 
@@ -73,6 +78,7 @@ pub use ports::{
     Clock, FixedTable, FixedTemperature, Integration, LineSource, Ports, SourceLine, TableStore,
     TelemetrySink, Thermometer,
 };
+pub use predicted::{PredictedStar, predicted_window_side};
 pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Provenance, StarFlags,
     StarRecord, TemperatureSource,
@@ -278,6 +284,26 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.work.stars.records()
     }
 
+    /// Each star of [`Self::stars`] with the attitude stage's prediction it was measured for
+    /// (its catalog identity), `None` for a star the tracker found itself; in the same order.
+    pub fn identities(&self) -> impl Iterator<Item = Option<&PredictedStar>> + '_ {
+        self.work
+            .stars
+            .carries()
+            .iter()
+            .map(|c| c.predicted.as_ref())
+    }
+
+    /// Takes the attitude stage's prediction of the next frame's stars (between frames;
+    /// replacing any, an empty slice clears it): the next frame tracks one window on each
+    /// valid star ([`PredictedStar::is_valid`], the first 32) instead of the
+    /// last frame's stars, even where the mode rules would have acquired
+    /// ([`ModeReason::Predicted`]). A commanded acquisition or standby drops it. Returns
+    /// the stars taken.
+    pub fn predict_next(&mut self, stars: &[PredictedStar]) -> usize {
+        self.trk.set_prediction(stars)
+    }
+
     /// The calibration a window read now gets, as the tracker would calibrate it: the last
     /// frame's table, the last complete dark scale, the configured exposure and the last
     /// frame's temperature (the link's diagnostic windows use it); `None` before a frame
@@ -322,6 +348,11 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
     /// The running dark ratio now (also in every [`FrameSummary`]).
     pub fn dark_drift(&self) -> DarkDrift {
         self.drift.report()
+    }
+
+    /// The readout geometry the tracker was made for.
+    pub fn geometry(&self) -> &ReadoutGeometry {
+        &self.geometry
     }
 
     /// The configuration in force.
@@ -431,7 +462,14 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.apply_dark_law(table.and_then(|t| t.dark_law()));
         self.table = table;
 
-        let (to, change) = self.modes.begin(self.trk.priors_len() > 0, table.is_some());
+        let (to, change) = self.modes.begin(
+            self.trk.priors_len() > 0,
+            table.is_some(),
+            self.trk.prediction_len() > 0,
+        );
+        if to != Mode::Tracking {
+            self.trk.drop_prediction();
+        }
         if let Some((from, reason)) = change {
             telemetry.event(&Event::ModeChange {
                 frame,
@@ -637,7 +675,9 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.work.summary.stars_dropped = self.work.stars.dropped;
         self.trk
             .keep_priors(&self.work.stars, usize::from(self.config.max_tracked));
-        self.work.summary.next_mode = self.modes.end(centroids, &self.config);
+        self.work.summary.next_mode =
+            self.modes
+                .end(centroids, &self.config, self.trk.predicted_frame());
         telemetry.frame(&self.work.summary);
         self.work.summary
     }

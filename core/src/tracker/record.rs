@@ -20,7 +20,8 @@ pub enum Mode {
     Standby,
     /// Whole-frame detection, a centroid per detected star.
     Acquisition,
-    /// Only windows around the last frame's stars are read and measured.
+    /// Only windows around the last frame's stars, or the catalog's stars the attitude
+    /// stage predicts, are read and measured.
     Tracking,
 }
 
@@ -101,6 +102,12 @@ bitflags::bitflags! {
         /// frames measured its motion; acquisition: its fitted width exceeds the configured
         /// PSF's by `SMEARED_WIDTH_RATIO`.
         const TRAIL_UNKNOWN = 1 << 25;
+        /// Tracking: its trail during the exposure is longer than its tracking window holds
+        /// (a component beyond the window's side less 1 px, the capture's largest window
+        /// being `CAPTURE_MAX_SIDE`): the trailed fit sees no end of it and the position
+        /// along it is not measured; kept to place the next window, not used for the
+        /// attitude.
+        const TRAIL_CLIPPED = 1 << 26;
     }
 }
 
@@ -110,14 +117,16 @@ bitflags::bitflags! {
     /// and the SIL's CSV carry them as a `u8`.
     #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
     pub struct Provenance: u8 {
-        /// Found in a tracking frame, in a window placed on the last frame's star (else by
-        /// acquisition's scan of the whole frame).
+        /// Found in a tracking frame, in a window placed on the last frame's star or on a
+        /// catalog star the attitude stage predicted (else by acquisition's scan of the
+        /// whole frame).
         const TRACKED = 1 << 0;
         /// Measured by the fused raw-window CoG (tracking), background carried from the
         /// star's last full measurement.
         const FUSED = 1 << 1;
         /// Measured by the trailed-star fit (tracking), on the whole tracking window, the
-        /// trail taken from the star's last motion: the position is at mid-exposure.
+        /// trail taken from the star's prediction or else its last motion: the position is
+        /// at mid-exposure.
         const TRAILED = 1 << 2;
     }
 }
@@ -429,6 +438,9 @@ pub enum ModeReason {
     NoTable,
     /// A calibration table is in force again after a standby for want of one.
     TableAvailable,
+    /// The attitude stage predicted the frame's stars from the catalog, where the last
+    /// frame's stars alone would have sent the tracker to acquisition.
+    Predicted,
 }
 
 /// Something that happened between frames.

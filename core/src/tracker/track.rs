@@ -24,7 +24,17 @@
 //! method, whose fit flags a smear it cannot follow. A star that moved at least
 //! [`TRAIL_MIN_PX`] before [`TRAIL_SETTLE_FRAMES`] tracking frames measured its motion is
 //! flagged [`StarFlags::TRAIL_UNKNOWN`]: it places the next window, the attitude stage skips
-//! it.
+//! it. A trail longer than the window holds (a component beyond its side less 1 px: with
+//! [`CAPTURE_MAX_SIDE`] 15, 14 px, 2.06 deg/s across the boresight in 100 ms) leaves the
+//! position along it unmeasured: the star is flagged [`StarFlags::TRAIL_CLIPPED`] and the
+//! attitude stage skips it.
+//!
+//! With the attitude stage's prediction ([`super::PredictedStar`]) the windows are placed
+//! on the catalog's stars at their predicted positions instead, each sized by
+//! [`super::predicted_window_side`] (the centroid window, the prediction's bound and the
+//! predicted trail), and a star is measured with the trailed-star fit from its predicted
+//! trail in its first tracked frame (no settling, never `TRAIL_UNKNOWN`); its prediction
+//! goes with its record to the attitude stage, which checks it and keeps its identity.
 //!
 //! Cost per line: a row test per window and the copy of the rows inside windows; per
 //! star, the window's calibration (121 pixels for 11x11), the window test (~2-4 k
@@ -37,6 +47,7 @@ use super::Shared;
 use super::config::{CentroidMethod, TrackerConfig};
 use super::list::{Carry, StarList};
 use super::measure::{Policy, StarBackground, measure};
+use super::predicted::{PredictedStar, predicted_window_side};
 use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord};
 use super::{Capture, TRACK_WINDOWS, Watch};
 use crate::calib::refresh::WatchedWindow;
@@ -50,12 +61,26 @@ use crate::detect::track_detect;
 use crate::geometry::ReadoutGeometry;
 use crate::window::Rect;
 
-/// A star of the last frame to look for.
+/// A star to look for: one of the last frame's, or one the attitude stage predicts.
 #[derive(Clone, Copy, Debug)]
 struct Prior {
     x_px: f32,
     y_px: f32,
     carry: Carry,
+}
+
+impl Prior {
+    /// The catalog star `p` at its predicted position.
+    fn predicted(p: PredictedStar) -> Self {
+        Self {
+            x_px: p.x_px,
+            y_px: p.y_px,
+            carry: Carry {
+                predicted: Some(p),
+                ..Carry::default()
+            },
+        }
+    }
 }
 
 /// A placed window: its star and the fused CoG's anchor pixel and plan slot.
@@ -66,9 +91,13 @@ struct Placed {
     slot: u8,
 }
 
-/// Tracking's state: the last frame's stars and this frame's windows (capture order).
+/// Tracking's state: the last frame's stars, the attitude stage's prediction for the next
+/// frame, and this frame's windows (capture order).
 pub(super) struct Tracking {
     priors: heapless::Vec<Prior, TRACK_WINDOWS>,
+    prediction: heapless::Vec<PredictedStar, TRACK_WINDOWS>,
+    /// The current frame's windows came from a prediction.
+    predicted_frame: bool,
     placed: heapless::Vec<Placed, TRACK_WINDOWS>,
     rects: heapless::Vec<Rect, TRACK_WINDOWS>,
 }
@@ -92,7 +121,15 @@ pub const TRAIL_SETTLE_FRAMES: u8 = 2;
 
 /// Flags `record` [`StarFlags::TRAIL_UNKNOWN`] when its star moved at least
 /// [`TRAIL_MIN_PX`] from `prior` before its motion settled; returns its tracked-frame count.
+/// A predicted star's motion is the attitude's: it is never flagged.
 fn settle(record: &mut StarRecord, prior: &Prior) -> u8 {
+    if prior.carry.predicted.is_some() {
+        return prior
+            .carry
+            .tracked_frames
+            .saturating_add(1)
+            .max(TRAIL_SETTLE_FRAMES);
+    }
     let (dx, dy) = (record.x_px - prior.x_px, record.y_px - prior.y_px);
     let moved = libm::sqrtf(dx * dx + dy * dy);
     // A non-finite move is no evidence of motion; the record's own flags say what it is.
@@ -111,6 +148,14 @@ fn trail_of(velocity_px: Option<(f32, f32)>) -> Option<(f32, f32)> {
         let l = libm::sqrtf(vx * vx + vy * vy);
         l.is_finite() && l >= TRAIL_MIN_PX
     })
+}
+
+/// Whether a trail of `trail_px` (px, exposure start to end) is longer than `rect` holds: a
+/// component beyond the window's side less 1 px, so that no end of it is in the window.
+fn trail_clipped(trail_px: (f32, f32), rect: Rect) -> bool {
+    // A NaN trail is no trail the window holds.
+    let beyond = |t: f32, side: u16| t.is_nan() || t.abs() > f32::from(side.saturating_sub(1));
+    beyond(trail_px.0, rect.width) || beyond(trail_px.1, rect.height)
 }
 
 /// The side of a trailed star's tracking window: `side` widened by the trail's larger
@@ -137,6 +182,8 @@ impl Tracking {
     pub(super) const fn new() -> Self {
         Self {
             priors: heapless::Vec::new(),
+            prediction: heapless::Vec::new(),
+            predicted_frame: false,
             placed: heapless::Vec::new(),
             rects: heapless::Vec::new(),
         }
@@ -144,7 +191,35 @@ impl Tracking {
 
     /// Stars the next tracking frame would look for.
     pub(super) fn priors_len(&self) -> usize {
-        self.priors.len()
+        self.priors.len().max(self.prediction.len())
+    }
+
+    /// Takes the attitude stage's prediction for the next frame (replacing any): its valid
+    /// stars ([`PredictedStar::is_valid`]), the first [`TRACK_WINDOWS`]; returns how many.
+    pub(super) fn set_prediction(&mut self, stars: &[PredictedStar]) -> usize {
+        self.prediction.clear();
+        for p in stars.iter().filter(|p| p.is_valid()) {
+            if self.prediction.push(*p).is_err() {
+                break;
+            }
+        }
+        self.prediction.len()
+    }
+
+    /// Stars predicted for the next frame.
+    pub(super) fn prediction_len(&self) -> usize {
+        self.prediction.len()
+    }
+
+    /// Forgets the prediction (a frame that does not track).
+    pub(super) fn drop_prediction(&mut self) {
+        self.prediction.clear();
+        self.predicted_frame = false;
+    }
+
+    /// Whether the current (or last) frame's windows came from a prediction.
+    pub(super) fn predicted_frame(&self) -> bool {
+        self.predicted_frame
     }
 
     /// This frame's windows.
@@ -187,6 +262,16 @@ impl Tracking {
         capture.reset();
         self.placed.clear();
         self.rects.clear();
+        // A prediction replaces the last frame's stars: the catalog's stars in the field.
+        self.predicted_frame = !self.prediction.is_empty();
+        if self.predicted_frame {
+            self.priors.clear();
+            for p in self.prediction.iter() {
+                // Same capacity: cannot fail.
+                let _ = self.priors.push(Prior::predicted(*p));
+            }
+            self.prediction.clear();
+        }
         // Plan slots: a star keeps its last one (each slot served one window last frame,
         // so at most one star holds it); the others take a free one.
         let mut used = 0u64;
@@ -207,7 +292,10 @@ impl Tracking {
                 pixel_of(p.x_px + vx, geometry.active_cols),
                 pixel_of(p.y_px + vy, geometry.active_rows),
             );
-            let side = trail_of(p.carry.velocity_px).map_or(side, |t| trailed_side(side, t));
+            let side = match p.carry.predicted {
+                Some(pr) => predicted_window_side(config.window_px, pr.bound_px, pr.trail_px),
+                None => trail_of(p.carry.velocity_px).map_or(side, |t| trailed_side(side, t)),
+            };
             let (rect, clipped) = Rect::centred_clipped(
                 anchor.0,
                 anchor.1,
@@ -296,7 +384,11 @@ impl Tracking {
         let Some(placed) = self.placed.get(i) else {
             return;
         };
+        let predicted = placed.prior.carry.predicted;
         let velocity = |r: &StarRecord| {
+            if let Some(p) = predicted {
+                return Some(p.motion_px);
+            }
             let v = (r.x_px - placed.prior.x_px, r.y_px - placed.prior.y_px);
             // A jump beyond the window is no motion of this star: forget it.
             let limit = f32::from(config.track_window_px());
@@ -307,7 +399,10 @@ impl Tracking {
             .capture
             .window(i)
             .is_some_and(|w| sh.watch.touches(w.rect));
-        let trail = trail_of(placed.prior.carry.velocity_px);
+        let trail = match predicted {
+            Some(p) => trail_of(Some(p.trail_px)),
+            None => trail_of(placed.prior.carry.velocity_px),
+        };
         if policy.method == CentroidMethod::FusedCog1
             && !found
             && trail.is_none()
@@ -322,6 +417,7 @@ impl Tracking {
                     plan_slot: Some(placed.slot),
                     velocity_px: v,
                     tracked_frames,
+                    predicted,
                 },
             );
             return;
@@ -375,6 +471,9 @@ impl Tracking {
             let mut record =
                 policy.trailed_record(&input, StarFlags::from_track(verdict.flags), trail);
             record.provenance = Provenance::TRACKED | Provenance::TRAILED;
+            if trail_clipped(trail, rect) {
+                record.flags |= StarFlags::TRAIL_CLIPPED;
+            }
             let v = velocity(&record);
             let tracked_frames = settle(&mut record, &placed.prior);
             sh.stars.push(
@@ -384,6 +483,7 @@ impl Tracking {
                     plan_slot: None,
                     velocity_px: v,
                     tracked_frames,
+                    predicted,
                 },
             );
             return;
@@ -419,6 +519,7 @@ impl Tracking {
                 plan_slot: None,
                 velocity_px: v,
                 tracked_frames,
+                predicted,
             },
         );
     }

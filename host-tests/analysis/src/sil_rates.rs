@@ -9,7 +9,8 @@
 //! RMS bound are over the solved frames that are not wrong.
 //!
 //! The scene: 100 ms exposures every 100 ms (the frame-transfer sensor integrating while
-//! the last frame is read), the flight configuration's tracker, the SIL's sensor; run `k` of
+//! the last frame is read), the flight configuration's tracker told that exposure, the
+//! SIL's sensor; run `k` of
 //! a rate uses seed `seed0 + k` for the attitude and the sensor. Cost: a run is what its
 //! frames cost in the SIL ([`startrack_homes::sil`]: ~1 s an acquisition frame in release, ~0.02 s a
 //! tracking frame), so a rate that keeps losing its stars costs most.
@@ -90,9 +91,13 @@ pub fn config(case: &RateCase, seed: u64, frames: u32) -> SilConfig {
     // Valid by construction: finite rate, exposure equal to the period.
     let motion = ExposureMotion::new(profile, EXPOSURE_S, EXPOSURE_S)
         .unwrap_or_else(|e| unreachable!("{e}"));
+    // The tracker is told the exposure it runs with (its mid-exposure tags follow it).
+    let mut tracker = SilConfig::default().tracker;
+    tracker.exposure_ms = (EXPOSURE_S * 1e3).round() as u32;
     SilConfig {
         frames,
         seed,
+        tracker,
         sky: Some(SkyScene::ccd47_15deg_moving(q0, motion)),
         period_us: (EXPOSURE_S * 1e6).round() as u64,
         ..SilConfig::default()

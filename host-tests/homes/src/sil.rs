@@ -91,6 +91,12 @@ pub struct SilConfig {
     /// time of its first pulse) before its first frame, so the attitude stage removes the
     /// aberration; `false` leaves the attitude apparent (for comparison).
     pub send_velocity: bool,
+    /// Point sources in no catalog, still, rendered besides the scene's stars in every
+    /// frame from `false_stars_from`: false stars, or with a narrow PSF (`a_px` 0.3) a hot
+    /// pixel's or a cosmic ray's spike. They are not in the frames' truth.
+    pub false_stars: Vec<Star>,
+    /// The first frame with the false stars.
+    pub false_stars_from: u32,
 }
 
 /// The spacecraft time the SIL's commands take at counter 0 (`--spacecraft-time`'s
@@ -112,6 +118,8 @@ impl Default for SilConfig {
             counter_rate_ppm: 0.0,
             velocity_m_s: None,
             send_velocity: true,
+            false_stars: Vec::new(),
+            false_stars_from: 0,
         }
     }
 }
@@ -177,6 +185,9 @@ pub struct SilFrame {
     pub missed: Vec<Star>,
     /// Samples the sensor rendered for it.
     pub samples_read: u64,
+    /// Its windows the attitude stage predicted from the catalog (0: none; the tracker's
+    /// own windows, or a full frame).
+    pub predicted_windows: usize,
     /// The attitude stage's result and the truth (sky scenes only).
     pub attitude: Option<AttitudeCheck>,
 }
@@ -197,6 +208,8 @@ pub struct AttitudeCheck {
     /// The true spacecraft time at mid-exposure, s since the CUC epoch (`None` without a
     /// spacecraft clock).
     pub true_time_s: Option<f64>,
+    /// Stars of the fix identified by their predicted identities (0: searched, or none).
+    pub identified: u8,
 }
 
 impl AttitudeCheck {
@@ -448,6 +461,7 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
             telemetry: &mut recorder,
         };
         let before = source.samples_rendered;
+        let predicted_windows = cycle.predicted();
         let Ok(outcome) = block_on(cycle.run_frame(&mut source, &mut ports));
         let summary = outcome.summary;
         let truth = stars_of(summary.frame);
@@ -458,6 +472,11 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
             &params,
             source.samples_rendered - before,
         );
+        frame.predicted_windows = if summary.mode == Mode::Tracking {
+            predicted_windows
+        } else {
+            0
+        };
         if let (Some(fix), Some((scene, _))) = (outcome.attitude, sky.as_ref()) {
             let mid_us = outcome.report.map_or(0, |r| r.mid_exposure_us);
             frame.attitude = Some(AttitudeCheck {
@@ -469,6 +488,7 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
                 true_time_s: pps
                     .as_ref()
                     .map(|l| l.spacecraft_us_at(mid_us as f64) * 1e-6),
+                identified: cycle.solver().map_or(0, |s| s.identified()),
             });
         }
         frames.push(frame);
@@ -514,7 +534,8 @@ pub fn frame_stars(
 }
 
 /// The simulated sensor of frame `frame`: [`frame_stars`] still, or with a sky scene that
-/// turns during the exposure its stars along their paths ([`SkyScene::trails`]).
+/// turns during the exposure its stars along their paths ([`SkyScene::trails`]); and the
+/// configuration's false stars.
 pub fn frame_simulator(
     config: &SilConfig,
     params: &SensorParams,
@@ -528,12 +549,23 @@ pub fn frame_simulator(
         return Simulator {
             frame,
             trails: sky.trails(cat, frame, f64::from(config.tracker.psf_a_px)),
-            ..Simulator::new(params.clone(), Vec::new())
+            ..Simulator::new(params.clone(), false_stars(config, frame))
         };
     }
+    let mut stars = frame_stars(config, base, catalog, frame);
+    stars.extend(false_stars(config, frame));
     Simulator {
         frame,
-        ..Simulator::new(params.clone(), frame_stars(config, base, catalog, frame))
+        ..Simulator::new(params.clone(), stars)
+    }
+}
+
+/// The false stars of frame `frame` ([`SilConfig::false_stars`]).
+fn false_stars(config: &SilConfig, frame: u32) -> Vec<Star> {
+    if frame >= config.false_stars_from {
+        config.false_stars.clone()
+    } else {
+        Vec::new()
     }
 }
 
@@ -650,6 +682,7 @@ fn match_frame(
         stars,
         missed,
         samples_read,
+        predicted_windows: 0,
         attitude: None,
     }
 }

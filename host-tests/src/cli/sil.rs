@@ -231,6 +231,8 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
     };
     if let (Some(sky), Some(motion)) = (config.sky.as_mut(), motion_of(args, config.period_us)?) {
         config.period_us = (motion.period_s * 1e6).round() as u64;
+        // The tracker is told the exposure it runs with (its mid-exposure tags follow it).
+        config.tracker.exposure_ms = (motion.exposure_s * 1e3).round().max(1.0) as u32;
         sky.motion = Some(motion);
         sky.rate_rad_per_frame = [0.0; 3];
     }

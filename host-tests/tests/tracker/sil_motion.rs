@@ -1,6 +1,7 @@
 //! The tracker on a turning sky ([`startrack_sim::sky::motion`]): stars trailed during the
-//! exposure, measured by the trailed-star fit once the tracker knows their motion from the
-//! last two frames, against the truth at mid-exposure.
+//! exposure, measured by the trailed-star fit once the tracker knows their motion (from the
+//! last two frames, or from the attitude's prediction of the catalog's windows), against the
+//! truth at mid-exposure; the rate table and a slew held on the catalog's windows.
 
 use rand::SeedableRng;
 use startrack_analysis::sil_rates;
@@ -131,7 +132,7 @@ fn rate_table_in_short_has_no_wrong_attitude() {
 }
 
 /// The full rate table: every rate of [`sil_rates::RATE_CASES`] over 3 seeded attitudes of
-/// 20 frames, written to [`RATES_CSV`]. About ten minutes in the test profile:
+/// 20 frames, written to [`RATES_CSV`]. About six minutes in the test profile:
 /// `cargo test -p startrack-host --test tracker sil_motion::rate_table -- --ignored --nocapture`.
 #[test]
 #[ignore = "Monte Carlo over six rates, minutes; its CSV is committed"]
@@ -216,5 +217,106 @@ fn star_signal_scales_with_the_exposure() {
     assert!(a.len() > 10 && a.len() == b.len());
     for (s, t) in a.iter().zip(&b) {
         assert!((t.signal_e - 0.5 * s.signal_e).abs() < 1e-9 * s.signal_e);
+    }
+}
+
+/// The rate table's run of seed 100 ([`sil_rates::config`]) slewing from rest across the
+/// boresight at `accel_deg_s2` to `rate_deg_s`, exposures of `exposure_ms` every 100 ms (the
+/// tracker told them), `frames` frames.
+fn slew(rate_deg_s: f64, accel_deg_s2: f64, exposure_ms: u32, frames: u32) -> SilConfig {
+    let case = sil_rates::RateCase {
+        motion: "cross",
+        rate_deg_s,
+    };
+    let mut config = sil_rates::config(&case, 100, frames);
+    if let Some(m) = config.sky.as_mut().and_then(|s| s.motion.as_mut()) {
+        m.profile.accel_rad_s2 = accel_deg_s2.to_radians();
+        m.exposure_s = f64::from(exposure_ms) * 1e-3;
+    }
+    config.tracker.exposure_ms = exposure_ms;
+    config
+}
+
+/// A slew from rest to 3 deg/s across the boresight (2 deg/s^2, the rate reached at 1.5 s),
+/// 40 ms exposures every 100 ms (8 px trails at 3 deg/s, 20 px of motion between frames):
+/// from the first frame's lost-in-space attitude the tracker never acquires again; every
+/// frame has an attitude and none is wrong ([`sil_rates::is_wrong`]: while the rate changes
+/// a trailed star's centroid is its mean position over the exposure, not its position at
+/// mid-exposure, `alpha T^2 / 24` off, 0.5 arcsec here); and once at the rate (from frame
+/// 18, the rate filter predicting again) every frame tracks the catalog's predicted
+/// windows, its attitude from their identities and within 5 of its sigmas on each axis.
+/// About 15 s in the test profile.
+#[test]
+fn catalog_windows_hold_a_slew_to_3_deg_s() {
+    let config = slew(3.0, 2.0, 40, 25);
+    let report = sil::run(&config).unwrap();
+    for f in &report.frames {
+        let n = f.summary.frame;
+        let expected = if n == 0 {
+            Mode::Acquisition
+        } else {
+            Mode::Tracking
+        };
+        assert_eq!(f.summary.mode, expected, "frame {n}");
+        let c = f.attitude.as_ref().unwrap();
+        let fix = c.fix.as_ref().unwrap_or_else(|e| panic!("frame {n}: {e}"));
+        let e = c.error_rad().unwrap();
+        let a = &fix.attitude;
+        let wrong = sil_rates::is_wrong(e, a.boresight_sigma_rad(), a.roll_sigma_rad());
+        assert!(!wrong, "frame {n}: {e:?}");
+        if n >= 18 {
+            for (i, v) in e.iter().enumerate() {
+                let sigma = a.cov_rad2[i][i].sqrt();
+                assert!(
+                    v.abs() < 5.0 * sigma,
+                    "frame {n}: axis {i} {v:e} rad, sigma {sigma:e}"
+                );
+            }
+            assert!(
+                f.predicted_windows >= 20,
+                "frame {n}: {}",
+                f.predicted_windows
+            );
+            assert!(c.identified >= 20, "frame {n}: {} identified", c.identified);
+        }
+    }
+}
+
+/// A slew with 100 ms exposures every 100 ms, from rest at 1 deg/s^2 to 2 deg/s across the
+/// boresight (seed 100, 30 frames): each frame's mode, predicted windows, stars identified by
+/// them, and attitude error against its bound, printed (docs/tracker.md, "At body rate",
+/// quotes the end of the ramp). Seconds:
+/// `cargo test -p startrack-host --test tracker sil_motion::slew_frames_at_100_ms -- --ignored --nocapture`.
+#[test]
+#[ignore = "prints a slew's frames for docs/tracker.md; asserts nothing"]
+fn slew_frames_at_100_ms() {
+    let config = slew(2.0, 1.0, 100, 30);
+    let report = sil::run(&config).unwrap();
+    for f in &report.frames {
+        let c = f.attitude.as_ref().unwrap();
+        let line = match (&c.fix, c.error_rad()) {
+            (Ok(fix), Some(e)) => {
+                let a = &fix.attitude;
+                format!(
+                    "error {:.2} arcsec, bound {:.2} arcsec{}",
+                    e[0].hypot(e[1]) * 206_264.806,
+                    a.boresight_sigma_rad() * 206_264.806,
+                    if sil_rates::is_wrong(e, a.boresight_sigma_rad(), a.roll_sigma_rad()) {
+                        ", wrong"
+                    } else {
+                        ""
+                    }
+                )
+            }
+            (Err(e), _) => e.to_string(),
+            _ => String::new(),
+        };
+        eprintln!(
+            "frame {:2} {:11} predicted {:2} identified {:2}: {line}",
+            f.summary.frame,
+            f.summary.mode.name(),
+            f.predicted_windows,
+            c.identified
+        );
     }
 }
