@@ -12,12 +12,13 @@
 //! copy of the candidate list (`N` x 28 B); per star, a window copy and its measurement.
 
 use super::config::{CentroidMethod, TrackerConfig};
-use super::list::Carry;
+use super::list::{Carry, StarList};
 use super::measure::{Policy, measure};
 use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord};
 use super::{Ring, Shared};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
-use crate::detect::{Detection, ScanDetector};
+use crate::centroid::CentroidInput;
+use crate::detect::{CAPTURE_MAX_SIDE, Detection, ScanDetector};
 use crate::geometry::ReadoutGeometry;
 use crate::units::Electrons;
 use crate::window::Rect;
@@ -28,6 +29,34 @@ struct Pending {
     rect: Rect,
     clipped: bool,
     detection: Detection,
+    /// The blob may be a trail: its window holds the blob's extent, and the trailed test
+    /// runs on it, started from this trail (px over the exposure).
+    trail_start_px: Option<(f32, f32)>,
+}
+
+/// A blob is tested for a trail when its moments give a trail of at least this, px
+/// (`sqrt(12 (l1 - l2))`, the covariance's eigenvalues: a segment of length `L` adds
+/// `L^2 / 12` along itself), or when it is wider than the centroid box.
+pub const TRAIL_SCREEN_PX: f32 = 1.5;
+
+/// The trail a blob's second moments suggest, px over the exposure (along the larger
+/// eigenvector, `sqrt(12 (l1 - l2))`), and whether the blob is long enough to test.
+fn blob_trail(d: &Detection, box_px: u16) -> Option<(f32, f32)> {
+    let [xx, yy, xy] = d.moments_px2;
+    let disc = libm::sqrtf((0.25 * (xx - yy) * (xx - yy) + xy * xy).max(0.0));
+    let l = libm::sqrtf(12.0 * 2.0 * disc);
+    let phi = 0.5 * libm::atan2f(2.0 * xy, xx - yy);
+    let [x0, x1, y0, y1] = d.extent;
+    let wide = x1.saturating_sub(x0) >= box_px || y1.saturating_sub(y0) >= box_px;
+    if !l.is_finite() || !(l >= TRAIL_SCREEN_PX || wide) {
+        return None;
+    }
+    // A wide blob whose moments say little (a fragmented trail) starts from its extent.
+    let (lx, ly) = (f32::from(x1 - x0), f32::from(y1 - y0));
+    let l = l
+        .max(TRAIL_SCREEN_PX)
+        .max(if wide { lx.max(ly) * 0.7 } else { 0.0 });
+    Some((l * libm::cosf(phi), l * libm::sinf(phi)))
 }
 
 /// Acquisition's state within a frame.
@@ -126,17 +155,22 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         summary: &mut FrameSummary,
     ) {
         for d in self.closed.iter() {
-            let (rect, clipped) = Rect::centred_clipped(
-                d.peak_x,
-                d.peak_y,
-                config.window_px,
-                geometry.active_cols,
-                geometry.active_rows,
-            );
+            let trail_start_px = blob_trail(d, u16::from(config.box_px()));
+            let (rect, clipped) = match trail_start_px {
+                Some(_) => trail_window(d, config, geometry),
+                None => Rect::centred_clipped(
+                    d.peak_x,
+                    d.peak_y,
+                    config.window_px,
+                    geometry.active_cols,
+                    geometry.active_rows,
+                ),
+            };
             let p = Pending {
                 rect,
                 clipped,
                 detection: *d,
+                trail_start_px,
             };
             if self.pending.push(p).is_err() {
                 summary.windows_dropped = summary.windows_dropped.saturating_add(1);
@@ -174,6 +208,38 @@ impl<'t, const N: usize> Acquisition<'t, N> {
 /// deg/s in 100 ms) at 1.4-1.5 times it, 6.8 px at 1.9-2.4 times.
 pub const SMEARED_WIDTH_RATIO: f32 = 1.5;
 
+/// The window of a blob that may be a trail: its extent plus [`TRAIL_MARGIN_PX`] each side,
+/// odd, at least `window_px` and at most [`CAPTURE_MAX_SIDE`] a side, centred on the blob.
+fn trail_window(d: &Detection, config: &TrackerConfig, geometry: &ReadoutGeometry) -> (Rect, bool) {
+    let [x0, x1, y0, y1] = d.extent;
+    let side = |lo: u16, hi: u16| {
+        (hi.saturating_sub(lo)
+            .saturating_add(1 + 2 * TRAIL_MARGIN_PX)
+            | 1)
+        .clamp(config.window_px, CAPTURE_MAX_SIDE)
+    };
+    let centre = |v: f32, lo: u16, hi: u16| {
+        let v = if v.is_finite() { v } else { f32::from(lo) };
+        (v + 0.5).clamp(f32::from(lo), f32::from(hi)) as u16
+    };
+    let (cx, cy) = (centre(d.x_px, x0, x1), centre(d.y_px, y0, y1));
+    let (wx, wy) = (side(x0, x1), side(y0, y1));
+    let (h, hc) = Rect::centred_clipped(cx, cy, wx, geometry.active_cols, geometry.active_rows);
+    let (v, vc) = Rect::centred_clipped(cx, cy, wy, geometry.active_cols, geometry.active_rows);
+    let rect = Rect {
+        x0: h.x0,
+        width: h.width,
+        y0: v.y0,
+        height: v.height,
+    };
+    (rect, (hc && h.width != wx) || (vc && v.height != wy))
+}
+
+/// Pixels a trail's window reaches beyond its blob on each side: the PSF's wings below the
+/// join threshold (2.5 sigma of the flight PSF, 1.7 px) and a border pixel for the
+/// background.
+pub const TRAIL_MARGIN_PX: u16 = 3;
+
 /// Measures one pending window, or reports the detector's position with the reason.
 fn measure_pending<const N: usize>(
     cal: &FrameCalibration<'_>,
@@ -192,20 +258,40 @@ fn measure_pending<const N: usize>(
     let lost = if !copied {
         sh.summary.ring_lost = sh.summary.ring_lost.saturating_add(1);
         StarFlags::RING_LOST
-    } else if sh.scratch.calibrate(cal, rect).is_ok()
-        && let Some(input) = sh.scratch.window(rect, p.clipped)
-    {
-        let mut m = measure(policy, &input, detected, want_background);
-        if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {
-            m.record.flags |= StarFlags::TRAIL_UNKNOWN;
+    } else if sh.scratch.calibrate(cal, rect).is_err() {
+        sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+        StarFlags::CALIB_FAILED
+    } else if let Some(trail_start) = p.trail_start_px {
+        // The trailed test on the blob's whole window; a round star is measured as any
+        // other, on its centroid window around the peak.
+        if let Some(input) = sh.scratch.window(rect, p.clipped)
+            && let Some(record) = policy.free_trailed_record(&input, detected, trail_start)
+        {
+            sh.stars.push(record, Carry::default());
+            return;
         }
-        sh.stars.push(
-            m.record,
-            Carry {
-                background: m.background,
-                ..Carry::default()
-            },
+        let (rel, _) = Rect::centred_clipped(
+            p.detection.peak_x.saturating_sub(rect.x0),
+            p.detection.peak_y.saturating_sub(rect.y0),
+            config.window_px,
+            rect.width,
+            rect.height,
         );
+        let sub = Rect {
+            x0: rect.x0.saturating_add(rel.x0),
+            y0: rect.y0.saturating_add(rel.y0),
+            ..rel
+        };
+        let sub_clipped =
+            p.clipped || sub.width < config.window_px || sub.height < config.window_px;
+        if let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) {
+            push_measured(policy, config, &input, detected, want_background, sh.stars);
+            return;
+        }
+        sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+        StarFlags::CALIB_FAILED
+    } else if let Some(input) = sh.scratch.window(rect, p.clipped) {
+        push_measured(policy, config, &input, detected, want_background, sh.stars);
         return;
     } else {
         sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
@@ -227,6 +313,30 @@ fn measure_pending<const N: usize>(
             chi2_dof: 0.0,
         },
         Carry::default(),
+    );
+}
+
+/// Measures a round star's centroid window by the configured method and pushes it, flagged
+/// [`StarFlags::TRAIL_UNKNOWN`] when its fitted width says it is smeared
+/// ([`SMEARED_WIDTH_RATIO`]).
+fn push_measured<const N: usize>(
+    policy: &Policy<'_>,
+    config: &TrackerConfig,
+    input: &CentroidInput<'_>,
+    detected: StarFlags,
+    want_background: bool,
+    stars: &mut StarList<N>,
+) {
+    let mut m = measure(policy, input, detected, want_background);
+    if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {
+        m.record.flags |= StarFlags::TRAIL_UNKNOWN;
+    }
+    stars.push(
+        m.record,
+        Carry {
+            background: m.background,
+            ..Carry::default()
+        },
     );
 }
 

@@ -6,6 +6,7 @@
 //! the tests run the same code.
 
 pub mod accuracy;
+pub mod acquisition_rates;
 pub mod exposure_chart;
 pub mod figures;
 pub mod sil_rates;

@@ -29,8 +29,10 @@ impl<const N: usize> LineDetector<N> {
             return;
         }
         let mut flags = b.flags;
+        let mut moments_px2 = [0.0; 3];
         let (x, y) = match b.moments.shape() {
-            Some(((mx, my), (l1, l2))) => {
+            Some(((mx, my), (l1, l2), cov)) => {
+                moments_px2 = cov;
                 // A single star is round to within noise; a pair is elongated along the line
                 // joining it (its variance grows by f (1 - f) d^2 for fluxes f, 1 - f and
                 // separation d).
@@ -60,6 +62,8 @@ impl<const N: usize> LineDetector<N> {
             pixels: b.pixels,
             snr,
             flags,
+            extent: [b.x_min, b.x_max, b.y_min, b.last_y],
+            moments_px2,
         };
         if let Err(d) = self.candidates.push(d) {
             self.dropped += 1;

@@ -80,6 +80,11 @@ pub struct Detection {
     pub snr: f32,
     /// Flags.
     pub flags: DetectionFlags,
+    /// The blob's extent: first and last column, first and last row (active pixels).
+    pub extent: [u16; 4],
+    /// The blob's second moments about its position, weighted by its pixels' positive
+    /// signal: `(xx, yy, xy)`, px^2 (a trailed star's is stretched along its trail).
+    pub moments_px2: [f32; 3],
 }
 
 /// True when pixel `x` belongs to a blob: above its block's threshold `thr`
@@ -138,8 +143,9 @@ impl Moments {
         self.xy += o.xy + sx * o.y + sy * o.x + sx * sy * o.w;
     }
 
-    /// Mean (relative) and the covariance's eigenvalues (larger first), px and px^2.
-    fn shape(&self) -> Option<((f32, f32), (f32, f32))> {
+    /// Mean (relative), the covariance's eigenvalues (larger first) and the covariance
+    /// `(xx, yy, xy)`, px and px^2.
+    fn shape(&self) -> Option<((f32, f32), (f32, f32), [f32; 3])> {
         if self.w <= 0.0 {
             return None;
         }
@@ -149,7 +155,7 @@ impl Moments {
         let cxy = self.xy / self.w - mx * my;
         let half_tr = 0.5 * (cxx + cyy);
         let disc = libm::sqrtf((0.25 * (cxx - cyy) * (cxx - cyy) + cxy * cxy).max(0.0));
-        Some(((mx, my), (half_tr + disc, half_tr - disc)))
+        Some(((mx, my), (half_tr + disc, half_tr - disc), [cxx, cyy, cxy]))
     }
 }
 
