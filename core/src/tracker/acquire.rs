@@ -6,10 +6,27 @@
 //! [`StarFlags::RING_LOST`] and the detector's own position; one whose calibration fails
 //! with [`StarFlags::CALIB_FAILED`].
 //!
+//! # Trailed stars
+//! A blob that may be a star trailed during the exposure (its second moments give a trail
+//! of at least [`TRAIL_SCREEN_PX`]) gets a window
+//! holding its extent plus [`TRAIL_MARGIN_PX`] each side (at most [`CAPTURE_MAX_SIDE`], 15
+//! px: the ring's 16 lines and the scratch window), and the trailed-star fit with the trail
+//! unknown ([`crate::centroid::trail_fit::trail_fit_free`]) tests it against the round
+//! model at a false-alarm rate of 1e-3: a trailed star is reported at mid-exposure
+//! ([`Provenance::TRAILED`]), its trail fitted, so lost in space works while the spacecraft
+//! turns; a round one is measured as any star on its centroid window around the peak. A
+//! trail that reaches within [`super::TRAIL_END_MARGIN_PX`] of its window's border (longer
+//! than about 11 px along a row or column at the flight PSF) is flagged
+//! [`StarFlags::TRAIL_UNKNOWN`], and so is a star called round whose width-free fit is wider
+//! than [`SMEARED_WIDTH_RATIO`] times the PSF. Detection itself is unchanged: the blob's eq.
+//! 8 SNR sums its pixels, the matched filter's statistic over the pixels above the join
+//! level, at no cost per pixel (docs/tracker.md, "Lost in space at body rate").
+//!
 //! The candidates are bit for bit those of a `LineDetector` with the same background
 //! stride fed every calibrated row (host test `scan`). Cost per line: the scan (~13 M7
 //! instructions a pixel, `cargo m7-bench` `scan_detect`), a 2 KB copy into the ring and a
-//! copy of the candidate list (`N` x 28 B); per star, a window copy and its measurement.
+//! copy of the candidate list (`N` x 40 B); per star, a window copy and its measurement;
+//! per screened blob the trailed test (two fits on up to 15 x 15 pixels).
 
 use super::config::{CentroidMethod, TrackerConfig};
 use super::list::{Carry, StarList};
@@ -29,33 +46,27 @@ struct Pending {
     rect: Rect,
     clipped: bool,
     detection: Detection,
-    /// The blob may be a trail: its window holds the blob's extent, and the trailed test
-    /// runs on it, started from this trail (px over the exposure).
-    trail_start_px: Option<(f32, f32)>,
 }
 
 /// A blob is tested for a trail when its moments give a trail of at least this, px
 /// (`sqrt(12 (l1 - l2))`, the covariance's eigenvalues: a segment of length `L` adds
-/// `L^2 / 12` along itself), or when it is wider than the centroid box.
+/// `L^2 / 12` along itself). The moments are of the pixels above the join level, so a
+/// trail's reads short; the fit finds its length.
 pub const TRAIL_SCREEN_PX: f32 = 1.5;
 
-/// The trail a blob's second moments suggest, px over the exposure (along the larger
-/// eigenvector, `sqrt(12 (l1 - l2))`), and whether the blob is long enough to test.
-fn blob_trail(d: &Detection, box_px: u16) -> Option<(f32, f32)> {
-    let [xx, yy, xy] = d.moments_px2;
+/// The trail the trailed test starts from when blob `d` may be a trail (its moments give at
+/// least [`TRAIL_SCREEN_PX`]), px over the exposure: `sqrt(12 (l1 - l2))` along the larger
+/// eigenvector of its moments (a segment of length `L` adds `L^2 / 12` along itself);
+/// `None` for a round blob. The window is then [`trail_window`]'s.
+fn blob_trail(d: &Detection) -> Option<(f32, f32)> {
+    let [xx, yy, xy] = d.moments_px2();
     let disc = libm::sqrtf((0.25 * (xx - yy) * (xx - yy) + xy * xy).max(0.0));
+    // l1 - l2 = 2 disc.
     let l = libm::sqrtf(12.0 * 2.0 * disc);
-    let phi = 0.5 * libm::atan2f(2.0 * xy, xx - yy);
-    let [x0, x1, y0, y1] = d.extent;
-    let wide = x1.saturating_sub(x0) >= box_px || y1.saturating_sub(y0) >= box_px;
-    if !l.is_finite() || !(l >= TRAIL_SCREEN_PX || wide) {
+    if !(l.is_finite() && l >= TRAIL_SCREEN_PX) {
         return None;
     }
-    // A wide blob whose moments say little (a fragmented trail) starts from its extent.
-    let (lx, ly) = (f32::from(x1 - x0), f32::from(y1 - y0));
-    let l = l
-        .max(TRAIL_SCREEN_PX)
-        .max(if wide { lx.max(ly) * 0.7 } else { 0.0 });
+    let phi = 0.5 * libm::atan2f(2.0 * xy, xx - yy);
     Some((l * libm::cosf(phi), l * libm::sinf(phi)))
 }
 
@@ -155,8 +166,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         summary: &mut FrameSummary,
     ) {
         for d in self.closed.iter() {
-            let trail_start_px = blob_trail(d, u16::from(config.box_px()));
-            let (rect, clipped) = match trail_start_px {
+            let (rect, clipped) = match blob_trail(d) {
                 Some(_) => trail_window(d, config, geometry),
                 None => Rect::centred_clipped(
                     d.peak_x,
@@ -170,7 +180,6 @@ impl<'t, const N: usize> Acquisition<'t, N> {
                 rect,
                 clipped,
                 detection: *d,
-                trail_start_px,
             };
             if self.pending.push(p).is_err() {
                 summary.windows_dropped = summary.windows_dropped.saturating_add(1);
@@ -201,11 +210,12 @@ impl<'t, const N: usize> Acquisition<'t, N> {
     }
 }
 
-/// An acquired star whose fitted width (the width-free fit's `psf_a_px`) exceeds the
-/// configured PSF's by this factor is a smeared star, its trail unknown: flagged
-/// [`StarFlags::TRAIL_UNKNOWN`] (kept for tracking, not used for the attitude). On the SIL's
-/// sky a still star fits within 3 % of the PSF's width, one trailed 3.4 px a frame (0.5
-/// deg/s in 100 ms) at 1.4-1.5 times it, 6.8 px at 1.9-2.4 times.
+/// An acquired star the trailed test does not call trailed whose fitted width (the
+/// width-free fit's `psf_a_px`) exceeds the configured PSF's by this factor is a smeared
+/// star, its trail unknown: flagged [`StarFlags::TRAIL_UNKNOWN`] (kept for tracking, not
+/// used for the attitude). On the SIL's sky a still star fits within 3 % of the PSF's
+/// width, one trailed 3.4 px a frame (0.5 deg/s in 100 ms) at 1.4-1.5 times it, 6.8 px at
+/// 1.9-2.4 times.
 pub const SMEARED_WIDTH_RATIO: f32 = 1.5;
 
 /// The window of a blob that may be a trail: its extent plus [`TRAIL_MARGIN_PX`] each side,
@@ -261,7 +271,7 @@ fn measure_pending<const N: usize>(
     } else if sh.scratch.calibrate(cal, rect).is_err() {
         sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
         StarFlags::CALIB_FAILED
-    } else if let Some(trail_start) = p.trail_start_px {
+    } else if let Some(trail_start) = blob_trail(&p.detection) {
         // The trailed test on the blob's whole window; a round star is measured as any
         // other, on its centroid window around the peak.
         if let Some(input) = sh.scratch.window(rect, p.clipped)

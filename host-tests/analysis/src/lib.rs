@@ -11,3 +11,4 @@ pub mod exposure_chart;
 pub mod figures;
 pub mod sil_rates;
 pub mod tradeoff;
+pub mod trail_chart;

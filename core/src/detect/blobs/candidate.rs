@@ -29,10 +29,11 @@ impl<const N: usize> LineDetector<N> {
             return;
         }
         let mut flags = b.flags;
-        let mut moments_px2 = [0.0; 3];
+        let mut moments_64ths = [0i16; 3];
         let (x, y) = match b.moments.shape() {
             Some(((mx, my), (l1, l2), cov)) => {
-                moments_px2 = cov;
+                // Saturating float-to-int casts; NaN gives 0.
+                moments_64ths = cov.map(|m| (m * 64.0) as i16);
                 // A single star is round to within noise; a pair is elongated along the line
                 // joining it (its variance grows by f (1 - f) d^2 for fluxes f, 1 - f and
                 // separation d).
@@ -63,7 +64,7 @@ impl<const N: usize> LineDetector<N> {
             snr,
             flags,
             extent: [b.x_min, b.x_max, b.y_min, b.last_y],
-            moments_px2,
+            moments_64ths,
         };
         if let Err(d) = self.candidates.push(d) {
             self.dropped += 1;

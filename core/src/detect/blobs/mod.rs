@@ -83,8 +83,16 @@ pub struct Detection {
     /// The blob's extent: first and last column, first and last row (active pixels).
     pub extent: [u16; 4],
     /// The blob's second moments about its position, weighted by its pixels' positive
-    /// signal: `(xx, yy, xy)`, px^2 (a trailed star's is stretched along its trail).
-    pub moments_px2: [f32; 3],
+    /// signal: `(xx, yy, xy)` in 1/64 px^2, saturating at +-512 px^2 (a trailed star's is
+    /// stretched along its trail); [`Self::moments_px2`] in px^2.
+    pub moments_64ths: [i16; 3],
+}
+
+impl Detection {
+    /// The blob's second moments `(xx, yy, xy)`, px^2.
+    pub fn moments_px2(&self) -> [f32; 3] {
+        self.moments_64ths.map(|m| f32::from(m) / 64.0)
+    }
 }
 
 /// True when pixel `x` belongs to a blob: above its block's threshold `thr`

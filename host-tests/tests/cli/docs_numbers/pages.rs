@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 27] = [
+const CHECKED: [&str; 29] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -44,6 +44,8 @@ const CHECKED: [&str; 27] = [
     "accuracy-frames",
     "accuracy-frames-field",
     "trail-bound",
+    "trail-rates",
+    "acquisition-rates",
     "sil-rates",
     "first-attitude",
     "exposure-chart",
