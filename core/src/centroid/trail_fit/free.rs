@@ -44,9 +44,12 @@
 //! Per step and pixel: the held fit's two `erfc`-and-density evaluations and exponential,
 //! a few more multiplies for the width, length and angle derivatives, the weight's divide
 //! and the 7x7 normal matrix's 28 sums; a 7x7 Cholesky per step. The round model costs the
-//! same per step. A 15 x 9 window and ~6 + 6 steps: about 15 x the held trailed fit's 7x7
-//! (`cargo m7-bench`, `centroid_trail_free_15x9`); only the stars acquisition screens
-//! (elongated, or wider than the configured PSF) pay it.
+//! same per step. Measured on the Cortex-M7 (`cargo m7-bench`, QEMU instructions): an
+//! acquisition frame whose 30 stars are trailed 6 px along the rows, each window 13 x 13,
+//! costs ~80 M against ~39 M for the same frame of still stars
+//! (`tracker_acquisition_frame_trailed` against `tracker_acquisition_frame`), ~1.4 M a
+//! trailed star for both fits, ~29 times the held trailed fit on 7x7; only the stars
+//! acquisition screens (an elongated blob) pay it.
 
 use super::{Along, FRAC_1_SQRT_2PI, Trail};
 use crate::centroid::cog::cog_in_box;
@@ -245,15 +248,26 @@ fn normal_equations(
             flux * dal * vv,
             flux * gphi,
         ];
-        let j = [0, 1, 2, 3, 4, 5, 6]
-            .map(|i| j.get(i).copied().unwrap_or(0.0) * mask.get(i).copied().unwrap_or(0.0));
+        let mut j = j;
+        for (ji, m) in j.iter_mut().zip(mask) {
+            *ji *= m;
+        }
         let res = f - (theta.bg + star);
         chi2 += res * res * wt;
-        for ((row_a, bi), ji) in a.iter_mut().zip(b.iter_mut()).zip(j.iter()) {
+        // The upper triangle; the lower is mirrored once at the end.
+        for (i, ((row_a, bi), ji)) in a.iter_mut().zip(b.iter_mut()).zip(j.iter()).enumerate() {
             let jw = ji * wt;
             *bi += jw * res;
-            for (aim, jm) in row_a.iter_mut().zip(j.iter()) {
+            for (aim, jm) in row_a.iter_mut().zip(j.iter()).skip(i) {
                 *aim += jw * jm;
+            }
+        }
+    }
+    for i in 0..K {
+        for m in 0..i {
+            let upper = a.get(m).and_then(|r| r.get(i)).copied().unwrap_or(0.0);
+            if let Some(v) = a.get_mut(i).and_then(|r| r.get_mut(m)) {
+                *v = upper;
             }
         }
     }
