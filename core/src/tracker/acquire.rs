@@ -66,8 +66,19 @@ fn blob_trail(d: &Detection) -> Option<(f32, f32)> {
     if !(l.is_finite() && l >= TRAIL_SCREEN_PX) {
         return None;
     }
-    let phi = 0.5 * libm::atan2f(2.0 * xy, xx - yy);
-    Some((l * libm::cosf(phi), l * libm::sinf(phi)))
+    // The larger eigenvalue's eigenvector, from whichever of its two forms is longer.
+    let l1 = 0.5 * (xx + yy) + disc;
+    let (a, b) = ((xy, l1 - xx), (l1 - yy, xy));
+    let (vx, vy) = if a.0 * a.0 + a.1 * a.1 >= b.0 * b.0 + b.1 * b.1 {
+        a
+    } else {
+        b
+    };
+    let n = libm::sqrtf(vx * vx + vy * vy);
+    if !(n.is_finite() && n > 0.0) {
+        return Some((l, 0.0));
+    }
+    Some((l * vx / n, l * vy / n))
 }
 
 /// Acquisition's state within a frame.

@@ -178,20 +178,17 @@ fn measure(m: &str, input: &CentroidInput<'_>, star: &TrailedStar) -> Option<Cen
             }
             f.centroid
         }
-        "gauss-width" => {
-            let f = sub(&|i| {
-                let f = gauss_fit_width(
-                    i,
-                    &WidthFitParams {
-                        background: bg,
-                        ..WidthFitParams::new()
-                    },
-                );
-                let smeared = f64::from(f.psf_a_px) > f64::from(SMEARED_WIDTH_RATIO) * PSF_A_PX;
-                (!smeared).then_some(f.centroid)
-            })?;
-            f
-        }
+        "gauss-width" => sub(&|i| {
+            let f = gauss_fit_width(
+                i,
+                &WidthFitParams {
+                    background: bg,
+                    ..WidthFitParams::new()
+                },
+            );
+            let smeared = f64::from(f.psf_a_px) > f64::from(SMEARED_WIDTH_RATIO) * PSF_A_PX;
+            (!smeared).then_some(f.centroid)
+        })?,
         "gauss" => sub(&|i| {
             Some(gauss_fit(
                 i,

@@ -21,6 +21,9 @@ use crate::table::pixcorr::CogPower;
 
 pub(in crate::centroid) type Mat4 = [[f32; 4]; 4];
 
+/// A solved `K x K` system: the step, the Jacobi scales and the scaled Cholesky factor.
+pub(in crate::centroid) type Solved<const K: usize> = ([f32; K], [f32; K], [[f32; K]; K]);
+
 fn at<const K: usize>(m: &[[f32; K]; K], i: usize, j: usize) -> f32 {
     m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
 }
@@ -239,7 +242,7 @@ pub(in crate::centroid) fn solve(n: &Normal) -> Option<([f32; 4], [f32; 4], Mat4
 pub(in crate::centroid) fn solve_k<const K: usize>(
     a: &[[f32; K]; K],
     b: &[f32; K],
-) -> Option<([f32; K], [f32; K], [[f32; K]; K])> {
+) -> Option<Solved<K>> {
     let mut d = [0.0f32; K];
     for (i, di) in d.iter_mut().enumerate() {
         let aii = at(a, i, i);

@@ -133,7 +133,7 @@ impl TrailedFit {
             .centroid
             .flags
             .intersects(CentroidFlags::NOT_CONVERGED | CentroidFlags::DEGENERATE)
-            && self.delta_chi2() > trail_dchi2_limit(self.border, TRAIL_FALSE_ALARM)
+            && self.delta_chi2() > trail_dchi2_limit(self.border)
     }
 
     /// The trailed model's `chi2 / dof`.
@@ -142,21 +142,22 @@ impl TrailedFit {
     }
 }
 
-/// The `dchi2` a round star exceeds with probability `alpha`: `2 f` with `f` the upper
-/// `alpha` point of `F(2, border - 1)` (the variance from `border` pixels), `2 ln(1 /
-/// alpha)` (chi-square, 2 dof) for `border` 0; 13.8 at 1e-3 with a known variance, 15.6 with
-/// a 15 x 15 window's border, 18.9 with a 7 x 7's.
-pub fn trail_dchi2_limit(border: u16, alpha: f32) -> f32 {
-    let a = alpha.clamp(1e-12, 1.0);
-    if border < 4 {
-        return if border == 0 {
-            -2.0 * libm::logf(a)
-        } else {
-            f32::MAX
-        };
+/// The `dchi2` a round star exceeds with probability [`TRAIL_FALSE_ALARM`]: `2 f` with `f`
+/// the upper 1e-3 point of `F(2, border - 1)` (the variance from `border` pixels),
+/// `d (1e3^(2/d) - 1)` with `d = border - 1`; `2 ln 1e3` = 13.8 (chi-square, 2 dof) for
+/// `border` 0; 15.6 with a 15 x 15 window's border, 18.9 with a 7 x 7's; `f32::MAX` for a
+/// border of 1 to 3 pixels (nothing to test against).
+pub fn trail_dchi2_limit(border: u16) -> f32 {
+    /// `ln(1 / TRAIL_FALSE_ALARM)`.
+    const LN_1E3: f32 = 6.907_755;
+    match border {
+        0 => 2.0 * LN_1E3,
+        1..=3 => f32::MAX,
+        _ => {
+            let d = f32::from(border - 1);
+            d * (math::exp(2.0 * LN_1E3 / d) - 1.0)
+        }
     }
-    let d = f32::from(border - 1);
-    d * (libm::powf(a, -2.0 / d) - 1.0)
 }
 
 /// Parameters in the normal equations' order: position, flux, background, width, trail
@@ -176,7 +177,10 @@ struct Theta {
     bg: f32,
     s: f32,
     l: f32,
-    phi: f32,
+    /// The trail's unit direction (its angle `phi` is the parameter: a step `dphi` rotates
+    /// it, no trigonometric function evaluated).
+    ex: f32,
+    ey: f32,
 }
 
 impl Theta {
@@ -185,8 +189,8 @@ impl Theta {
         Trail {
             inv_s: 1.0 / self.s,
             l_px: if self.l >= 0.05 * self.s { self.l } else { 0.0 },
-            ex: libm::cosf(self.phi),
-            ey: libm::sinf(self.phi),
+            ex: self.ex,
+            ey: self.ey,
         }
     }
 }
@@ -279,6 +283,22 @@ fn normal_equations(
     (a, b, chi2)
 }
 
+/// `theta` with its direction turned by `dphi` (|dphi| <= 0.5 rad): `cos` and `sin` by
+/// their series to the fourth and fifth order (within 3e-5 there), the direction then
+/// renormalised to unit length.
+fn rotated(theta: Theta, dphi: f32) -> Theta {
+    let d2 = dphi * dphi;
+    let c = 1.0 - 0.5 * d2 * (1.0 - d2 / 12.0);
+    let s = dphi * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
+    let (ex, ey) = (c * theta.ex - s * theta.ey, s * theta.ex + c * theta.ey);
+    let n = math::sqrt(ex * ex + ey * ey);
+    Theta {
+        ex: ex / n,
+        ey: ey / n,
+        ..theta
+    }
+}
+
 /// A converged (or last) fit: parameters, chi-square, and the covariance's factor there.
 struct Fit {
     theta: Theta,
@@ -324,7 +344,7 @@ fn fit(
             bg: theta.bg + sb,
             s: (theta.s + ds).clamp(0.3, s_max),
             l: (theta.l + dl).min(l_max),
-            phi: theta.phi + sphi.clamp(-0.5, 0.5),
+            ..rotated(theta, sphi.clamp(-0.5, 0.5))
         };
         let inside = (-0.5..=wmax).contains(&theta.x) && (-0.5..=hmax).contains(&theta.y);
         if !inside
@@ -389,7 +409,8 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
         bg: 0.0,
         s: s0,
         l: 0.0,
-        phi: 0.0,
+        ex: 1.0,
+        ey: 0.0,
     };
     let round = fit(&p, whole, theta0, round_free, params);
     let chi2_round = round.as_ref().map_or(f32::NAN, |r| r.chi2);
@@ -401,7 +422,8 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
     let theta = Theta {
         s: s0,
         l: l0,
-        phi: libm::atan2f(ty, tx),
+        ex: tx / l0,
+        ey: ty / l0,
         ..round.as_ref().map_or(theta0, |r| r.theta)
     };
     let Some(tr) = fit(&p, whole, theta, [true; K], params) else {
@@ -422,7 +444,7 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
     } else {
         CentroidFlags::NOT_CONVERGED
     };
-    let (c, s) = (libm::cosf(th.phi), libm::sinf(th.phi));
+    let (c, s) = (th.ex, th.ey);
     TrailedFit {
         centroid: p.finish(m, extra),
         trail_px: (th.l * c, th.l * s),

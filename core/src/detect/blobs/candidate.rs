@@ -31,7 +31,11 @@ impl<const N: usize> LineDetector<N> {
         let mut flags = b.flags;
         let mut moments_64ths = [0i16; 3];
         let (x, y) = match b.moments.shape() {
-            Some(((mx, my), (l1, l2), cov)) => {
+            Some(super::Shape {
+                mean: (mx, my),
+                eigen: (l1, l2),
+                cov,
+            }) => {
                 // Saturating float-to-int casts; NaN gives 0.
                 moments_64ths = cov.map(|m| (m * 64.0) as i16);
                 // A single star is round to within noise; a pair is elongated along the line

@@ -153,7 +153,7 @@ impl Moments {
 
     /// Mean (relative), the covariance's eigenvalues (larger first) and the covariance
     /// `(xx, yy, xy)`, px and px^2.
-    fn shape(&self) -> Option<((f32, f32), (f32, f32), [f32; 3])> {
+    fn shape(&self) -> Option<Shape> {
         if self.w <= 0.0 {
             return None;
         }
@@ -163,8 +163,23 @@ impl Moments {
         let cxy = self.xy / self.w - mx * my;
         let half_tr = 0.5 * (cxx + cyy);
         let disc = libm::sqrtf((0.25 * (cxx - cyy) * (cxx - cyy) + cxy * cxy).max(0.0));
-        Some(((mx, my), (half_tr + disc, half_tr - disc), [cxx, cyy, cxy]))
+        Some(Shape {
+            mean: (mx, my),
+            eigen: (half_tr + disc, half_tr - disc),
+            cov: [cxx, cyy, cxy],
+        })
     }
+}
+
+/// A blob's [`Moments::shape`].
+#[derive(Clone, Copy, Debug)]
+struct Shape {
+    /// Mean, relative to the moments' reference, px.
+    mean: (f32, f32),
+    /// The covariance's eigenvalues, larger first, px^2.
+    eigen: (f32, f32),
+    /// The covariance `(xx, yy, xy)`, px^2.
+    cov: [f32; 3],
 }
 
 #[derive(Clone, Copy, Debug, Default)]
