@@ -4,7 +4,7 @@
 //! nothing), per rate and exposure over seeded attitudes: the frames solved and wrong
 //! ([`sil_rates::is_wrong`]: over 60 arcsec, or 10 of its own sigmas), the stars found,
 //! measured as trailed and usable for identification, and the trailed positions' chi^2/dof
-//! against their own sigmas (the truth at mid-exposure).
+//! against their own sigmas (the truth at mid-exposure, blends aside: [`sil_rates::blended`]).
 //!
 //! The rate is about the camera's x axis (`--rate-deg-s W,0,0`: the field moves along the
 //! rows), the exposure equal to the frame period, the tracker told it, the flight
@@ -19,9 +19,6 @@ use startrack_sim::sky::motion::{ExposureMotion, RateProfile};
 use startrack_sim::sky::scene::SkyScene;
 
 const ARCSEC_PER_RAD: f64 = 206_264.806;
-
-/// Another true star within this distance makes a star a blend, left out of the chi^2, px.
-pub const BLEND_PX: f64 = 5.0;
 
 /// One point: the rate about the camera's x axis and the exposure.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -136,11 +133,7 @@ pub fn add_run(row: &mut AcqRow, report: &SilReport, sums: &mut (f64, usize, f64
             let Some(t) = m.truth.filter(|_| trailed && usable) else {
                 continue;
             };
-            let blend = f
-                .truth
-                .iter()
-                .any(|u| *u != t && (u.x_px - t.x_px).hypot(u.y_px - t.y_px) < BLEND_PX);
-            if blend {
+            if sil_rates::blended(f, &t) {
                 continue;
             }
             sums.0 += ((f64::from(s.x_px) - t.x_px) / f64::from(s.sigma_x_px)).powi(2)
@@ -193,14 +186,7 @@ pub const CSV_HEADER: &str = "rate_deg_s,exposure_ms,trail_px,frames,solved,wron
 
 /// The rows as CSV, after `comment` lines (each prefixed `# `).
 pub fn csv(rows: &[AcqRow], comment: &[&str]) -> String {
-    let mut out = String::new();
-    for c in comment {
-        out.push_str("# ");
-        out.push_str(c);
-        out.push('\n');
-    }
-    out.push_str(CSV_HEADER);
-    out.push('\n');
+    let mut out = crate::figures::csv::csv_head(comment, CSV_HEADER);
     for r in rows {
         let Some(c) = r.case else { continue };
         out.push_str(&format!(

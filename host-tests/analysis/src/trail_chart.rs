@@ -280,14 +280,7 @@ pub const CSV_HEADER: &str = "rate_deg_s,trail_px,method,stars,flagged,rms_px,bo
 /// The points as CSV, after `comment` lines (each prefixed `# `); a method that flagged
 /// every star has NaN figures.
 pub fn csv(points: &[TrailPoint], comment: &[&str]) -> String {
-    let mut out = String::new();
-    for c in comment {
-        out.push_str("# ");
-        out.push_str(c);
-        out.push('\n');
-    }
-    out.push_str(CSV_HEADER);
-    out.push('\n');
+    let mut out = crate::figures::csv::csv_head(comment, CSV_HEADER);
     for p in points {
         let nan = p.flagged == p.stars;
         let f = |v: f64| {

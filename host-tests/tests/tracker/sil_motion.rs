@@ -25,11 +25,7 @@ pub fn turning_sky(seed: u64, rate_deg_s: [f64; 3], frames: u32) -> SilConfig {
     }
 }
 
-/// Another true star within this distance makes a star an unresolved blend, px (the
-/// scene's doubles: its seed-5 field holds one 0.47 px apart).
-pub const BLEND_PX: f64 = 5.0;
-
-/// chi^2 over both axes of a frame's matched usable centroids (blends aside, [`BLEND_PX`])
+/// chi^2 over both axes of a frame's matched usable centroids (blends aside, [`sil_rates::blended`])
 /// against their own sigmas, the number of terms, and how many of those stars were measured
 /// as trailed.
 fn frame_chi2(f: &SilFrame) -> (f64, usize, usize) {
@@ -38,11 +34,7 @@ fn frame_chi2(f: &SilFrame) -> (f64, usize, usize) {
         let Some(t) = m.truth.filter(|_| m.star.is_centroid()) else {
             continue;
         };
-        let blend = f
-            .truth
-            .iter()
-            .any(|u| *u != t && (u.x_px - t.x_px).hypot(u.y_px - t.y_px) < BLEND_PX);
-        if blend {
+        if sil_rates::blended(f, &t) {
             continue;
         }
         let s = &m.star;

@@ -6,7 +6,7 @@
 //! # Two nested models on the same pixels
 //! - round: `m_k = B + N g(u, v)` with `L = 0` and the width `s` free, `(x, y, N, B, s)`;
 //! - trailed: the same with the trail `L` and its angle `phi` free, `(x, y, N, B, s, L,
-//!   phi)`,
+//!   phi)`, the angle a unit direction turned by each step (no trigonometric function),
 //!
 //! `g` the trailed Gaussian of [`super`] (`s^2` the PSF's variance plus the pixel's 1/12).
 //! Both are fitted by Gauss-Newton with the weights `1 / (max(N g, 0) + var_bg + 1)` from
@@ -43,10 +43,11 @@
 //! # Cost
 //! Per step and pixel: the held fit's two `erfc`-and-density evaluations and exponential,
 //! a few more multiplies for the width, length and angle derivatives, the weight's divide
-//! and the 7x7 normal matrix's 28 sums; a 7x7 Cholesky per step. The round model costs the
+//! and the 7x7 normal matrix's 28 upper-triangle sums and 7 right-hand sides; a 7x7
+//! Cholesky per step. The round model costs the
 //! same per step. Measured on the Cortex-M7 (`cargo m7-bench`, QEMU instructions): an
-//! acquisition frame whose 30 stars are trailed 6 px along the rows, each window 13 x 13,
-//! costs ~80 M against ~39 M for the same frame of still stars
+//! acquisition frame whose 30 stars (PSF sigma 1 px) are trailed 6 px along the rows, each
+//! window up to 15 x 15, costs ~80 M against ~39 M for the same frame of still stars
 //! (`tracker_acquisition_frame_trailed` against `tracker_acquisition_frame`), ~1.4 M a
 //! trailed star for both fits, ~29 times the held trailed fit on 7x7; only the stars
 //! acquisition screens (an elongated blob) pay it.

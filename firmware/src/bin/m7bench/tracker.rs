@@ -82,17 +82,7 @@ pub fn run(
             stars: 0,
             tracked: 0,
         };
-        let inputs = FrameInputs {
-            table: Some(*table),
-            temperature_k: None,
-            start_us: 0,
-        };
-        let mut ticks = bench.measure(|| {
-            tracker.begin_frame(inputs, &mut sink);
-        });
-        if tracker.mode() != mode {
-            return Err("tracker: unexpected mode");
-        }
+        let mut ticks = begin(bench, table, &mut tracker, &mut sink, mode)?;
         for y in 0..G.lines {
             raw_line_noisy(usize::from(y), &stars, rng, &mut line);
             ticks += bench.measure(|| {
@@ -139,17 +129,7 @@ fn trailed_acquisition<'t>(
         tracked: 0,
     };
     let mut trailed = 0usize;
-    let inputs = FrameInputs {
-        table: Some(*table),
-        temperature_k: None,
-        start_us: 0,
-    };
-    let mut ticks = bench.measure(|| {
-        tracker.begin_frame(inputs, &mut sink);
-    });
-    if tracker.mode() != Mode::Acquisition {
-        return Err("tracker: trailed frame not acquisition");
-    }
+    let mut ticks = begin(bench, table, tracker, &mut sink, Mode::Acquisition)?;
     let mut line = [0u16; RAW_COLS];
     for y in 0..G.lines {
         raw_line_trailed(usize::from(y), stars, TRAIL_PX + 1, rng, &mut line);
@@ -176,6 +156,28 @@ fn trailed_acquisition<'t>(
     Ok(())
 }
 
+/// Begins a frame with `table` (ticks of `begin_frame`); an error unless it runs in `mode`.
+fn begin<'t>(
+    bench: &Bench,
+    table: &CalibTable<'t>,
+    tracker: &mut Tracker<'t, '_, 32>,
+    sink: &mut Count,
+    mode: Mode,
+) -> Result<u64, &'static str> {
+    let inputs = FrameInputs {
+        table: Some(*table),
+        temperature_k: None,
+        start_us: 0,
+    };
+    let ticks = bench.measure(|| {
+        tracker.begin_frame(inputs, sink);
+    });
+    if tracker.mode() != mode {
+        return Err("tracker: unexpected mode");
+    }
+    Ok(ticks)
+}
+
 /// The windowed tracking frame: the lines `tracker.readout_request()` reads, and no others.
 fn windowed<'t>(
     out: &mut Out,
@@ -189,17 +191,7 @@ fn windowed<'t>(
         stars: 0,
         tracked: 0,
     };
-    let inputs = FrameInputs {
-        table: Some(*table),
-        temperature_k: None,
-        start_us: 0,
-    };
-    let mut ticks = bench.measure(|| {
-        tracker.begin_frame(inputs, &mut sink);
-    });
-    if tracker.mode() != Mode::Tracking {
-        return Err("tracker: windowed frame not tracking");
-    }
+    let mut ticks = begin(bench, table, tracker, &mut sink, Mode::Tracking)?;
     // What the sequencer reads for this request (a copy: the request borrows the tracker).
     let mut reads = [false; G.lines as usize];
     let mut window_rows = 0usize;
