@@ -105,6 +105,18 @@ fn round_stars_of_any_width_are_rarely_called_trailed() {
                     worst = worst.max(f.delta_chi2());
                 }
                 if f.is_trailed() {
+                    eprintln!(
+                        "round a {a} SNR {snr} star {k}: dchi2 {:.1}, round converged {}, chi2 {:.1} / {:.1}, dof {}, trail {:?}, width {:.3}",
+                        f.delta_chi2(),
+                        f.round_converged,
+                        f.chi2_round,
+                        f.chi2,
+                        f.dof,
+                        f.trail_px,
+                        f.psf_sigma_px
+                    );
+                }
+                if f.is_trailed() {
                     t_cell += 1;
                 }
             }

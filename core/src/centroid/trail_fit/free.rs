@@ -21,7 +21,10 @@
 //! round star is called trailed once in 1,000 tests; the host test `centroid_trail_free`
 //! holds it on round stars of widths 0.6-2 px and SNR 10-1000 whose width nobody told
 //! the fit. A star of another width than the configured PSF's is a round star of its own
-//! width, not a trail (the width is free in both models).
+//! width, not a trail (the width is free in both models). A star the test would call
+//! trailed gets a second round fit started from the trailed solution, and the better round
+//! fit is the one compared (a round fit from the CoG can stop on a worse minimum: a wide
+//! bright star whose wings reach the border).
 //!
 //! # Start and steps
 //! Round: the power-1 CoG of the window, `N` its sum, `s` from `start_sigma_px`. Trailed:
@@ -119,6 +122,8 @@ pub struct TrailedFit {
     pub dof: u16,
     /// Usable pixels of the window's border (the background variance's sample).
     pub border: u16,
+    /// The round fit converged (else `chi2_round` is its last step's, above its minimum).
+    pub round_converged: bool,
 }
 
 impl TrailedFit {
@@ -284,6 +289,13 @@ fn normal_equations(
     (a, b, chi2)
 }
 
+impl Fit {
+    /// `chi2_round` less this fit's chi-square (NaN when either is).
+    fn chi2_round_gap(&self, chi2_round: f32) -> f32 {
+        chi2_round - self.chi2
+    }
+}
+
 /// `theta` with its direction turned by `dphi` (|dphi| <= 0.5 rad): `cos` and `sin` by
 /// their series to the fourth and fifth order (within 3e-5 there), the direction then
 /// renormalised to unit length.
@@ -377,6 +389,7 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
         chi2_round: f32::NAN,
         dof: 0,
         border,
+        round_converged: false,
     };
     let p = match Prepared::new(input, params.background) {
         Ok(p) => p,
@@ -392,8 +405,9 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
     let Some(start) = cog_in_box(&p, whole, p.centre(), CogPower::One) else {
         return failed(p.degenerate(CentroidFlags::empty()), border);
     };
-    let give_up = |chi2_round: f32| TrailedFit {
+    let give_up = |chi2_round: f32, round_converged: bool| TrailedFit {
         chi2_round,
+        round_converged,
         ..failed(p.finish(start, CentroidFlags::NOT_CONVERGED), border)
     };
     let n_px = p.box_pixels(whole).count();
@@ -415,10 +429,11 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
     };
     let round = fit(&p, whole, theta0, round_free, params);
     let chi2_round = round.as_ref().map_or(f32::NAN, |r| r.chi2);
+    let round_converged = round.as_ref().is_some_and(|r| r.converged);
     let (tx, ty) = params.start_trail_px;
     let l0 = math::sqrt(tx * tx + ty * ty);
     if !(l0.is_finite() && l0 >= MIN_TRAIL_PX) {
-        return give_up(chi2_round);
+        return give_up(chi2_round, round_converged);
     }
     let theta = Theta {
         s: s0,
@@ -428,8 +443,26 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
         ..round.as_ref().map_or(theta0, |r| r.theta)
     };
     let Some(tr) = fit(&p, whole, theta, [true; K], params) else {
-        return give_up(chi2_round);
+        return give_up(chi2_round, round_converged);
     };
+    // The round model's minimum may lie nearer the trailed solution than the CoG start
+    // (a wide bright star whose border holds its wings): a trail is only called against
+    // the better of the two round fits.
+    let (mut chi2_round, mut round_converged) = (chi2_round, round_converged);
+    if !(tr.chi2_round_gap(chi2_round) <= trail_dchi2_limit(border)) {
+        let again = Theta {
+            l: 0.0,
+            ex: 1.0,
+            ey: 0.0,
+            ..tr.theta
+        };
+        if let Some(r) = fit(&p, whole, again, round_free, params)
+            && !(r.chi2 >= chi2_round)
+        {
+            chi2_round = r.chi2;
+            round_converged = r.converged;
+        }
+    }
     let (d, l) = tr.factor;
     let th = tr.theta;
     let m = Measured {
@@ -455,5 +488,6 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
         chi2_round,
         dof: u16::try_from(n_px.saturating_sub(K)).unwrap_or(u16::MAX),
         border,
+        round_converged,
     }
 }
