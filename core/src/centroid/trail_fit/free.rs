@@ -22,9 +22,10 @@
 //! holds it on round stars of widths 0.6-2 px and SNR 10-1000 whose width nobody told
 //! the fit. A star of another width than the configured PSF's is a round star of its own
 //! width, not a trail (the width is free in both models). A star the test would call
-//! trailed gets a second round fit started from the trailed solution, and the better round
-//! fit is the one compared (a round fit from the CoG can stop on a worse minimum: a wide
-//! bright star whose wings reach the border).
+//! trailed whose fitted trail is shorter than 3 `s` (nearly round) gets a second round fit
+//! started from the trailed solution, and the better round fit is the one compared (a round
+//! fit from the CoG can stop on a worse minimum: a wide bright star whose wings reach the
+//! border).
 //!
 //! # Start and steps
 //! Round: the power-1 CoG of the window, `N` its sum, `s` from `start_sigma_px`. Trailed:
@@ -100,6 +101,10 @@ pub const TRAIL_FALSE_ALARM: f32 = 1e-3;
 /// Shortest trail the trailed model keeps, px: below it the angle is undefined and the
 /// fit fails (the star is round).
 pub const MIN_TRAIL_PX: f32 = 0.3;
+
+/// A trailed solution shorter than this many `s` (the PSF sigma with the pixel's variance)
+/// that the test would call trailed is checked against a second round fit started from it.
+const REFIT_TRAIL_SIGMAS: f32 = 3.0;
 
 /// The result of [`trail_fit_free`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -445,11 +450,14 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
     let Some(tr) = fit(&p, whole, theta, [true; K], params) else {
         return give_up(chi2_round, round_converged);
     };
-    // The round model's minimum may lie nearer the trailed solution than the CoG start
-    // (a wide bright star whose border holds its wings): a trail is only called against
-    // the better of the two round fits.
+    // A trailed solution shorter than 3 s is nearly round: a large improvement on the round
+    // fit then says the round fit stopped on a worse minimum than the round model's (a wide
+    // bright star whose border holds its wings), so the round model is fitted again from
+    // there and the better round fit compared. A longer trail's improvement is its own
+    // (and the refit, far from the round minimum, would cost a whole fit).
     let (mut chi2_round, mut round_converged) = (chi2_round, round_converged);
-    if !(tr.chi2_round_gap(chi2_round) <= trail_dchi2_limit(border)) {
+    let near_round = tr.theta.l < REFIT_TRAIL_SIGMAS * tr.theta.s;
+    if near_round && !(tr.chi2_round_gap(chi2_round) <= trail_dchi2_limit(border)) {
         let again = Theta {
             l: 0.0,
             ex: 1.0,
