@@ -457,7 +457,8 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
     // (and the refit, far from the round minimum, would cost a whole fit).
     let (mut chi2_round, mut round_converged) = (chi2_round, round_converged);
     let near_round = tr.theta.l < REFIT_TRAIL_SIGMAS * tr.theta.s;
-    if near_round && !(tr.chi2_round_gap(chi2_round) <= trail_dchi2_limit(border)) {
+    let gap = tr.chi2_round_gap(chi2_round);
+    if near_round && (gap.is_nan() || gap > trail_dchi2_limit(border)) {
         let again = Theta {
             l: 0.0,
             ex: 1.0,
@@ -465,7 +466,7 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
             ..tr.theta
         };
         if let Some(r) = fit(&p, whole, again, round_free, params)
-            && !(r.chi2 >= chi2_round)
+            && (chi2_round.is_nan() || r.chi2 < chi2_round)
         {
             chi2_round = r.chi2;
             round_converged = r.converged;
