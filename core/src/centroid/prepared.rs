@@ -145,6 +145,11 @@ impl<'a> Prepared<'a> {
         pos(f) + self.bg.variance_e2
     }
 
+    /// The number of usable border pixels (the background variance's sample).
+    pub(crate) fn perimeter_usable(&self) -> u16 {
+        u16::try_from(self.perimeter().count()).unwrap_or(u16::MAX)
+    }
+
     /// The usable border pixels' bits, row-major.
     fn perimeter(&self) -> Perimeter<'_, 'a> {
         Perimeter {

@@ -18,11 +18,12 @@ use super::config::{CentroidMethod, TrackerConfig};
 use super::record::{StarFlags, StarRecord};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::centroid::cog::{CogParams, cog, sigma_unreliable as cog_sigma_unreliable};
+use crate::centroid::gauss_fit::{CHI2_FLAG_Z, chi2_dof_limit_border};
 use crate::centroid::gauss_fit::{
     GaussFitParams, PsfFit, WidthFitParams, WidthPrior, gauss_fit, gauss_fit_width,
     gauss_fit_width_prior,
 };
-use crate::centroid::trail_fit::{TrailFitParams, trail_fit};
+use crate::centroid::trail_fit::{FreeTrailParams, TrailFitParams, trail_fit, trail_fit_free};
 use crate::centroid::{Background, Centroid, CentroidInput, estimate_background};
 use crate::detect::capture::{CAPTURE_MAX_PX, CAPTURE_MAX_SIDE};
 use crate::table::pixcorr::CogPower;
@@ -30,6 +31,14 @@ use crate::table::pixcorr::{PixCorr, PixCorrBackground};
 use crate::table::{CalibTable, PsfModel};
 use crate::units::{BiasAdu, Electrons};
 use crate::window::{Rect, Window};
+
+/// A trailed star's fitted trail must end at least this far inside its window's border
+/// pixel centres, px (else it is flagged [`StarFlags::TRAIL_UNKNOWN`]): 1.5 px, about two
+/// PSF sigmas of the flight's `a = 1.2 px`, so a 15 px window holds an 11 px trail.
+pub const TRAIL_END_MARGIN_PX: f32 = 1.5;
+
+/// `sigma / a` of a Gaussian PSF (`sqrt(0.31)`).
+const SIGMA_PER_A: f32 = 0.556_776_4;
 
 /// Largest centroid window, px (the configuration's limit).
 pub(crate) const MAX_WINDOW_PX: usize = 13;
@@ -181,6 +190,57 @@ impl<'t> Policy<'t> {
         );
         let c = self.cti.map_or(c, |k| k.corrected(c));
         StarRecord::from_centroid(&c, flags | StarFlags::from_pixels(pixel_flags))
+    }
+
+    /// The star's record from the trailed-star fit with the trail unknown
+    /// ([`trail_fit_free`]: length, angle and width fitted, started from `start_trail_px`)
+    /// when the test calls the star trailed, its position at mid-exposure
+    /// ([`Provenance::TRAILED`](super::Provenance::TRAILED)), CTI-corrected, `flags` and the
+    /// window's pixel flags added; [`StarFlags::POOR_FIT`] when the trailed model does not
+    /// describe the window either, [`StarFlags::TRAIL_UNKNOWN`] when the fitted trail comes
+    /// within [`TRAIL_END_MARGIN_PX`] of the window's edge (a trail the window may cut).
+    /// Detection's [`StarFlags::DETECT_BLENDED`] is taken off a trail the model describes:
+    /// the blob's elongation was the trail. `None` when the star is not trailed (or the
+    /// fit failed).
+    pub(crate) fn free_trailed_record(
+        &self,
+        input: &CentroidInput<'_>,
+        flags: StarFlags,
+        start_trail_px: (f32, f32),
+    ) -> Option<StarRecord> {
+        let f = trail_fit_free(input, &FreeTrailParams::new(self.sigma_px, start_trail_px));
+        if !f.is_trailed() {
+            return None;
+        }
+        let pixel_flags = input
+            .pixel_flags
+            .iter()
+            .fold(PixelFlags::empty(), |m, f| m | *f);
+        let c = self.cti.map_or(f.centroid, |k| k.corrected(f.centroid));
+        let mut flags = flags | StarFlags::from_pixels(pixel_flags);
+        let poor = f.chi2_dof() > chi2_dof_limit_border(f.dof, f.border, CHI2_FLAG_Z);
+        if poor {
+            flags |= StarFlags::POOR_FIT;
+        } else {
+            flags -= StarFlags::DETECT_BLENDED;
+        }
+        // The trail's ends, window-relative: inside the margin, or the window may cut it.
+        let r = input.window.rect;
+        let (cx, cy) = (
+            f.centroid.x_px - f32::from(r.x0),
+            f.centroid.y_px - f32::from(r.y0),
+        );
+        let (hx, hy) = (0.5 * f.trail_px.0.abs(), 0.5 * f.trail_px.1.abs());
+        let m = TRAIL_END_MARGIN_PX;
+        let inside = |c: f32, h: f32, n: u16| c - h >= m && c + h <= f32::from(n) - 1.0 - m;
+        if !(inside(cx, hx, r.width) && inside(cy, hy, r.height)) {
+            flags |= StarFlags::TRAIL_UNKNOWN;
+        }
+        let mut record = StarRecord::from_centroid(&c, flags);
+        record.provenance = super::Provenance::TRAILED;
+        record.psf_a_px = f.psf_sigma_px / SIGMA_PER_A;
+        record.chi2_dof = f.chi2_dof();
+        Some(record)
     }
 
     /// The centroid of `input` by a method of a given width (the fused CoG's general path

@@ -70,9 +70,10 @@ mod predicted;
 mod record;
 mod track;
 
+pub use acquire::{SMEARED_WIDTH_RATIO, TRAIL_MARGIN_PX, TRAIL_SCREEN_PX};
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
 pub use drift::DarkDrift;
-pub use measure::select_curve;
+pub use measure::{TRAIL_END_MARGIN_PX, select_curve};
 pub use modes::CommandError;
 pub use ports::{
     Clock, FixedTable, FixedTemperature, Integration, LineSource, Ports, SourceLine, TableStore,

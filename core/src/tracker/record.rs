@@ -99,8 +99,10 @@ bitflags::bitflags! {
         /// Its trail during the exposure is unknown or guessed, so the position is a smeared
         /// star's, kept to place the next window but not used for the attitude. Tracking:
         /// the star moved at least `TRAIL_MIN_PX` since the last frame before two tracking
-        /// frames measured its motion; acquisition: its fitted width exceeds the configured
-        /// PSF's by `SMEARED_WIDTH_RATIO`.
+        /// frames measured its motion; acquisition: a star the trailed test does not call
+        /// trailed whose fitted width exceeds the configured PSF's by
+        /// `SMEARED_WIDTH_RATIO`, or a trailed star whose fitted trail ends within
+        /// `TRAIL_END_MARGIN_PX` of its window's border (a trail the window may cut).
         const TRAIL_UNKNOWN = 1 << 25;
         /// Tracking: its trail during the exposure is longer than its tracking window holds
         /// (a component beyond the window's side less 1 px, the capture's largest window
@@ -124,9 +126,11 @@ bitflags::bitflags! {
         /// Measured by the fused raw-window CoG (tracking), background carried from the
         /// star's last full measurement.
         const FUSED = 1 << 1;
-        /// Measured by the trailed-star fit (tracking), on the whole tracking window, the
-        /// trail taken from the star's prediction or else its last motion: the position is
-        /// at mid-exposure.
+        /// Measured by the trailed-star fit: in tracking on the whole tracking window, the
+        /// trail taken from the star's prediction or else its last motion; in acquisition on
+        /// the blob's window, the trail fitted (length, angle and width free) and the star
+        /// found trailed by the test against the round model: the position is at
+        /// mid-exposure.
         const TRAILED = 1 << 2;
     }
 }

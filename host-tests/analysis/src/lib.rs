@@ -6,7 +6,9 @@
 //! the tests run the same code.
 
 pub mod accuracy;
+pub mod acquisition_rates;
 pub mod exposure_chart;
 pub mod figures;
 pub mod sil_rates;
 pub mod tradeoff;
+pub mod trail_chart;

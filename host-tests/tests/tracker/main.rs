@@ -10,6 +10,7 @@ mod dark_drift;
 mod demo;
 mod frame_cycle;
 mod safe_states;
+mod sil_acquire_rate;
 mod sil_motion;
 mod sil_sky;
 mod tracker;

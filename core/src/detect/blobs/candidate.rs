@@ -29,8 +29,15 @@ impl<const N: usize> LineDetector<N> {
             return;
         }
         let mut flags = b.flags;
+        let mut moments_64ths = [0i16; 3];
         let (x, y) = match b.moments.shape() {
-            Some(((mx, my), (l1, l2))) => {
+            Some(super::Shape {
+                mean: (mx, my),
+                eigen: (l1, l2),
+                cov,
+            }) => {
+                // Saturating float-to-int casts; NaN gives 0.
+                moments_64ths = cov.map(|m| (m * 64.0) as i16);
                 // A single star is round to within noise; a pair is elongated along the line
                 // joining it (its variance grows by f (1 - f) d^2 for fluxes f, 1 - f and
                 // separation d).
@@ -60,6 +67,8 @@ impl<const N: usize> LineDetector<N> {
             pixels: b.pixels,
             snr,
             flags,
+            extent: [b.x_min, b.x_max, b.y_min, b.last_y],
+            moments_64ths,
         };
         if let Err(d) = self.candidates.push(d) {
             self.dropped += 1;

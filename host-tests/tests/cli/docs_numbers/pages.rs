@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 28] = [
+const CHECKED: [&str; 30] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -44,6 +44,8 @@ const CHECKED: [&str; 28] = [
     "accuracy-frames",
     "accuracy-frames-field",
     "trail-bound",
+    "trail-rates",
+    "acquisition-rates",
     "sil-rates",
     "first-attitude",
     "exposure-chart",

@@ -218,3 +218,58 @@ fn exposure_table_is_the_chart_csv() {
         }
     }
 }
+
+const ACQUISITION_RATES: &str = "host-tests/figures/acquisition-rates.csv";
+
+/// The "Lost in space at body rate" table of docs/tracker.md is
+/// `host-tests/figures/acquisition-rates.csv`, row for row.
+#[test]
+fn acquisition_rate_table_is_the_acquisition_rates_csv() {
+    use super::helpers::{Csv, matches};
+    let csv = Csv::read(ACQUISITION_RATES);
+    let recs = csv.records();
+    let (header, body) = table("docs/tracker.md", "acquisition-rates");
+    assert_eq!(
+        header,
+        [
+            "rate, deg/s",
+            "exposure, ms",
+            "trail, px",
+            "frames",
+            "solved",
+            "wrong",
+            "stars",
+            "trailed",
+            "usable",
+            "trailed chi^2/dof",
+            "cross-boresight RMS, arcsec"
+        ]
+    );
+    assert_eq!(
+        body.len(),
+        recs.len(),
+        "{ACQUISITION_RATES}: one row a point"
+    );
+    for (row, rec) in body.iter().zip(&recs) {
+        for (i, col) in [
+            "rate_deg_s",
+            "exposure_ms",
+            "trail_px",
+            "frames",
+            "solved",
+            "wrong",
+            "stars",
+            "trailed",
+            "usable",
+            "trailed_chi2_dof",
+            "rms_cross_arcsec",
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let (d, c) = (&row[i], rec[col]);
+            let same = if c == "NaN" { d == "-" } else { matches(d, c) };
+            assert!(same, "{col}: {row:?} vs {rec:?}");
+        }
+    }
+}
