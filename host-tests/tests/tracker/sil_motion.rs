@@ -12,15 +12,18 @@ use startrack_sim::sky::motion::{ExposureMotion, RateProfile};
 use startrack_sim::sky::scene::SkyScene;
 
 /// A sky turning at `rate_deg_s` (camera frame) during 100 ms exposures every 100 ms, from
-/// a seeded attitude.
+/// a seeded attitude, the tracker told that exposure.
 pub fn turning_sky(seed: u64, rate_deg_s: [f64; 3], frames: u32) -> SilConfig {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let q0 = random_attitude(&mut rng);
     let profile = RateProfile::constant(rate_deg_s.map(f64::to_radians));
     let motion = ExposureMotion::new(profile, 0.1, 0.1).unwrap();
+    let mut tracker = SilConfig::default().tracker;
+    tracker.exposure_ms = 100;
     SilConfig {
         frames,
         seed,
+        tracker,
         sky: Some(SkyScene::ccd47_15deg_moving(q0, motion)),
         ..SilConfig::default()
     }
