@@ -189,22 +189,28 @@ impl<'c> Solver<'c> {
         velocity_m_s: Option<[f64; 3]>,
         applied: &mut bool,
     ) -> Result<Fix, SolveError> {
-        let mut measured: heapless::Vec<(f32, Measured), { ident::MAX_STARS }> =
+        // Ranked as the star list ranks: a window the PSF describes (no `POOR_FIT`: a
+        // particle hit is bright and fits badly) before one it does not, then the brighter.
+        let rank = |s: &StarRecord| (!s.flags.contains(StarFlags::POOR_FIT), s.flux_e);
+        let above = |a: &(bool, f32), b: &(bool, f32)| (a.0, a.1) > (b.0, b.1);
+        let mut measured: heapless::Vec<((bool, f32), Measured), { ident::MAX_STARS }> =
             heapless::Vec::new();
         for s in stars.iter().filter(|s| usable(s)) {
             // A position the camera model cannot invert (a fold) is not used.
             let Some(m) = self.measure(s) else { continue };
             if measured.len() < ident::MAX_STARS {
-                let _ = measured.push((s.flux_e, m));
-            } else if let Some(dimmest) = measured
+                let _ = measured.push((rank(s), m));
+            } else if let Some(lowest) = measured
                 .iter_mut()
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-                .filter(|d| d.0 < s.flux_e)
+                .min_by(|a, b| a.0.0.cmp(&b.0.0).then(a.0.1.total_cmp(&b.0.1)))
+                .filter(|d| above(&rank(s), &d.0))
             {
-                *dimmest = (s.flux_e, m);
+                *lowest = (rank(s), m);
             }
         }
-        crate::small_sort::sort_by(&mut measured, |a, b| b.0.total_cmp(&a.0));
+        crate::small_sort::sort_by(&mut measured, |a, b| {
+            b.0.0.cmp(&a.0.0).then(b.0.1.total_cmp(&a.0.1))
+        });
         let mut dirs: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
         for (_, m) in &measured {
             let _ = dirs.push(*m);

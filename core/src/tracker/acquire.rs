@@ -17,7 +17,7 @@ use super::measure::{Policy, measure};
 use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord};
 use super::{Ring, Shared};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
-use crate::detect::{Detection, ScanDetector};
+use crate::detect::{Detection, DetectionFlags, ScanDetector};
 use crate::geometry::ReadoutGeometry;
 use crate::units::Electrons;
 use crate::window::Rect;
@@ -36,6 +36,10 @@ pub(super) struct Acquisition<'t, const N: usize> {
     scan: Option<ScanDetector<'t, N>>,
     closed: heapless::Vec<Detection, N>,
     pending: heapless::Vec<Pending, N>,
+    /// Sum and count of the whole rows' mean sky (saturated and excluded pixels left out),
+    /// e- per pixel.
+    sky_sum_e: f32,
+    sky_rows: u32,
 }
 
 impl<'t, const N: usize> Acquisition<'t, N> {
@@ -44,6 +48,8 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             scan: None,
             closed: heapless::Vec::new(),
             pending: heapless::Vec::new(),
+            sky_sum_e: 0.0,
+            sky_rows: 0,
         }
     }
 
@@ -53,6 +59,8 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         self.scan = None;
         self.closed.clear();
         self.pending.clear();
+        self.sky_sum_e = 0.0;
+        self.sky_rows = 0;
     }
 
     /// Active row `y`: into the ring and the scan; the windows it completes are measured.
@@ -93,7 +101,13 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             return LineOutcome::Refused;
         }
         let outcome = match scan.whole_line() {
-            Some((e, f)) => row_mean(e, f),
+            Some((e, f)) => {
+                if let Some(sky) = sky_mean(e, f) {
+                    self.sky_sum_e += sky;
+                    self.sky_rows += 1;
+                }
+                row_mean(e, f)
+            }
             None => LineOutcome::Scanned,
         };
         self.queue_closed(config, geometry, sh.summary);
@@ -114,6 +128,9 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             scan.finish_closed(&mut self.closed);
             sh.summary.candidates_dropped = scan.detector().dropped();
             self.queue_closed(config, geometry, sh.summary);
+        }
+        if self.sky_rows > 0 {
+            sh.summary.sky_e = self.sky_sum_e / self.sky_rows as f32;
         }
         self.serve(cal, policy, config, None, sh);
     }
@@ -183,6 +200,12 @@ fn measure_pending<const N: usize>(
     sh: &mut Shared<'_, N>,
 ) {
     let rect = p.rect;
+    // A saturated blob is a bright object or its bloomed columns: masked, never a star.
+    if p.detection.flags.contains(DetectionFlags::SATURATED) {
+        sh.summary.masked = sh.summary.masked.saturating_add(1);
+        sh.summary.saturated_px = sh.summary.saturated_px.max(p.detection.pixels);
+        return;
+    }
     let detected = StarFlags::from_detection(p.detection.flags);
     let want_background = config.tracking_method == CentroidMethod::FusedCog1;
     let copied = match sh.scratch.inputs(rect) {
@@ -196,6 +219,10 @@ fn measure_pending<const N: usize>(
         && let Some(input) = sh.scratch.window(rect, p.clipped)
     {
         let mut m = measure(policy, &input, detected, want_background);
+        if m.hit {
+            sh.summary.hits = sh.summary.hits.saturating_add(1);
+            return;
+        }
         if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {
             m.record.flags |= StarFlags::TRAIL_UNKNOWN;
         }
@@ -228,6 +255,19 @@ fn measure_pending<const N: usize>(
         },
         Carry::default(),
     );
+}
+
+/// A whole calibrated row's mean sky: the mean of its pixels that are neither excluded nor
+/// saturated, e- (`None` without one).
+fn sky_mean(e: &[Electrons], f: &[PixelFlags]) -> Option<f32> {
+    let (mut sum, mut n) = (0i64, 0i64);
+    for (v, fl) in e.iter().zip(f.iter()) {
+        if !fl.is_excluded() && !fl.contains(PixelFlags::SATURATED) {
+            sum += i64::from(v.to_bits());
+            n += 1;
+        }
+    }
+    (n > 0).then(|| sum as f32 / (64.0 * n as f32))
 }
 
 /// A whole calibrated row's mean over the pixels that are not excluded, its OR-ed flags

@@ -46,7 +46,7 @@ use crate::centroid::CentroidInput;
 use crate::centroid::raw_cog::{PlanError, RawCogParams, RawWindow};
 use crate::detect::capture::CAPTURE_MAX_SIDE;
 use crate::detect::track::TrackResult;
-use crate::detect::track_detect;
+use crate::detect::{TrackFlags, track_detect};
 use crate::geometry::ReadoutGeometry;
 use crate::window::Rect;
 
@@ -155,16 +155,19 @@ impl Tracking {
     /// Keeps the usable centroids of `stars`, the brightest `max` of them, for the next
     /// tracking frame.
     pub(super) fn keep_priors<const N: usize>(&mut self, stars: &StarList<N>, max: usize) {
-        let mut order: heapless::Vec<(f32, usize), N> = heapless::Vec::new();
+        let mut order: heapless::Vec<(bool, f32, usize), N> = heapless::Vec::new();
         for (i, (s, _)) in stars.iter().enumerate() {
             if s.is_centroid() {
                 // At most N stars in the list: cannot fail.
-                let _ = order.push((s.flux_e, i));
+                let _ = order.push((s.flags.contains(StarFlags::POOR_FIT), s.flux_e, i));
             }
         }
-        crate::small_sort::sort_by(&mut order, |a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        // The list's rank: windows the PSF describes first, then the brighter.
+        crate::small_sort::sort_by(&mut order, |a, b| {
+            a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2))
+        });
         self.priors.clear();
-        for (_, i) in order.iter().take(max.min(TRACK_WINDOWS)) {
+        for (_, _, i) in order.iter().take(max.min(TRACK_WINDOWS)) {
             if let Some((s, c)) = stars.iter().nth(*i) {
                 // At most TRACK_WINDOWS taken: cannot fail.
                 let _ = self.priors.push(Prior {
@@ -367,6 +370,13 @@ impl Tracking {
             sh.summary.track_lost = sh.summary.track_lost.saturating_add(1);
             return;
         }
+        note_sky(sh.summary, verdict.background_e);
+        // A window holding a saturated pixel is on a bright object or its bloomed columns:
+        // masked, never a star.
+        if verdict.flags.contains(TrackFlags::SATURATED) {
+            sh.summary.masked = sh.summary.masked.saturating_add(1);
+            return;
+        }
         if let Some(trail) = trail {
             let Some(input) = sh.scratch.window(rect, clipped) else {
                 sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
@@ -409,6 +419,10 @@ impl Tracking {
             return;
         };
         let mut m = measure(policy, &input, flags, want_background);
+        if m.hit {
+            sh.summary.hits = sh.summary.hits.saturating_add(1);
+            return;
+        }
         m.record.provenance = Provenance::TRACKED;
         let v = velocity(&m.record);
         let tracked_frames = settle(&mut m.record, &placed.prior);
@@ -422,6 +436,17 @@ impl Tracking {
             },
         );
     }
+}
+
+/// Folds a tracking window's border background into the frame's mean sky (a running mean
+/// over the windows that held their star).
+fn note_sky(summary: &mut FrameSummary, background_e: f32) {
+    if !background_e.is_finite() {
+        return;
+    }
+    let n = f32::from(summary.sky_windows);
+    summary.sky_e = (summary.sky_e * n + background_e) / (n + 1.0);
+    summary.sky_windows = summary.sky_windows.saturating_add(1);
 }
 
 impl Tracking {

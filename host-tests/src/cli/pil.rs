@@ -166,6 +166,11 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
         counter_ppm: 0.0,
         velocity_km_s: None,
         apparent: false,
+        moon: None,
+        earth_limb: None,
+        sun_angle_deg: None,
+        planet: Vec::new(),
+        protons: None,
     };
     let sil = super::sil::config_of(&sil_args)?;
     let elf = elf_of(args)?;

@@ -100,6 +100,24 @@ impl Simulator {
         }
     }
 
+    /// The raw level at and above which a sample may be a full pixel or the ADC's top, for
+    /// the calibration table: over both outputs the lowest of 65535 and the full well as the
+    /// output reads it ([`Self::saturation_e`]'s limit through the output's bias and gain),
+    /// less 5 column-bias sigmas and 3 read-noise sigmas (a full pixel of the lowest column
+    /// bias, read low, is still flagged).
+    pub fn saturation_level_adu(&self) -> u16 {
+        let p = &self.params;
+        let level = (0..2)
+            .map(|out| {
+                let well = p.full_well_e * (1.0 - p.nonlinearity_at_full_well[out]);
+                p.bias_adu[out] + well / p.gain_e_per_adu[out]
+                    - 5.0 * p.column_bias_sigma_adu
+                    - 3.0 * p.read_noise_e / p.gain_e_per_adu[out]
+            })
+            .fold(65535.0f64, f64::min);
+        level.floor().clamp(1.0, 65535.0) as u16
+    }
+
     /// Relative dark of raw element (`col`, `line`): 1 + dsnu N(0,1), clipped at 0.
     pub fn dark_rel(&self, col: usize, line: usize) -> f64 {
         let p = &self.params;
