@@ -180,6 +180,14 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             }
             self.pending.swap_remove(i);
             measure_pending(cal, policy, config, &p, &mut sh);
+            // Measured: the star list (its rank: a window the PSF describes first) keeps it
+            // or not, so its place in the detector's bounded list goes to the next
+            // candidate. That list then holds only the candidates waiting for their rows;
+            // ranked by the blob alone, at a solar flare's rate the brighter proton hits
+            // filled it and the stars were never measured.
+            if let Some(scan) = self.scan.as_mut() {
+                scan.forget(&p.detection);
+            }
         }
     }
 }
@@ -191,20 +199,22 @@ impl<'t, const N: usize> Acquisition<'t, N> {
 /// deg/s in 100 ms) at 1.4-1.5 times it, 6.8 px at 1.9-2.4 times.
 pub const SMEARED_WIDTH_RATIO: f32 = 1.5;
 
-/// Measures one pending window, or reports the detector's position with the reason.
+/// Measures one pending window, or reports the detector's position with the reason;
+/// false when it is no star (masked on a saturated object, or a particle hit).
+#[allow(clippy::needless_return, reason = "the branches read as one")]
 fn measure_pending<const N: usize>(
     cal: &FrameCalibration<'_>,
     policy: &Policy<'_>,
     config: &TrackerConfig,
     p: &Pending,
     sh: &mut Shared<'_, N>,
-) {
+) -> bool {
     let rect = p.rect;
     // A saturated blob is a bright object or its bloomed columns: masked, never a star.
     if p.detection.flags.contains(DetectionFlags::SATURATED) {
         sh.summary.masked = sh.summary.masked.saturating_add(1);
         sh.summary.saturated_px = sh.summary.saturated_px.max(p.detection.pixels);
-        return;
+        return false;
     }
     let detected = StarFlags::from_detection(p.detection.flags);
     let want_background = config.tracking_method == CentroidMethod::FusedCog1;
@@ -221,7 +231,7 @@ fn measure_pending<const N: usize>(
         let mut m = measure(policy, &input, detected, want_background);
         if m.hit {
             sh.summary.hits = sh.summary.hits.saturating_add(1);
-            return;
+            return false;
         }
         if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {
             m.record.flags |= StarFlags::TRAIL_UNKNOWN;
@@ -233,7 +243,7 @@ fn measure_pending<const N: usize>(
                 ..Carry::default()
             },
         );
-        return;
+        return true;
     } else {
         sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
         StarFlags::CALIB_FAILED
@@ -255,6 +265,7 @@ fn measure_pending<const N: usize>(
         },
         Carry::default(),
     );
+    true
 }
 
 /// A whole calibrated row's mean sky: the mean of its pixels that are neither excluded nor

@@ -186,6 +186,9 @@ pub struct SilFrame {
     pub attitude: Option<AttitudeCheck>,
     /// In-field true stars clear of the bright scene ([`unaffected`]); `None` without one.
     pub unaffected: Option<usize>,
+    /// The Moon or the Earth is on the active area ([`object_in_field`]); `None` without a
+    /// bright scene.
+    pub object_in_field: Option<bool>,
 }
 
 /// A frame's attitude against the truth.
@@ -473,6 +476,7 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
                     .filter(|t| in_field(t, &params) && unaffected(&sim, t))
                     .count(),
             );
+            frame.object_in_field = Some(object_in_field(&sim));
         }
         if let (Some(fix), Some((scene, _))) = (outcome.attitude, sky.as_ref()) {
             let mid_us = outcome.report.map_or(0, |r| r.mid_exposure_us);
@@ -550,6 +554,35 @@ pub fn frame_simulator(
         sim.bright = Some(std::sync::Arc::new(bright));
     }
     sim
+}
+
+/// Whether `sim`'s frame has the Moon's disc or the Earth on the active area (false without
+/// a bright scene).
+pub fn object_in_field(sim: &Simulator) -> bool {
+    let Some(b) = sim.bright.as_ref() else {
+        return false;
+    };
+    let g = sim.params.geometry;
+    let (cols, rows) = (f64::from(g.active_cols), f64::from(g.active_rows));
+    let moon = b.moon.is_some_and(|m| {
+        m.surface_e > 0.0
+            && m.centre_px[0] + m.radius_px >= -0.5
+            && m.centre_px[0] - m.radius_px <= cols - 0.5
+            && m.centre_px[1] + m.radius_px >= -0.5
+            && m.centre_px[1] - m.radius_px <= rows - 0.5
+    });
+    // The Earth's region is convex and large: on the area when a corner is in it.
+    let earth = b.earth.is_some_and(|e| {
+        [
+            (0.0, 0.0),
+            (cols - 1.0, 0.0),
+            (0.0, rows - 1.0),
+            (cols - 1.0, rows - 1.0),
+        ]
+        .iter()
+        .any(|&(x, y)| e.inside_px(x, y) > -0.5)
+    });
+    moon || earth
 }
 
 /// Half the side of the box around a true star that an object must stay out of for the
@@ -706,5 +739,6 @@ fn match_frame(
         samples_read,
         attitude: None,
         unaffected: None,
+        object_in_field: None,
     }
 }
