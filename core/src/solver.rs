@@ -211,6 +211,13 @@ impl<'c> Solver<'c> {
         crate::small_sort::sort_by(&mut measured, |a, b| {
             b.0.0.cmp(&a.0.0).then(b.0.1.total_cmp(&a.0.1))
         });
+        // With enough stars the PSF describes, those it does not are left out: their
+        // positions and sigmas are not clean (a proton hit inside a tracked star's window
+        // moves its fit by up to pixels while its sigma stays the star's).
+        let clean = measured.iter().filter(|m| m.0.0).count();
+        if clean >= CLEAN_ENOUGH {
+            measured.truncate(clean);
+        }
         let mut dirs: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
         for (_, m) in &measured {
             let _ = dirs.push(*m);
@@ -312,6 +319,10 @@ impl<'c> Solver<'c> {
         })
     }
 }
+
+/// Stars the fitted PSF describes (no [`StarFlags::POOR_FIT`]) from which the others are
+/// left out of identification.
+pub const CLEAN_ENOUGH: usize = 6;
 
 /// A star whose position identification may use: a centroid, not saturated, its trail not
 /// unknown, with a finite position and a finite positive sigma.

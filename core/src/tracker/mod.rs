@@ -200,8 +200,8 @@ pub struct Tracker<'t, 'b, const N: usize> {
     acq: Acquisition<'t, N>,
     trk: Tracking,
     work: FrameWork<N>,
-    /// The Moon and Earth bits of the last acquisition frame: a tracking frame's masked
-    /// windows are taken to be on them.
+    /// The Moon and Earth bits of the last acquisition frame, which the tracking frames
+    /// after it carry (their windows do not see the whole field).
     last_bright: Obstructions,
 }
 
@@ -663,8 +663,8 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
 
 impl<const N: usize> Tracker<'_, '_, N> {
     /// What took stars from the frame now ending (see [`Obstructions`]): in acquisition
-    /// the largest saturated region's size, in tracking the last acquisition's Moon or
-    /// Earth when a window was masked; in both the sky and the hits.
+    /// the largest saturated region's size, in tracking the last acquisition's Moon and
+    /// Earth bits; in both the sky and the hits.
     fn obstructions(&mut self) -> Obstructions {
         let s = &self.work.summary;
         let rows = u32::from(self.geometry.active_rows);
@@ -678,7 +678,7 @@ impl<const N: usize> Tracker<'_, '_, N> {
                 }
                 self.last_bright = o;
             }
-            Mode::Tracking if s.masked > 0 => o |= self.last_bright,
+            Mode::Tracking => o |= self.last_bright,
             _ => {}
         }
         if s.sky_e > STRAY_LIGHT_LIMIT_E {

@@ -398,31 +398,45 @@ impl Tracking {
             );
             return;
         }
-        // The centroid window around the peak, inside the tracking window.
-        let (rel, _) = Rect::centred_clipped(
-            verdict.peak_x.saturating_sub(rect.x0),
-            verdict.peak_y.saturating_sub(rect.y0),
-            config.window_px,
-            rect.width,
-            rect.height,
-        );
-        let sub = Rect {
-            x0: rect.x0.saturating_add(rel.x0),
-            y0: rect.y0.saturating_add(rel.y0),
-            ..rel
-        };
-        let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;
         let want_background = config.tracking_method == CentroidMethod::FusedCog1;
         let flags = StarFlags::from_track(verdict.flags);
-        let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) else {
-            sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+        // The centroid window around the peak, inside the tracking window; when that is a
+        // particle hit, around the predicted pixel (the star may be beside the hit).
+        let mut m = None;
+        for (k, (px, py)) in [(verdict.peak_x, verdict.peak_y), placed.anchor]
+            .into_iter()
+            .enumerate()
+        {
+            if k == 1 && px.abs_diff(verdict.peak_x).max(py.abs_diff(verdict.peak_y)) <= 1 {
+                break;
+            }
+            let (rel, _) = Rect::centred_clipped(
+                px.saturating_sub(rect.x0),
+                py.saturating_sub(rect.y0),
+                config.window_px,
+                rect.width,
+                rect.height,
+            );
+            let sub = Rect {
+                x0: rect.x0.saturating_add(rel.x0),
+                y0: rect.y0.saturating_add(rel.y0),
+                ..rel
+            };
+            let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;
+            let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) else {
+                sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+                return;
+            };
+            let measured = measure(policy, &input, flags, want_background);
+            if !measured.hit {
+                m = Some(measured);
+                break;
+            }
+            sh.summary.hits = sh.summary.hits.saturating_add(1);
+        }
+        let Some(mut m) = m else {
             return;
         };
-        let mut m = measure(policy, &input, flags, want_background);
-        if m.hit {
-            sh.summary.hits = sh.summary.hits.saturating_add(1);
-            return;
-        }
         m.record.provenance = Provenance::TRACKED;
         let v = velocity(&m.record);
         let tracked_frames = settle(&mut m.record, &placed.prior);

@@ -60,14 +60,14 @@ fn protons(env: ProtonEnv) -> BrightSky {
 /// The short scenes the CI test asserts on and the table shows: the full Moon leaving the
 /// field at its edge, the Earth's limb 150 px into a corner, the Sun at 32 deg, Venus,
 /// the SAA's and a solar flare's protons; `frames` frames each (the Moon's scene runs
-/// until 4 frames after it leaves).
+/// until 5 frames after it leaves).
 pub fn short_cases(frames: u32) -> Vec<BrightCase> {
     vec![
         BrightCase {
             name: "moon leaving",
-            bright: moon(1034.0, 480.0, 0.0),
+            bright: moon(1020.0, 480.0, 0.0),
             drift_px: (0.9, 0.0),
-            frames: frames.max(24),
+            frames: frames.max(30),
         },
         BrightCase {
             name: "earth limb",

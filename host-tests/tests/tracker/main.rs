@@ -9,6 +9,7 @@ mod dark_drift;
 mod demo;
 mod frame_cycle;
 mod safe_states;
+mod sil_bright;
 mod sil_motion;
 mod sil_sky;
 mod tracker;
