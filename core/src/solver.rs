@@ -3,8 +3,9 @@
 //!
 //! Each frame, the usable stars ([`StarRecord::is_centroid`], not saturated, their trail
 //! not unknown ([`StarFlags::TRAIL_UNKNOWN`]), with a finite
-//! positive sigma) are turned into camera-frame directions by the [`Camera`], brightest
-//! first, at most [`ident::MAX_STARS`]. With a prior no older than
+//! positive sigma) are turned into camera-frame directions by the [`Camera`], at most
+//! [`ident::MAX_STARS`], those the fitted PSF describes first (no [`StarFlags::POOR_FIT`]),
+//! then the brightest; with [`CLEAN_ENOUGH`] of those, the `POOR_FIT` ones are left out. With a prior no older than
 //! [`SolverConfig::max_prior_age_us`], [`ident::track`] identifies them near it; without one,
 //! or when tracking fails, [`ident::lost_in_space`] does. A solution replaces the prior; a
 //! frame with none leaves the prior to age out, so one bad frame does not send the next

@@ -23,8 +23,9 @@
 //! the width-free fit's chi-square flags the bright ones `POOR_FIT`, the rest stay in the
 //! list as false stars, which identification tolerates.
 //!
-//! Cost: the border median and variance (as the fit's background), a pass over the window
-//! for its peak and eight neighbour reads; ~1,000 M7 instructions a 7x7 window.
+//! Cost: the border median and variance (as the fit's background, most of it), a pass over
+//! the window for its peak and eight neighbour reads: ~5,300 M7 instructions a 7x7 window
+//! (`cargo m7-bench`, `particle_hit_7x7`), 0.16 M a 30-star frame.
 
 use crate::calib::PixelFlags;
 use crate::centroid::{Background, CentroidInput, estimate_background};

@@ -201,7 +201,6 @@ pub const SMEARED_WIDTH_RATIO: f32 = 1.5;
 
 /// Measures one pending window, or reports the detector's position with the reason;
 /// false when it is no star (masked on a saturated object, or a particle hit).
-#[allow(clippy::needless_return, reason = "the branches read as one")]
 fn measure_pending<const N: usize>(
     cal: &FrameCalibration<'_>,
     policy: &Policy<'_>,

@@ -255,14 +255,7 @@ pub const CSV_HEADER: &str = "scene,frames,solved,wrong,eligible,eligible_solved
 
 /// The rows as CSV, after `comment` lines (each prefixed `# `).
 pub fn csv(rows: &[BrightRow], comment: &[&str]) -> String {
-    let mut out = String::new();
-    for c in comment {
-        out.push_str("# ");
-        out.push_str(c);
-        out.push('\n');
-    }
-    out.push_str(CSV_HEADER);
-    out.push('\n');
+    let mut out = crate::sil_rates::csv_start(comment, CSV_HEADER);
     for r in rows {
         out.push_str(&format!(
             "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",

@@ -192,19 +192,25 @@ pub fn run_case(case: &RateCase, seed0: u64, runs: u64, frames: u32) -> Result<R
     Ok(row)
 }
 
-/// The CSV header of [`csv`].
-pub const CSV_HEADER: &str = "motion,rate_deg_s,runs,frames,solved,availability,wrong,worst_arcsec,rms_cross_arcsec,bound_cross_arcsec,ratio";
-
-/// The rows as CSV, after `comment` lines (each prefixed `# `).
-pub fn csv(rows: &[RateRow], comment: &[&str]) -> String {
+/// A CSV's start: `comment` lines (each prefixed `# `), then `header`, each line ended.
+pub fn csv_start(comment: &[&str], header: &str) -> String {
     let mut out = String::new();
     for c in comment {
         out.push_str("# ");
         out.push_str(c);
         out.push('\n');
     }
-    out.push_str(CSV_HEADER);
+    out.push_str(header);
     out.push('\n');
+    out
+}
+
+/// The CSV header of [`csv`].
+pub const CSV_HEADER: &str = "motion,rate_deg_s,runs,frames,solved,availability,wrong,worst_arcsec,rms_cross_arcsec,bound_cross_arcsec,ratio";
+
+/// The rows as CSV, after `comment` lines (each prefixed `# `).
+pub fn csv(rows: &[RateRow], comment: &[&str]) -> String {
+    let mut out = csv_start(comment, CSV_HEADER);
     for r in rows {
         let (motion, rate) = r.case.map_or(("", 0.0), |c| (c.motion, c.rate_deg_s));
         out.push_str(&format!(

@@ -113,7 +113,7 @@ pub struct SilArgs {
     #[arg(long, requires = "velocity_km_s")]
     pub apparent: bool,
     /// With `--sky`: the Moon, its centre at frame 0 X,Y (active px) and its phase angle
-    /// (deg, 0 full to 180 new; default 0), fixed in the sky as the field turns: X,Y[,PHASE].
+    /// (deg, 0 full to 180 new; default 0), fixed in the sky as the field turns: `X,Y[,PHASE]`.
     #[arg(
         long,
         requires = "sky",
@@ -128,7 +128,7 @@ pub struct SilArgs {
     pub earth_limb: Option<Vec<f64>>,
     /// With `--sky`: the Sun's stray light, the Sun A deg from the boresight (30, the
     /// baffle's exclusion, to 180) at azimuth AZ on the image (deg from +x towards +y;
-    /// default 0): A[,AZ].
+    /// default 0): `A[,AZ]`.
     #[arg(
         long,
         requires = "sky",
