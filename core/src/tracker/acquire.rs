@@ -192,6 +192,11 @@ impl<'t, const N: usize> Acquisition<'t, N> {
     }
 }
 
+/// A saturated blob of more than this many pixels is masked ([`StarFlags`] would only flag
+/// a star's clipped core): four 7 x 7 windows' worth, more than the brightest star's wings
+/// above the join threshold; a bloomed column alone is 1,024.
+pub const MASK_MIN_PX: u32 = 196;
+
 /// An acquired star whose fitted width (the width-free fit's `psf_a_px`) exceeds the
 /// configured PSF's by this factor is a smeared star, its trail unknown: flagged
 /// [`StarFlags::TRAIL_UNKNOWN`] (kept for tracking, not used for the attitude). On the SIL's
@@ -209,8 +214,9 @@ fn measure_pending<const N: usize>(
     sh: &mut Shared<'_, N>,
 ) -> bool {
     let rect = p.rect;
-    // A saturated blob is a bright object or its bloomed columns: masked, never a star.
-    if p.detection.flags.contains(DetectionFlags::SATURATED) {
+    // A saturated blob larger than any star's is a bright object or its bloomed columns:
+    // masked, never a star (a star whose core clipped is reported, flagged saturated).
+    if p.detection.flags.contains(DetectionFlags::SATURATED) && p.detection.pixels > MASK_MIN_PX {
         sh.summary.masked = sh.summary.masked.saturating_add(1);
         sh.summary.saturated_px = sh.summary.saturated_px.max(p.detection.pixels);
         return false;
@@ -228,8 +234,10 @@ fn measure_pending<const N: usize>(
         && let Some(input) = sh.scratch.window(rect, p.clipped)
     {
         let mut m = measure(policy, &input, detected, want_background);
-        if m.hit {
+        if m.hit_like {
             sh.summary.hits = sh.summary.hits.saturating_add(1);
+        }
+        if m.hit {
             return false;
         }
         if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {

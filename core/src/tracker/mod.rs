@@ -67,8 +67,8 @@ mod track;
 
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
 pub use drift::DarkDrift;
-pub use measure::HIT_WIDTH_FRACTION;
 pub use measure::select_curve;
+pub use measure::{HIT_MONITOR_FRACTION, HIT_WIDTH_FRACTION};
 pub use modes::CommandError;
 pub use ports::{
     Clock, FixedTable, FixedTemperature, LineSource, Ports, SourceLine, TableStore, TelemetrySink,
@@ -91,8 +91,9 @@ pub const EARTH_MIN_COLUMNS: u32 = 48;
 /// shot noise (22 e-) then passes the CCD47-20's read and dark noise and the faint stars'
 /// SNR falls.
 pub const STRAY_LIGHT_LIMIT_E: f32 = 500.0;
-/// This many particle hits in a frame flag it: a quiet orbit's rate (~1 cm^-2 s^-1) gives a
-/// 1.77 cm^2 sensor about 0.2 a 100 ms frame, the South Atlantic Anomaly ~190.
+/// This many particle hits counted in a frame flag it: a quiet orbit's rate (~1 cm^-2 s^-1)
+/// gives a 1.77 cm^2 sensor about 0.2 hits a 100 ms frame, the South Atlantic Anomaly ~190,
+/// of which the monitor counts about one in six in an acquisition frame.
 pub const RADIATION_HITS: u16 = 5;
 
 use crate::calib::refresh::{Defect, DefectWatch};

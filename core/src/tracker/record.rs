@@ -127,7 +127,7 @@ bitflags::bitflags! {
     /// numbers are stable: housekeeping and the attitude report's validity flags carry them.
     /// Told from the image alone ([`crate::tracker`]'s frame end): the Moon and the Earth by
     /// the size of a saturated region, the Sun by the sky background, radiation by the
-    /// particle hits rejected.
+    /// particle hits counted.
     #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
     pub struct Obstructions: u8 {
         /// A saturated region of the Moon's size (its bloomed columns).
@@ -356,8 +356,9 @@ pub struct FrameSummary {
     /// Detections and tracking windows holding a saturated pixel: a bright object or its
     /// bloomed columns, masked (never reported as stars).
     pub masked: u16,
-    /// Windows rejected as particle hits ([`crate::detect::is_particle_hit`]): the frame's
-    /// radiation monitor.
+    /// Windows sharper than any star the optics make, particle hits
+    /// ([`crate::detect::is_particle_hit`] at `HIT_MONITOR_FRACTION` of the PSF; those past
+    /// `HIT_WIDTH_FRACTION` are rejected): the frame's radiation monitor.
     pub hits: u16,
     /// Acquisition: pixels of the largest saturated region (0: none).
     pub saturated_px: u32,

@@ -371,9 +371,10 @@ impl Tracking {
             return;
         }
         note_sky(sh.summary, verdict.background_e);
-        // A window holding a saturated pixel is on a bright object or its bloomed columns:
-        // masked, never a star.
-        if verdict.flags.contains(TrackFlags::SATURATED) {
+        // A window a saturated column crosses (saturated pixels in its top or bottom row) is
+        // on a bright object or its bloomed columns: masked, never a star (a star whose
+        // core clipped is measured, flagged saturated).
+        if verdict.flags.contains(TrackFlags::SATURATED) && crossed_by_saturation(sh, rect) {
             sh.summary.masked = sh.summary.masked.saturating_add(1);
             return;
         }
@@ -428,11 +429,13 @@ impl Tracking {
                 return;
             };
             let measured = measure(policy, &input, flags, want_background);
+            if measured.hit_like {
+                sh.summary.hits = sh.summary.hits.saturating_add(1);
+            }
             if !measured.hit {
                 m = Some(measured);
                 break;
             }
-            sh.summary.hits = sh.summary.hits.saturating_add(1);
         }
         let Some(mut m) = m else {
             return;
@@ -450,6 +453,21 @@ impl Tracking {
             },
         );
     }
+}
+
+/// True when a saturated pixel lies in the top or bottom row of the calibrated window
+/// `rect`.
+fn crossed_by_saturation<const N: usize>(sh: &mut Shared<'_, N>, rect: Rect) -> bool {
+    let w = usize::from(rect.width);
+    let h = usize::from(rect.height);
+    let Some((_, f)) = sh.scratch.calibrated_mut(rect) else {
+        return false;
+    };
+    let top = f.get(..w).unwrap_or(&[]);
+    let bottom = f.get(w * h.saturating_sub(1)..).unwrap_or(&[]);
+    top.iter()
+        .chain(bottom)
+        .any(|p| p.contains(crate::calib::PixelFlags::SATURATED))
 }
 
 /// Folds a tracking window's border background into the frame's mean sky (a running mean

@@ -157,7 +157,7 @@ pub struct BrightRow {
     pub flagged_sun: usize,
     /// ... radiation.
     pub flagged_radiation: usize,
-    /// Particle hits rejected over the run.
+    /// Windows counted as particle hits over the run.
     pub hits: usize,
     /// Detections and windows masked over the run.
     pub masked: usize,

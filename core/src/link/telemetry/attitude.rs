@@ -139,7 +139,7 @@ bitflags::bitflags! {
         const EARTH_IN_FIELD = 1 << 6;
         /// The Sun's stray light raised the sky background above its limit: faint stars lost.
         const SUN_STRAY_LIGHT = 1 << 7;
-        /// Particle hits above the radiation limit were rejected in the frame.
+        /// Particle hits above the radiation limit were counted in the frame.
         const RADIATION = 1 << 8;
     }
 }

@@ -54,7 +54,7 @@ pub struct FrameTotals {
     pub track_lost: u32,
     /// Stars not reported because the star list was full.
     pub stars_dropped: u32,
-    /// Windows rejected as particle hits.
+    /// Windows counted as particle hits.
     pub hits: u32,
     /// Detections and windows masked on a bright object.
     pub masked: u32,
@@ -96,7 +96,7 @@ pub struct Housekeeping {
     pub status: u8,
     /// Pixels confirmed in flight that the table in force does not list yet.
     pub defects_pending: u16,
-    /// The last frame's particle hits rejected (the radiation monitor).
+    /// The last frame's windows counted as particle hits (the radiation monitor).
     pub hits: u16,
     /// The last frame's detections and windows masked on a bright object.
     pub masked: u16,
@@ -208,7 +208,7 @@ pub const HK_FIELDS: [(&str, &str, &str); 42] = [
     (
         "hits",
         "u16",
-        "last frame's windows rejected as particle hits (the radiation monitor)",
+        "last frame's windows counted as particle hits (the radiation monitor; the sharpest rejected)",
     ),
     (
         "masked",
@@ -223,7 +223,7 @@ pub const HK_FIELDS: [(&str, &str, &str); 42] = [
     (
         "hits_total",
         "u32",
-        "windows rejected as particle hits, since start",
+        "windows counted as particle hits, since start",
     ),
     (
         "masked_total",

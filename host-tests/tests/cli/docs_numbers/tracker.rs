@@ -245,7 +245,7 @@ fn bright_table_is_the_bright_availability_csv() {
             "flagged Earth",
             "flagged Sun",
             "flagged radiation",
-            "hits rejected",
+            "hits counted",
             "masked"
         ]
     );
