@@ -24,12 +24,14 @@
 //! [`FrameCycle::transmit`] between frames as its link allows; it decides nothing about a
 //! frame itself.
 //!
-//! Mid-exposure, the instant a report is tagged with, is the frame's start on the home's
-//! clock less half the exposure of the frame before: the CCD is frame-transfer, so the image
-//! a frame reads was integrated under the previous frame's program, up to the transfer that
-//! opens this frame's (docs/sequencer.md), for the exposure that program was given. It is
-//! held at the counter's 0 where it would fall before it (the first frames of a home whose
-//! clock starts at 0 with a frame period shorter than half the exposure, as the SIL's).
+//! Mid-exposure, the instant a report is tagged with, is the middle of the frame's
+//! integration as its line source saw it ([`crate::tracker::Integration`]): on the board
+//! from the end of the frame transfer that opened the previous frame's program to the start
+//! of the one that opens this frame's (the CCD is frame-transfer: the image a frame reads
+//! was integrated under the previous program, for its exposure or its readout, whichever
+//! was longer, docs/sequencer.md). A source that does not know gives none, and the tag is
+//! then the frame's start less half the previous frame's configured exposure, held at the
+//! counter's 0 where it would fall before it.
 //!
 //! Cost: the tracker's frame ([`crate::tracker`]), the link's star list and report encoding
 //! ([`crate::link`]), the attitude stage when a catalog is given ([`crate::solver`]), and a
@@ -285,7 +287,10 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         let exposure_us = u64::from(self.tracker.config().exposure_ms) * 1000;
         let integrated_us = self.last_exposure_us.unwrap_or(exposure_us);
         self.last_exposure_us = Some(exposure_us);
-        let mid_us = summary.start_us.saturating_sub(integrated_us / 2);
+        let mid_us = source.integration().map_or_else(
+            || summary.start_us.saturating_sub(integrated_us / 2),
+            |i| i.mid_us(),
+        );
         let mut report = None;
         let attitude = self.solver.as_mut().map(|solver| {
             let time = self.clock.time_of(mid_us);

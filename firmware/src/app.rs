@@ -5,7 +5,7 @@
 //!
 //! | port | bound to |
 //! |---|---|
-//! | lines | [`ChannelLines`]: the request to the board's line path ([`crate::lines::REQUESTS`]; on the STM32H743 the sequencer), its line buffers back ([`crate::lines::FILLED`]) |
+//! | lines | [`ChannelLines`]: the request to the board's line path ([`crate::lines::REQUESTS`]; on the STM32H743 the sequencer), its line buffers back ([`crate::lines::FILLED`]), each with the frame's integration from the line path's frame transfers |
 //! | clock | embassy-time's `Instant` (the board's time driver) |
 //! | sync pulse | the board's capture of the PPS line ([`crate::pps`]; on the STM32H743 TIM5), taken between frames before the link |
 //! | temperature | the board's `Thermometer` (on the STM32H743 the CCD board's TMP117, else the MCU's) |
@@ -38,15 +38,15 @@ use startrack_core::safe::SetupFaults;
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    Clock, FixedTable, LineSource, SourceLine, Tracker, TrackerBuffers, TrackerConfig,
+    Clock, FixedTable, Integration, LineSource, SourceLine, Tracker, TrackerBuffers, TrackerConfig,
 };
 
 /// Stars a frame the board keeps (candidates, windows, reported stars).
 pub const MAX_STARS: usize = 32;
 
-/// The exposure at start-up, ms: the flight configuration's (1 s), so that every frame's
-/// integration is the configured one (a full frame reads in 0.55 s, docs/sequencer.md); a
-/// command sets a shorter one to reach the tracking rate.
+/// The exposure at start-up, ms: the flight configuration's (39 ms: a 30-window tracking
+/// frame integrates for it and cycles in 49.4 ms; a full frame, read in 0.6 s, integrates
+/// for its readout, docs/sequencer.md); a command sets another.
 const EXPOSURE_MS: u32 = TrackerConfig::FLIGHT.exposure_ms;
 
 /// How long a line may take beyond the exposure before the frame is ended without it (a
@@ -83,6 +83,9 @@ pub struct ChannelLines {
     no_lines_us: Option<u64>,
     /// The exposure sent with each request, us.
     exposure_us: u32,
+    /// When the frame's image was integrated, from its lines (the line path's frame
+    /// transfers).
+    integration: Option<Integration>,
 }
 
 impl ChannelLines {
@@ -95,6 +98,7 @@ impl ChannelLines {
             ended: true,
             no_lines_us: None,
             exposure_us: exposure_ms.saturating_mul(1000),
+            integration: None,
         }
     }
 
@@ -130,6 +134,7 @@ impl LineSource for ChannelLines {
         self.release();
         self.frame = frame;
         self.ended = false;
+        self.integration = None;
         // No window: nothing to read (the frame is still clocked, for its exposure).
         self.no_lines_us = matches!(request, ReadoutRequest::Windows(w) if w.is_empty())
             .then_some(u64::from(self.exposure_us));
@@ -173,6 +178,7 @@ impl LineSource for ChannelLines {
                 return Ok(None);
             }
             self.ended = raw.last;
+            self.integration = raw.integration.or(self.integration);
             let line = raw.line;
             let samples: &LineBuf = self.lent.insert(raw.samples);
             return Ok(Some(SourceLine {
@@ -180,6 +186,10 @@ impl LineSource for ChannelLines {
                 samples: &samples[..],
             }));
         }
+    }
+
+    fn integration(&self) -> Option<Integration> {
+        self.integration
     }
 }
 

@@ -22,6 +22,7 @@ use embassy_sync::signal::Signal;
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::MAX_WINDOWS;
+use startrack_core::tracker::Integration;
 use startrack_core::window::Rect;
 
 /// The readout mode of this firmware: the CCD47-20 read through both outputs.
@@ -46,6 +47,9 @@ pub struct RawLine {
     pub last: bool,
     /// The samples; the buffer goes back to [`FREE`] once processed.
     pub samples: &'static mut LineBuf,
+    /// When the frame's image was integrated, us of the board's clock (embassy-time): the
+    /// line path's frame transfers (`None`: not known).
+    pub integration: Option<Integration>,
 }
 
 /// Buffers ready to be filled by the readout DMA.

@@ -7,13 +7,15 @@
 //! takes the received bytes (commands act on the tracker there, never mid-frame) and moves
 //! queued telemetry into [`TX`] as far as it has room, without waiting. A slow link therefore
 //! leaves telemetry in the service's queues (dropped and counted when they are full), and a
-//! flood of bytes fills [`RX`] (the excess is dropped and counted by the board's receive
-//! task in [`RX_DROPPED`]): neither can stall the frame loop.
+//! flood of bytes fills [`RX`] (the excess is dropped and counted in [`RX_DROPPED`] by
+//! [`received`], which the board's receive task calls): neither can stall the frame loop.
+//! Both pipes are written with [`crate::pipe::write_fitting`], so a write that wraps around
+//! a pipe's ring loses nothing.
 //!
 //! Memory: the pipes ([`RX_PIPE_BYTES`] + [`TX_PIPE_BYTES`]) in `.bss`, the service (~16 KB)
 //! in [`SERVICE`]; the board's buffers are the board's.
 
-use core::sync::atomic::AtomicU32;
+use core::sync::atomic::{AtomicU32, Ordering};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
 use startrack_core::cycle::FrameCycle;
@@ -95,7 +97,17 @@ fn send_queued(mut transmit: impl FnMut(&mut [u8]) -> usize, buf: &mut [u8]) {
         if n == 0 {
             break;
         }
-        // The room was checked; a short write cannot happen with one writer.
-        let _ = TX.try_write(buf.get(..n).unwrap_or_default());
+        // The room was checked and this task is the only writer: every byte goes in, across
+        // the ring's end too ([`crate::pipe`]).
+        crate::pipe::write_fitting(&TX, buf.get(..n).unwrap_or_default());
+    }
+}
+
+/// Hands bytes the board received to the tracker task ([`RX`]); what does not fit is
+/// dropped and counted in [`RX_DROPPED`]. Each board's receive task calls it.
+pub fn received(bytes: &[u8]) {
+    let taken = crate::pipe::write_fitting(&RX, bytes);
+    if taken < bytes.len() {
+        RX_DROPPED.fetch_add((bytes.len() - taken) as u32, Ordering::Relaxed);
     }
 }

@@ -21,6 +21,7 @@ mod catalog;
 mod flash_store;
 mod lines;
 mod link;
+mod pipe;
 mod pps;
 mod safe_state;
 mod spawn;

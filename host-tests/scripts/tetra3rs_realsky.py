@@ -109,10 +109,15 @@ def main():
               "st_matched", "st_rmse_arcsec", "t3_solved", "t3_ra_deg", "t3_dec_deg",
               "t3_roll_deg", "t3_fov_deg", "t3_matched", "t3_rmse_arcsec",
               "boresight_diff_arcsec", "roll_diff_arcsec"]
-    with open(out_csv, "w", newline="") as f:
-        f.write("# ESA tetra3 test data (github.com/esa/tetra3 test_data), credit ESA / Gustav "
-                "Pettersson, CC BY-SA 3.0 IGO; tetra3rs " + tetra3rs.__version__ + "; "
-                "host-tests/scripts/tetra3rs_realsky.py\n")
+    write_csv(out_csv, "ESA tetra3 test data (github.com/esa/tetra3 test_data), credit ESA / "
+              "Gustav Pettersson, CC BY-SA 3.0 IGO; tetra3rs " + tetra3rs.__version__ + "; "
+              "host-tests/scripts/tetra3rs_realsky.py", fields, rows)
+
+
+def write_csv(path, comment, fields, rows):
+    """`rows` (dicts) under the header `fields`, after one `# comment` line."""
+    with open(path, "w", newline="") as f:
+        f.write("# " + comment + "\n")
         w = csv.DictWriter(f, fieldnames=fields, lineterminator="\n")
         w.writeheader()
         for row in rows:

@@ -150,18 +150,33 @@ impl DarkScaleEstimator {
         raw_line: &[u16],
         levels: &LineLevels,
     ) -> Result<(), LineError> {
+        self.add_line_cols(table, raw_line, levels, table.geometry().covered_cols())
+    }
+
+    /// Adds the covered pixels of one raw line in `strips` (raw column ranges, what the
+    /// frame's readout reads: [`crate::readout::ReadoutRequest::covered_cols`]; each strip
+    /// read by one output, as a covered strip at an end of the line is), with that line's
+    /// levels.
+    pub fn add_line_cols(
+        &mut self,
+        table: &CalibTable<'_>,
+        raw_line: &[u16],
+        levels: &LineLevels,
+        strips: [(usize, usize); 2],
+    ) -> Result<(), LineError> {
         let g = table.geometry();
         check_len(g, raw_line)?;
         let mut vals = [0i32; 2 * MAX_STRIP_PX];
         let mut n = 0;
-        for (start, end) in g.covered_cols() {
+        for (start, end) in strips {
+            // A covered strip lies at one end of the line, so one output read all of it.
+            let out = g.output_of_col(start);
+            let (bias, gain) = (levels.bias(out), table.gain(out));
             for col in start..end.min(start + MAX_STRIP_PX) {
                 let (Some(raw), Some(v)) = (raw_line.get(col), vals.get_mut(n)) else {
                     break;
                 };
-                let out = g.output_of_col(col);
-                let offset = offset_16ths(levels.bias(out), table.column_bias(col));
-                *v = signal_bits(*raw, offset, table.gain(out));
+                *v = signal_bits(*raw, offset_16ths(bias, table.column_bias(col)), gain);
                 n += 1;
             }
         }

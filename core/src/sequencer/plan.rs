@@ -7,7 +7,8 @@
 //! counts binned register elements from an output (`k = 0` is read first). With two outputs
 //! the left half is raw columns `[k b, (k+1) b)` and the right half `[L - (k+1) b, L - k b)`,
 //! both read at the same shift; with one output the whole line is read through the left
-//! one. The over-scan and covered columns at each end are read on every row read.
+//! one. The over-scan and the covered columns the request reads
+//! ([`ReadoutRequest::covered_cols`]) at each end are read on every row read.
 //! Cost: `shift_runs` is O(windows x log windows) a row group; no allocation.
 
 use crate::geometry::ReadoutGeometry;
@@ -210,11 +211,12 @@ impl<'a> ReadoutPlan<'a> {
         let b = self.binning.factor();
         let len = self.geometry.line_len() as u16;
         let prefix = self.geometry.first_active_col() as u16;
-        let prefix_shifts = prefix.div_ceil(b);
-        let _ = runs.push((0, prefix_shifts.min(n)));
+        // The over-scan and the covered columns the request reads, at each end.
+        let edge = self.request.edge_px(&self.geometry) as u16;
+        let _ = runs.push((0, edge.div_ceil(b).min(n)));
         if self.geometry.outputs == 1 {
             // The far end's covered and over-scan columns, read through the left output.
-            let _ = runs.push(((len - prefix) / b, n));
+            let _ = runs.push(((len - edge) / b, n));
         }
         let (r0, r1) = self.group_rows(g);
         let half = len / 2;
@@ -280,8 +282,15 @@ mod tests {
         assert!(plan.group_read(100) && plan.group_read(115) && !plan.group_read(116));
         let mut runs = ShiftRuns::new();
         plan.shift_runs(106, &mut runs);
-        // Prefix 0..24, left window raw 34..45, right window raw 1024..1035 -> 37..48 (1072 - 1035, 1071 - 1024 + 1).
-        assert_eq!(runs.as_slice(), &[(0, 24), (34, 48)]);
+        // The over-scan and the outer 8 covered columns 0..16, left window raw 34..45, right
+        // window raw 1024..1035 -> 37..48 (1072 - 1035, 1071 - 1024 + 1).
+        assert_eq!(runs.as_slice(), &[(0, 16), (34, 48)]);
+        // A full frame reads every covered column.
+        let full = ReadoutPlan::new(g, ReadoutRequest::FullFrame, Binning::X1, 0);
+        assert!(full.is_ok_and(|p| {
+            p.shift_runs(3, &mut runs);
+            runs.as_slice() == [(0, 536)]
+        }));
         let bad = Rect {
             x0: 1020,
             y0: 0,

@@ -111,7 +111,8 @@ pub struct TrackerConfig {
     /// After this many tracking frames in a row, one acquisition frame (to pick up stars
     /// entering the field).
     pub reacquire_every: u32,
-    /// Exposure time, ms (hot pixels' own dark law).
+    /// Exposure time, ms: the time the sequencer holds between frame transfers at least (a
+    /// readout longer than it integrates for the readout), and the hot pixels' own dark law.
     pub exposure_ms: u32,
     /// A [`super::LineSummary`] is reported for every line whose index is a multiple of
     /// this.
@@ -124,9 +125,12 @@ impl TrackerConfig {
     /// loses up to 2.5x the Cramer-Rao bound on stars of another width (docs/accuracy.md,
     /// "width unknown"); fitting each star's own costs ~13,700 M7 instructions a 7x7 star
     /// against ~7,000 for the given width and ~2,600 for the fused CoG, a small part of a
-    /// 30-star tracking frame (`cargo m7-bench`, `tracker_tracking_frame`, two thirds of it
+    /// 30-star tracking frame (`cargo m7-bench`, `tracker_tracking_frame`, three fifths of it
     /// the bias and dark scale of every line); the other methods stay for budgets that need
-    /// them and for a field whose width is known.
+    /// them and for a field whose width is known. A 39 ms exposure: the longest whole
+    /// number of ms that keeps the 30-window tracking cycle within the 50 ms of 20 Hz (its
+    /// 10.4 ms frame transfer and 38.6 ms readout at 1 MHz, docs/sequencer.md), and within
+    /// the exposures that keep an attitude to 2 deg/s (docs/tracker.md, the exposure chart).
     pub const FLIGHT: Self = Self {
         acquisition_method: CentroidMethod::GaussFitWidth,
         tracking_method: CentroidMethod::GaussFitWidth,
@@ -142,7 +146,7 @@ impl TrackerConfig {
         max_tracked: 32,
         min_track_stars: 3,
         reacquire_every: 16,
-        exposure_ms: 1000,
+        exposure_ms: 39,
         line_summary_every: 64,
     };
 

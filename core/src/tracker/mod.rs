@@ -71,8 +71,8 @@ pub use measure::select_curve;
 pub use measure::{HIT_MONITOR_FRACTION, HIT_WIDTH_FRACTION};
 pub use modes::CommandError;
 pub use ports::{
-    Clock, FixedTable, FixedTemperature, LineSource, Ports, SourceLine, TableStore, TelemetrySink,
-    Thermometer,
+    Clock, FixedTable, FixedTemperature, Integration, LineSource, Ports, SourceLine, TableStore,
+    TelemetrySink, Thermometer,
 };
 pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Obstructions, Provenance,
@@ -562,7 +562,11 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             };
             return Some((outcome, Electrons::ZERO));
         };
-        self.estimator.add_line(&table, samples, &levels).ok()?;
+        // The covered columns this frame's readout reads (windows read fewer).
+        let covered = self.readout_request().covered_cols(&self.geometry);
+        self.estimator
+            .add_line_cols(&table, samples, &levels, covered)
+            .ok()?;
         // The CCD47-20 always has covered columns, so the running estimate exists.
         let dark_scale_e = self
             .prev_dark_scale

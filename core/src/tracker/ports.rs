@@ -4,7 +4,7 @@
 //!
 //! | port | the board | the host (`process`, `sil`) |
 //! |---|---|---|
-//! | [`LineSource`] | the CCD sequencer's readout of what the request reads, ADC lines by DMA | a FITS frame, or the simulated CCD47-20 rendering only what the request reads |
+//! | [`LineSource`] | the CCD sequencer's readout of what the request reads, ADC lines by DMA, and the instants of its frame transfers ([`Integration`]) | a FITS frame, or the simulated CCD47-20 rendering only what the request reads (its exposure after the frame's start) |
 //! | [`Clock`] | the MCU timer | frame number x frame period |
 //! | [`Thermometer`] | the CCD board's sensor | a fixed value or the FITS keyword |
 //! | [`TableStore`] | the flash slot in force | a table file |
@@ -30,6 +30,31 @@ pub struct SourceLine<'a> {
     pub samples: &'a [u16],
 }
 
+/// When the image a frame reads was integrated, on the home's clock ([`Clock`], us): from
+/// the end of the frame transfer that opened the integration to the start of the one that
+/// closed it (on the board the sequencer's frame transfers; a home with a model of the
+/// sensor, its model's). The frame cycle tags the frame's attitude at its middle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Integration {
+    /// The integration's start, us.
+    pub start_us: u64,
+    /// Its end, us (not before `start_us`).
+    pub end_us: u64,
+}
+
+impl Integration {
+    /// The middle, us.
+    pub const fn mid_us(&self) -> u64 {
+        self.start_us + self.end_us.saturating_sub(self.start_us) / 2
+    }
+
+    /// The length, us.
+    pub const fn duration_us(&self) -> u64 {
+        self.end_us.saturating_sub(self.start_us)
+    }
+}
+
 /// Raw lines in readout order.
 #[allow(
     async_fn_in_trait,
@@ -50,6 +75,14 @@ pub trait LineSource {
     /// The frame's next line, or `None` when the frame is over. The line stays valid until
     /// the next call.
     async fn next_line(&mut self) -> Result<Option<SourceLine<'_>>, Self::Error>;
+
+    /// When the image of the frame just read was integrated, asked once its lines have
+    /// ended; `None` when the source does not know (a recorded frame, a frame that read no
+    /// line), and the frame cycle then takes the configured exposure before the frame's
+    /// start.
+    fn integration(&self) -> Option<Integration> {
+        None
+    }
 }
 
 /// The home's clock.

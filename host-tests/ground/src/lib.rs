@@ -440,7 +440,8 @@ impl Ground {
     /// takes chunks in order only, so the first chunk without an acceptance is where the
     /// upload stands: a chunk rejected, or lost (a later one answered first, or nothing
     /// answered in a share of the timeout), makes the upload resume there; an out-of-order
-    /// refusal says where the store is (the low 16 bits of its offset).
+    /// refusal says where the store is (the low 16 bits of its offset; at the table's end,
+    /// every chunk is in and the upload goes on to its commit).
     fn send_chunks(
         &mut self,
         chunks: &[&[u8]],
@@ -489,11 +490,14 @@ impl Ground {
                 continue;
             }
             // The first chunk in flight failed or was lost. An out-of-order refusal names
-            // where the store stands.
+            // where the store stands: the start of a chunk, or the table's end when every
+            // chunk is stored and only acceptances were lost.
             let (code, param) = (r.u16(), r.u32());
+            let total = chunks.iter().map(|c| c.len()).sum::<usize>();
             let stands = match (code, param) {
-                (Some(9), Some(v)) if v >> 16 == 5 => (done..chunks.len().min(done + 64))
-                    .find(|&k| (k * chunk) as u32 & 0xFFFF == v & 0xFFFF),
+                (Some(9), Some(v)) if v >> 16 == 5 => (done..=chunks.len())
+                    .take(64)
+                    .find(|&k| (k * chunk).min(total) as u32 & 0xFFFF == v & 0xFFFF),
                 _ => None,
             };
             if let Some(k) = stands {

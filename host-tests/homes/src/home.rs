@@ -12,15 +12,16 @@ use startrack_core::calib::{
     CalibError, DarkScaleEstimator, FrameCalibration, LineLevels, PixelFlags,
 };
 use startrack_core::cycle::{CyclePorts, FrameCycle};
-use startrack_core::geometry::{ReadoutGeometry, Segment};
+use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::link::LinkService;
 use startrack_core::readout::ReadoutRequest;
 use startrack_core::safe::{FaultRecord, Health, SetupFaults};
 use startrack_core::table::CalibTable;
 use startrack_core::table::pixcorr::{CurveHeader, PixCorrBackground};
 use startrack_core::tracker::{
-    Clock, Event, FixedTable, FixedTemperature, FrameSummary, LineSource, LineSummary, Mode,
-    SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig, select_curve,
+    Clock, Event, FixedTable, FixedTemperature, FrameSummary, Integration, LineSource, LineSummary,
+    Mode, SourceLine, StarRecord, TelemetrySink, Tracker, TrackerBuffers, TrackerConfig,
+    select_curve,
 };
 use startrack_core::units::Electrons;
 use startrack_core::units::Kelvin;
@@ -194,6 +195,12 @@ impl LineSource for FrameLines<'_> {
 /// The simulated sensor as a line source: frame `k` of the tracker is rendered by
 /// `scene(k)` (the stars where they are at that frame, the frame's own noise), and only the
 /// samples the request reads are rendered; the others are 0.
+///
+/// With a [`FrameTiming`] it also models when: frame `k` integrates from `k` periods for the
+/// exposure (the simulator's motion model, `startrack_sim::sky::motion`), the frame
+/// transfer follows and then the board's readout of what the frame reads, so the frame's
+/// [`Integration`] is its exposure after its start, and its lines end the exposure plus the
+/// readout after it ([`Self::readout_done_us`]).
 pub struct SimLines<F: FnMut(u32) -> Simulator> {
     scene: F,
     sim: Option<Simulator>,
@@ -203,10 +210,23 @@ pub struct SimLines<F: FnMut(u32) -> Simulator> {
     /// Samples rendered so far (what a readout would have digitised).
     pub samples_rendered: u64,
     /// The current frame's readout on the board, us ([`board_readout_us`]): 0 from the
-    /// frame's start until its last line has been given, then the readout. A
-    /// [`ReadoutClock`] sharing it reads the time the frame's lines end.
+    /// frame's start until its last line has been given, then the readout (after the
+    /// exposure, with a [`FrameTiming`]). A [`ReadoutClock`] sharing it reads the time the
+    /// frame's lines end.
     pub readout_done_us: Rc<Cell<u64>>,
     readout_us: u64,
+    timing: Option<FrameTiming>,
+    integration: Option<Integration>,
+}
+
+/// When the simulated frames are taken: one every `period_us` from the clock's 0, each
+/// integrating for `exposure_us` from its start (what the simulator renders), us.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameTiming {
+    /// The frame period, us.
+    pub period_us: u64,
+    /// The exposure, us.
+    pub exposure_us: u64,
 }
 
 impl<F: FnMut(u32) -> Simulator> SimLines<F> {
@@ -221,7 +241,16 @@ impl<F: FnMut(u32) -> Simulator> SimLines<F> {
             samples_rendered: 0,
             readout_done_us: Rc::new(Cell::new(0)),
             readout_us: 0,
+            timing: None,
+            integration: None,
         }
+    }
+
+    /// The source with frames taken as `timing` says (their [`Integration`] and readout
+    /// instants).
+    pub fn with_timing(mut self, timing: FrameTiming) -> Self {
+        self.timing = Some(timing);
+        self
     }
 }
 
@@ -254,7 +283,7 @@ pub fn board_readout_us(geometry: &ReadoutGeometry, request: &ReadoutRequest<'_>
 }
 
 /// The raw column spans `[start, end)` of line `line` that `request` reads: the whole line,
-/// or the over-scan and covered columns plus the windows' pixels. Empty when the line is
+/// or the over-scan and the covered columns the request reads plus the windows' pixels. Empty when the line is
 /// not read.
 pub fn read_spans(
     geometry: &ReadoutGeometry,
@@ -269,10 +298,8 @@ pub fn read_spans(
         return vec![(0, len)];
     };
     let first = geometry.first_active_col();
-    let mut spans: Vec<(usize, usize)> = (0..len)
-        .filter(|&c| !matches!(geometry.segment(c), Some(Segment::Active)))
-        .map(|c| (c, c + 1))
-        .collect();
+    let edge = request.edge_px(geometry);
+    let mut spans: Vec<(usize, usize)> = vec![(0, edge), (len - edge, len)];
     for r in rects.iter().filter(|r| r.contains(r.x0, line)) {
         let s = first + usize::from(r.x0);
         spans.push((s, s + usize::from(r.width)));
@@ -307,6 +334,17 @@ impl<F: FnMut(u32) -> Simulator> LineSource for SimLines<F> {
         self.next = 0;
         self.readout_us = board_readout_us(&g, request);
         self.readout_done_us.set(0);
+        self.integration = self.timing.map(|t| {
+            let start_us = u64::from(frame) * t.period_us;
+            Integration {
+                start_us,
+                end_us: start_us + t.exposure_us,
+            }
+        });
+        if let Some(i) = self.integration {
+            // The frame transfer ends the exposure; the readout follows it.
+            self.readout_us += i.duration_us();
+        }
         Ok(())
     }
 
@@ -328,6 +366,10 @@ impl<F: FnMut(u32) -> Simulator> LineSource for SimLines<F> {
             samples: &self.buf,
         }))
     }
+
+    fn integration(&self) -> Option<Integration> {
+        self.integration
+    }
 }
 
 /// A clock that reads frame number x frame period (the host has no readout timing).
@@ -346,8 +388,9 @@ impl Clock for FrameClock {
 }
 
 /// A clock that reads frame number x frame period, plus the frame's board readout once its
-/// last line has been given ([`SimLines::readout_done_us`]): a report made after the lines
-/// reads the time the board's lines would end. The host's own processing time is not in
+/// last line has been given ([`SimLines::readout_done_us`], after the frame's exposure with
+/// a [`FrameTiming`]): a report made after the lines reads the time the board's lines would
+/// end. The host's own processing time is not in
 /// it (it is not the M7's).
 #[derive(Clone, Debug)]
 pub struct ReadoutClock {

@@ -216,7 +216,8 @@ pub fn serve(config: &ServeConfig, on_listen: &mut dyn FnMut(u16)) -> Result<Ser
             .as_ref()
             .map(|(scene, cat)| sil::sky_solver(scene, *cat));
         let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
-        let mut source = SimLines::new(|k| sil::frame_simulator(sc, &params, &base, catalog, k));
+        let mut source = SimLines::new(|k| sil::frame_simulator(sc, &params, &base, catalog, k))
+            .with_timing(sil::frame_timing(sc));
         let mut thermometer = FixedTemperature(None);
         loop {
             let stopped = config

@@ -19,7 +19,7 @@
 //! over-scan and covered columns plus its windows per star; ~1 s and ~0.02 s in release
 //! (`time startrack sil --frames N` for a few N measures both).
 
-use crate::home::{ReadoutClock, Recorder, SimLines, block_on, host_health};
+use crate::home::{FrameTiming, ReadoutClock, Recorder, SimLines, block_on, host_health};
 use rand::{RngExt, SeedableRng};
 use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
@@ -408,7 +408,8 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
         .map_err(|e| e.to_string())?;
     let mut link = Box::new(LinkService::new());
     let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
-    let mut source = SimLines::new(|frame| frame_simulator(config, &params, &base, catalog, frame));
+    let mut source = SimLines::new(|frame| frame_simulator(config, &params, &base, catalog, frame))
+        .with_timing(frame_timing(config));
     let mut recorder = Recorder::default();
     let mut tables = FixedTable(Some(table));
     let mut thermometer = FixedTemperature(None);
@@ -499,6 +500,21 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
         health: *cycle.health(),
         housekeeping: cycle.housekeeping(None),
     })
+}
+
+/// When the SIL's frames are taken: one every `period_us`, each integrating from its start
+/// for the exposure the simulator renders: a sky scene's motion's when it has one
+/// ([`SkyScene::motion`]), else the tracker's configured exposure.
+pub fn frame_timing(config: &SilConfig) -> FrameTiming {
+    let motion_us = config
+        .sky
+        .as_ref()
+        .and_then(|s| s.motion.as_ref())
+        .map(|m| (m.exposure_s * 1e6).round() as u64);
+    FrameTiming {
+        period_us: config.period_us,
+        exposure_us: motion_us.unwrap_or(u64::from(config.tracker.exposure_ms) * 1000),
+    }
 }
 
 /// The true stars (at mid-exposure) of frame `frame` of `config`'s scene: the sky's when it has one and its

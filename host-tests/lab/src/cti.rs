@@ -491,49 +491,63 @@ pub fn summarize(cells: &[McCell]) -> (f64, f64, f64) {
 /// The noise-free biases as CSV:
 /// `flux_e,measured_flux_e,x_px,y_px,transfers_par,transfers_ser,output,bias_x_px,bias_y_px`.
 pub fn bias_csv(points: &[BiasPoint]) -> String {
-    let mut s = String::from(
-        "flux_e,measured_flux_e,x_px,y_px,transfers_par,transfers_ser,output,bias_x_px,bias_y_px\n",
-    );
-    for p in points {
-        let _ = writeln!(
-            s,
-            "{:.1},{:.1},{:.2},{:.2},{},{},{},{:.6},{:.6}",
-            p.flux_e,
-            p.measured_flux_e,
-            p.x_px,
-            p.y_px,
-            p.transfers_par,
-            p.transfers_ser,
-            p.output,
-            p.bias_x_px,
-            p.bias_y_px
-        );
-    }
-    s
+    csv_text(
+        "flux_e,measured_flux_e,x_px,y_px,transfers_par,transfers_ser,output,bias_x_px,bias_y_px",
+        points,
+        |s, p| {
+            writeln!(
+                s,
+                "{:.1},{:.1},{:.2},{:.2},{},{},{},{:.6},{:.6}",
+                p.flux_e,
+                p.measured_flux_e,
+                p.x_px,
+                p.y_px,
+                p.transfers_par,
+                p.transfers_ser,
+                p.output,
+                p.bias_x_px,
+                p.bias_y_px
+            )
+        },
+    )
 }
 
 /// The Monte Carlo cells as CSV:
 /// `snr,flux_e,x_px,y_px,bias_x_px,bias_y_px,residual_x_px,residual_y_px,se_x_px,se_y_px,pairs`.
 pub fn mc_csv(cells: &[McCell]) -> String {
-    let mut s = String::from(
-        "snr,flux_e,x_px,y_px,bias_x_px,bias_y_px,residual_x_px,residual_y_px,se_x_px,se_y_px,pairs\n",
-    );
-    for c in cells {
-        let _ = writeln!(
-            s,
-            "{},{:.1},{:.2},{:.2},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{}",
-            c.snr,
-            c.flux_e,
-            c.x_px,
-            c.y_px,
-            c.bias_px.0,
-            c.bias_px.1,
-            c.residual_px.0,
-            c.residual_px.1,
-            c.residual_se_px.0,
-            c.residual_se_px.1,
-            c.used
-        );
+    csv_text(
+        "snr,flux_e,x_px,y_px,bias_x_px,bias_y_px,residual_x_px,residual_y_px,se_x_px,se_y_px,pairs",
+        cells,
+        |s, c| {
+            writeln!(
+                s,
+                "{},{:.1},{:.2},{:.2},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{}",
+                c.snr,
+                c.flux_e,
+                c.x_px,
+                c.y_px,
+                c.bias_px.0,
+                c.bias_px.1,
+                c.residual_px.0,
+                c.residual_px.1,
+                c.residual_se_px.0,
+                c.residual_se_px.1,
+                c.used
+            )
+        },
+    )
+}
+
+/// A CSV: the `header` line, then each item's line as `row` writes it.
+fn csv_text<T>(
+    header: &str,
+    items: &[T],
+    mut row: impl FnMut(&mut String, &T) -> std::fmt::Result,
+) -> String {
+    let mut s = format!("{header}\n");
+    for item in items {
+        // Writing into a String cannot fail.
+        let _ = row(&mut s, item);
     }
     s
 }

@@ -10,7 +10,7 @@
 //! bar on a terminal. Writing that lab set takes about 4 minutes (simulating 108 M samples;
 //! 3 minutes and 86 M without the ladder).
 
-use super::{CliError, write_file};
+use super::{CliError, LabError, write_file};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_core::table::MAX_TILE_LOG2;
 use startrack_lab::calib_frames::labset::LabSet;
@@ -98,7 +98,7 @@ pub fn is_fits_name(name: &str) -> bool {
 }
 
 fn collect_fits(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), CliError> {
-    let rd = std::fs::read_dir(dir).map_err(|e| CliError::Io {
+    let rd = std::fs::read_dir(dir).map_err(|e| LabError::Io {
         path: dir.to_path_buf(),
         msg: e.to_string(),
     })?;

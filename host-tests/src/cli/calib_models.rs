@@ -16,7 +16,7 @@
 //! Cost: `calib cti` under a second (0.3 s in the test profile) (256 noise-free windows for the fit, 125 cells
 //! of 40-400 pairs for the Monte Carlo); `calib psf-model` one small SVD per clipping round.
 
-use super::{CliError, read_file, write_file};
+use super::{CliError, LabError, read_file, write_file};
 use startrack_core::geometry::ReadoutGeometry;
 use startrack_lab::cti::{
     CTI_FIT_FLUXES_E, CtiCoeffsJson, CtiExperiment, DEFAULT_TRAPS, McCell, bias_csv, mc_csv,
@@ -138,7 +138,7 @@ pub fn measure_cti(args: &CalibCtiArgs) -> Result<(CtiRun, String), CliError> {
 /// Runs `startrack calib cti`: writes the three files and prints the summary.
 pub fn run_cti(args: &CalibCtiArgs) -> Result<CtiRun, CliError> {
     let (run, bias) = measure_cti(args)?;
-    std::fs::create_dir_all(&args.out_dir).map_err(|e| CliError::Io {
+    std::fs::create_dir_all(&args.out_dir).map_err(|e| LabError::Io {
         path: args.out_dir.clone(),
         msg: e.to_string(),
     })?;
@@ -166,7 +166,7 @@ pub fn run_psf_model(
     let mut stars = Vec::new();
     for p in &args.stars {
         let text = String::from_utf8_lossy(&read_file(p)?).into_owned();
-        stars.extend(read_stars_csv(&text).map_err(|(line, msg)| CliError::Csv {
+        stars.extend(read_stars_csv(&text).map_err(|(line, msg)| LabError::Csv {
             path: p.clone(),
             line,
             msg,

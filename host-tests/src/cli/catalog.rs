@@ -7,7 +7,7 @@
 //! `truth.csv` (`field,qw,qx,qy,qz`: ICRS to camera, Hamilton, scalar first), and with
 //! `--prior-error-deg` a `prior.csv` of the same form for tracking.
 
-use super::{CliError, write_file};
+use super::{CliError, LabError, write_file};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use startrack_core::attitude::Quat;
@@ -57,7 +57,7 @@ pub fn spec(args: &CatalogBuildArgs) -> Result<BuildSpec, CliError> {
 /// Builds and writes the catalog; returns what was built.
 pub fn run_build(args: &CatalogBuildArgs) -> Result<Built, CliError> {
     let path = args.list.clone().unwrap_or_else(default_list_path);
-    let list = read_list(&path).map_err(|e| CliError::Csv {
+    let list = read_list(&path).map_err(|e| LabError::Csv {
         path: e.path.clone(),
         line: e.line,
         msg: e.msg,
@@ -104,7 +104,7 @@ pub fn run_case(args: &CatalogCaseArgs) -> Result<(), CliError> {
     spec.dropout = args.dropout;
     let dir = &args.out;
     let fields_dir = dir.join("fields");
-    std::fs::create_dir_all(&fields_dir).map_err(|e| CliError::Io {
+    std::fs::create_dir_all(&fields_dir).map_err(|e| LabError::Io {
         path: fields_dir.clone(),
         msg: e.to_string(),
     })?;

@@ -101,13 +101,13 @@ pub fn parts(exposure_ms: u32, m7_costs: &str) -> Result<Vec<Part>, String> {
     Ok(out)
 }
 
-/// The exposure the exposure chart recommends for a 20 Hz tracker, ms: under the 30-window
-/// readout (40.9 ms at 1 MHz), so frames integrate for the readout (docs/tracker.md).
-pub const SHORT_EXPOSURE_MS: u32 = 40;
+/// A long exposure the time is also given at, ms (1 s: the standby frame is then padded
+/// to it).
+pub const LONG_EXPOSURE_MS: u32 = 1000;
 
-/// The exposures the time is given at: the flight configuration's and [`SHORT_EXPOSURE_MS`].
+/// The exposures the time is given at: [`LONG_EXPOSURE_MS`] and the flight configuration's.
 pub fn exposures_ms() -> [u32; 2] {
-    [TrackerConfig::FLIGHT.exposure_ms, SHORT_EXPOSURE_MS]
+    [LONG_EXPOSURE_MS, TrackerConfig::FLIGHT.exposure_ms]
 }
 
 /// The CSV header of [`csv`].

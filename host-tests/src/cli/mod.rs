@@ -21,42 +21,17 @@ pub mod solve;
 pub mod solve_image;
 pub mod tradeoff;
 
-use startrack_core::table::{TableError, WriteError};
-use startrack_lab::LabError;
-use startrack_sim::fits::FitsError;
+pub use startrack_lab::LabError;
 use std::fmt;
-use std::path::{Path, PathBuf};
 
-/// Why a subcommand failed.
+/// Why a subcommand failed: what the lab and sky tools report (a file that could not be read
+/// or written, a FITS input, a table, a CSV line: [`LabError`]), or an option's value or a
+/// combination of inputs that is unusable.
 #[derive(Clone, Debug, PartialEq)]
 pub enum CliError {
-    /// A file could not be read or written.
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What the system said.
-        msg: String,
-    },
-    /// A FITS input was unusable.
-    Fits(FitsError),
-    /// The calibration table is corrupt or of another format.
-    Table {
-        /// The file.
-        path: PathBuf,
-        /// What the parser found.
-        err: TableError,
-    },
-    /// The table could not be encoded.
-    TableWrite(WriteError),
-    /// A line of a CSV input is malformed.
-    Csv {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line number.
-        line: usize,
-        /// What is wrong.
-        msg: String,
-    },
+    /// A file, a FITS input, a calibration table or a CSV line ([`LabError`], never its
+    /// `Invalid`, which is [`Self::Usage`]).
+    Lab(LabError),
     /// An option's value or a combination of inputs is unusable.
     Usage(String),
 }
@@ -64,17 +39,7 @@ pub enum CliError {
 impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::Io { path, msg } => write!(f, "{}: {msg}", path.display()),
-            Self::Fits(e) => write!(f, "{e}"),
-            Self::Table { path, err } => {
-                write!(
-                    f,
-                    "{}: not a usable calibration table: {err}",
-                    path.display()
-                )
-            }
-            Self::TableWrite(e) => write!(f, "cannot encode the table: {e}"),
-            Self::Csv { path, line, msg } => write!(f, "{}:{line}: {msg}", path.display()),
+            Self::Lab(e) => e.fmt(f),
             Self::Usage(m) => f.write_str(m),
         }
     }
@@ -85,34 +50,24 @@ impl std::error::Error for CliError {}
 impl From<LabError> for CliError {
     fn from(e: LabError) -> Self {
         match e {
-            LabError::Io { path, msg } => Self::Io { path, msg },
-            LabError::Fits(e) => Self::Fits(e),
-            LabError::Table { path, err } => Self::Table { path, err },
-            LabError::TableWrite(e) => Self::TableWrite(e),
-            LabError::Csv { path, line, msg } => Self::Csv { path, line, msg },
             LabError::Invalid(m) => Self::Usage(m),
+            e => Self::Lab(e),
         }
     }
 }
 
-impl From<FitsError> for CliError {
-    fn from(e: FitsError) -> Self {
-        Self::Fits(e)
+impl From<startrack_sim::fits::FitsError> for CliError {
+    fn from(e: startrack_sim::fits::FitsError) -> Self {
+        Self::Lab(LabError::Fits(e))
     }
 }
 
 /// Reads a whole file.
-pub fn read_file(path: &Path) -> Result<Vec<u8>, CliError> {
-    std::fs::read(path).map_err(|e| CliError::Io {
-        path: path.to_path_buf(),
-        msg: e.to_string(),
-    })
+pub fn read_file(path: &std::path::Path) -> Result<Vec<u8>, CliError> {
+    Ok(startrack_lab::read_file(path)?)
 }
 
 /// Writes a whole file.
-pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
-    std::fs::write(path, bytes).map_err(|e| CliError::Io {
-        path: path.to_path_buf(),
-        msg: e.to_string(),
-    })
+pub fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), CliError> {
+    Ok(startrack_lab::write_file(path, bytes)?)
 }

@@ -25,7 +25,7 @@
 pub mod images;
 
 use super::solve_image::ImageCameraArgs;
-use super::{CliError, read_file, write_file};
+use super::{CliError, LabError, read_file, write_file};
 use serde::Deserialize;
 use startrack_core::attitude::{Camera, Quat};
 use startrack_core::catalog::Catalog;
@@ -156,9 +156,12 @@ fn catalog_bytes(path: Option<&Path>) -> Result<Vec<u8>, CliError> {
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> CliError + '_ {
-    move |e| CliError::Io {
-        path: path.to_path_buf(),
-        msg: e.to_string(),
+    move |e| {
+        LabError::Io {
+            path: path.to_path_buf(),
+            msg: e.to_string(),
+        }
+        .into()
     }
 }
 
@@ -219,7 +222,7 @@ fn default_sigma() -> f64 {
 
 /// One field's pixel positions, brightest first (`x_px,y_px,flux_e`).
 fn read_field(path: &Path) -> Result<Vec<[f64; 2]>, CliError> {
-    let text = String::from_utf8(read_file(path)?).map_err(|e| CliError::Csv {
+    let text = String::from_utf8(read_file(path)?).map_err(|e| LabError::Csv {
         path: path.to_path_buf(),
         line: 0,
         msg: e.to_string(),
@@ -234,7 +237,7 @@ fn read_field(path: &Path) -> Result<Vec<[f64; 2]>, CliError> {
             .split(',')
             .map(|s| s.trim().parse::<f64>())
             .collect::<Result<_, _>>()
-            .map_err(|e| CliError::Csv {
+            .map_err(|e| LabError::Csv {
                 path: path.to_path_buf(),
                 line: n + 1,
                 msg: e.to_string(),
@@ -242,11 +245,12 @@ fn read_field(path: &Path) -> Result<Vec<[f64; 2]>, CliError> {
         match v.as_slice() {
             [x, y, ..] if x.is_finite() && y.is_finite() => out.push([*x, *y]),
             _ => {
-                return Err(CliError::Csv {
+                return Err(LabError::Csv {
                     path: path.to_path_buf(),
                     line: n + 1,
                     msg: "expected x_px,y_px,flux_e".into(),
-                });
+                }
+                .into());
             }
         }
     }
@@ -255,7 +259,7 @@ fn read_field(path: &Path) -> Result<Vec<[f64; 2]>, CliError> {
 
 /// `field,qw,qx,qy,qz` rows in field order.
 fn read_truth(path: &Path) -> Result<Vec<Quat>, CliError> {
-    let text = String::from_utf8(read_file(path)?).map_err(|e| CliError::Csv {
+    let text = String::from_utf8(read_file(path)?).map_err(|e| LabError::Csv {
         path: path.to_path_buf(),
         line: 0,
         msg: e.to_string(),
@@ -267,17 +271,18 @@ fn read_truth(path: &Path) -> Result<Vec<Quat>, CliError> {
             .skip(1)
             .map(|s| s.trim().parse::<f64>())
             .collect::<Result<_, _>>()
-            .map_err(|e| CliError::Csv {
+            .map_err(|e| LabError::Csv {
                 path: path.to_path_buf(),
                 line: n + 1,
                 msg: e.to_string(),
             })?;
         let [w, x, y, z] = v[..] else {
-            return Err(CliError::Csv {
+            return Err(LabError::Csv {
                 path: path.to_path_buf(),
                 line: n + 1,
                 msg: "expected field,qw,qx,qy,qz".into(),
-            });
+            }
+            .into());
         };
         out.push(Quat([w, x, y, z]));
     }

@@ -7,8 +7,8 @@
 //! (`target/pil/thumbv7em-none-eabihf/release/startrack-firmware`), built first unless
 //! `--no-build`.
 
-use super::CliError;
-use super::sil::SilArgs;
+use super::sil::{SceneArgs, SilArgs};
+use super::{CliError, LabError};
 use startrack_homes::pil::{self, PilConfig, PilFrame, PilReport};
 use std::io::Write;
 use std::path::PathBuf;
@@ -16,23 +16,12 @@ use std::time::Duration;
 
 /// Options of `startrack pil`.
 #[derive(Clone, Debug, clap::Args)]
+#[command(mut_arg("frames", |a| a.default_value("5")))]
 pub struct PilArgs {
-    /// Frames to run.
-    #[arg(long, default_value_t = 5)]
-    pub frames: u32,
-    /// Seed of the scene and the sensor.
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Stars in the scene (without `--sky`).
-    #[arg(long, default_value_t = 20)]
-    pub stars: usize,
-    /// Motion of the scene per frame, px: X,Y.
-    #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.3, -0.2])]
-    pub drift_px: Vec<f64>,
-    /// The scene from the sky, as `startrack sil --sky` (the catalog loaded into the
-    /// emulated flash: the firmware's attitude stage runs).
-    #[arg(long)]
-    pub sky: bool,
+    /// The scene, as `startrack sil`'s (with `--sky` the catalog is loaded into the emulated
+    /// flash and the firmware's attitude stage runs).
+    #[command(flatten)]
+    pub scene: SceneArgs,
     /// With `--sky`: attitude CSV (one row per frame), as `startrack sil --attitude`.
     #[arg(long, requires = "sky")]
     pub attitude: Option<PathBuf>,
@@ -145,33 +134,7 @@ pub fn frame_line(f: &PilFrame, previous_counts: u64) -> String {
 
 /// Runs `startrack pil`.
 pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
-    let sil_args = SilArgs {
-        frames: args.frames,
-        seed: args.seed,
-        stars: args.stars,
-        drift_px: args.drift_px.clone(),
-        psf_a_px: None,
-        telemetry: None,
-        truth: None,
-        sky: args.sky,
-        attitude: None,
-        port: None,
-        link_noise: 0.0,
-        flash: None,
-        power_cut_at_write: None,
-        rate_deg_s: None,
-        exposure_ms: None,
-        slew_accel_deg_s2: None,
-        spacecraft_time_s: None,
-        counter_ppm: 0.0,
-        velocity_km_s: None,
-        apparent: false,
-        moon: None,
-        earth_limb: None,
-        sun_angle_deg: None,
-        planet: Vec::new(),
-        protons: None,
-    };
+    let sil_args = SilArgs::of_scene(args.scene.clone())?;
     let sil = super::sil::config_of(&sil_args)?;
     let elf = elf_of(args)?;
     let dir = args.dir.clone().unwrap_or_else(|| {
@@ -250,7 +213,7 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
         comparison = Some(c);
     }
     if let Some(p) = &args.figures {
-        let io = |e: std::io::Error| CliError::Io {
+        let io = |e: std::io::Error| LabError::Io {
             path: p.clone(),
             msg: e.to_string(),
         };
@@ -264,13 +227,13 @@ pub fn run(args: &PilArgs) -> Result<PilReport, CliError> {
     if let (Some(p), Some(sky)) = (&args.attitude, sil.sky) {
         let mut f = std::fs::File::create(p)
             .map(std::io::BufWriter::new)
-            .map_err(|e| CliError::Io {
+            .map_err(|e| LabError::Io {
                 path: p.clone(),
                 msg: e.to_string(),
             })?;
         write_attitude(&mut f, &report, &sky)
             .and_then(|()| f.flush())
-            .map_err(|e| CliError::Io {
+            .map_err(|e| LabError::Io {
                 path: p.clone(),
                 msg: e.to_string(),
             })?;

@@ -17,7 +17,7 @@
 //! and which pixel-phase curve a CoG uses) comes from those options, else the frame's
 //! `PSFA` keyword (px, written by `startrack simulate`), else the flight configuration's.
 
-use super::{CliError, read_file};
+use super::{CliError, LabError, read_file};
 use clap::builder::TypedValueParser as _;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{CentroidMethod, TrackerConfig};
@@ -137,7 +137,7 @@ pub fn config_of(
 /// Runs the tracker on the frame and returns what it found (nothing written).
 pub fn measure(args: &ProcessArgs) -> Result<Processed, CliError> {
     let bytes = read_file(&args.calib)?;
-    let table = CalibTable::parse(&bytes).map_err(|err| CliError::Table {
+    let table = CalibTable::parse(&bytes).map_err(|err| LabError::Table {
         path: args.calib.clone(),
         err,
     })?;
@@ -153,7 +153,7 @@ pub fn measure(args: &ProcessArgs) -> Result<Processed, CliError> {
 pub fn run(args: &ProcessArgs) -> Result<(), CliError> {
     let result = measure(args)?;
     let io = |path: PathBuf| {
-        move |e: std::io::Error| CliError::Io {
+        move |e: std::io::Error| LabError::Io {
             path,
             msg: e.to_string(),
         }

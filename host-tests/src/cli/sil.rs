@@ -21,7 +21,7 @@
 //! With `--port P` it serves the link instead ([`startrack_homes::link_home::serve`]); with `--sky` too,
 //! each frame's attitude report (`TM[134,2]`) is sent as the board sends it.
 
-use super::CliError;
+use super::{CliError, LabError};
 use startrack_core::tracker::{Event, Mode, TrackerConfig};
 use startrack_homes::home::csv_row;
 use startrack_homes::sil::{self, SilConfig, SilReport};
@@ -29,21 +29,35 @@ use startrack_sim::sky::bright::BrightSky;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// Options of `startrack sil`.
+/// The scene options `startrack sil` and `startrack pil` share (each flattens them into its
+/// own options; `pil` runs 5 frames by default).
 #[derive(Clone, Debug, clap::Args)]
-pub struct SilArgs {
+pub struct SceneArgs {
     /// Frames to run.
     #[arg(long, default_value_t = 20)]
     pub frames: u32,
     /// Seed of the scene and the sensor.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Stars in the scene.
+    /// Stars in the scene (without `--sky`).
     #[arg(long, default_value_t = 20)]
     pub stars: usize,
     /// Motion of the scene per frame, px: X,Y (a slow attitude rate).
     #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.3, -0.2])]
     pub drift_px: Vec<f64>,
+    /// The scene from the sky: the catalog's stars at a seeded random attitude turning by
+    /// `--drift-px` a frame across the boresight, every frame identified and its attitude
+    /// checked against the truth (instead of `--stars` random stars).
+    #[arg(long)]
+    pub sky: bool,
+}
+
+/// Options of `startrack sil`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct SilArgs {
+    /// The scene.
+    #[command(flatten)]
+    pub scene: SceneArgs,
     /// PSF 80 %-energy radius of the scene and the tracker, px.
     #[arg(long)]
     pub psf_a_px: Option<f32>,
@@ -53,11 +67,6 @@ pub struct SilArgs {
     /// Truth CSV (one row per true star per frame).
     #[arg(long)]
     pub truth: Option<PathBuf>,
-    /// The scene from the sky: the catalog's stars at a seeded random attitude turning by
-    /// `--drift-px` a frame across the boresight, every frame identified and its attitude
-    /// checked against the truth (instead of `--stars` random stars).
-    #[arg(long)]
-    pub sky: bool,
     /// With `--sky`: attitude CSV (one row per frame).
     #[arg(long, requires = "sky")]
     pub attitude: Option<PathBuf>,
@@ -169,9 +178,24 @@ pub struct SilArgs {
 /// Exit code of `startrack sil --power-cut-at-write N` when the cut happened.
 pub const POWER_CUT_EXIT_CODE: u8 = 4;
 
+impl SilArgs {
+    /// `startrack sil`'s options as given on their own (each at its default) over `scene`:
+    /// the SIL `startrack pil` compares the firmware with.
+    pub fn of_scene(scene: SceneArgs) -> Result<Self, CliError> {
+        use clap::{Args, FromArgMatches};
+        let usage = |e: clap::Error| CliError::Usage(e.to_string());
+        let matches = Self::augment_args(clap::Command::new("sil"))
+            .try_get_matches_from(["sil"])
+            .map_err(usage)?;
+        let args = Self::from_arg_matches(&matches).map_err(usage)?;
+        Ok(Self { scene, ..args })
+    }
+}
+
 /// The SIL configuration of `args`.
 pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
-    let [dx, dy] = args.drift_px[..] else {
+    let scene = &args.scene;
+    let [dx, dy] = scene.drift_px[..] else {
         return Err(CliError::Usage("--drift-px takes X,Y".into()));
     };
     if !(dx.is_finite() && dy.is_finite() && dx.abs() <= 5.0 && dy.abs() <= 5.0) {
@@ -186,9 +210,9 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
     tracker
         .validate(sil::SIL_CAPACITY)
         .map_err(|e| CliError::Usage(e.to_string()))?;
-    let sky = args.sky.then(|| {
+    let sky = scene.sky.then(|| {
         use rand::SeedableRng;
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed ^ 0x534b_5900);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(scene.seed ^ 0x534b_5900);
         let q0 = startrack_sim::sky::field::random_attitude(&mut rng);
         let f = startrack_sim::sky::field::FieldSpec::ccd47_15deg(0.0)
             .camera
@@ -231,9 +255,9 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
         send_velocity: !args.apparent,
         spacecraft_epoch_us,
         counter_rate_ppm: args.counter_ppm,
-        frames: args.frames,
-        seed: args.seed,
-        stars: args.stars,
+        frames: scene.frames,
+        seed: scene.seed,
+        stars: scene.stars,
         drift_px: (dx, dy),
         tracker,
         sky,
@@ -415,10 +439,11 @@ fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>, CliError> {
 }
 
 fn io_error(path: &Path, e: &std::io::Error) -> CliError {
-    CliError::Io {
+    LabError::Io {
         path: path.to_path_buf(),
         msg: e.to_string(),
     }
+    .into()
 }
 
 /// Writes the telemetry CSV of `report`.

@@ -24,7 +24,7 @@
 //! simulator's hot pixels ([`HotPixels`], [`HOT_RATES_E_PER_S`] at 293 K, 1 s) and lists
 //! every one with its true dark in `hot.csv`, as a ground calibration would.
 
-use super::{CliError, write_file};
+use super::{CliError, LabError, write_file};
 use rand::{RngExt as _, SeedableRng as _};
 use startrack_analysis::accuracy::flux_for_snr;
 use startrack_core::geometry::Segment;
@@ -273,7 +273,7 @@ fn hot_csv(sim: &Simulator) -> String {
 pub fn run(args: &SimulateArgs) -> Result<SimFiles, CliError> {
     let p = params(args)?;
     let g = p.geometry;
-    std::fs::create_dir_all(&args.out).map_err(|e| CliError::Io {
+    std::fs::create_dir_all(&args.out).map_err(|e| LabError::Io {
         path: args.out.clone(),
         msg: e.to_string(),
     })?;

@@ -11,7 +11,7 @@
 //! `case.json`'s). `time_us` is the wall time of identification and
 //! attitude (directions from pixels included, file reading not).
 
-use super::{CliError, read_file, write_file};
+use super::{CliError, LabError, read_file, write_file};
 use serde::Deserialize;
 use startrack_core::attitude::{Camera, Quat};
 use startrack_core::catalog::Catalog;
@@ -75,7 +75,7 @@ pub struct SolveSummary {
 }
 
 fn read_field(path: &Path) -> Result<Vec<[f64; 3]>, CliError> {
-    let text = String::from_utf8(read_file(path)?).map_err(|_| CliError::Csv {
+    let text = String::from_utf8(read_file(path)?).map_err(|_| LabError::Csv {
         path: path.to_path_buf(),
         line: 0,
         msg: "not UTF-8".into(),
@@ -92,11 +92,12 @@ fn read_field(path: &Path) -> Result<Vec<[f64; 3]>, CliError> {
                 out.push([v[0], v[1], v[2]])
             }
             _ => {
-                return Err(CliError::Csv {
+                return Err(LabError::Csv {
                     path: path.to_path_buf(),
                     line: n + 1,
                     msg: "expected x_px,y_px,flux_e".into(),
-                });
+                }
+                .into());
             }
         }
     }
@@ -117,11 +118,12 @@ fn read_priors(path: &Path) -> Result<std::collections::HashMap<String, Quat>, C
                 out.insert((*name).to_string(), Quat([q[0], q[1], q[2], q[3]]));
             }
             _ => {
-                return Err(CliError::Csv {
+                return Err(LabError::Csv {
                     path: path.to_path_buf(),
                     line: n + 1,
                     msg: "expected field,qw,qx,qy,qz".into(),
-                });
+                }
+                .into());
             }
         }
     }
@@ -132,7 +134,7 @@ fn read_priors(path: &Path) -> Result<std::collections::HashMap<String, Quat>, C
 pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
     let json_path = args.case.join("case.json");
     let case: CaseJson =
-        serde_json::from_slice(&read_file(&json_path)?).map_err(|e| CliError::Csv {
+        serde_json::from_slice(&read_file(&json_path)?).map_err(|e| LabError::Csv {
             path: json_path.clone(),
             line: e.line(),
             msg: e.to_string(),
@@ -160,7 +162,7 @@ pub fn run(args: &SolveArgs) -> Result<SolveSummary, CliError> {
     let priors = args.prior.as_deref().map(read_priors).transpose()?;
     let fields_dir = args.case.join("fields");
     let mut names: Vec<PathBuf> = std::fs::read_dir(&fields_dir)
-        .map_err(|e| CliError::Io {
+        .map_err(|e| LabError::Io {
             path: fields_dir.clone(),
             msg: e.to_string(),
         })?

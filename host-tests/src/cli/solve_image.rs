@@ -23,7 +23,7 @@
 //! An image that cannot be read or solved gets a row with `solved` 0 and one line on stderr,
 //! and the command then exits non-zero.
 
-use super::{CliError, read_file, write_file};
+use super::{CliError, LabError, read_file, write_file};
 use startrack_core::attitude::{Camera, angle_between};
 use startrack_core::catalog::Catalog;
 use startrack_lab::realsky::picture;
@@ -249,8 +249,18 @@ impl ImageCameraArgs {
     }
 }
 
+/// The pattern-star cap radius of the default catalog for a field of `fov_deg`, deg: the
+/// 15 degree build's 4 degrees (at most three pattern stars a cap) down to a 10 degree
+/// field, then in proportion to the field, so that a narrower field holds as many pattern
+/// stars as a 10 degree one (about four in a 4:3 field; with 4 degree caps a 6 degree field
+/// holds under two, and lost in space needs three).
+pub fn pattern_cap_deg(fov_deg: f64) -> f64 {
+    4.0 * (fov_deg / 10.0).min(1.0)
+}
+
 /// The catalog `bytes` of `--catalog`, or the default one built for a square field of
-/// `fov_deg` from `list`, every star to [`DEFAULT_MAG_LIMIT`].
+/// `fov_deg` from `list`, every star to [`DEFAULT_MAG_LIMIT`], its pattern stars
+/// [`pattern_cap_deg`] apart.
 pub fn catalog_bytes(
     catalog: Option<&Path>,
     list: &[SkyStar],
@@ -259,13 +269,16 @@ pub fn catalog_bytes(
     match catalog {
         Some(p) => read_file(p),
         None => {
-            let spec = super::catalog::spec(&super::catalog::CatalogBuildArgs {
-                out: PathBuf::new(),
-                list: None,
-                mag_limit: DEFAULT_MAG_LIMIT,
-                fov_deg,
-                max_separation_deg: 12.0,
-            })?;
+            let spec = startrack_sim::sky::build::BuildSpec {
+                pattern_cap_rad: pattern_cap_deg(fov_deg).to_radians(),
+                ..super::catalog::spec(&super::catalog::CatalogBuildArgs {
+                    out: PathBuf::new(),
+                    list: None,
+                    mag_limit: DEFAULT_MAG_LIMIT,
+                    fov_deg,
+                    max_separation_deg: 12.0,
+                })?
+            };
             Ok(startrack_sim::sky::build::build(list, &spec)
                 .map_err(|e| CliError::Usage(e.to_string()))?
                 .bytes)
@@ -276,10 +289,13 @@ pub fn catalog_bytes(
 /// The star list of `--list` (default [`deep_list_path`]).
 pub fn read_star_list(path: Option<&Path>) -> Result<Vec<SkyStar>, CliError> {
     let list_path = path.map_or_else(deep_list_path, Path::to_path_buf);
-    read_list(&list_path).map_err(|e| CliError::Csv {
-        path: e.path.clone(),
-        line: e.line,
-        msg: e.msg,
+    read_list(&list_path).map_err(|e| {
+        LabError::Csv {
+            path: e.path.clone(),
+            line: e.line,
+            msg: e.msg,
+        }
+        .into()
     })
 }
 
@@ -292,7 +308,7 @@ pub fn run(args: &SolveImageArgs) -> Result<SolveImageSummary, CliError> {
     let fov_deg = catalog_fov(&args.camera, camera.as_ref(), &args.images);
     let bytes = catalog_bytes(args.catalog.as_deref(), &list, fov_deg)?;
     let cat = Catalog::parse(&bytes).map_err(|e| CliError::Usage(format!("catalog: {e}")))?;
-    std::fs::create_dir_all(&args.out).map_err(|e| CliError::Io {
+    std::fs::create_dir_all(&args.out).map_err(|e| LabError::Io {
         path: args.out.clone(),
         msg: e.to_string(),
     })?;

@@ -626,3 +626,42 @@ fn sil_velocity_and_time_options_parse_and_refuse_bad_values() {
     assert_one_line_error(&["sil", "--sky", "--velocity-km-s", "1,2"], s, "VX,VY,VZ");
     assert_one_line_error(&["sil", "--sky", "--spacecraft-time-s", "5e9"], s, "4e9");
 }
+
+/// `startrack pil` takes `startrack sil`'s scene options (one flattened set) and compares the
+/// firmware with the SIL that `startrack sil` runs on that scene, every other option at its
+/// default; only the frame count's default differs (5 against 20).
+#[test]
+fn pil_runs_the_sils_scene_options() {
+    use clap::Parser;
+    use startrack_host::cli::pil::PilArgs;
+    use startrack_host::cli::sil::{SilArgs, config_of};
+    #[derive(Parser)]
+    struct Sil {
+        #[command(flatten)]
+        args: SilArgs,
+    }
+    #[derive(Parser)]
+    struct Pil {
+        #[command(flatten)]
+        args: PilArgs,
+    }
+    fn with(frames: Option<&'static str>) -> Vec<&'static str> {
+        let mut v = vec!["x", "--sky", "--seed", "7", "--drift-px", "0.5", "0.25"];
+        v.extend(frames.map(|f| ["--frames", f]).into_iter().flatten());
+        v
+    }
+    let pil = Pil::try_parse_from(with(Some("3")))
+        .expect("pil parses")
+        .args;
+    let sil = Sil::try_parse_from(with(Some("3")))
+        .expect("sil parses")
+        .args;
+    let of_pil = SilArgs::of_scene(pil.scene).expect("defaults");
+    assert_eq!(
+        config_of(&of_pil).expect("valid"),
+        config_of(&sil).expect("valid")
+    );
+    let pil = Pil::try_parse_from(with(None)).expect("pil parses").args;
+    let sil = Sil::try_parse_from(with(None)).expect("sil parses").args;
+    assert_eq!((pil.scene.frames, sil.scene.frames), (5, 20));
+}

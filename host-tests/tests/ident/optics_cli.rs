@@ -87,7 +87,10 @@ fn bad_inputs_are_typed_errors() {
         dir.path().join("nothing"),
         dir.path().join("m.json"),
     ));
-    assert!(matches!(missing, Err(CliError::Io { .. })), "{missing:?}");
+    assert!(
+        matches!(missing, Err(CliError::Lab(LabError::Io { .. }))),
+        "{missing:?}"
+    );
 
     // A model that folds the image inside the frame is refused before any table is built.
     let folded = dir.path().join("folded.json");

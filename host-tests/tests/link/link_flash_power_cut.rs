@@ -5,6 +5,7 @@
 //! a later upload then succeeds. N covers the first and last erase, the first data unit, one
 //! in the middle, the last data unit and the header write.
 
+use crate::served::{BIN, gse, id, in_force, upload};
 use startrack_core::link::TableUpload;
 use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_homes::flash_home::{FlashHome, flash_table};
@@ -17,8 +18,6 @@ use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-
-const BIN: &str = env!("CARGO_BIN_EXE_startrack");
 
 /// A running `startrack sil --port 0 --flash FILE [...]` and its port.
 struct Sil {
@@ -69,37 +68,6 @@ impl Drop for Sil {
     }
 }
 
-fn gse(port: u16, args: &[&str]) -> (i32, String) {
-    let out = Command::new(BIN)
-        .args(["gse", "--port", &port.to_string(), "--timeout-s", "10"])
-        .args(args)
-        .output()
-        .expect("spawn gse");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-    )
-}
-
-/// (length, CRC-32) of the table in force, from `gse status`.
-fn in_force(port: u16) -> Option<(u64, String)> {
-    let (code, text) = gse(port, &["status"]);
-    assert_eq!(code, 0, "gse status failed: {text}");
-    let v: serde_json::Value = serde_json::from_str(&text).expect("status JSON");
-    let t = v.get("table")?;
-    if t.is_null() {
-        return None;
-    }
-    Some((
-        t["len_bytes"].as_u64().expect("len"),
-        t["crc32"].as_str().expect("crc").to_string(),
-    ))
-}
-
-fn id(table: &[u8]) -> (u64, String) {
-    (table.len() as u64, format!("{:08x}", CRC32.checksum(table)))
-}
-
 #[test]
 fn power_cut_during_an_upload_leaves_the_old_or_the_new_table() {
     let dir = tempfile::tempdir().expect("tmp");
@@ -146,7 +114,7 @@ fn power_cut_during_an_upload_leaves_the_old_or_the_new_table() {
         {
             let mut sil = Sil::start(&flash, Some(n));
             assert_eq!(in_force(sil.port), Some(id(&old)), "bring-up table");
-            let (code, _) = gse(sil.port, &["upload-table", new_arg]);
+            let (code, _, _) = gse(sil.port, &["upload-table", new_arg]);
             assert_ne!(code, 0, "cut at {n}: the upload cannot have completed");
             assert_eq!(
                 sil.wait_exit(Duration::from_secs(20)),
@@ -161,9 +129,7 @@ fn power_cut_during_an_upload_leaves_the_old_or_the_new_table() {
             after == id(&old) || after == id(&new),
             "cut at {n}: neither table in force: {after:?}"
         );
-        let (code, text) = gse(sil.port, &["upload-table", new_arg]);
-        assert_eq!(code, 0, "cut at {n}: the upload after the reboot: {text}");
-        assert_eq!(in_force(sil.port), Some(id(&new)));
+        upload(sil.port, &new_path, &new);
         outcomes.push((n, after == id(&new)));
     }
     // Only the header write puts the new table in force; a cut before it keeps the old one.

@@ -7,12 +7,15 @@
 mod link_decoder;
 mod link_flash_power_cut;
 mod link_flash_upload;
+mod link_ground_upload;
 mod link_pil_power_cut;
+mod link_pipe;
 mod link_protocol_doc;
 mod link_python;
 mod link_sil;
 mod link_soak;
 mod link_standby;
+mod served;
 mod store_api;
 mod store_power_cut;
 mod store_props;

@@ -85,6 +85,11 @@ fn oracle(g: &ReadoutGeometry, rects: Option<&[Rect]>, b: usize) -> Vec<[i64; 2]
     let os = usize::from(g.overscan_px);
     let par_cols = len - 2 * os;
     let prefix = g.first_active_col();
+    // The over-scan and the covered columns read at each end.
+    let edge = match rects {
+        None => prefix,
+        Some(rs) => ReadoutRequest::Windows(rs).edge_px(g),
+    };
     let dual = g.outputs == 2;
     let n = if dual { len / 2 / b } else { len / b };
     let value = |r: usize, line: usize| {
@@ -113,8 +118,8 @@ fn oracle(g: &ReadoutGeometry, rects: Option<&[Rect]>, b: usize) -> Vec<[i64; 2]
         let needed = |col: usize| match rects {
             None => true,
             Some(rs) => {
-                col < prefix
-                    || col >= len - prefix
+                col < edge
+                    || col >= len - edge
                     || rs.iter().any(|r| {
                         hits(r, &rows)
                             && col >= prefix + usize::from(r.x0)
@@ -419,7 +424,12 @@ fn check_line_jobs(g: &ReadoutGeometry, request: ReadoutRequest<'_>) {
         lines_seen.push(job.line);
         for (col, &v) in line.iter().enumerate() {
             let active = col >= prefix && col < len - prefix;
-            let wanted = !active || request.reads_pixel((col - prefix) as u16, job.line);
+            let edge = request.edge_px(g);
+            let wanted = if active {
+                request.reads_pixel((col - prefix) as u16, job.line)
+            } else {
+                col < edge || col >= len - edge
+            };
             if !wanted {
                 // Not asked for: untouched with one output; with two, the other half's
                 // sample at the same shift may be there.

@@ -79,6 +79,14 @@ fn small() -> SensorParams {
     }
 }
 
+/// The flight configuration with 1 s exposures: the dark these tests measure is the
+/// sensors' charge in 1 s (250 e- at 293 K on the default sensor), far above the read noise,
+/// where the flight's 39 ms holds a few electrons.
+const SECOND_FRAMES: TrackerConfig = TrackerConfig {
+    exposure_ms: 1000,
+    ..TrackerConfig::FLIGHT
+};
+
 /// The lab's law: the default sensor's 250 e- in the 1 s exposure at 293 K, doubling every
 /// 6.5 K; band 0.8 to 1.25.
 fn lab_law() -> DarkLaw {
@@ -114,7 +122,7 @@ fn run(dark_e: f64, sensor_k: Option<f64>, frames: u32) -> Housekeeping {
     };
     let mut buffers = Box::new(TrackerBuffers::new());
     let mut tracker =
-        Box::new(Tracker::<32>::new(TrackerConfig::FLIGHT, params.geometry, &mut buffers).unwrap());
+        Box::new(Tracker::<32>::new(SECOND_FRAMES, params.geometry, &mut buffers).unwrap());
     tracker.set_dark_law(Some(lab_law()));
     let mut source = SimLines::new(|frame| Simulator {
         frame,
@@ -189,7 +197,7 @@ fn the_running_ratio_follows_a_step_with_its_time_constant() {
     law.reference_k = Kelvin::from_num(286.5);
     let mut buffers = Box::new(TrackerBuffers::new());
     let mut tracker =
-        Box::new(Tracker::<32>::new(TrackerConfig::FLIGHT, lab.geometry, &mut buffers).unwrap());
+        Box::new(Tracker::<32>::new(SECOND_FRAMES, lab.geometry, &mut buffers).unwrap());
     tracker.set_dark_law(Some(law));
     let mut source = SimLines::new(|frame| Simulator {
         frame,
@@ -247,7 +255,7 @@ fn run_lab(
         dark_rate_e_per_s_at_293k: dark_scale * lab.dark_rate_e_per_s_at_293k,
         ..lab.clone()
     };
-    let config = TrackerConfig::FLIGHT;
+    let config = SECOND_FRAMES;
     let exposure_s = f64::from(config.exposure_ms) / 1000.0;
     let mut buffers = Box::new(TrackerBuffers::new());
     let mut tracker = Box::new(Tracker::<32>::new(config, lab.geometry, &mut buffers).unwrap());
@@ -310,9 +318,8 @@ fn the_home_override_wins_over_the_table_law() {
     assert!(!out);
 
     let mut buffers = Box::new(TrackerBuffers::new());
-    let mut tracker = Box::new(
-        Tracker::<32>::new(TrackerConfig::FLIGHT, lab_table().0.geometry, &mut buffers).unwrap(),
-    );
+    let mut tracker =
+        Box::new(Tracker::<32>::new(SECOND_FRAMES, lab_table().0.geometry, &mut buffers).unwrap());
     tracker.set_dark_law(Some(doubled));
     assert_eq!(tracker.dark_law(), Some(doubled));
     tracker.set_dark_law(None);
@@ -385,7 +392,7 @@ fn a_replacement_table_brings_its_own_law() {
     };
     let mut buffers = Box::new(TrackerBuffers::new());
     let mut tracker =
-        Box::new(Tracker::<32>::new(TrackerConfig::FLIGHT, lab.geometry, &mut buffers).unwrap());
+        Box::new(Tracker::<32>::new(SECOND_FRAMES, lab.geometry, &mut buffers).unwrap());
     let mut source = SimLines::new(|frame| sensor.frame_sensor(frame, 1.0, 288.0, false));
     let mut bench = Bench::new(CalibTable::parse(bytes_a).unwrap(), Some(288.0), 1_100_000);
     let mut ratios = Vec::new();

@@ -55,12 +55,14 @@ fn housekeeping_follows_every_frame_of_the_cycle() {
         (h.temperature_k, h.temperature_source),
         (None, ThermoSource::None)
     );
-    // The SIL's clock after the last frame's lines: its instant plus the board's readout of
-    // what it read, between a frame transfer (10.4 ms) and a full frame (605.4 ms).
-    let period_us = SilConfig::default().period_us;
-    let instant_ms = u64::from(last.frame) * period_us / 1000;
+    // The SIL's clock after the last frame's lines: its instant plus its exposure and the
+    // board's readout of what it read, between a frame transfer (10.4 ms) and a full frame
+    // (605.4 ms).
+    let sil = SilConfig::default();
+    let instant_ms = u64::from(last.frame) * sil.period_us / 1000;
+    let read_from_ms = instant_ms + u64::from(sil.tracker.exposure_ms);
     assert!(
-        (instant_ms + 10..=instant_ms + 606).contains(&h.uptime_ms),
+        (read_from_ms + 10..=read_from_ms + 606).contains(&h.uptime_ms),
         "{} ms, frame at {instant_ms} ms",
         h.uptime_ms
     );

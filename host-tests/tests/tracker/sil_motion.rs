@@ -80,6 +80,15 @@ fn trailed_stars_are_fitted_at_mid_exposure_once_the_motion_is_known() {
         sum += s;
         n += k;
         let c = f.attitude.as_ref().unwrap();
+        // Tagged at the truth's mid-exposure: the SIL's frames integrate the motion's
+        // exposure from their start (its line source's integration).
+        let tagged_us = c.report.unwrap().mid_exposure_us;
+        assert_eq!(
+            tagged_us,
+            (c.t_mid_s * 1e6).round() as u64,
+            "frame {}",
+            f.summary.frame
+        );
         let fix = c.fix.as_ref().unwrap();
         let e = c.error_rad().unwrap();
         for (i, v) in e.iter().enumerate() {

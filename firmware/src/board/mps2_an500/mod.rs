@@ -37,7 +37,7 @@ use semihosting::io::Read;
 use startrack_core::cycle::FrameOutcome;
 use startrack_core::safe::{ResetCause, SetupFaults};
 use startrack_core::store::{H743_BANK_B, H743_BANK2, Layout};
-use startrack_core::tracker::{FixedTemperature, StarRecord};
+use startrack_core::tracker::{FixedTemperature, Integration, StarRecord};
 use static_cell::ConstStaticCell;
 
 use defmt_semihosting as _;
@@ -320,8 +320,13 @@ async fn host_lines_task() {
             continue;
         }
         // The integration before the readout (the sequencer's exposure), then the program.
+        let exposure_start = embassy_time::Instant::now();
         embassy_time::Timer::after_micros(u64::from(req.exposure_us)).await;
         let program_start = embassy_time::Instant::now();
+        let integration = Some(Integration {
+            start_us: exposure_start.as_micros(),
+            end_us: program_start.as_micros(),
+        });
         loop {
             let header = HOST.lock(|h| h.borrow_mut().as_mut().map(|ch| ch.line_header()));
             let Some(Ok(header)) = header else {
@@ -368,6 +373,7 @@ async fn host_lines_task() {
                     line: header.line,
                     last: header.last,
                     samples: buf,
+                    integration,
                 })
                 .await;
             if header.last {

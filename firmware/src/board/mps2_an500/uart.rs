@@ -1,8 +1,8 @@
 //! The link's bytes on `mps2-an500`: CMSDK APB UART0 (0x4000_4000), which QEMU connects to
 //! its first `-serial` character device (the PIL makes it a TCP socket on 127.0.0.1, so the
 //! ground tool's `--port` reaches it as it reaches the served SIL). [`link_rx_task`] moves
-//! received bytes into [`RX`], [`link_tx_task`] sends what [`TX`] holds; the protocol is the
-//! application's ([`crate::link`]).
+//! received bytes into [`crate::link::RX`], [`link_tx_task`] sends what [`TX`] holds; the
+//! protocol is the application's ([`crate::link`]).
 //!
 //! The UART has a one-byte buffer each way and QEMU paces it by the character device, not by
 //! the baud rate. Both tasks poll (no interrupt: the board has no device crate), every
@@ -10,7 +10,7 @@
 //!
 //! Cost: a poll is a few register reads; a byte a few more.
 
-use crate::link::{RX, RX_DROPPED, RX_ERRORS, TX};
+use crate::link::{RX_ERRORS, TX};
 use core::sync::atomic::Ordering;
 use embassy_time::Timer;
 
@@ -53,7 +53,8 @@ pub fn init() {
     write(CTRL, TX_EN | RX_EN);
 }
 
-/// Moves received bytes into [`RX`]; a full pipe drops them (counted).
+/// Moves received bytes into [`crate::link::RX`] ([`crate::link::received`]: a full pipe
+/// drops them, counted).
 #[embassy_executor::task]
 pub async fn link_rx_task() {
     let mut buf = [0u8; 64];
@@ -77,11 +78,7 @@ pub async fn link_rx_task() {
             Timer::after_micros(POLL_US).await;
             continue;
         }
-        let bytes = buf.get(..n).unwrap_or_default();
-        let taken = RX.try_write(bytes).unwrap_or(0);
-        if taken < n {
-            RX_DROPPED.fetch_add((n - taken) as u32, Ordering::Relaxed);
-        }
+        crate::link::received(buf.get(..n).unwrap_or_default());
     }
 }
 

@@ -121,6 +121,7 @@ pub async fn readout_task(mut adc: AdcLink, samples: &'static mut [u16; LINE_LEN
                         line,
                         last,
                         samples: buf,
+                        integration: ready.integration,
                     })
                     .await;
             }

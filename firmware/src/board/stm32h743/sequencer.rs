@@ -75,8 +75,9 @@ use embassy_time::{Duration, Instant};
 use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, Chain, CompileError, Cost, Limits, LineJob, LineJobs, Link, Links, PinMap, PlanError,
-    Program, ProgramParts, ReadoutPlan, Step, Ticks, Timing, compile,
+    Program, ProgramParts, ReadoutPlan, SegmentId, Step, Ticks, Timing, compile,
 };
+use startrack_core::tracker::Integration;
 
 use super::mdma_list::{MdmaChannel, Node, NodeConfig, NodeRing};
 
@@ -167,6 +168,10 @@ pub struct LineReady {
     pub last: bool,
     /// When its last sample is taken.
     pub due: Instant,
+    /// When the frame's image was integrated: from the end of the frame transfer of the
+    /// program before this frame's to the start of this frame's (`None` for the first
+    /// program after the clocks started).
+    pub integration: Option<Integration>,
     /// What it digitises and where each word goes.
     pub job: LineJob,
 }
@@ -203,6 +208,9 @@ pub struct Sequencer {
     table_first: [u64; 2],
     /// Line jobs the readout had no room for.
     pub dropped_lines: u32,
+    /// When the last linked program's frame transfer ends (the next frame's integration
+    /// starts).
+    last_ft_end: Option<Instant>,
 }
 
 impl Sequencer {
@@ -232,6 +240,7 @@ impl Sequencer {
             table: 0,
             table_first: [0; 2],
             dropped_lines: 0,
+            last_ft_end: None,
         }
     }
 
@@ -428,6 +437,29 @@ impl Sequencer {
             self.start_pace(tick_ps);
         }
         let frame_start = self.ring.queued();
+        // The frame transfer that opens this program: when it starts (its first tick, from
+        // the ticks the MDMA has played) and ends; the image read by it integrated since
+        // the previous program's ended.
+        let tick_us = |ticks: u64| Duration::from_micros(ticks * u64::from(tick_ps) / 1_000_000);
+        let (played, now) = (self.played(), Instant::now());
+        let ft_start = if frame_start >= played {
+            now + tick_us(frame_start - played)
+        } else {
+            now.checked_sub(tick_us(played - frame_start))
+                .unwrap_or(now)
+        };
+        let ft_ticks = program
+            .steps()
+            .first()
+            .filter(|s| s.segment == SegmentId::FrameTransfer)
+            .map_or(0, |s| {
+                program.segment(SegmentId::FrameTransfer).len() as u64 * u64::from(s.repeat)
+            });
+        let integration = self.last_ft_end.map(|start| Integration {
+            start_us: start.as_micros(),
+            end_us: ft_start.as_micros(),
+        });
+        self.last_ft_end = Some(ft_start + tick_us(ft_ticks));
         let mut jobs = LineJobs::new(program).peekable();
         let mut first_batch = true;
         loop {
@@ -436,7 +468,7 @@ impl Sequencer {
                 return Err(SeqError::Underrun);
             }
             first_batch = false;
-            self.send_jobs(&mut jobs, frame, frame_start, tick_ps);
+            self.send_jobs(&mut jobs, frame, frame_start, tick_ps, integration);
             if n == 0 && links.clone().next().is_none() && jobs.peek().is_none() {
                 return Ok(());
             }
@@ -456,6 +488,7 @@ impl Sequencer {
         frame: Option<u32>,
         frame_start: u64,
         tick_ps: u32,
+        integration: Option<Integration>,
     ) {
         let played = self.played();
         let now = Instant::now();
@@ -474,6 +507,7 @@ impl Sequencer {
                     frame,
                     last,
                     due,
+                    integration,
                     job,
                 })
                 .is_err()
@@ -492,6 +526,7 @@ impl Sequencer {
         self.running = false;
         self.ring = NodeRing::new();
         self.table_first = [0; 2];
+        self.last_ft_end = None;
     }
 }
 

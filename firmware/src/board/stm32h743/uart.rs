@@ -2,10 +2,10 @@
 //! PD9 RX; an RS-422 transceiver on the same pins in flight) at [`BAUD`], receive by DMA
 //! into a ring buffer ([`RX_RING_BYTES`]), transmit by DMA ([`TX_DMA_BYTES`]), both buffers in
 //! the non-cacheable DMA region ([`super::memory::DmaRegion`]). [`link_rx_task`] copies what
-//! the ring received into [`RX`], [`link_tx_task`] sends what [`TX`] holds; the protocol is
-//! the application's ([`crate::link`]).
+//! the ring received into [`crate::link::RX`], [`link_tx_task`] sends what [`TX`] holds; the
+//! protocol is the application's ([`crate::link`]).
 
-use crate::link::{RX, RX_DROPPED, RX_ERRORS, TX};
+use crate::link::{RX_ERRORS, TX};
 use core::sync::atomic::Ordering;
 use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
@@ -19,19 +19,14 @@ pub const RX_RING_BYTES: usize = 1024;
 /// the CPU copies into it from the DMA.
 pub const TX_DMA_BYTES: usize = 512;
 
-/// Copies the DMA ring's bytes into [`RX`]; a full pipe drops them (counted).
+/// Copies the DMA ring's bytes into [`crate::link::RX`] ([`crate::link::received`]: a full
+/// pipe drops them, counted).
 #[embassy_executor::task]
 pub async fn link_rx_task(mut rx: RingBufferedUartRx<'static>) {
     let mut buf = [0u8; 256];
     loop {
         match rx.read(&mut buf).await {
-            Ok(n) => {
-                let bytes = buf.get(..n).unwrap_or_default();
-                let taken = RX.try_write(bytes).unwrap_or(0);
-                if taken < n {
-                    RX_DROPPED.fetch_add((n - taken) as u32, Ordering::Relaxed);
-                }
-            }
+            Ok(n) => crate::link::received(buf.get(..n).unwrap_or_default()),
             Err(e) => {
                 // The ring restarts on its next read; the partial frame fails its COBS or
                 // CRC check and is counted by the service.

@@ -67,6 +67,45 @@ pub fn has_distortion(c: &Camera) -> bool {
     [c.k1, c.k2, c.p1, c.p2].iter().any(|v| *v != 0.0)
 }
 
+/// An image axis.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Axis {
+    X,
+    Y,
+}
+
+/// The forward SIP terms of `c` on one axis, `(p, q, coefficient)` of `u^p v^q`, zero terms
+/// left out: `A` for [`Axis::X`]; `B` for [`Axis::Y`], the same polynomial with `u` and `v`
+/// and the two tangential coefficients swapped.
+fn sip_forward(c: &Camera, axis: Axis) -> Vec<(usize, usize, f64)> {
+    let f = c.focal_length_px;
+    let (f2, f4) = (f * f, f * f * f * f);
+    let (pa, pb) = match axis {
+        Axis::X => (c.p2, c.p1),
+        Axis::Y => (c.p1, c.p2),
+    };
+    [
+        (2, 0, 3.0 * pa / f),
+        (0, 2, pa / f),
+        (1, 1, 2.0 * pb / f),
+        (3, 0, c.k1 / f2),
+        (1, 2, c.k1 / f2),
+        (5, 0, c.k2 / f4),
+        (3, 2, 2.0 * c.k2 / f4),
+        (1, 4, c.k2 / f4),
+    ]
+    .into_iter()
+    .map(|(p, q, v)| {
+        if axis == Axis::X {
+            (p, q, v)
+        } else {
+            (q, p, v)
+        }
+    })
+    .filter(|t| t.2 != 0.0)
+    .collect()
+}
+
 /// The SIP terms of `c` over an image of `size_px`, or `None` without distortion or where the
 /// model has no inverse on the grid.
 pub fn sip_of(c: &Camera, size_px: [usize; 2]) -> Option<Sip> {
@@ -74,30 +113,7 @@ pub fn sip_of(c: &Camera, size_px: [usize; 2]) -> Option<Sip> {
         return None;
     }
     let f = c.focal_length_px;
-    let (f2, f4) = (f * f, f * f * f * f);
-    let keep = |v: Vec<(usize, usize, f64)>| -> Vec<(usize, usize, f64)> {
-        v.into_iter().filter(|t| t.2 != 0.0).collect()
-    };
-    let ap = keep(vec![
-        (2, 0, 3.0 * c.p2 / f),
-        (0, 2, c.p2 / f),
-        (1, 1, 2.0 * c.p1 / f),
-        (3, 0, c.k1 / f2),
-        (1, 2, c.k1 / f2),
-        (5, 0, c.k2 / f4),
-        (3, 2, 2.0 * c.k2 / f4),
-        (1, 4, c.k2 / f4),
-    ]);
-    let bp = keep(vec![
-        (0, 2, 3.0 * c.p1 / f),
-        (2, 0, c.p1 / f),
-        (1, 1, 2.0 * c.p2 / f),
-        (0, 3, c.k1 / f2),
-        (2, 1, c.k1 / f2),
-        (0, 5, c.k2 / f4),
-        (2, 3, 2.0 * c.k2 / f4),
-        (4, 1, c.k2 / f4),
-    ]);
+    let (ap, bp) = (sip_forward(c, Axis::X), sip_forward(c, Axis::Y));
     let inv_order = if c.k2 != 0.0 {
         5
     } else if c.k1 != 0.0 {

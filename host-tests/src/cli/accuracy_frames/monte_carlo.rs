@@ -36,10 +36,10 @@
 //! four 9 x 9 Fisher sums per star. The files of each frame (18 MB) are deleted once the
 //! frame is measured.
 
-use crate::cli::CliError;
 use crate::cli::calib_models::{PsfModelArgs, run_psf_model};
 use crate::cli::process::{ProcessArgs, measure};
 use crate::cli::simulate::{SceneMix, SimFiles, SimulateArgs, params};
+use crate::cli::{CliError, LabError};
 use startrack_analysis::accuracy::{crlb_x_px, crlb_x_width_free_px, rms_relative_se};
 use startrack_core::tracker::{StarFlags, StarRecord};
 use startrack_homes::home::write_csv;
@@ -268,9 +268,12 @@ pub fn process_args(frame: &Path, table: &Path) -> ProcessArgs {
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> CliError + '_ {
-    move |e| CliError::Io {
-        path: path.to_path_buf(),
-        msg: e.to_string(),
+    move |e| {
+        LabError::Io {
+            path: path.to_path_buf(),
+            msg: e.to_string(),
+        }
+        .into()
     }
 }
 
@@ -301,11 +304,12 @@ fn read_truth(path: &Path) -> Result<Vec<[f64; 4]>, CliError> {
             let v: Vec<f64> = l.split(',').filter_map(|x| x.parse().ok()).collect();
             match v.as_slice() {
                 &[x, y, s, a] => Ok([x, y, s, a]),
-                _ => Err(CliError::Csv {
+                _ => Err(LabError::Csv {
                     path: path.to_path_buf(),
                     line: i + 1,
                     msg: "need x_px,y_px,signal_e,a_px".into(),
-                }),
+                }
+                .into()),
             }
         })
         .collect()

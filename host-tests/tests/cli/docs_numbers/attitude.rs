@@ -243,3 +243,139 @@ fn realsky_optics_prose_is_its_csv() {
     let page = flat(&read("docs/attitude.md"));
     assert!(page.contains(&phrase), "docs/attitude.md lacks {phrase:?}");
 }
+
+const MORE: &str = "host-tests/figures/realsky-more.csv";
+
+/// The rows of the "More skies" table: each a set, the images' folder and the nominal field.
+const MORE_GROUPS: [(&str, &str, &str); 9] = [
+    (
+        "openstartracker",
+        "tests/science_cam_may8_0.1sec_gain40/samples",
+        "6.1",
+    ),
+    (
+        "openstartracker",
+        "tests/science_cam_may8_0.05sec_gain40/samples",
+        "6.1",
+    ),
+    (
+        "openstartracker",
+        "tests/science_cam_may8_0.04sec_gain40/samples",
+        "6.1",
+    ),
+    (
+        "openstartracker",
+        "tests/science_cam_may8_0.03sec_gain40/samples",
+        "6.1",
+    ),
+    (
+        "openstartracker",
+        "tests/science_cam_may8_0.1sec_gain12/samples",
+        "6.1",
+    ),
+    ("cedar-solve", "examples/data/medium_fov", "11"),
+    ("cedar-solve", "examples/data/medium_fov", "10"),
+    ("cedar-solve", "examples/data/medium_fov", "15"),
+    ("cedar-solve", "examples/data/medium_fov", "20"),
+];
+
+/// The "More skies" table is `host-tests/figures/realsky-more.csv` summed per set, folder
+/// and field, and the prose's totals and largest differences are the CSV's.
+#[test]
+fn realsky_more_table_is_its_csv() {
+    let csv = Csv::read(MORE);
+    let recs = csv.records();
+    let (header, body) = table("docs/attitude.md", "realsky-more");
+    assert_eq!(header.len(), 10);
+    assert_eq!(body.len(), MORE_GROUPS.len());
+    let others = ["t3rs", "t3st", "cs"];
+    let (mut b_all, mut r_all) = (0.0f64, 0.0f64);
+    let mut in_groups = 0;
+    for (row, (set, folder, fov)) in body.iter().zip(MORE_GROUPS) {
+        let rs: Vec<_> = recs
+            .iter()
+            .filter(|r| {
+                r["set"] == set
+                    && r["nominal_fov_deg"] == fov
+                    && r["image"].rsplit_once('/').map(|(d, _)| d) == Some(folder)
+            })
+            .collect();
+        in_groups += rs.len();
+        let solved = |k: &str| {
+            rs.iter()
+                .filter(|r| r[format!("{k}_solved").as_str()] == "1")
+                .count()
+        };
+        assert_eq!(row[1], fov, "{row:?}");
+        assert_eq!(row[2], rs.len().to_string(), "{row:?}");
+        assert_eq!(row[3], solved("st").to_string(), "{row:?}");
+        assert_eq!(row[4], solved("t3rs").to_string(), "{row:?}");
+        assert_eq!(row[5], solved("t3st").to_string(), "{row:?}");
+        if rs.iter().all(|r| r["cs_run"] == "0") {
+            assert_eq!(row[6], "not run", "{row:?}");
+        } else {
+            assert_eq!(row[6], solved("cs").to_string(), "{row:?}");
+        }
+        let col = |name: String| -> Vec<f64> {
+            rs.iter()
+                .filter_map(|r| r.get(name.as_str()).filter(|v| !v.is_empty()))
+                .map(|v| v.parse::<f64>().unwrap().abs())
+                .collect()
+        };
+        let b: Vec<f64> = others
+            .iter()
+            .flat_map(|k| col(format!("{k}_boresight_diff_arcsec")))
+            .collect();
+        let r: Vec<f64> = others
+            .iter()
+            .flat_map(|k| col(format!("{k}_roll_diff_arcsec")))
+            .collect();
+        let w = col("st_wcs_rms_px".into());
+        if b.is_empty() {
+            assert!(
+                row[7].is_empty() && row[8].is_empty() && row[9].is_empty(),
+                "{row:?}"
+            );
+            continue;
+        }
+        let max = |v: &[f64]| v.iter().copied().fold(0.0f64, f64::max);
+        let min = |v: &[f64]| v.iter().copied().fold(f64::MAX, f64::min);
+        assert!(matches(&row[7], &format!("{:.2}", max(&b))), "{row:?}");
+        assert!(matches(&row[8], &format!("{:.1}", max(&r))), "{row:?}");
+        let wcs = match row[9].split_once(" to ") {
+            Some((lo, hi)) => {
+                matches(lo, &format!("{:.3}", min(&w))) && matches(hi, &format!("{:.3}", max(&w)))
+            }
+            None => matches(&row[9], &format!("{:.3}", max(&w))) && min(&w) == max(&w),
+        };
+        assert!(wcs, "{row:?}: {w:?}");
+        b_all = b_all.max(max(&b));
+        r_all = r_all.max(max(&r));
+    }
+    assert_eq!(in_groups, recs.len(), "every image in a row of the table");
+    let total = |k: &str| {
+        recs.iter()
+            .filter(|r| r[format!("{k}_solved").as_str()] == "1")
+            .count()
+    };
+    let page = flat(&read("docs/attitude.md"));
+    for phrase in [
+        format!("every attitude `solve-image` gives is within {b_all:.2} arcsec"),
+        format!("its roll within {r_all:.1} arcsec"),
+        format!(
+            "Of the {} images `solve-image` solves {}, tetra3rs {} end to end and {} from `solve-image`'s own stars, cedar-solve {} of the {} it was run on",
+            recs.len(),
+            total("st"),
+            total("t3rs"),
+            total("t3st"),
+            total("cs"),
+            recs.iter().filter(|r| r["cs_run"] == "1").count()
+        ),
+        format!(
+            "it gives no attitude on the {} frames it does not solve",
+            recs.len() - total("st")
+        ),
+    ] {
+        assert!(page.contains(&phrase), "docs/attitude.md lacks {phrase:?}");
+    }
+}

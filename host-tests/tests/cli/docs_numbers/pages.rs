@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 29] = [
+const CHECKED: [&str; 30] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -53,6 +53,7 @@ const CHECKED: [&str; 29] = [
     "realsky-tetra3rs",
     "realsky-optics",
     "realsky-optics-residuals",
+    "realsky-more",
     "pil-figures",
 ];
 
