@@ -285,7 +285,7 @@ impl<'c> Solver<'c> {
         // particle hit is bright and fits badly) before one it does not, then the brighter;
         // each with its direction and the catalog star it was predicted to be (when it lies
         // within its prediction's bound).
-        let rank = |s: &StarRecord| (!s.flags.contains(StarFlags::POOR_FIT), s.flux_e);
+        let rank = |s: &StarRecord| (s.fit_is_clean(), s.flux_e);
         let above = |a: &(bool, f32), b: &(bool, f32)| (a.0, a.1) > (b.0, b.1);
         let mut measured: heapless::Vec<
             ((bool, f32), Measured, Option<u16>),

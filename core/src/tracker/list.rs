@@ -10,7 +10,7 @@
 
 use super::measure::StarBackground;
 use super::predicted::PredictedStar;
-use super::record::{StarFlags, StarRecord};
+use super::record::StarRecord;
 
 /// What a star carries to the next tracking frame besides its position.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -93,10 +93,10 @@ impl<const N: usize> StarList<N> {
     }
 }
 
-/// True when `a` ranks above `b` in a full list: a window the fitted PSF describes (no
-/// [`StarFlags::POOR_FIT`]) above one it does not, then the larger flux.
+/// True when `a` ranks above `b` in a full list: a clean fit
+/// ([`StarRecord::fit_is_clean`]) above one that is not, then the larger flux.
 pub(crate) fn ranks_above(a: &StarRecord, b: &StarRecord) -> bool {
-    let poor = |s: &StarRecord| s.flags.contains(StarFlags::POOR_FIT);
+    let poor = |s: &StarRecord| !s.fit_is_clean();
     match (poor(a), poor(b)) {
         (false, true) => true,
         (true, false) => false,

@@ -447,14 +447,24 @@ pub(crate) fn measure(
             level_e: b.level_e(),
             variance_e2: b.variance_e2,
         });
-    // The rejection's limit is the stricter: tested only on a window the monitor counts.
-    let hit_like = is_particle_hit(input, &policy.monitor_limits);
+    let (hit_like, hit) = hit_test(policy, input);
     Measured {
         record: policy.record(input, flags | StarFlags::from_pixels(pixel_flags)),
         background,
-        hit: hit_like && is_particle_hit(input, &policy.hit_limits),
+        hit,
         hit_like,
     }
+}
+
+/// The particle-hit test of a calibrated window: whether the radiation monitor counts it
+/// (`.0`) and whether it is rejected as no star (`.1`). The rejection's limit is the
+/// stricter: tested only on a window the monitor counts.
+pub(crate) fn hit_test(policy: &Policy<'_>, input: &CentroidInput<'_>) -> (bool, bool) {
+    let hit_like = is_particle_hit(input, &policy.monitor_limits);
+    (
+        hit_like,
+        hit_like && is_particle_hit(input, &policy.hit_limits),
+    )
 }
 
 #[cfg(test)]

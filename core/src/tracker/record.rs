@@ -268,6 +268,20 @@ pub struct StarRecord {
 }
 
 impl StarRecord {
+    /// Whether the fitted PSF describes the window and the fit's sigmas hold (none of
+    /// [`StarFlags::POOR_FIT`], [`StarFlags::SIGMA_UNRELIABLE`], [`StarFlags::NOT_CONVERGED`]):
+    /// the star list, the choice of tracking windows and identification rank such a star
+    /// above every other, then by flux. A particle hit or a star beside a hot pixel the table
+    /// does not list fits poorly; a lone hot pixel or a noise peak fits narrower than any
+    /// star, its sigma unreliable.
+    pub fn fit_is_clean(&self) -> bool {
+        !self.flags.intersects(
+            StarFlags::POOR_FIT
+                .union(StarFlags::SIGMA_UNRELIABLE)
+                .union(StarFlags::NOT_CONVERGED),
+        )
+    }
+
     /// A centroid as a record, with `flags` added to the centroid's own (no PSF measured:
     /// `psf_a_px` and `chi2_dof` 0; found by acquisition: no provenance bit).
     pub(crate) fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {

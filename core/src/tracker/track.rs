@@ -234,10 +234,10 @@ impl Tracking {
         for (i, (s, _)) in stars.iter().enumerate() {
             if s.is_centroid() {
                 // At most N stars in the list: cannot fail.
-                let _ = order.push((s.flags.contains(StarFlags::POOR_FIT), s.flux_e, i));
+                let _ = order.push((!s.fit_is_clean(), s.flux_e, i));
             }
         }
-        // The list's rank: windows the PSF describes first, then the brighter.
+        // The list's rank: clean fits first, then the brighter.
         crate::small_sort::sort_by(&mut order, |a, b| {
             a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2))
         });
@@ -502,8 +502,12 @@ impl Tracking {
         let want_background = config.tracking_method == CentroidMethod::FusedCog1;
         let flags = StarFlags::from_track(verdict.flags);
         // The centroid window around the peak, inside the tracking window; when that is a
-        // particle hit, around the predicted pixel (the star may be beside the hit).
+        // particle hit, around the predicted pixel (the star may be beside the hit). When
+        // both are hits the star is kept, flagged `POOR_FIT` (its window holds a hit, or a
+        // hot pixel the table does not list yet): its window goes on being placed and
+        // watched for new defects, and identification ranks it last.
         let mut m = None;
+        let mut last_hit = None;
         for (k, (px, py)) in [(verdict.peak_x, verdict.peak_y), placed.anchor]
             .into_iter()
             .enumerate()
@@ -536,8 +540,14 @@ impl Tracking {
                 m = Some(measured);
                 break;
             }
+            last_hit = Some(measured);
         }
-        let Some(mut m) = m else {
+        let Some(mut m) = m.or_else(|| {
+            last_hit.map(|mut h| {
+                h.record.flags |= StarFlags::POOR_FIT;
+                h
+            })
+        }) else {
             return;
         };
         m.record.provenance = Provenance::TRACKED;
