@@ -101,7 +101,7 @@ pub(crate) struct Policy<'t> {
 
 /// The narrowest star image the optics make, as a fraction of the configured PSF's 80 %
 /// radius `psf_a_px`: an image sharper than one of this width is a particle hit
-/// ([`crate::detect::is_particle_hit`]). 0.4: the field's PSF varies, and the host tests'
+/// ([`crate::detect::is_particle_hit`]), flagged `POOR_FIT`. 0.4: the field's PSF varies, and the host tests'
 /// fields hold real stars of half the configured width (the accuracy Monte Carlo's 0.6 px
 /// about a configured 1.2; the tracker tests' 0.8 about 1.4), none of which may be taken
 /// for a hit; a proton's charge spreads over ~0.3 px, so a hit that crossed the silicon
@@ -113,7 +113,7 @@ pub const HIT_WIDTH_FRACTION: f32 = 0.4;
 
 /// A window sharper than a star of this fraction of the configured PSF's width could make
 /// is counted as a particle hit (the radiation monitor, `hits`) whether or not it is
-/// rejected: half, a PSF no star tracker's optics make; a field with real stars that narrow
+/// flagged: half, a PSF no star tracker's optics make; a field with real stars that narrow
 /// (the accuracy Monte Carlo's) counts some of them.
 pub const HIT_MONITOR_FRACTION: f32 = 0.5;
 
@@ -327,7 +327,8 @@ pub(crate) enum MeasureError {
 pub(crate) struct Measured {
     pub(crate) record: StarRecord,
     pub(crate) background: Option<StarBackground>,
-    /// The window is a particle hit, not a star: rejected.
+    /// The window is sharper than any star ([`HIT_WIDTH_FRACTION`]): a particle hit, or a star
+    /// beside a hot pixel the table does not list; flagged `POOR_FIT` where it is kept.
     pub(crate) hit: bool,
     /// The window is sharper than the radiation monitor's limit: counted as a hit.
     pub(crate) hit_like: bool,
@@ -457,7 +458,7 @@ pub(crate) fn measure(
 }
 
 /// The particle-hit test of a calibrated window: whether the radiation monitor counts it
-/// (`.0`) and whether it is rejected as no star (`.1`). The rejection's limit is the
+/// (`.0`) and whether it is sharper than any star (`.1`). The second's limit is the
 /// stricter: tested only on a window the monitor counts.
 pub(crate) fn hit_test(policy: &Policy<'_>, input: &CentroidInput<'_>) -> (bool, bool) {
     let hit_like = is_particle_hit(input, &policy.monitor_limits);

@@ -208,7 +208,7 @@ pub const HK_FIELDS: [(&str, &str, &str); 42] = [
     (
         "hits",
         "u16",
-        "last frame's windows counted as particle hits (the radiation monitor; the sharpest rejected)",
+        "last frame's windows counted as particle hits (the radiation monitor; the sharpest flagged `POOR_FIT`)",
     ),
     (
         "masked",
