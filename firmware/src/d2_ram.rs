@@ -76,11 +76,20 @@ impl<T: Zeroable + Send> D2Static<T> {
     }
 
     /// The cell's `T`, all zero, the first time only (`None` after).
+    #[expect(
+        clippy::mut_from_ref,
+        reason = "one `&mut` handed out once from a shared static, as static_cell's `try_take`"
+    )]
     pub fn try_take(&'static self, _ready: D2Ready) -> Option<&'static mut T> {
         if self.taken.swap(true, Ordering::AcqRel) {
             return None;
         }
-        const { assert!(size_of::<T>() % 4 == 0, "a D2Cell holds whole 32-bit words") };
+        const {
+            assert!(
+                size_of::<T>().is_multiple_of(4),
+                "a D2Cell holds whole 32-bit words"
+            )
+        };
         let words = self.cell.0.get().cast::<u32>();
         for i in 0..size_of::<T>() / 4 {
             // SAFETY: `_ready` says the memory is usable; `taken` was false, so nothing else
