@@ -14,9 +14,21 @@
 //!                     with the link's velocity command (within [`VELOCITY_MAX_AGE_S`] of
 //!                     the frame's spacecraft time) the attitude is of the ICRF, stellar
 //!                     aberration removed, else of the apparent sky and flagged so
+//!                  -> the next frame's windows: with a rate and an attitude no older than
+//!                     [`PREDICT_MAX_AGE_US`] at the next frame's mid-exposure, the catalog's
+//!                     stars there ([`Solver::predict`]), handed to the tracker
+//!                     ([`Tracker::predict_next`]); the attitude stage then takes each star's
+//!                     identity from its window ([`Solver::update_with_identities`])
 //!                  -> housekeeping (Health): the frame's counters, the temperature and its
 //!                     source, the uptime
 //! ```
+//!
+//! The next frame's mid-exposure is this frame's plus the interval between this frame's
+//! and the last one's (the frame cycle's own mid-exposure times; none before two frames, so
+//! the first frames track on their own stars). No prediction (no rate yet, the attitude
+//! lost for longer than [`PREDICT_MAX_AGE_US`], fewer than [`MIN_PREDICTED`] stars on the
+//! sensor) leaves the tracker to its own rules: windows on its last stars, a full frame when
+//! it loses them or every `reacquire_every` frames.
 //!
 //! A home binds its hardware to the ports ([`CyclePorts`], the line source, the link's
 //! table store and window reader, the sync pulse) and calls [`FrameCycle::run_frame`] once a
@@ -34,12 +46,14 @@
 //! counter's 0 where it would fall before it.
 //!
 //! Cost: the tracker's frame ([`crate::tracker`]), the link's star list and report encoding
-//! ([`crate::link`]), the attitude stage when a catalog is given ([`crate::solver`]), and a
-//! few additions for housekeeping. Memory: the tracker (owned), a borrowed
+//! ([`crate::link`]), the attitude stage when a catalog is given ([`crate::solver`]), the
+//! catalog prediction of the next frame's windows ([`crate::predict`]), and a few additions
+//! for housekeeping. Memory: the tracker (owned), a borrowed
 //! [`LinkService`], the solver (a catalog reference and a prior).
 
 use crate::link::telemetry::Housekeeping;
 use crate::link::{LinkService, TableInfo, TableUpload, Targets, WindowReader};
+use crate::predict::{PredictConfig, PredictedStars};
 use crate::safe::{Health, ThermoSource};
 use crate::solver::{Fix, SolveError, Solver};
 use crate::time::{SpacecraftClock, SyncPulse};
@@ -109,7 +123,24 @@ pub struct FrameCycle<'t, 'b, 'c, 'l, const N: usize> {
     velocity: Option<crate::link::Velocity>,
     /// The exposure the last frame's program integrated for, us (`None` before the first).
     last_exposure_us: Option<u64>,
+    /// The last frame's mid-exposure, us (`None` before the first).
+    last_mid_us: Option<u64>,
+    /// The last rate the filter gave (`None` once its window restarts).
+    last_rate: Option<crate::attitude::Rate>,
+    /// Whether the attitude stage predicts the next frame's windows.
+    predicting: bool,
+    /// Stars the tracker took from the last prediction, for its next frame.
+    predicted: usize,
 }
+
+/// The attitude stage predicts the next frame's windows from an attitude at most this old
+/// at the next frame's mid-exposure, us: a fix that stops coming (stars lost, a bad frame)
+/// is propagated by the rate for this long before the tracker is left to its own rules.
+pub const PREDICT_MAX_AGE_US: u64 = 500_000;
+
+/// Fewest stars a prediction must hold to be handed to the tracker (identification's
+/// fewest).
+pub const MIN_PREDICTED: usize = crate::ident::MIN_MATCHES;
 
 /// A velocity is applied to frames within this of its time, s: a low orbit's velocity turns
 /// by 4 degrees a minute, 0.4" of aberration at 7.7 km/s.
@@ -163,7 +194,27 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             rate: crate::attitude::RateFilter::new(),
             velocity: None,
             last_exposure_us: None,
+            last_mid_us: None,
+            last_rate: None,
+            predicting: true,
+            predicted: 0,
         }
+    }
+
+    /// Whether the attitude stage predicts the next frame's windows from the catalog (on by
+    /// default; off, tracking places its windows on its own last stars and reacquires every
+    /// `reacquire_every` frames). Takes effect from the next frame.
+    pub fn set_predicting(&mut self, on: bool) {
+        self.predicting = on;
+        if !on {
+            self.tracker.predict_next(&[]);
+        }
+    }
+
+    /// Stars the attitude stage predicted for the next frame (0: none, the tracker follows
+    /// its own rules).
+    pub fn predicted(&self) -> usize {
+        self.predicted
     }
 
     /// The spacecraft clock model the reports are tagged by.
@@ -303,13 +354,20 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
                 }
                 _ => None,
             };
-            let (result, aberration_applied) =
-                solver.update_at_velocity(self.tracker.stars(), mid_us, velocity);
+            let (result, aberration_applied) = solver.update_with_identities(
+                self.tracker.stars(),
+                self.tracker.identities(),
+                mid_us,
+                velocity,
+            );
             // The rate of the attitudes so far, this frame's the newest (none without it).
             let rate = result
                 .as_ref()
                 .ok()
                 .and_then(|f| self.rate.push(f.time_us, &f.attitude));
+            if result.is_ok() {
+                self.last_rate = rate;
+            }
             let mut r = crate::link::telemetry::AttitudeReport::of(
                 summary.frame,
                 &result,
@@ -318,12 +376,15 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
                 rate,
                 aberration_applied,
             );
+            r.flags |= crate::link::telemetry::Validity::of_obstructions(summary.obstructions);
             let latency = ports.clock.now_us().saturating_sub(mid_us);
             r.latency_us = u32::try_from(latency).unwrap_or(u32::MAX);
             self.link.send_attitude(&r);
             report = Some(r);
             result
         });
+        self.predict_next(mid_us);
+        self.last_mid_us = Some(mid_us);
         self.health.on_frame(&summary);
         self.health.on_temperature(last_k, source_used);
         self.health.uptime_ms = ports.clock.now_us() / 1000;
@@ -332,6 +393,49 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             attitude,
             report,
         })
+    }
+}
+
+impl<const N: usize> FrameCycle<'_, '_, '_, '_, N> {
+    /// Hands the tracker the catalog's stars at the next frame's mid-exposure, this frame's
+    /// `mid_us` plus the last interval, or clears its prediction when there is none.
+    fn predict_next(&mut self, mid_us: u64) {
+        let mut out = PredictedStars::new();
+        let interval_us = self
+            .last_mid_us
+            .and_then(|last| mid_us.checked_sub(last))
+            .filter(|&d| d > 0);
+        if let (true, Some(solver), Some(rate), Some(interval_us)) = (
+            self.predicting,
+            self.solver.as_ref(),
+            self.last_rate.as_ref(),
+            interval_us,
+        ) {
+            let next_mid_us = mid_us.saturating_add(interval_us);
+            let fresh = solver
+                .prior()
+                .is_some_and(|(_, t)| next_mid_us.saturating_sub(t) <= PREDICT_MAX_AGE_US);
+            let g = self.tracker.geometry();
+            let active = [g.active_cols, g.active_rows];
+            let exposure_s = f64::from(self.tracker.config().exposure_ms) * 1e-3;
+            let cfg = PredictConfig::flight(self.tracker.config().window_px);
+            let predicted = fresh
+                && solver
+                    .predict(
+                        rate,
+                        next_mid_us,
+                        exposure_s,
+                        interval_us as f64 * 1e-6,
+                        active,
+                        &cfg,
+                        &mut out,
+                    )
+                    .is_ok();
+            if !predicted || out.len() < MIN_PREDICTED {
+                out.clear();
+            }
+        }
+        self.predicted = self.tracker.predict_next(&out);
     }
 }
 

@@ -11,7 +11,8 @@
 //! calibration table ([`table`]) -> detections ([`detect`]) -> centroids ([`centroid`]) -> the frame's attitude from the
 //! identified stars ([`solver`], with [`catalog`], [`ident`] and [`attitude`]). The tracker
 //! application ([`tracker`]) runs these stages frame after frame; the frame cycle ([`cycle`])
-//! adds the link ([`link`]), the attitude stage and housekeeping ([`safe`]) around each frame.
+//! adds the link ([`link`]), the attitude stage, the catalog's prediction of the next frame's
+//! windows ([`predict`]) and housekeeping ([`safe`]) around each frame.
 //!
 //! Every fixed-point quantity has its format and range stated in [`units`].
 #![no_std]
@@ -28,11 +29,13 @@ pub mod attitude;
 pub mod calib;
 pub mod catalog;
 pub mod centroid;
+mod clamp;
 pub mod cycle;
 pub mod detect;
 pub mod geometry;
 pub mod ident;
 pub mod link;
+pub mod predict;
 pub mod readout;
 pub mod safe;
 pub mod sequencer;

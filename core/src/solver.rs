@@ -2,9 +2,11 @@
 //! its covariance out, and the prior it keeps from one frame to the next.
 //!
 //! Each frame, the usable stars ([`StarRecord::is_centroid`], not saturated, their trail
-//! not unknown ([`StarFlags::TRAIL_UNKNOWN`]), with a finite
-//! positive sigma) are turned into camera-frame directions by the [`Camera`], brightest
-//! first, at most [`ident::MAX_STARS`]. With a prior no older than
+//! neither unknown nor clipped ([`StarFlags::TRAIL_UNKNOWN`], [`StarFlags::TRAIL_CLIPPED`]),
+//! with a finite positive sigma) are turned into camera-frame directions by the [`Camera`],
+//! at most [`ident::MAX_STARS`], those the fitted PSF describes first (no
+//! [`StarFlags::POOR_FIT`]), then the brightest; with [`CLEAN_ENOUGH`] of those, the
+//! `POOR_FIT` ones are left out. With a prior no older than
 //! [`SolverConfig::max_prior_age_us`], [`ident::track`] identifies them near it; without one,
 //! or when tracking fails, [`ident::lost_in_space`] does. A solution replaces the prior; a
 //! frame with none leaves the prior to age out, so one bad frame does not send the next
@@ -26,10 +28,11 @@
 //! percentile) plus a sort of at most 32 stars; no allocation, about 1 KB of state beyond
 //! identification's stack.
 
-use crate::attitude::{self, Attitude, AttitudeError, Camera, Observation, Quat, aberrate};
+use crate::attitude::{self, Attitude, AttitudeError, Camera, Observation, Quat, Rate, aberrate};
 use crate::catalog::Catalog;
 use crate::ident::{self, FocalScale, IdentConfig, IdentError, Measured};
-use crate::tracker::{StarFlags, StarRecord};
+use crate::predict::{self, PredictConfig, PredictError, PredictFrom};
+use crate::tracker::{PredictedStar, StarFlags, StarRecord};
 
 /// How the attitude stage identifies and when it trusts its prior.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -125,8 +128,13 @@ impl core::error::Error for SolveError {}
 pub struct Solver<'c> {
     catalog: Catalog<'c>,
     config: SolverConfig,
-    prior: Option<(Quat, u64)>,
+    prior: Option<(Attitude, u64)>,
     scale: Option<FocalScale>,
+    /// Stars of the last fix identified by their predicted identities (0: searched).
+    identified: u8,
+    /// The velocity the last fix's aberration was removed for (its attitude is then of the
+    /// ICRF), m/s.
+    prior_velocity: Option<[f64; 3]>,
 }
 
 impl<'c> Solver<'c> {
@@ -137,6 +145,8 @@ impl<'c> Solver<'c> {
             config,
             prior: None,
             scale: None,
+            identified: 0,
+            prior_velocity: None,
         }
     }
 
@@ -149,13 +159,66 @@ impl<'c> Solver<'c> {
 
     /// The attitude of the last solved frame and its time, us.
     pub fn prior(&self) -> Option<(Quat, u64)> {
-        self.prior
+        self.prior.map(|(a, t)| (a.q, t))
+    }
+
+    /// How many stars of the last fix were identified by the identities the catalog
+    /// predicted for them ([`Self::update_with_identities`]): 0 when the fix was searched
+    /// (tracking's triangles, lost in space) or there was none.
+    pub fn identified(&self) -> u8 {
+        self.identified
+    }
+
+    /// The catalog stars of the next frame ([`predict::predict`]): the last fix (its
+    /// attitude, covariance and focal-length scale, at its time, and the velocity its
+    /// aberration was removed for) propagated by `rate` to
+    /// `next_mid_us`, the next frame's mid-exposure, its stars trailed over `exposure_s` and
+    /// moving over `period_s` after it, on an active area of `active_px` (columns, rows),
+    /// into `out`. No fix, a fix after `next_mid_us` or older than the configuration allows
+    /// is an error, as are bad inputs.
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the prediction's inputs, each plain"
+    )]
+    pub fn predict(
+        &self,
+        rate: &Rate,
+        next_mid_us: u64,
+        exposure_s: f64,
+        period_s: f64,
+        active_px: [u16; 2],
+        cfg: &PredictConfig,
+        out: &mut predict::PredictedStars,
+    ) -> Result<usize, PredictError> {
+        out.clear();
+        let (attitude, t) = self.prior.ok_or(PredictError::TooOld)?;
+        if next_mid_us < t {
+            return Err(PredictError::BadInput);
+        }
+        let from = PredictFrom {
+            attitude,
+            rate: *rate,
+            scale: self.scale.map_or(1.0, |s| s.value),
+            interval_s: (next_mid_us - t) as f64 * 1e-6,
+            exposure_s,
+            period_s,
+            velocity_m_s: self.prior_velocity,
+        };
+        predict::predict(
+            &self.catalog,
+            &self.config.camera,
+            &from,
+            active_px,
+            cfg,
+            out,
+        )
     }
 
     /// Forgets the prior (the next frame is lost in space).
     pub fn forget(&mut self) {
         self.prior = None;
         self.scale = None;
+        self.identified = 0;
     }
 
     /// The attitude of the frame at `time_us` whose tracker reported `stars`, of the apparent
@@ -177,37 +240,95 @@ impl<'c> Solver<'c> {
         time_us: u64,
         velocity_m_s: Option<[f64; 3]>,
     ) -> (Result<Fix, SolveError>, bool) {
+        self.update_with_identities(stars, core::iter::empty(), time_us, velocity_m_s)
+    }
+
+    /// [`Self::update_at_velocity`] for stars measured in windows the catalog predicted:
+    /// `identities` gives each star of `stars`, in order, the prediction it was measured for
+    /// (the tracker's [`crate::tracker::Tracker::identities`]; `None`, or a shorter
+    /// iterator, for a star found otherwise). A usable star within its prediction's bound
+    /// ([`PredictedStar::matches`]) keeps its catalog identity; with a fresh prior and at
+    /// least four such stars, [`ident::confirm`] verifies them (a star off its prediction,
+    /// or inconsistent with the others' attitude, is dropped, so a false star cannot enter
+    /// the attitude), and only when that fails does identification search (tracking's
+    /// triangles, then lost in space) on every usable star. Cost: the joint fit of the
+    /// identified stars, a few thousand flops, instead of the search.
+    pub fn update_with_identities<'p>(
+        &mut self,
+        stars: &[StarRecord],
+        identities: impl IntoIterator<Item = Option<&'p PredictedStar>>,
+        time_us: u64,
+        velocity_m_s: Option<[f64; 3]>,
+    ) -> (Result<Fix, SolveError>, bool) {
         let mut applied = false;
-        let result = self.identify(stars, time_us, velocity_m_s, &mut applied);
+        let mut ids = identities.into_iter();
+        let result = self.identify(
+            stars,
+            &mut |_| ids.next().flatten().copied(),
+            time_us,
+            velocity_m_s,
+            &mut applied,
+        );
         (result, applied)
     }
 
     fn identify(
         &mut self,
         stars: &[StarRecord],
+        identity: &mut dyn FnMut(usize) -> Option<PredictedStar>,
         time_us: u64,
         velocity_m_s: Option<[f64; 3]>,
         applied: &mut bool,
     ) -> Result<Fix, SolveError> {
-        let mut measured: heapless::Vec<(f32, Measured), { ident::MAX_STARS }> =
-            heapless::Vec::new();
-        for s in stars.iter().filter(|s| usable(s)) {
+        self.identified = 0;
+        // Ranked as the star list ranks: a window the PSF describes (no `POOR_FIT`: a
+        // particle hit is bright and fits badly) before one it does not, then the brighter;
+        // each with its direction and the catalog star it was predicted to be (when it lies
+        // within its prediction's bound).
+        let rank = |s: &StarRecord| (s.fit_is_clean(), s.flux_e);
+        let above = |a: &(bool, f32), b: &(bool, f32)| (a.0, a.1) > (b.0, b.1);
+        let mut measured: heapless::Vec<
+            ((bool, f32), Measured, Option<u16>),
+            { ident::MAX_STARS },
+        > = heapless::Vec::new();
+        for (k, s) in stars.iter().enumerate() {
+            let id = identity(k)
+                .filter(|p| p.matches(s.x_px, s.y_px))
+                .map(|p| p.catalog);
+            if !usable(s) {
+                continue;
+            }
             // A position the camera model cannot invert (a fold) is not used.
             let Some(m) = self.measure(s) else { continue };
             if measured.len() < ident::MAX_STARS {
-                let _ = measured.push((s.flux_e, m));
-            } else if let Some(dimmest) = measured
+                let _ = measured.push((rank(s), m, id));
+            } else if let Some(lowest) = measured
                 .iter_mut()
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-                .filter(|d| d.0 < s.flux_e)
+                .min_by(|a, b| a.0.0.cmp(&b.0.0).then(a.0.1.total_cmp(&b.0.1)))
+                .filter(|d| above(&rank(s), &d.0))
             {
-                *dimmest = (s.flux_e, m);
+                *lowest = (rank(s), m, id);
             }
         }
-        crate::small_sort::sort_by(&mut measured, |a, b| b.0.total_cmp(&a.0));
+        crate::small_sort::sort_by(&mut measured, |a, b| {
+            b.0.0.cmp(&a.0.0).then(b.0.1.total_cmp(&a.0.1))
+        });
+        // With enough stars the PSF describes, those it does not are left out: their
+        // positions and sigmas are not clean (a proton hit inside a tracked star's window
+        // moves its fit by up to pixels while its sigma stays the star's).
+        let clean = measured.iter().filter(|m| m.0.0).count();
+        if clean >= CLEAN_ENOUGH {
+            measured.truncate(clean);
+        }
         let mut dirs: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
-        for (_, m) in &measured {
+        let mut known: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
+        let mut known_ids: heapless::Vec<u16, { ident::MAX_STARS }> = heapless::Vec::new();
+        for (_, m, id) in &measured {
             let _ = dirs.push(*m);
+            if let Some(c) = id {
+                let _ = known.push(*m);
+                let _ = known_ids.push(*c);
+            }
         }
         let used = dirs.len() as u8;
         if dirs.len() < ident::MIN_MATCHES {
@@ -218,37 +339,61 @@ impl<'c> Solver<'c> {
             .prior
             .filter(|&(_, t)| time_us >= t && time_us - t <= cfg.max_prior_age_us);
         let prior_scale = self.scale.map_or(1.0, |s| s.value);
-        let tracked = fresh.and_then(|(q, _)| {
-            ident::track_scaled(
-                &self.catalog,
-                &dirs,
-                q,
-                prior_scale,
-                cfg.prior_error_rad,
-                &cfg.ident,
-            )
-            .ok()
-        });
-        let (solution, mode) = match tracked {
-            Some(s) => (s, SolveMode::Tracking),
-            None => (
-                ident::lost_in_space(&self.catalog, &dirs, &cfg.ident).map_err(|error| {
-                    SolveError::Ident {
-                        usable: used,
-                        error,
-                    }
-                })?,
-                SolveMode::LostInSpace,
-            ),
+        let confirmed = fresh
+            .filter(|_| known.len() >= ident::MIN_MATCHES)
+            .and_then(|(a, _)| {
+                ident::confirm(
+                    &self.catalog,
+                    &known,
+                    &known_ids,
+                    a.q,
+                    prior_scale,
+                    &cfg.ident,
+                )
+                .ok()
+            });
+        let tracked = || {
+            fresh.and_then(|(a, _)| {
+                ident::track_scaled(
+                    &self.catalog,
+                    &dirs,
+                    a.q,
+                    prior_scale,
+                    cfg.prior_error_rad,
+                    &cfg.ident,
+                )
+                .ok()
+            })
+        };
+        let (solution, mode, basis) = match confirmed {
+            Some(s) => {
+                self.identified = s.matches.len() as u8;
+                (s, SolveMode::Tracking, &known)
+            }
+            None => match tracked() {
+                Some(s) => (s, SolveMode::Tracking, &dirs),
+                None => (
+                    ident::lost_in_space(&self.catalog, &dirs, &cfg.ident).map_err(|error| {
+                        SolveError::Ident {
+                            usable: used,
+                            error,
+                        }
+                    })?,
+                    SolveMode::LostInSpace,
+                    &dirs,
+                ),
+            },
         };
         let mut attitude = solution.attitude;
+        self.prior_velocity = None;
         if let Some(v) = velocity_m_s
-            && let Ok(a) = self.aberrated(&dirs, &solution, v)
+            && let Ok(a) = self.aberrated(basis, &solution, v)
         {
             attitude = a;
             *applied = true;
+            self.prior_velocity = Some(v);
         }
-        self.prior = Some((attitude.q, time_us));
+        self.prior = Some((attitude, time_us));
         self.scale = Some(solution.scale);
         Ok(Fix {
             attitude,
@@ -308,12 +453,19 @@ impl<'c> Solver<'c> {
     }
 }
 
-/// A star whose position identification may use: a centroid, not saturated, its trail not
-/// unknown, with a finite position and a finite positive sigma.
+/// Stars the fitted PSF describes (no [`StarFlags::POOR_FIT`]) from which the others are
+/// left out of identification.
+pub const CLEAN_ENOUGH: usize = 6;
+
+/// A star whose position identification may use: a centroid, not saturated, its trail
+/// neither unknown nor clipped, with a finite position and a finite positive sigma.
 fn usable(s: &StarRecord) -> bool {
     s.is_centroid()
         && !s.flags.intersects(
-            StarFlags::SATURATED | StarFlags::DETECT_SATURATED | StarFlags::TRAIL_UNKNOWN,
+            StarFlags::SATURATED
+                | StarFlags::DETECT_SATURATED
+                | StarFlags::TRAIL_UNKNOWN
+                | StarFlags::TRAIL_CLIPPED,
         )
         && s.x_px.is_finite()
         && s.y_px.is_finite()

@@ -61,6 +61,10 @@ use super::prepared::{Measured, Prepared};
 use super::{Background, Centroid, CentroidFlags, CentroidInput};
 use crate::table::pixcorr::CogPower;
 
+mod free;
+
+pub use free::{FreeTrailParams, TRAIL_FALSE_ALARM, TrailedFit, trail_dchi2_limit, trail_fit_free};
+
 /// Parameters of [`trail_fit`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -137,16 +141,12 @@ impl Trail {
         })
     }
 
-    /// `(g, dg/dx, dg/dy)` at the pixel offset `(dc, dr)` = pixel centre minus star.
+    /// The profile along the trail at offset `u`: `A(u)`, `dA/du`, and the densities
+    /// `exp(-z^2)` at the segment's two ends (`z = (u +- L/2) / (s sqrt 2)`, 0 for a point).
     #[inline(always)]
-    fn eval(&self, dc: f32, dr: f32) -> (f32, f32, f32) {
+    fn along(&self, u: f32) -> Along {
         let k = self.inv_s;
-        let u = dc * self.ex + dr * self.ey;
-        let v = -dc * self.ey + dr * self.ex;
-        let tv = v * k;
-        let vv = math::exp(-0.5 * tv * tv) * FRAC_1_SQRT_2PI * k;
-        let dvv = -tv * k * vv;
-        let (a, da) = if self.l_px > 0.0 {
+        if self.l_px > 0.0 {
             let h = 0.5 * self.l_px;
             let (zh, zl) = ((u + h) * k * FRAC_1_SQRT_2, (u - h) * k * FRAC_1_SQRT_2);
             let (eh, gh) = math::erfc_abs_and_gauss(zh);
@@ -160,12 +160,43 @@ impl Trail {
                 1.0 - 0.5 * (eh + el)
             };
             let inv_l = 1.0 / self.l_px;
-            (pos(diff) * inv_l, (gh - gl) * FRAC_1_SQRT_2PI * k * inv_l)
+            Along {
+                a: pos(diff) * inv_l,
+                da: (gh - gl) * FRAC_1_SQRT_2PI * k * inv_l,
+                ends: (zh, zl, gh, gl),
+            }
         } else {
             let tu = u * k;
             let a = math::exp(-0.5 * tu * tu) * FRAC_1_SQRT_2PI * k;
-            (a, -tu * k * a)
-        };
+            Along {
+                a,
+                da: -tu * k * a,
+                ends: (0.0, 0.0, 0.0, 0.0),
+            }
+        }
+    }
+
+    /// The offsets `(u, v)` along and across the trail of the pixel offset `(dc, dr)`.
+    #[inline(always)]
+    fn rotate(&self, dc: f32, dr: f32) -> (f32, f32) {
+        (dc * self.ex + dr * self.ey, -dc * self.ey + dr * self.ex)
+    }
+
+    /// `(V(v), dV/dv)`, the density across the trail.
+    #[inline(always)]
+    fn across(&self, v: f32) -> (f32, f32) {
+        let k = self.inv_s;
+        let tv = v * k;
+        let vv = math::exp(-0.5 * tv * tv) * FRAC_1_SQRT_2PI * k;
+        (vv, -tv * k * vv)
+    }
+
+    /// `(g, dg/dx, dg/dy)` at the pixel offset `(dc, dr)` = pixel centre minus star.
+    #[inline(always)]
+    fn eval(&self, dc: f32, dr: f32) -> (f32, f32, f32) {
+        let (u, v) = self.rotate(dc, dr);
+        let (vv, dvv) = self.across(v);
+        let Along { a, da, .. } = self.along(u);
         let g = a * vv;
         let (gu, gv) = (da * vv, a * dvv);
         // du/dx = -ex, dv/dx = ey; du/dy = -ey, dv/dy = -ex.
@@ -175,6 +206,17 @@ impl Trail {
             -self.ey * gu - self.ex * gv,
         )
     }
+}
+
+/// [`Trail::along`]'s result.
+#[derive(Clone, Copy, Debug)]
+struct Along {
+    /// `A(u)`, px^-1.
+    a: f32,
+    /// `dA/du`, px^-2.
+    da: f32,
+    /// `(zh, zl, exp(-zh^2), exp(-zl^2))` at the segment's ends (zeros for a point).
+    ends: (f32, f32, f32, f32),
 }
 
 /// The normal equations at `theta = (x, y, N, B)` (window-relative), excluded pixels skipped.

@@ -169,6 +169,34 @@ pub(crate) fn false_match_bound(cat: &Catalog<'_>, cfg: &IdentConfig, h: &Verifi
     wide(local).min(gated(cat, cfg, h, local, &by_mag))
 }
 
+/// The bound of identities given beforehand ([`super::confirm`]: `matched` of `n` stars kept,
+/// `q` the fitted attitude): the wide count held to the flat `alpha / H_max`, `H_max T`,
+/// `N` the densest field's count or, when that fails, the count in the field `q` points at
+/// (never above the densest). No triangle, no place in a search: the strictest level.
+pub(crate) fn given_identities_bound(
+    cat: &Catalog<'_>,
+    cfg: &IdentConfig,
+    n: usize,
+    matched: usize,
+    q: Quat,
+) -> f64 {
+    let tail = |field_stars: f64| {
+        let p = gate_probability(field_stars, cfg.match_radius_rad, cat.field_radius_rad());
+        let t = binomial_tail(n.saturating_sub(3), matched.saturating_sub(3), p);
+        (f64::from(cfg.max_hypotheses) * t).min(1.0)
+    };
+    let densest_stars = f64::from(cat.max_field_stars());
+    let densest = tail(densest_stars);
+    if densest <= cfg.max_false_probability {
+        return densest;
+    }
+    let boresight = q.rotate_inv([0.0, 0.0, 1.0]);
+    let local = cat
+        .cone(boresight, cat.field_radius_rad() + cfg.match_radius_rad)
+        .count();
+    tail((local as f64).min(densest_stars))
+}
+
 /// Bins of [`MagHistogram`], 0.1 mag each from Hp -2 (the last holds everything fainter than
 /// Hp 10.7).
 const MAG_BINS: usize = 128;

@@ -61,6 +61,12 @@
 //! by [`IdentConfig::track_scale_error`] of their length (the drift since the prior).
 //! Triangles are formed from candidates only and verified as above.
 //!
+//! # Known identities
+//! When the stars were measured where the catalog predicted them (the tracker's windows from
+//! the last attitude, [`crate::predict`]), [`confirm`] takes their identities and only
+//! verifies them: the joint fit, the worst star beyond `TIGHT_SIGMAS` dropped until none is,
+//! the leverage test and the false-match bound, as a hypothesis's verification.
+//!
 //! Cost: a lost-in-space triangle costs a counting sort of `2 P_ik` entries and one bucket
 //! lookup per orientation of the `P_ij` pairs (`P` the pairs in a tolerance window over the
 //! scale range, a few thousand), a hypothesis a quick check of a few cone searches and, for
@@ -643,6 +649,114 @@ pub fn track_scaled(
     Err(IdentError::NoMatch { hypotheses: hyps })
 }
 
+/// Most stars [`confirm`] drops as inconsistent before it gives up (a frame with more than
+/// this many stars off their identities is searched instead).
+pub(crate) const CONFIRM_MAX_DROPPED: usize = 8;
+
+/// Identification from identities known beforehand: `stars` (brightest first) are the
+/// catalog stars `ids` (one per star, in order: the tracker's stars measured in the windows
+/// the catalog predicted), the attitude near `prior` with focal-length scale near
+/// `prior_scale`. Nothing is searched; the identities are verified: the attitude and the
+/// scale are fitted to them as in verification (Gauss-Newton from `prior`), the star whose
+/// studentised residual (its residual over its own sigma and `sqrt(1 - h)`, `h` the share
+/// of its position the fit follows) is largest beyond `TIGHT_SIGMAS` (5) is dropped and the
+/// fit repeated until every residual is within (a false star or a hot pixel measured in a
+/// predicted window cannot stay in the attitude), at most `CONFIRM_MAX_DROPPED` (8) times;
+/// the fit must not follow one star alone (leverage, as in verification), its scale must
+/// be within `cfg.track_scale_error` of `prior_scale`, and the wide count's false-match bound
+/// (module documentation) held to the flat `alpha / H_max`, for `n` stars of which the kept
+/// ones matched, must pass. Any
+/// failure is an error (the caller then searches: [`track_scaled`], [`lost_in_space`]).
+/// Cost: a joint fit of the stars (three Gauss-Newton steps, ~100 flops a star) per round.
+#[inline(never)]
+pub fn confirm(
+    cat: &Catalog<'_>,
+    stars: &[Measured],
+    ids: &[u16],
+    prior: Quat,
+    prior_scale: f64,
+    cfg: &IdentConfig,
+) -> Result<Solution, IdentError> {
+    let n = check_input(stars, cfg)?.min(ids.len());
+    if n < MIN_MATCHES {
+        return Err(IdentError::TooFewStars);
+    }
+    if !(0.9..=1.1).contains(&prior_scale) {
+        return Err(IdentError::BadInput);
+    }
+    let prior = prior.normalized().ok_or(IdentError::BadInput)?;
+    let no_match = IdentError::NoMatch { hypotheses: 1 };
+    let mut matches: heapless::Vec<Match, MAX_STARS> = heapless::Vec::new();
+    for (m, &catalog) in ids.iter().enumerate().take(n) {
+        let (Ok(star), Some(_)) = (u8::try_from(m), cat.dir(usize::from(catalog))) else {
+            continue;
+        };
+        // The same catalog star twice is no identity: both are left out.
+        if ids.iter().take(n).filter(|&&c| c == catalog).count() > 1 {
+            continue;
+        }
+        let _ = matches.push(Match { star, catalog });
+    }
+    let (mut q, mut s) = (prior, prior_scale);
+    let mut dropped = 0;
+    let joint = loop {
+        if matches.len() < MIN_MATCHES {
+            return Err(no_match);
+        }
+        let joint = fit(cat, stars, &matches, s, Some(q)).ok_or(no_match)?;
+        (q, s) = (joint.attitude.q, joint.scale.value);
+        let scaled = rescaled(stars, n, s);
+        // The largest residual in its own sigmas, studentised: a residual's variance is the
+        // star's own less what the fit follows of it (its leverage `h`), so a star the fit
+        // follows (a heavy one: a hot pixel's spike measured with a tiny sigma) shows its
+        // disagreement rather than hiding it in the others' residuals.
+        let worst = matches
+            .iter()
+            .enumerate()
+            .filter_map(|(k, m)| {
+                let st = scaled.get(usize::from(m.star))?;
+                let r = cat.dir(usize::from(m.catalog))?;
+                let p = predicted_sigma(st.dir, &joint.cov, s);
+                let h = (0.5 * p * p / (st.sigma_rad * st.sigma_rad)).min(1.0 - 1e-6);
+                let z = angle_between(q.rotate(r), st.dir) / st.sigma_rad;
+                Some((k, z / libm::sqrt(1.0 - h)))
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        match worst {
+            // A NaN residual is no agreement either.
+            Some((k, z)) if z.is_nan() || z > TIGHT_SIGMAS => {
+                if dropped == CONFIRM_MAX_DROPPED {
+                    return Err(no_match);
+                }
+                matches.remove(k);
+                dropped += 1;
+            }
+            _ => break joint,
+        }
+    };
+    if high_leverage(stars, n, &matches, &joint) {
+        return Err(no_match);
+    }
+    let ds = cfg.track_scale_error;
+    let margin = 3.0 * joint.scale.sigma;
+    if joint.scale.value < prior_scale / (1.0 + ds) - margin
+        || joint.scale.value > prior_scale / (1.0 - ds) + margin
+    {
+        return Err(no_match);
+    }
+    let false_probability = bound::given_identities_bound(cat, cfg, n, matches.len(), q);
+    if false_probability > cfg.max_false_probability {
+        return Err(no_match);
+    }
+    Ok(Solution {
+        attitude: joint.attitude,
+        matches,
+        false_probability,
+        hypotheses: 1,
+        scale: joint.scale,
+    })
+}
+
 /// Verifies the triangle `basis` (measured index, catalog index) with `scale` its
 /// focal-length scale: the solution when its false-match bound passes and its fitted scale
 /// lies in `range` (widened by 3 of its sigmas).
@@ -972,7 +1086,7 @@ fn high_leverage(stars: &[Measured], n: usize, matches: &[Match], joint: &Joint)
 /// The 1-sigma of a star's position (rad, tangent plane, the root of the trace of its 2 x 2
 /// covariance) at direction `dir` predicted from the covariance `cov` of a fit's rotation and
 /// scale at scale `scale`.
-fn predicted_sigma(dir: [f64; 3], cov: &[[f64; 4]; 4], scale: f64) -> f64 {
+pub(crate) fn predicted_sigma(dir: [f64; 3], cov: &[[f64; 4]; 4], scale: f64) -> f64 {
     let Some((ju, jw, _)) = jacobian(dir, scale) else {
         return 0.0;
     };

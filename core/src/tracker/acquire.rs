@@ -6,18 +6,37 @@
 //! [`StarFlags::RING_LOST`] and the detector's own position; one whose calibration fails
 //! with [`StarFlags::CALIB_FAILED`].
 //!
+//! # Trailed stars
+//! A blob that may be a star trailed during the exposure (its second moments give a trail
+//! of at least [`TRAIL_SCREEN_PX`]) gets a window
+//! holding its extent plus [`TRAIL_MARGIN_PX`] each side (at most [`CAPTURE_MAX_SIDE`], 15
+//! px: the ring's 16 lines and the scratch window), and the trailed-star fit with the trail
+//! unknown ([`crate::centroid::trail_fit::trail_fit_free`]) tests it against the round
+//! model at a false-alarm rate of 1e-3: a trailed star is reported at mid-exposure
+//! ([`Provenance::TRAILED`]), its trail fitted, so lost in space works while the spacecraft
+//! turns; a round one is measured as any star on its centroid window around the peak. A
+//! trail that reaches within [`super::TRAIL_END_MARGIN_PX`] of its window's border (longer
+//! than about 11 px along a row or column at the flight PSF) is flagged
+//! [`StarFlags::TRAIL_UNKNOWN`], and so is a star called round whose width-free fit is wider
+//! than [`SMEARED_WIDTH_RATIO`] times the PSF. Detection itself is unchanged: the blob's eq.
+//! 8 SNR sums its pixels, the matched filter's statistic over the pixels above the join
+//! level, at no cost per pixel (docs/tracker.md, "Lost in space at body rate").
+//!
 //! The candidates are bit for bit those of a `LineDetector` with the same background
 //! stride fed every calibrated row (host test `scan`). Cost per line: the scan (~13 M7
 //! instructions a pixel, `cargo m7-bench` `scan_detect`), a 2 KB copy into the ring and a
-//! copy of the candidate list (`N` x 28 B); per star, a window copy and its measurement.
+//! copy of the candidate list (`N` x 40 B); per star, a window copy and its measurement;
+//! per screened blob the trailed test (two fits on up to 15 x 15 pixels).
 
 use super::config::{CentroidMethod, TrackerConfig};
-use super::list::Carry;
+use super::list::{Carry, StarList};
 use super::measure::{Policy, measure};
 use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord};
 use super::{Ring, Shared};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
-use crate::detect::{Detection, ScanDetector};
+use crate::centroid::CentroidInput;
+use crate::clamp::clamp;
+use crate::detect::{CAPTURE_MAX_SIDE, Detection, DetectionFlags, ScanDetector};
 use crate::geometry::ReadoutGeometry;
 use crate::units::Electrons;
 use crate::window::Rect;
@@ -30,12 +49,49 @@ struct Pending {
     detection: Detection,
 }
 
+/// A blob is tested for a trail when its moments give a trail of at least this, px
+/// (`sqrt(12 (l1 - l2))`, the covariance's eigenvalues: a segment of length `L` adds
+/// `L^2 / 12` along itself). The moments are of the pixels above the join level, so a
+/// trail's reads short; the fit finds its length.
+pub const TRAIL_SCREEN_PX: f32 = 1.5;
+
+/// The trail the trailed test starts from when blob `d` may be a trail (its moments give at
+/// least [`TRAIL_SCREEN_PX`]), px over the exposure: `sqrt(12 (l1 - l2))` along the larger
+/// eigenvector of its moments (a segment of length `L` adds `L^2 / 12` along itself);
+/// `None` for a round blob. The window is then [`trail_window`]'s.
+fn blob_trail(d: &Detection) -> Option<(f32, f32)> {
+    let [xx, yy, xy] = d.moments_px2();
+    let disc = libm::sqrtf((0.25 * (xx - yy) * (xx - yy) + xy * xy).max(0.0));
+    // l1 - l2 = 2 disc.
+    let l = libm::sqrtf(12.0 * 2.0 * disc);
+    if !(l.is_finite() && l >= TRAIL_SCREEN_PX) {
+        return None;
+    }
+    // The larger eigenvalue's eigenvector, from whichever of its two forms is longer.
+    let l1 = 0.5 * (xx + yy) + disc;
+    let (a, b) = ((xy, l1 - xx), (l1 - yy, xy));
+    let (vx, vy) = if a.0 * a.0 + a.1 * a.1 >= b.0 * b.0 + b.1 * b.1 {
+        a
+    } else {
+        b
+    };
+    let n = libm::sqrtf(vx * vx + vy * vy);
+    if !(n.is_finite() && n > 0.0) {
+        return Some((l, 0.0));
+    }
+    Some((l * vx / n, l * vy / n))
+}
+
 /// Acquisition's state within a frame.
 pub(super) struct Acquisition<'t, const N: usize> {
     /// Built on the frame's first active line (it holds the frame's calibration).
     scan: Option<ScanDetector<'t, N>>,
     closed: heapless::Vec<Detection, N>,
     pending: heapless::Vec<Pending, N>,
+    /// Sum and count of the whole rows' mean sky (saturated and excluded pixels left out),
+    /// e- per pixel.
+    sky_sum_e: f32,
+    sky_rows: u32,
 }
 
 impl<'t, const N: usize> Acquisition<'t, N> {
@@ -44,6 +100,8 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             scan: None,
             closed: heapless::Vec::new(),
             pending: heapless::Vec::new(),
+            sky_sum_e: 0.0,
+            sky_rows: 0,
         }
     }
 
@@ -53,6 +111,8 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         self.scan = None;
         self.closed.clear();
         self.pending.clear();
+        self.sky_sum_e = 0.0;
+        self.sky_rows = 0;
     }
 
     /// Active row `y`: into the ring and the scan; the windows it completes are measured.
@@ -93,7 +153,13 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             return LineOutcome::Refused;
         }
         let outcome = match scan.whole_line() {
-            Some((e, f)) => row_mean(e, f),
+            Some((e, f)) => {
+                if let Some(sky) = sky_mean(e, f) {
+                    self.sky_sum_e += sky;
+                    self.sky_rows += 1;
+                }
+                row_mean(e, f)
+            }
             None => LineOutcome::Scanned,
         };
         self.queue_closed(config, geometry, sh.summary);
@@ -115,6 +181,9 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             sh.summary.candidates_dropped = scan.detector().dropped();
             self.queue_closed(config, geometry, sh.summary);
         }
+        if self.sky_rows > 0 {
+            sh.summary.sky_e = self.sky_sum_e / self.sky_rows as f32;
+        }
         self.serve(cal, policy, config, None, sh);
     }
 
@@ -126,13 +195,16 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         summary: &mut FrameSummary,
     ) {
         for d in self.closed.iter() {
-            let (rect, clipped) = Rect::centred_clipped(
-                d.peak_x,
-                d.peak_y,
-                config.window_px,
-                geometry.active_cols,
-                geometry.active_rows,
-            );
+            let (rect, clipped) = match blob_trail(d) {
+                Some(_) => trail_window(d, config, geometry),
+                None => Rect::centred_clipped(
+                    d.peak_x,
+                    d.peak_y,
+                    config.window_px,
+                    geometry.active_cols,
+                    geometry.active_rows,
+                ),
+            };
             let p = Pending {
                 rect,
                 clipped,
@@ -163,25 +235,91 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             }
             self.pending.swap_remove(i);
             measure_pending(cal, policy, config, &p, &mut sh);
+            // Measured: the star list (its rank: a window the PSF describes first) keeps it
+            // or not, so its place in the detector's bounded list goes to the next
+            // candidate. That list then holds only the candidates waiting for their rows;
+            // ranked by the blob alone, at a solar flare's rate the brighter proton hits
+            // filled it and the stars were never measured.
+            if let Some(scan) = self.scan.as_mut() {
+                scan.forget(&p.detection);
+            }
         }
     }
 }
 
-/// An acquired star whose fitted width (the width-free fit's `psf_a_px`) exceeds the
-/// configured PSF's by this factor is a smeared star, its trail unknown: flagged
-/// [`StarFlags::TRAIL_UNKNOWN`] (kept for tracking, not used for the attitude). On the SIL's
-/// sky a still star fits within 3 % of the PSF's width, one trailed 3.4 px a frame (0.5
-/// deg/s in 100 ms) at 1.4-1.5 times it, 6.8 px at 1.9-2.4 times.
+/// An acquired star the trailed test does not call trailed whose fitted width (the
+/// width-free fit's `psf_a_px`) exceeds the configured PSF's by this factor is a smeared
+/// star, its trail unknown: flagged [`StarFlags::TRAIL_UNKNOWN`] (kept for tracking, not
+/// used for the attitude). On the SIL's sky a still star fits within 3 % of the PSF's
+/// width, one trailed 3.4 px a frame (0.5 deg/s in 100 ms) at 1.4-1.5 times it, 6.8 px at
+/// 1.9-2.4 times.
 pub const SMEARED_WIDTH_RATIO: f32 = 1.5;
 
-/// Measures one pending window, or reports the detector's position with the reason.
+/// The window of a blob that may be a trail: its extent plus [`TRAIL_MARGIN_PX`] each side,
+/// odd, at least `window_px` and at most [`CAPTURE_MAX_SIDE`] a side, centred on the blob.
+fn trail_window(d: &Detection, config: &TrackerConfig, geometry: &ReadoutGeometry) -> (Rect, bool) {
+    let [x0, x1, y0, y1] = d.extent;
+    let side = |lo: u16, hi: u16| {
+        clamp(
+            hi.saturating_sub(lo)
+                .saturating_add(1 + 2 * TRAIL_MARGIN_PX)
+                | 1,
+            config.window_px,
+            CAPTURE_MAX_SIDE,
+        )
+    };
+    let centre = |v: f32, lo: u16, hi: u16| {
+        let v = if v.is_finite() { v } else { f32::from(lo) };
+        clamp(v + 0.5, f32::from(lo), f32::from(hi)) as u16
+    };
+    let (cx, cy) = (centre(d.x_px, x0, x1), centre(d.y_px, y0, y1));
+    let (wx, wy) = (side(x0, x1), side(y0, y1));
+    let (h, hc) = Rect::centred_clipped(cx, cy, wx, geometry.active_cols, geometry.active_rows);
+    let (v, vc) = Rect::centred_clipped(cx, cy, wy, geometry.active_cols, geometry.active_rows);
+    let rect = Rect {
+        x0: h.x0,
+        width: h.width,
+        y0: v.y0,
+        height: v.height,
+    };
+    (rect, (hc && h.width != wx) || (vc && v.height != wy))
+}
+
+/// Pixels a trail's window reaches beyond its blob on each side: the PSF's wings below the
+/// join threshold (2.5 sigma of the flight PSF, 1.7 px) and a border pixel for the
+/// background.
+pub const TRAIL_MARGIN_PX: u16 = 3;
+
+/// A trailed fit narrower across its trail than this fraction of the configured PSF's width
+/// is a particle's track, not a star, and the window is measured as a round one (where the
+/// particle-hit test judges it): the optics spread a star across its trail as they spread a
+/// still one, while a proton's charge is spread by diffusion only. The tracker's
+/// width-free fit serves stars down to two thirds of the configured width (docs/accuracy.md,
+/// "Each star's own width"); on the SIL at the South Atlantic Anomaly's rate the tracks the
+/// trailed test calls trails fit at 0.43 to 0.47 of it, its stars at 1.0.
+pub const TRAIL_MIN_WIDTH_FRACTION: f32 = 0.5;
+
+/// A saturated blob of more than this many pixels is masked ([`StarFlags`] would only flag
+/// a star's clipped core): four 7 x 7 windows' worth, more than the brightest star's wings
+/// above the join threshold; a bloomed column alone is 1,024.
+pub const MASK_MIN_PX: u32 = 196;
+
+/// Measures one pending window, or reports the detector's position with the reason;
+/// false when it is no star (masked on a saturated object, or a particle hit).
 fn measure_pending<const N: usize>(
     cal: &FrameCalibration<'_>,
     policy: &Policy<'_>,
     config: &TrackerConfig,
     p: &Pending,
     sh: &mut Shared<'_, N>,
-) {
+) -> bool {
+    // A saturated blob larger than any star's is a bright object or its bloomed columns:
+    // masked, never a star (a star whose core clipped is reported, flagged saturated).
+    if p.detection.flags.contains(DetectionFlags::SATURATED) && p.detection.pixels > MASK_MIN_PX {
+        sh.summary.masked = sh.summary.masked.saturating_add(1);
+        sh.summary.saturated_px = sh.summary.saturated_px.max(p.detection.pixels);
+        return false;
+    }
     let rect = p.rect;
     let detected = StarFlags::from_detection(p.detection.flags);
     let want_background = config.tracking_method == CentroidMethod::FusedCog1;
@@ -192,21 +330,59 @@ fn measure_pending<const N: usize>(
     let lost = if !copied {
         sh.summary.ring_lost = sh.summary.ring_lost.saturating_add(1);
         StarFlags::RING_LOST
-    } else if sh.scratch.calibrate(cal, rect).is_ok()
-        && let Some(input) = sh.scratch.window(rect, p.clipped)
-    {
-        let mut m = measure(policy, &input, detected, want_background);
-        if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {
-            m.record.flags |= StarFlags::TRAIL_UNKNOWN;
+    } else if sh.scratch.calibrate(cal, rect).is_err() {
+        sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+        StarFlags::CALIB_FAILED
+    } else if let Some(trail_start) = blob_trail(&p.detection) {
+        // The trailed test on the blob's whole window; a round star is measured as any
+        // other, on its centroid window around the peak.
+        // A trail is as wide across as the optics make a still star; a proton's track is
+        // narrower (charge diffusion only): such a "trail" is measured as a round window,
+        // where the particle-hit test judges it.
+        if let Some(input) = sh.scratch.window(rect, p.clipped)
+            && let Some(record) = policy.free_trailed_record(&input, detected, trail_start)
+            && record.psf_a_px >= TRAIL_MIN_WIDTH_FRACTION * config.psf_a_px
+        {
+            sh.stars.push(record, Carry::default());
+            return true;
         }
-        sh.stars.push(
-            m.record,
-            Carry {
-                background: m.background,
-                ..Carry::default()
-            },
+        let (rel, _) = Rect::centred_clipped(
+            p.detection.peak_x.saturating_sub(rect.x0),
+            p.detection.peak_y.saturating_sub(rect.y0),
+            config.window_px,
+            rect.width,
+            rect.height,
         );
-        return;
+        let sub = Rect {
+            x0: rect.x0.saturating_add(rel.x0),
+            y0: rect.y0.saturating_add(rel.y0),
+            ..rel
+        };
+        let sub_clipped =
+            p.clipped || sub.width < config.window_px || sub.height < config.window_px;
+        if let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) {
+            return push_measured(
+                policy,
+                config,
+                &input,
+                detected,
+                want_background,
+                sh.stars,
+                sh.summary,
+            );
+        }
+        sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+        StarFlags::CALIB_FAILED
+    } else if let Some(input) = sh.scratch.window(rect, p.clipped) {
+        return push_measured(
+            policy,
+            config,
+            &input,
+            detected,
+            want_background,
+            sh.stars,
+            sh.summary,
+        );
     } else {
         sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
         StarFlags::CALIB_FAILED
@@ -228,6 +404,57 @@ fn measure_pending<const N: usize>(
         },
         Carry::default(),
     );
+    true
+}
+
+/// A whole calibrated row's mean sky: the mean of its pixels that are neither excluded nor
+/// saturated, e- (`None` without one).
+fn sky_mean(e: &[Electrons], f: &[PixelFlags]) -> Option<f32> {
+    let (mut sum, mut n) = (0i64, 0i64);
+    for (v, fl) in e.iter().zip(f.iter()) {
+        if !fl.is_excluded() && !fl.contains(PixelFlags::SATURATED) {
+            sum += i64::from(v.to_bits());
+            n += 1;
+        }
+    }
+    (n > 0).then(|| sum as f32 / (64.0 * n as f32))
+}
+
+/// Measures a round star's centroid window by the configured method and pushes it, flagged
+/// [`StarFlags::TRAIL_UNKNOWN`] when its fitted width says it is smeared
+/// ([`SMEARED_WIDTH_RATIO`]), and [`StarFlags::POOR_FIT`] (a particle hit is counted) when
+/// the window is sharper than a star.
+fn push_measured<const N: usize>(
+    policy: &Policy<'_>,
+    config: &TrackerConfig,
+    input: &CentroidInput<'_>,
+    detected: StarFlags,
+    want_background: bool,
+    stars: &mut StarList<N>,
+    summary: &mut FrameSummary,
+) -> bool {
+    let mut m = measure(policy, input, detected, want_background);
+    if m.hit_like {
+        summary.hits = summary.hits.saturating_add(1);
+    }
+    // A particle hit, or a star beside a hot pixel the table does not list yet (as sharp as
+    // a hit, and persistent): kept, flagged, so the star list ranks it below every clean
+    // star and identification leaves it out, while its window, if it gets one, goes on
+    // feeding the in-flight defect watch.
+    if m.hit {
+        m.record.flags |= StarFlags::POOR_FIT;
+    }
+    if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {
+        m.record.flags |= StarFlags::TRAIL_UNKNOWN;
+    }
+    stars.push(
+        m.record,
+        Carry {
+            background: m.background,
+            ..Carry::default()
+        },
+    );
+    true
 }
 
 /// A whole calibrated row's mean over the pixels that are not excluded, its OR-ed flags

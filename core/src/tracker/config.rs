@@ -108,8 +108,9 @@ pub struct TrackerConfig {
     pub max_tracked: u16,
     /// Fewest usable centroids for the next frame to be a tracking frame.
     pub min_track_stars: u16,
-    /// After this many tracking frames in a row, one acquisition frame (to pick up stars
-    /// entering the field).
+    /// After this many tracking frames in a row on the tracker's own stars, one acquisition
+    /// frame (to pick up stars entering the field); frames on the attitude stage's predicted
+    /// windows do not count (the catalog brings the stars entering the field).
     pub reacquire_every: u32,
     /// Exposure time, ms: the time the sequencer holds between frame transfers at least (a
     /// readout longer than it integrates for the readout), and the hot pixels' own dark law.

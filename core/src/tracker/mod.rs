@@ -15,7 +15,9 @@
 //!                 pass the threshold and every background row whole; each closed blob's
 //!                 centroid window is cut from the ring once its last row is in,
 //!                 calibrated and measured (acquire.rs)
-//!   tracking      the rows of the windows placed on the last frame's stars are copied;
+//!   tracking      the rows of the windows placed on the catalog's stars the attitude
+//!                 stage predicted ([`Tracker::predict_next`]), else on the last frame's
+//!                 stars, are copied;
 //!                 a window whose last row is in is calibrated, tested for its star
 //!                 (detect::track) and the centroid window around the star's peak
 //!                 measured (track.rs)
@@ -35,7 +37,9 @@
 //! All in `modes.rs`, asked by [`Tracker::begin_frame`] and [`Tracker::end_frame`]: a
 //! command takes effect at the next frame; no table means standby; acquisition hands over
 //! to tracking with at least `min_track_stars` usable centroids, tracking goes back with
-//! fewer or every `reacquire_every` frames. Every change is an [`Event::ModeChange`] with
+//! fewer or every `reacquire_every` frames on its own stars; a prediction of the next
+//! frame's stars from the attitude stage ([`Tracker::predict_next`]) keeps it tracking on
+//! the catalog's stars and never reacquires. Every change is an [`Event::ModeChange`] with
 //! its [`ModeReason`].
 //!
 //! # Memory
@@ -62,21 +66,41 @@ mod list;
 mod measure;
 mod modes;
 mod ports;
+mod predicted;
 mod record;
 mod track;
 
+pub use acquire::{SMEARED_WIDTH_RATIO, TRAIL_MARGIN_PX, TRAIL_SCREEN_PX};
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
 pub use drift::DarkDrift;
-pub use measure::select_curve;
+pub use measure::{HIT_MONITOR_FRACTION, HIT_WIDTH_FRACTION, TRAIL_END_MARGIN_PX, select_curve};
 pub use modes::CommandError;
 pub use ports::{
     Clock, FixedTable, FixedTemperature, Integration, LineSource, Ports, SourceLine, TableStore,
     TelemetrySink, Thermometer,
 };
+pub use predicted::{PredictedStar, predicted_window_side};
 pub use record::{
-    Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Provenance, StarFlags,
-    StarRecord, TemperatureSource,
+    Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Obstructions, Provenance,
+    StarFlags, StarRecord, TemperatureSource,
 };
+
+/// A saturated region of at least this many whole columns of pixels is the Moon's: its disc,
+/// 35 px across on the 15 degree camera, blooms every column it crosses; a planet or a
+/// bright star blooms 1-3 columns, partly. Fewer: a bright object masked, no cause.
+pub const MOON_MIN_COLUMNS: u32 = 8;
+/// A saturated region of more than this many whole columns is larger than the Moon's
+/// (35 px and the PSF): the Earth. The image cannot tell a thin sliver of the Earth's limb
+/// from the Moon; the flag then says Moon.
+pub const EARTH_MIN_COLUMNS: u32 = 48;
+/// A sky background above this, e- per pixel (dark removed), is the Sun's stray light: its
+/// shot noise (22 e-) then passes the CCD47-20's read and dark noise and the faint stars'
+/// SNR falls.
+pub const STRAY_LIGHT_LIMIT_E: f32 = 500.0;
+/// This many particle hits counted in a frame flag it: a quiet orbit's rate (~1 cm^-2 s^-1)
+/// gives a 1.77 cm^2 sensor about 0.2 hits a 100 ms frame, the South Atlantic Anomaly ~190,
+/// of which the monitor counts about one in six in an acquisition frame.
+pub const RADIATION_HITS: u16 = 5;
 
 use crate::calib::refresh::{Defect, DefectWatch};
 use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels};
@@ -183,6 +207,9 @@ pub struct Tracker<'t, 'b, const N: usize> {
     acq: Acquisition<'t, N>,
     trk: Tracking,
     work: FrameWork<N>,
+    /// The Moon and Earth bits of the last acquisition frame, which the tracking frames
+    /// after it carry (their windows do not see the whole field).
+    last_bright: Obstructions,
 }
 
 /// What a frame's measurements write into: one window's scratch, the star list, the
@@ -256,6 +283,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             policy: None,
             acq: Acquisition::new(),
             trk: Tracking::new(),
+            last_bright: Obstructions::empty(),
             work: FrameWork {
                 scratch: Scratch::new(),
                 stars: StarList::new(),
@@ -276,6 +304,26 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
     /// (the attitude stage's input); it holds until the next frame begins.
     pub fn stars(&self) -> &[StarRecord] {
         self.work.stars.records()
+    }
+
+    /// Each star of [`Self::stars`] with the attitude stage's prediction it was measured for
+    /// (its catalog identity), `None` for a star the tracker found itself; in the same order.
+    pub fn identities(&self) -> impl Iterator<Item = Option<&PredictedStar>> + '_ {
+        self.work
+            .stars
+            .carries()
+            .iter()
+            .map(|c| c.predicted.as_ref())
+    }
+
+    /// Takes the attitude stage's prediction of the next frame's stars (between frames;
+    /// replacing any, an empty slice clears it): the next frame tracks one window on each
+    /// valid star ([`PredictedStar::is_valid`], the first 32) instead of the
+    /// last frame's stars, even where the mode rules would have acquired
+    /// ([`ModeReason::Predicted`]). A commanded acquisition or standby drops it. Returns
+    /// the stars taken.
+    pub fn predict_next(&mut self, stars: &[PredictedStar]) -> usize {
+        self.trk.set_prediction(stars)
     }
 
     /// The calibration a window read now gets, as the tracker would calibrate it: the last
@@ -322,6 +370,11 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
     /// The running dark ratio now (also in every [`FrameSummary`]).
     pub fn dark_drift(&self) -> DarkDrift {
         self.drift.report()
+    }
+
+    /// The readout geometry the tracker was made for.
+    pub fn geometry(&self) -> &ReadoutGeometry {
+        &self.geometry
     }
 
     /// The configuration in force.
@@ -431,7 +484,14 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.apply_dark_law(table.and_then(|t| t.dark_law()));
         self.table = table;
 
-        let (to, change) = self.modes.begin(self.trk.priors_len() > 0, table.is_some());
+        let (to, change) = self.modes.begin(
+            self.trk.priors_len() > 0,
+            table.is_some(),
+            self.trk.prediction_len() > 0,
+        );
+        if to != Mode::Tracking {
+            self.trk.drop_prediction();
+        }
         if let Some((from, reason)) = change {
             telemetry.event(&Event::ModeChange {
                 frame,
@@ -624,6 +684,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.work.summary.dark_drift = self.drift.report();
         self.work.summary.defects_pending =
             u16::try_from(self.work.watch.confirmed().len()).unwrap_or(u16::MAX);
+        self.work.summary.obstructions = self.obstructions();
         let mut centroids = 0u16;
         for s in self.work.stars.records() {
             telemetry.star(self.frame, s);
@@ -637,9 +698,41 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.work.summary.stars_dropped = self.work.stars.dropped;
         self.trk
             .keep_priors(&self.work.stars, usize::from(self.config.max_tracked));
-        self.work.summary.next_mode = self.modes.end(centroids, &self.config);
+        self.work.summary.next_mode =
+            self.modes
+                .end(centroids, &self.config, self.trk.predicted_frame());
         telemetry.frame(&self.work.summary);
         self.work.summary
+    }
+}
+
+impl<const N: usize> Tracker<'_, '_, N> {
+    /// What took stars from the frame now ending (see [`Obstructions`]): in acquisition
+    /// the largest saturated region's size, in tracking the last acquisition's Moon and
+    /// Earth bits; in both the sky and the hits.
+    fn obstructions(&mut self) -> Obstructions {
+        let s = &self.work.summary;
+        let rows = u32::from(self.geometry.active_rows);
+        let mut o = Obstructions::empty();
+        match s.mode {
+            Mode::Acquisition => {
+                if s.saturated_px > EARTH_MIN_COLUMNS * rows {
+                    o |= Obstructions::EARTH;
+                } else if s.saturated_px >= MOON_MIN_COLUMNS * rows {
+                    o |= Obstructions::MOON;
+                }
+                self.last_bright = o;
+            }
+            Mode::Tracking => o |= self.last_bright,
+            _ => {}
+        }
+        if s.sky_e > STRAY_LIGHT_LIMIT_E {
+            o |= Obstructions::SUN;
+        }
+        if s.hits >= RADIATION_HITS {
+            o |= Obstructions::RADIATION;
+        }
+        o
     }
 }
 

@@ -7,7 +7,14 @@
 //! - no calibration table: standby ([`ModeReason::NoTable`]), then acquisition when one is
 //!   in force ([`ModeReason::TableAvailable`]);
 //! - acquisition -> tracking with at least `min_track_stars` usable centroids;
-//! - tracking -> acquisition with fewer, or after `reacquire_every` tracking frames in a row.
+//! - tracking -> acquisition with fewer, or after `reacquire_every` tracking frames in a row
+//!   whose windows the tracker placed on its own last stars;
+//! - with a prediction from the attitude stage (the catalog's stars at the next frame,
+//!   [`super::PredictedStar`]) the next frame tracks its windows
+//!   ([`ModeReason::Predicted`] when the rules above would have acquired): a full frame
+//!   comes only when the attitude stage stops predicting (no attitude for some frames, too
+//!   few stars predicted), and tracking frames on a prediction never count towards
+//!   `reacquire_every`.
 //!
 //! Cost: a few compares a frame.
 
@@ -75,13 +82,21 @@ impl Modes {
         Ok(())
     }
 
-    /// A frame starts: its mode, and `(from, reason)` when that is a change.
+    /// A frame starts: its mode, and `(from, reason)` when that is a change;
+    /// `predicted`: the attitude stage predicted this frame's stars.
     pub(super) fn begin(
         &mut self,
         have_stars: bool,
         have_table: bool,
+        predicted: bool,
     ) -> (Mode, Option<(Mode, ModeReason)>) {
         let (mut to, mut reason) = self.next;
+        if predicted
+            && to == Mode::Acquisition
+            && matches!(reason, ModeReason::TooFewStars | ModeReason::Reacquire)
+        {
+            (to, reason) = (Mode::Tracking, ModeReason::Predicted);
+        }
         if let Some(m) = self.commanded.take() {
             (to, reason) = (m, ModeReason::Command);
             self.standby_held = m == Mode::Standby;
@@ -97,10 +112,12 @@ impl Modes {
         (to, (to != from).then_some((from, reason)))
     }
 
-    /// The frame ended with `centroids` usable centroids: the rules' next mode.
-    pub(super) fn end(&mut self, centroids: u16, config: &TrackerConfig) -> Mode {
+    /// The frame ended with `centroids` usable centroids: the rules' next mode;
+    /// `predicted`: its windows came from the attitude stage's prediction.
+    pub(super) fn end(&mut self, centroids: u16, config: &TrackerConfig, predicted: bool) -> Mode {
         let enough = centroids >= config.min_track_stars;
         self.tracking_run = match self.mode {
+            Mode::Tracking if predicted => 0,
             Mode::Tracking => self.tracking_run.saturating_add(1),
             _ => 0,
         };

@@ -20,7 +20,8 @@ pub enum Mode {
     Standby,
     /// Whole-frame detection, a centroid per detected star.
     Acquisition,
-    /// Only windows around the last frame's stars are read and measured.
+    /// Only windows around the last frame's stars, or the catalog's stars the attitude
+    /// stage predicts, are read and measured.
     Tracking,
 }
 
@@ -98,9 +99,17 @@ bitflags::bitflags! {
         /// Its trail during the exposure is unknown or guessed, so the position is a smeared
         /// star's, kept to place the next window but not used for the attitude. Tracking:
         /// the star moved at least `TRAIL_MIN_PX` since the last frame before two tracking
-        /// frames measured its motion; acquisition: its fitted width exceeds the configured
-        /// PSF's by `SMEARED_WIDTH_RATIO`.
+        /// frames measured its motion; acquisition: a star the trailed test does not call
+        /// trailed whose fitted width exceeds the configured PSF's by
+        /// `SMEARED_WIDTH_RATIO`, or a trailed star whose fitted trail ends within
+        /// `TRAIL_END_MARGIN_PX` of its window's border (a trail the window may cut).
         const TRAIL_UNKNOWN = 1 << 25;
+        /// Tracking: its trail during the exposure is longer than its tracking window holds
+        /// (a component beyond the window's side less 1 px, the capture's largest window
+        /// being `CAPTURE_MAX_SIDE`): the trailed fit sees no end of it and the position
+        /// along it is not measured; kept to place the next window, not used for the
+        /// attitude.
+        const TRAIL_CLIPPED = 1 << 26;
     }
 }
 
@@ -110,15 +119,45 @@ bitflags::bitflags! {
     /// and the SIL's CSV carry them as a `u8`.
     #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
     pub struct Provenance: u8 {
-        /// Found in a tracking frame, in a window placed on the last frame's star (else by
-        /// acquisition's scan of the whole frame).
+        /// Found in a tracking frame, in a window placed on the last frame's star or on a
+        /// catalog star the attitude stage predicted (else by acquisition's scan of the
+        /// whole frame).
         const TRACKED = 1 << 0;
         /// Measured by the fused raw-window CoG (tracking), background carried from the
         /// star's last full measurement.
         const FUSED = 1 << 1;
-        /// Measured by the trailed-star fit (tracking), on the whole tracking window, the
-        /// trail taken from the star's last motion: the position is at mid-exposure.
+        /// Measured by the trailed-star fit: in tracking on the whole tracking window, the
+        /// trail taken from the star's prediction or else its last motion; in acquisition on
+        /// the blob's window, the trail fitted (length, angle and width free) and the star
+        /// found trailed by the test against the round model: the position is at
+        /// mid-exposure.
         const TRAILED = 1 << 2;
+    }
+}
+
+bitflags::bitflags! {
+    /// What in the field took stars from a frame, one bit a cause (0: nothing). The bit
+    /// numbers are stable: housekeeping and the attitude report's validity flags carry them.
+    /// Told from the image alone ([`crate::tracker`]'s frame end): the Moon and the Earth by
+    /// the size of a saturated region, the Sun by the sky background, radiation by the
+    /// particle hits counted.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub struct Obstructions: u8 {
+        /// A saturated region of the Moon's size (its bloomed columns).
+        const MOON = 1 << 0;
+        /// A saturated region larger than the Moon can make: the Earth.
+        const EARTH = 1 << 1;
+        /// A sky background above the stray-light limit: the Sun's stray light.
+        const SUN = 1 << 2;
+        /// Particle hits above the radiation limit in the frame.
+        const RADIATION = 1 << 3;
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for Obstructions {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(f, "Obstructions({=u8:#x})", self.bits())
     }
 }
 
@@ -229,6 +268,20 @@ pub struct StarRecord {
 }
 
 impl StarRecord {
+    /// Whether the fitted PSF describes the window and the fit's sigmas hold (none of
+    /// [`StarFlags::POOR_FIT`], [`StarFlags::SIGMA_UNRELIABLE`], [`StarFlags::NOT_CONVERGED`]):
+    /// the star list, the choice of tracking windows and identification rank such a star
+    /// above every other, then by flux. A particle hit or a star beside a hot pixel the table
+    /// does not list fits poorly; a lone hot pixel or a noise peak fits narrower than any
+    /// star, its sigma unreliable.
+    pub fn fit_is_clean(&self) -> bool {
+        !self.flags.intersects(
+            StarFlags::POOR_FIT
+                .union(StarFlags::SIGMA_UNRELIABLE)
+                .union(StarFlags::NOT_CONVERGED),
+        )
+    }
+
     /// A centroid as a record, with `flags` added to the centroid's own (no PSF measured:
     /// `psf_a_px` and `chi2_dof` 0; found by acquisition: no provenance bit).
     pub(crate) fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {
@@ -327,6 +380,22 @@ pub struct FrameSummary {
     pub dark_drift: super::drift::DarkDrift,
     /// Pixels confirmed in flight that the table in force does not list yet (the overlay).
     pub defects_pending: u16,
+    /// Detections and tracking windows holding a saturated pixel: a bright object or its
+    /// bloomed columns, masked (never reported as stars).
+    pub masked: u16,
+    /// Windows sharper than any star the optics make, particle hits
+    /// ([`crate::detect::is_particle_hit`] at `HIT_MONITOR_FRACTION` of the PSF; those past
+    /// `HIT_WIDTH_FRACTION` are rejected): the frame's radiation monitor.
+    pub hits: u16,
+    /// Acquisition: pixels of the largest saturated region (0: none).
+    pub saturated_px: u32,
+    /// The mean sky background of the frame (acquisition: its whole rows; tracking: its
+    /// windows' borders), e- per pixel, dark removed; 0 when not measured.
+    pub sky_e: f32,
+    /// Tracking: windows whose border background `sky_e` averages.
+    pub sky_windows: u16,
+    /// What took stars from the frame.
+    pub obstructions: Obstructions,
 }
 
 impl FrameSummary {
@@ -360,6 +429,12 @@ impl FrameSummary {
                 out_of_band: false,
             },
             defects_pending: 0,
+            masked: 0,
+            hits: 0,
+            saturated_px: 0,
+            sky_e: 0.0,
+            sky_windows: 0,
+            obstructions: Obstructions::empty(),
         }
     }
 }
@@ -429,6 +504,9 @@ pub enum ModeReason {
     NoTable,
     /// A calibration table is in force again after a standby for want of one.
     TableAvailable,
+    /// The attitude stage predicted the frame's stars from the catalog, where the last
+    /// frame's stars alone would have sent the tracker to acquisition.
+    Predicted,
 }
 
 /// Something that happened between frames.

@@ -24,7 +24,17 @@
 //! method, whose fit flags a smear it cannot follow. A star that moved at least
 //! [`TRAIL_MIN_PX`] before [`TRAIL_SETTLE_FRAMES`] tracking frames measured its motion is
 //! flagged [`StarFlags::TRAIL_UNKNOWN`]: it places the next window, the attitude stage skips
-//! it.
+//! it. A trail longer than the window holds (a component beyond its side less 1 px: with
+//! [`CAPTURE_MAX_SIDE`] 15, 14 px, 2.06 deg/s across the boresight in 100 ms) leaves the
+//! position along it unmeasured: the star is flagged [`StarFlags::TRAIL_CLIPPED`] and the
+//! attitude stage skips it.
+//!
+//! With the attitude stage's prediction ([`super::PredictedStar`]) the windows are placed
+//! on the catalog's stars at their predicted positions instead, each sized by
+//! [`super::predicted_window_side`] (the centroid window, the prediction's bound and the
+//! predicted trail), and a star is measured with the trailed-star fit from its predicted
+//! trail in its first tracked frame (no settling, never `TRAIL_UNKNOWN`); its prediction
+//! goes with its record to the attitude stage, which checks it and keeps its identity.
 //!
 //! Cost per line: a row test per window and the copy of the rows inside windows; per
 //! star, the window's calibration (121 pixels for 11x11), the window test (~2-4 k
@@ -37,6 +47,7 @@ use super::Shared;
 use super::config::{CentroidMethod, TrackerConfig};
 use super::list::{Carry, StarList};
 use super::measure::{Policy, StarBackground, measure};
+use super::predicted::{PredictedStar, predicted_window_side};
 use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord};
 use super::{Capture, TRACK_WINDOWS, Watch};
 use crate::calib::refresh::WatchedWindow;
@@ -46,16 +57,30 @@ use crate::centroid::CentroidInput;
 use crate::centroid::raw_cog::{PlanError, RawCogParams, RawWindow};
 use crate::detect::capture::CAPTURE_MAX_SIDE;
 use crate::detect::track::TrackResult;
-use crate::detect::track_detect;
+use crate::detect::{TrackFlags, track_detect};
 use crate::geometry::ReadoutGeometry;
 use crate::window::Rect;
 
-/// A star of the last frame to look for.
+/// A star to look for: one of the last frame's, or one the attitude stage predicts.
 #[derive(Clone, Copy, Debug)]
 struct Prior {
     x_px: f32,
     y_px: f32,
     carry: Carry,
+}
+
+impl Prior {
+    /// The catalog star `p` at its predicted position.
+    fn predicted(p: PredictedStar) -> Self {
+        Self {
+            x_px: p.x_px,
+            y_px: p.y_px,
+            carry: Carry {
+                predicted: Some(p),
+                ..Carry::default()
+            },
+        }
+    }
 }
 
 /// A placed window: its star and the fused CoG's anchor pixel and plan slot.
@@ -66,9 +91,13 @@ struct Placed {
     slot: u8,
 }
 
-/// Tracking's state: the last frame's stars and this frame's windows (capture order).
+/// Tracking's state: the last frame's stars, the attitude stage's prediction for the next
+/// frame, and this frame's windows (capture order).
 pub(super) struct Tracking {
     priors: heapless::Vec<Prior, TRACK_WINDOWS>,
+    prediction: heapless::Vec<PredictedStar, TRACK_WINDOWS>,
+    /// The current frame's windows came from a prediction.
+    predicted_frame: bool,
     placed: heapless::Vec<Placed, TRACK_WINDOWS>,
     rects: heapless::Vec<Rect, TRACK_WINDOWS>,
 }
@@ -92,7 +121,15 @@ pub const TRAIL_SETTLE_FRAMES: u8 = 2;
 
 /// Flags `record` [`StarFlags::TRAIL_UNKNOWN`] when its star moved at least
 /// [`TRAIL_MIN_PX`] from `prior` before its motion settled; returns its tracked-frame count.
+/// A predicted star's motion is the attitude's: it is never flagged.
 fn settle(record: &mut StarRecord, prior: &Prior) -> u8 {
+    if prior.carry.predicted.is_some() {
+        return prior
+            .carry
+            .tracked_frames
+            .saturating_add(1)
+            .max(TRAIL_SETTLE_FRAMES);
+    }
     let (dx, dy) = (record.x_px - prior.x_px, record.y_px - prior.y_px);
     let moved = libm::sqrtf(dx * dx + dy * dy);
     // A non-finite move is no evidence of motion; the record's own flags say what it is.
@@ -111,6 +148,14 @@ fn trail_of(velocity_px: Option<(f32, f32)>) -> Option<(f32, f32)> {
         let l = libm::sqrtf(vx * vx + vy * vy);
         l.is_finite() && l >= TRAIL_MIN_PX
     })
+}
+
+/// Whether a trail of `trail_px` (px, exposure start to end) is longer than `rect` holds: a
+/// component beyond the window's side less 1 px, so that no end of it is in the window.
+fn trail_clipped(trail_px: (f32, f32), rect: Rect) -> bool {
+    // A NaN trail is no trail the window holds.
+    let beyond = |t: f32, side: u16| t.is_nan() || t.abs() > f32::from(side.saturating_sub(1));
+    beyond(trail_px.0, rect.width) || beyond(trail_px.1, rect.height)
 }
 
 /// The side of a trailed star's tracking window: `side` widened by the trail's larger
@@ -137,6 +182,8 @@ impl Tracking {
     pub(super) const fn new() -> Self {
         Self {
             priors: heapless::Vec::new(),
+            prediction: heapless::Vec::new(),
+            predicted_frame: false,
             placed: heapless::Vec::new(),
             rects: heapless::Vec::new(),
         }
@@ -144,7 +191,35 @@ impl Tracking {
 
     /// Stars the next tracking frame would look for.
     pub(super) fn priors_len(&self) -> usize {
-        self.priors.len()
+        self.priors.len().max(self.prediction.len())
+    }
+
+    /// Takes the attitude stage's prediction for the next frame (replacing any): its valid
+    /// stars ([`PredictedStar::is_valid`]), the first [`TRACK_WINDOWS`]; returns how many.
+    pub(super) fn set_prediction(&mut self, stars: &[PredictedStar]) -> usize {
+        self.prediction.clear();
+        for p in stars.iter().filter(|p| p.is_valid()) {
+            if self.prediction.push(*p).is_err() {
+                break;
+            }
+        }
+        self.prediction.len()
+    }
+
+    /// Stars predicted for the next frame.
+    pub(super) fn prediction_len(&self) -> usize {
+        self.prediction.len()
+    }
+
+    /// Forgets the prediction (a frame that does not track).
+    pub(super) fn drop_prediction(&mut self) {
+        self.prediction.clear();
+        self.predicted_frame = false;
+    }
+
+    /// Whether the current (or last) frame's windows came from a prediction.
+    pub(super) fn predicted_frame(&self) -> bool {
+        self.predicted_frame
     }
 
     /// This frame's windows.
@@ -155,16 +230,19 @@ impl Tracking {
     /// Keeps the usable centroids of `stars`, the brightest `max` of them, for the next
     /// tracking frame.
     pub(super) fn keep_priors<const N: usize>(&mut self, stars: &StarList<N>, max: usize) {
-        let mut order: heapless::Vec<(f32, usize), N> = heapless::Vec::new();
+        let mut order: heapless::Vec<(bool, f32, usize), N> = heapless::Vec::new();
         for (i, (s, _)) in stars.iter().enumerate() {
             if s.is_centroid() {
                 // At most N stars in the list: cannot fail.
-                let _ = order.push((s.flux_e, i));
+                let _ = order.push((!s.fit_is_clean(), s.flux_e, i));
             }
         }
-        crate::small_sort::sort_by(&mut order, |a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        // The list's rank: clean fits first, then the brighter.
+        crate::small_sort::sort_by(&mut order, |a, b| {
+            a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2))
+        });
         self.priors.clear();
-        for (_, i) in order.iter().take(max.min(TRACK_WINDOWS)) {
+        for (_, _, i) in order.iter().take(max.min(TRACK_WINDOWS)) {
             if let Some((s, c)) = stars.iter().nth(*i) {
                 // At most TRACK_WINDOWS taken: cannot fail.
                 let _ = self.priors.push(Prior {
@@ -187,6 +265,16 @@ impl Tracking {
         capture.reset();
         self.placed.clear();
         self.rects.clear();
+        // A prediction replaces the last frame's stars: the catalog's stars in the field.
+        self.predicted_frame = !self.prediction.is_empty();
+        if self.predicted_frame {
+            self.priors.clear();
+            for p in self.prediction.iter() {
+                // Same capacity: cannot fail.
+                let _ = self.priors.push(Prior::predicted(*p));
+            }
+            self.prediction.clear();
+        }
         // Plan slots: a star keeps its last one (each slot served one window last frame,
         // so at most one star holds it); the others take a free one.
         let mut used = 0u64;
@@ -207,7 +295,10 @@ impl Tracking {
                 pixel_of(p.x_px + vx, geometry.active_cols),
                 pixel_of(p.y_px + vy, geometry.active_rows),
             );
-            let side = trail_of(p.carry.velocity_px).map_or(side, |t| trailed_side(side, t));
+            let side = match p.carry.predicted {
+                Some(pr) => predicted_window_side(config.window_px, pr.bound_px, pr.trail_px),
+                None => trail_of(p.carry.velocity_px).map_or(side, |t| trailed_side(side, t)),
+            };
             let (rect, clipped) = Rect::centred_clipped(
                 anchor.0,
                 anchor.1,
@@ -296,7 +387,11 @@ impl Tracking {
         let Some(placed) = self.placed.get(i) else {
             return;
         };
+        let predicted = placed.prior.carry.predicted;
         let velocity = |r: &StarRecord| {
+            if let Some(p) = predicted {
+                return Some(p.motion_px);
+            }
             let v = (r.x_px - placed.prior.x_px, r.y_px - placed.prior.y_px);
             // A jump beyond the window is no motion of this star: forget it.
             let limit = f32::from(config.track_window_px());
@@ -307,7 +402,10 @@ impl Tracking {
             .capture
             .window(i)
             .is_some_and(|w| sh.watch.touches(w.rect));
-        let trail = trail_of(placed.prior.carry.velocity_px);
+        let trail = match predicted {
+            Some(p) => trail_of(Some(p.trail_px)),
+            None => trail_of(placed.prior.carry.velocity_px),
+        };
         if policy.method == CentroidMethod::FusedCog1
             && !found
             && trail.is_none()
@@ -322,6 +420,7 @@ impl Tracking {
                     plan_slot: Some(placed.slot),
                     velocity_px: v,
                     tracked_frames,
+                    predicted,
                 },
             );
             return;
@@ -367,6 +466,14 @@ impl Tracking {
             sh.summary.track_lost = sh.summary.track_lost.saturating_add(1);
             return;
         }
+        note_sky(sh.summary, verdict.background_e);
+        // A window a saturated column crosses (saturated pixels in its top or bottom row) is
+        // on a bright object or its bloomed columns: masked, never a star (a star whose
+        // core clipped is measured, flagged saturated).
+        if verdict.flags.contains(TrackFlags::SATURATED) && crossed_by_saturation(sh, rect) {
+            sh.summary.masked = sh.summary.masked.saturating_add(1);
+            return;
+        }
         if let Some(trail) = trail {
             let Some(input) = sh.scratch.window(rect, clipped) else {
                 sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
@@ -375,6 +482,9 @@ impl Tracking {
             let mut record =
                 policy.trailed_record(&input, StarFlags::from_track(verdict.flags), trail);
             record.provenance = Provenance::TRACKED | Provenance::TRAILED;
+            if trail_clipped(trail, rect) {
+                record.flags |= StarFlags::TRAIL_CLIPPED;
+            }
             let v = velocity(&record);
             let tracked_frames = settle(&mut record, &placed.prior);
             sh.stars.push(
@@ -384,31 +494,62 @@ impl Tracking {
                     plan_slot: None,
                     velocity_px: v,
                     tracked_frames,
+                    predicted,
                 },
             );
             return;
         }
-        // The centroid window around the peak, inside the tracking window.
-        let (rel, _) = Rect::centred_clipped(
-            verdict.peak_x.saturating_sub(rect.x0),
-            verdict.peak_y.saturating_sub(rect.y0),
-            config.window_px,
-            rect.width,
-            rect.height,
-        );
-        let sub = Rect {
-            x0: rect.x0.saturating_add(rel.x0),
-            y0: rect.y0.saturating_add(rel.y0),
-            ..rel
-        };
-        let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;
         let want_background = config.tracking_method == CentroidMethod::FusedCog1;
         let flags = StarFlags::from_track(verdict.flags);
-        let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) else {
-            sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+        // The centroid window around the peak, inside the tracking window; when that is a
+        // particle hit, around the predicted pixel (the star may be beside the hit). When
+        // both are hits the star is kept, flagged `POOR_FIT` (its window holds a hit, or a
+        // hot pixel the table does not list yet): its window goes on being placed and
+        // watched for new defects, and identification ranks it last.
+        let mut m = None;
+        let mut last_hit = None;
+        for (k, (px, py)) in [(verdict.peak_x, verdict.peak_y), placed.anchor]
+            .into_iter()
+            .enumerate()
+        {
+            if k == 1 && px.abs_diff(verdict.peak_x).max(py.abs_diff(verdict.peak_y)) <= 1 {
+                break;
+            }
+            let (rel, _) = Rect::centred_clipped(
+                px.saturating_sub(rect.x0),
+                py.saturating_sub(rect.y0),
+                config.window_px,
+                rect.width,
+                rect.height,
+            );
+            let sub = Rect {
+                x0: rect.x0.saturating_add(rel.x0),
+                y0: rect.y0.saturating_add(rel.y0),
+                ..rel
+            };
+            let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;
+            let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) else {
+                sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+                return;
+            };
+            let measured = measure(policy, &input, flags, want_background);
+            if measured.hit_like {
+                sh.summary.hits = sh.summary.hits.saturating_add(1);
+            }
+            if !measured.hit {
+                m = Some(measured);
+                break;
+            }
+            last_hit = Some(measured);
+        }
+        let Some(mut m) = m.or_else(|| {
+            last_hit.map(|mut h| {
+                h.record.flags |= StarFlags::POOR_FIT;
+                h
+            })
+        }) else {
             return;
         };
-        let mut m = measure(policy, &input, flags, want_background);
         m.record.provenance = Provenance::TRACKED;
         let v = velocity(&m.record);
         let tracked_frames = settle(&mut m.record, &placed.prior);
@@ -419,9 +560,36 @@ impl Tracking {
                 plan_slot: None,
                 velocity_px: v,
                 tracked_frames,
+                predicted,
             },
         );
     }
+}
+
+/// True when a saturated pixel lies in the top or bottom row of the calibrated window
+/// `rect`.
+fn crossed_by_saturation<const N: usize>(sh: &mut Shared<'_, N>, rect: Rect) -> bool {
+    let w = usize::from(rect.width);
+    let h = usize::from(rect.height);
+    let Some((_, f)) = sh.scratch.calibrated_mut(rect) else {
+        return false;
+    };
+    let top = f.get(..w).unwrap_or(&[]);
+    let bottom = f.get(w * h.saturating_sub(1)..).unwrap_or(&[]);
+    top.iter()
+        .chain(bottom)
+        .any(|p| p.contains(crate::calib::PixelFlags::SATURATED))
+}
+
+/// Folds a tracking window's border background into the frame's mean sky (a running mean
+/// over the windows that held their star).
+fn note_sky(summary: &mut FrameSummary, background_e: f32) {
+    if !background_e.is_finite() {
+        return;
+    }
+    let n = f32::from(summary.sky_windows);
+    summary.sky_e = (summary.sky_e * n + background_e) / (n + 1.0);
+    summary.sky_windows = summary.sky_windows.saturating_add(1);
 }
 
 impl Tracking {

@@ -157,14 +157,7 @@ pub const CSV_HEADER: &str = "rate_deg_s,exposure_ms,trail_px,frames,solved,wron
 /// The points as CSV, after `comment` lines (each prefixed `# `); the errors of a point
 /// without a solved frame are empty.
 pub fn csv(points: &[ExposurePoint], comment: &[&str]) -> String {
-    let mut out = String::new();
-    for c in comment {
-        out.push_str("# ");
-        out.push_str(c);
-        out.push('\n');
-    }
-    out.push_str(CSV_HEADER);
-    out.push('\n');
+    let mut out = crate::figures::csv::csv_head(comment, CSV_HEADER);
     for p in points {
         let v = |x: f64| {
             if p.solved > p.wrong {

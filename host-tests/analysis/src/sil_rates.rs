@@ -9,16 +9,29 @@
 //! RMS bound are over the solved frames that are not wrong.
 //!
 //! The scene: 100 ms exposures every 100 ms (the frame-transfer sensor integrating while
-//! the last frame is read), the flight configuration's tracker, the SIL's sensor; run `k` of
+//! the last frame is read), the flight configuration's tracker told that exposure, the
+//! SIL's sensor; run `k` of
 //! a rate uses seed `seed0 + k` for the attitude and the sensor. Cost: a run is what its
 //! frames cost in the SIL ([`startrack_homes::sil`]: ~1 s an acquisition frame in release, ~0.02 s a
 //! tracking frame), so a rate that keeps losing its stars costs most.
 
 use rand::SeedableRng;
-use startrack_homes::sil::{self, SilConfig, SilReport};
+use startrack_homes::sil::{self, SilConfig, SilFrame, SilReport};
+use startrack_sim::sim::Star;
 use startrack_sim::sky::field::random_attitude;
 use startrack_sim::sky::motion::{ExposureMotion, RateProfile};
 use startrack_sim::sky::scene::SkyScene;
+
+/// Another true star within this distance makes a star an unresolved blend, px (the
+/// scene's doubles: its seed-5 field holds one 0.47 px apart).
+pub const BLEND_PX: f64 = 5.0;
+
+/// Whether the true star `t` of frame `f` has another true star within [`BLEND_PX`].
+pub fn blended(f: &SilFrame, t: &Star) -> bool {
+    f.truth
+        .iter()
+        .any(|u| u != t && (u.x_px - t.x_px).hypot(u.y_px - t.y_px) < BLEND_PX)
+}
 
 /// A solved frame off by more than this in total is wrong, arcsec.
 pub const WRONG_ARCSEC: f64 = 60.0;
@@ -90,9 +103,13 @@ pub fn config(case: &RateCase, seed: u64, frames: u32) -> SilConfig {
     // Valid by construction: finite rate, exposure equal to the period.
     let motion = ExposureMotion::new(profile, EXPOSURE_S, EXPOSURE_S)
         .unwrap_or_else(|e| unreachable!("{e}"));
+    // The tracker is told the exposure it runs with (its mid-exposure tags follow it).
+    let mut tracker = SilConfig::default().tracker;
+    tracker.exposure_ms = (EXPOSURE_S * 1e3).round() as u32;
     SilConfig {
         frames,
         seed,
+        tracker,
         sky: Some(SkyScene::ccd47_15deg_moving(q0, motion)),
         period_us: (EXPOSURE_S * 1e6).round() as u64,
         ..SilConfig::default()
@@ -197,14 +214,7 @@ pub const CSV_HEADER: &str = "motion,rate_deg_s,runs,frames,solved,availability,
 
 /// The rows as CSV, after `comment` lines (each prefixed `# `).
 pub fn csv(rows: &[RateRow], comment: &[&str]) -> String {
-    let mut out = String::new();
-    for c in comment {
-        out.push_str("# ");
-        out.push_str(c);
-        out.push('\n');
-    }
-    out.push_str(CSV_HEADER);
-    out.push('\n');
+    let mut out = crate::figures::csv::csv_head(comment, CSV_HEADER);
     for r in rows {
         let (motion, rate) = r.case.map_or(("", 0.0), |c| (c.motion, c.rate_deg_s));
         out.push_str(&format!(

@@ -348,6 +348,7 @@ pub fn run_scene(seed: u64, scene: DemoScene) -> Result<DemoReport, String> {
                 fix: solver.update(&result.stars, 0),
                 report: None,
                 true_time_s: None,
+                identified: 0,
             }
         }),
     })

@@ -115,14 +115,7 @@ pub const CSV_HEADER: &str = "exposure_ms,step,ms,from";
 
 /// The parts at each of [`exposures_ms`] as CSV, after `comment` lines (each prefixed `# `).
 pub fn csv(m7_costs: &str, comment: &[&str]) -> Result<String, String> {
-    let mut out = String::new();
-    for c in comment {
-        out.push_str("# ");
-        out.push_str(c);
-        out.push('\n');
-    }
-    out.push_str(CSV_HEADER);
-    out.push('\n');
+    let mut out = startrack_analysis::figures::csv::csv_head(comment, CSV_HEADER);
     for e in exposures_ms() {
         for p in parts(e, m7_costs)? {
             out.push_str(&format!(

@@ -12,6 +12,7 @@ mod figures_pixelisation;
 mod tradeoff;
 mod tradeoff_failures;
 mod tradeoff_shapes;
+mod trail_chart;
 
 /// The command-line helpers, with `startrack` running this package's binary.
 mod common_cli {

@@ -12,6 +12,7 @@ mod centroid_gauss_fit;
 mod centroid_gauss_fit_width;
 mod centroid_math;
 mod centroid_trail_fit;
+mod centroid_trail_free;
 mod detect;
 mod pixcorr;
 mod raw_cog;

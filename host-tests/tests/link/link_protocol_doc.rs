@@ -96,7 +96,7 @@ fn render() -> String {
     for (id, data) in [
         (
             event::MODE_CHANGE,
-            "frame u32, from u8, to u8, reason u8 (0 start, 1 command, 2 acquired, 3 too few stars, 4 reacquire, 5 no table, 6 table available)",
+            "frame u32, from u8, to u8, reason u8 (0 start, 1 command, 2 acquired, 3 too few stars, 4 reacquire, 5 no table, 6 table available, 7 predicted: the attitude stage predicted the frame's stars)",
         ),
         (event::TABLE_CHANGED, "frame u32, length u32 (0: none)"),
         (event::CONFIG_APPLIED, "frame u32"),

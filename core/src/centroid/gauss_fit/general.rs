@@ -21,31 +21,34 @@ use crate::table::pixcorr::CogPower;
 
 pub(in crate::centroid) type Mat4 = [[f32; 4]; 4];
 
-fn at(m: &Mat4, i: usize, j: usize) -> f32 {
+/// A solved `K x K` system: the step, the Jacobi scales and the scaled Cholesky factor.
+pub(in crate::centroid) type Solved<const K: usize> = ([f32; K], [f32; K], [[f32; K]; K]);
+
+fn at<const K: usize>(m: &[[f32; K]; K], i: usize, j: usize) -> f32 {
     m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
 }
 
-fn set(m: &mut Mat4, i: usize, j: usize, v: f32) {
+fn set<const K: usize>(m: &mut [[f32; K]; K], i: usize, j: usize, v: f32) {
     if let Some(x) = m.get_mut(i).and_then(|r| r.get_mut(j)) {
         *x = v;
     }
 }
 
-fn vget(v: &[f32; 4], i: usize) -> f32 {
+fn vget<const K: usize>(v: &[f32; K], i: usize) -> f32 {
     v.get(i).copied().unwrap_or(0.0)
 }
 
 /// Cholesky factor (lower) of a symmetric positive-definite matrix, or `None`.
-fn cholesky(a: &Mat4) -> Option<Mat4> {
-    let mut l = [[0.0f32; 4]; 4];
-    for j in 0..4 {
+fn cholesky<const K: usize>(a: &[[f32; K]; K]) -> Option<[[f32; K]; K]> {
+    let mut l = [[0.0f32; K]; K];
+    for j in 0..K {
         let d = at(a, j, j) - (0..j).map(|k| at(&l, j, k) * at(&l, j, k)).sum::<f32>();
         if d.is_nan() || d <= 1e-12 {
             return None;
         }
         let ljj = math::sqrt(d);
         set(&mut l, j, j, ljj);
-        for i in j + 1..4 {
+        for i in j + 1..K {
             let s = at(a, i, j) - (0..j).map(|k| at(&l, i, k) * at(&l, j, k)).sum::<f32>();
             set(&mut l, i, j, s / ljj);
         }
@@ -54,17 +57,17 @@ fn cholesky(a: &Mat4) -> Option<Mat4> {
 }
 
 /// Solves `L L^T x = b`.
-fn chol_solve(l: &Mat4, b: &[f32; 4]) -> [f32; 4] {
-    let mut y = [0.0f32; 4];
-    for i in 0..4 {
+fn chol_solve<const K: usize>(l: &[[f32; K]; K], b: &[f32; K]) -> [f32; K] {
+    let mut y = [0.0f32; K];
+    for i in 0..K {
         let s = vget(b, i) - (0..i).map(|k| at(l, i, k) * vget(&y, k)).sum::<f32>();
         if let Some(v) = y.get_mut(i) {
             *v = s / at(l, i, i);
         }
     }
-    let mut x = [0.0f32; 4];
-    for i in (0..4).rev() {
-        let s = vget(&y, i) - (i + 1..4).map(|k| at(l, k, i) * vget(&x, k)).sum::<f32>();
+    let mut x = [0.0f32; K];
+    for i in (0..K).rev() {
+        let s = vget(&y, i) - (i + 1..K).map(|k| at(l, k, i) * vget(&x, k)).sum::<f32>();
         if let Some(v) = x.get_mut(i) {
             *v = s / at(l, i, i);
         }
@@ -231,30 +234,52 @@ type Profiles<'r> = (
 
 /// Jacobi-scales, factors and solves; returns the step and the scaled factor.
 pub(in crate::centroid) fn solve(n: &Normal) -> Option<([f32; 4], [f32; 4], Mat4)> {
-    let mut d = [0.0f32; 4];
+    solve_k(&n.a, &n.b)
+}
+
+/// [`solve`] for a `K x K` system `a d = b`: the step, the Jacobi scales and the scaled
+/// Cholesky factor; `None` when `a` is not positive definite or the step not finite.
+pub(in crate::centroid) fn solve_k<const K: usize>(
+    a: &[[f32; K]; K],
+    b: &[f32; K],
+) -> Option<Solved<K>> {
+    let mut d = [0.0f32; K];
     for (i, di) in d.iter_mut().enumerate() {
-        let aii = at(&n.a, i, i);
+        let aii = at(a, i, i);
         if aii.is_nan() || aii <= 0.0 {
             return None;
         }
         *di = 1.0 / math::sqrt(aii);
     }
-    let mut sa = [[0.0f32; 4]; 4];
-    for i in 0..4 {
-        for k in 0..4 {
-            set(&mut sa, i, k, at(&n.a, i, k) * vget(&d, i) * vget(&d, k));
+    let mut sa = [[0.0f32; K]; K];
+    for i in 0..K {
+        for k in 0..K {
+            set(&mut sa, i, k, at(a, i, k) * vget(&d, i) * vget(&d, k));
         }
     }
     let l = cholesky(&sa)?;
-    let sb = [0, 1, 2, 3].map(|i| vget(&n.b, i) * vget(&d, i));
+    let mut sb = [0.0f32; K];
+    for (i, v) in sb.iter_mut().enumerate() {
+        *v = vget(b, i) * vget(&d, i);
+    }
     let z = chol_solve(&l, &sb);
-    let step = [0, 1, 2, 3].map(|i| vget(&z, i) * vget(&d, i));
+    let mut step = [0.0f32; K];
+    for (i, v) in step.iter_mut().enumerate() {
+        *v = vget(&z, i) * vget(&d, i);
+    }
     step.iter().all(|v| v.is_finite()).then_some((step, d, l))
 }
 
 /// The variance of parameter `i` from the scaled factor: `d_i^2 [(D A D)^-1]_ii`.
-pub(in crate::centroid) fn variance(l: &Mat4, d: &[f32; 4], i: usize) -> f32 {
-    let e = [0, 1, 2, 3].map(|k| if k == i { 1.0 } else { 0.0 });
+pub(in crate::centroid) fn variance<const K: usize>(
+    l: &[[f32; K]; K],
+    d: &[f32; K],
+    i: usize,
+) -> f32 {
+    let mut e = [0.0f32; K];
+    if let Some(v) = e.get_mut(i) {
+        *v = 1.0;
+    }
     let z = chol_solve(l, &e);
     vget(&z, i) * vget(d, i) * vget(d, i)
 }

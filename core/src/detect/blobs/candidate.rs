@@ -1,6 +1,7 @@
 //! From a closed blob to a star candidate: the counting rules of the configuration (pixels,
 //! peak sigmas, saturation), the measured SNR (eq. 8), the shape test for blends, the flags,
-//! and the bounded list that keeps the `N` brightest; plus the reporting of the candidates a
+//! and the bounded list that keeps the `N` best ranked (round before elongated, then the
+//! brightest); plus the reporting of the candidates a
 //! line completed, for the firmware's acquisition centroiding.
 //!
 //! # Cost
@@ -10,6 +11,7 @@
 
 use super::{Blob, Detection, DetectionFlags, LineDetector};
 use crate::calib::PixelFlags;
+use crate::clamp::clamp;
 use crate::detect::DetectError;
 use crate::units::Electrons;
 
@@ -29,8 +31,15 @@ impl<const N: usize> LineDetector<N> {
             return;
         }
         let mut flags = b.flags;
+        let mut moments_64ths = [0i16; 3];
         let (x, y) = match b.moments.shape() {
-            Some(((mx, my), (l1, l2))) => {
+            Some(super::Shape {
+                mean: (mx, my),
+                eigen: (l1, l2),
+                cov,
+            }) => {
+                // Saturating float-to-int casts; NaN gives 0.
+                moments_64ths = cov.map(|m| (m * 64.0) as i16);
                 // A single star is round to within noise; a pair is elongated along the line
                 // joining it (its variance grows by f (1 - f) d^2 for fluxes f, 1 - f and
                 // separation d).
@@ -52,30 +61,44 @@ impl<const N: usize> LineDetector<N> {
             flags |= DetectionFlags::EDGE;
         }
         let d = Detection {
-            x_px: x.clamp(f32::from(b.x_min), f32::from(b.x_max)),
-            y_px: y.clamp(f32::from(b.y_min), f32::from(b.last_y)),
+            x_px: clamp(x, f32::from(b.x_min), f32::from(b.x_max)),
+            y_px: clamp(y, f32::from(b.y_min), f32::from(b.last_y)),
             peak_x: b.peak_x,
             peak_y: b.peak_y,
             flux_e: s,
             pixels: b.pixels,
             snr,
             flags,
+            extent: [b.x_min, b.x_max, b.y_min, b.last_y],
+            moments_64ths,
         };
         if let Err(d) = self.candidates.push(d) {
             self.dropped += 1;
-            let faintest = self
-                .candidates
-                .iter()
-                .enumerate()
-                .min_by(|a, b| a.1.flux_e.total_cmp(&b.1.flux_e))
-                .map(|(i, c)| (i, c.flux_e));
-            if let Some((i, f)) = faintest
-                && d.flux_e > f
+            let mut lowest: Option<(usize, &Detection)> = None;
+            for (i, c) in self.candidates.iter().enumerate() {
+                if lowest.is_none_or(|(_, l)| ranks_above(l, c)) {
+                    lowest = Some((i, c));
+                }
+            }
+            if let Some((i, _)) = lowest.filter(|(_, l)| ranks_above(&d, l))
                 && let Some(slot) = self.candidates.get_mut(i)
             {
                 *slot = d;
             }
         }
+    }
+}
+
+/// True when candidate `a` ranks above `b` in a full list: a round blob above an elongated
+/// one ([`DetectionFlags::BLENDED`]: a pair, a trailed star, or a proton's track), then the
+/// larger flux. A solar flare's proton tracks, brighter than most stars and elongated,
+/// then take no place a round star could have.
+fn ranks_above(a: &Detection, b: &Detection) -> bool {
+    let long = |d: &Detection| d.flags.contains(DetectionFlags::BLENDED);
+    match (long(a), long(b)) {
+        (false, true) => true,
+        (true, false) => false,
+        _ => a.flux_e > b.flux_e,
     }
 }
 

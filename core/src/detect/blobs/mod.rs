@@ -10,8 +10,9 @@
 //! affected candidates are flagged.
 //!
 //! Candidates live in a `heapless::Vec` of capacity `N`. When it is full, a new candidate
-//! replaces the faintest one if it is brighter; either way one candidate is lost and
-//! counted in [`LineDetector::dropped`]: the list always holds the `N` brightest.
+//! replaces the lowest ranked one if it ranks above it (a round blob above an elongated
+//! one, then the brighter); either way one candidate is lost and counted in
+//! [`LineDetector::dropped`]: the list always holds the `N` best ranked.
 //!
 //! Blob positions are means of the blob's pixels weighted by their positive signal: a seed for the centroid
 //! methods, not a measurement.
@@ -80,6 +81,19 @@ pub struct Detection {
     pub snr: f32,
     /// Flags.
     pub flags: DetectionFlags,
+    /// The blob's extent: first and last column, first and last row (active pixels).
+    pub extent: [u16; 4],
+    /// The blob's second moments about its position, weighted by its pixels' positive
+    /// signal: `(xx, yy, xy)` in 1/64 px^2, saturating at +-512 px^2 (a trailed star's is
+    /// stretched along its trail); [`Self::moments_px2`] in px^2.
+    pub moments_64ths: [i16; 3],
+}
+
+impl Detection {
+    /// The blob's second moments `(xx, yy, xy)`, px^2.
+    pub fn moments_px2(&self) -> [f32; 3] {
+        self.moments_64ths.map(|m| f32::from(m) / 64.0)
+    }
 }
 
 /// True when pixel `x` belongs to a blob: above its block's threshold `thr`
@@ -138,8 +152,9 @@ impl Moments {
         self.xy += o.xy + sx * o.y + sy * o.x + sx * sy * o.w;
     }
 
-    /// Mean (relative) and the covariance's eigenvalues (larger first), px and px^2.
-    fn shape(&self) -> Option<((f32, f32), (f32, f32))> {
+    /// Mean (relative), the covariance's eigenvalues (larger first) and the covariance
+    /// `(xx, yy, xy)`, px and px^2.
+    fn shape(&self) -> Option<Shape> {
         if self.w <= 0.0 {
             return None;
         }
@@ -149,8 +164,23 @@ impl Moments {
         let cxy = self.xy / self.w - mx * my;
         let half_tr = 0.5 * (cxx + cyy);
         let disc = libm::sqrtf((0.25 * (cxx - cyy) * (cxx - cyy) + cxy * cxy).max(0.0));
-        Some(((mx, my), (half_tr + disc, half_tr - disc)))
+        Some(Shape {
+            mean: (mx, my),
+            eigen: (half_tr + disc, half_tr - disc),
+            cov: [cxx, cyy, cxy],
+        })
     }
+}
+
+/// A blob's [`Moments::shape`].
+#[derive(Clone, Copy, Debug)]
+struct Shape {
+    /// Mean, relative to the moments' reference, px.
+    mean: (f32, f32),
+    /// The covariance's eigenvalues, larger first, px^2.
+    eigen: (f32, f32),
+    /// The covariance `(xx, yy, xy)`, px^2.
+    cov: [f32; 3],
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -272,5 +302,19 @@ impl<const N: usize> LineDetector<N> {
     /// Above-threshold pixels dropped because a run or blob table was full.
     pub fn dropped_pixels(&self) -> u32 {
         self.dropped_pixels
+    }
+
+    /// Takes candidate `d` out of the list (the tracker found it is no star: a particle hit,
+    /// a saturated object), so that it no longer holds a place a star could take; false when
+    /// the list does not hold it. The list's order changes (the last candidate takes its
+    /// place). Cost: a scan of the list.
+    pub fn forget(&mut self, d: &Detection) -> bool {
+        match self.candidates.iter().position(|c| c == d) {
+            Some(i) => {
+                self.candidates.swap_remove(i);
+                true
+            }
+            None => false,
+        }
     }
 }

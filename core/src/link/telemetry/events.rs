@@ -37,6 +37,7 @@ const fn reason_number(r: ModeReason) -> u8 {
         ModeReason::Reacquire => 4,
         ModeReason::NoTable => 5,
         ModeReason::TableAvailable => 6,
+        ModeReason::Predicted => 7,
     }
 }
 

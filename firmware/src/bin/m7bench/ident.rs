@@ -1,10 +1,16 @@
-//! Stages `ident_lost_in_space_p50`, `ident_lost_in_space_p99`, `ident_lost_in_space_max`
-//! and `ident_track_p99`, per field: star identification with the attitude from all matched
+//! Stages `ident_lost_in_space_p50`, `ident_lost_in_space_p99`, `ident_lost_in_space_max`,
+//! `ident_track_p99`, `predict_catalog_windows_p99` and `ident_confirm_p99`, per field: star identification with the attitude from all matched
 //! stars (`core/src/ident`, `core/src/attitude`) against the repo's 15 degree catalog
 //! (`host-tests/data/catalog-15deg.bin`, `startrack catalog build`), on [`FIELDS`] fields
 //! rendered here at pseudo-random attitudes: each catalog star in the 1024 x 1024 frame
 //! (f = 3889 px), centroid noise about 0.3 px, 10 % dropped, 3 false stars, brightest first.
 //! Tracking starts from the true attitude turned by 2 degrees.
+//!
+//! Tracking from the attitude, as the frame cycle runs it each tracking frame: the catalog's
+//! stars predicted at the next frame (`core/src/predict.rs`: the field's attitude turning at
+//! 1 deg/s across the boresight, 0.1 s ahead, 100 ms exposures, the flight choice of 32
+//! stars), then `ident::confirm` on those stars measured with 0.3 px noise and their
+//! identities, from the propagated attitude.
 //!
 //! Timed: `ident::lost_in_space` (or `ident::track`) on the measured directions; not timed:
 //! rendering the field. Also printed, as a `#` line: the stack each uses (high-water mark of
@@ -15,9 +21,10 @@ use crate::harness::{Bench, Out};
 use crate::inputs::Lcg;
 use core::fmt::Write as _;
 use core::hint::black_box;
-use startrack_core::attitude::{Camera, Quat};
+use startrack_core::attitude::{Attitude, Camera, Quat, Rate};
 use startrack_core::catalog::Catalog;
 use startrack_core::ident::{self, IdentConfig, MAX_STARS, Measured};
+use startrack_core::predict::{self, PredictConfig, PredictFrom, PredictedStars};
 
 /// The catalog the tracker flies for a 15 degree field.
 static CATALOG: &[u8] = include_bytes!("../../../../host-tests/data/catalog-15deg.bin");
@@ -147,12 +154,35 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
     let cfg = IdentConfig::for_camera(FOCAL_PX, SIGMA_PX);
     let mut lis = [0u64; FIELDS];
     let mut trk = [0u64; FIELDS];
+    let mut prd = [0u64; FIELDS];
+    let mut cnf = [0u64; FIELDS];
+    let mut known = [Measured {
+        dir: [0.0, 0.0, 1.0],
+        sigma_rad: 1.0,
+    }; MAX_STARS];
+    let mut ids = [0u16; MAX_STARS];
+    let w_rad_s = [0.0, 1f64.to_radians(), 0.0];
+    // The predicted stars' noise from a generator of its own: the fields stay those the
+    // identification stages have always been measured on.
+    let mut noise = Lcg(0x7072_6564);
+    let small = |s: f64| {
+        [
+            [s * s, 0.0, 0.0],
+            [0.0, s * s, 0.0],
+            [0.0, 0.0, 9.0 * s * s],
+        ]
+    };
     let mut meas = [Measured {
         dir: [0.0, 0.0, 1.0],
         sigma_rad: 1.0,
         inst_mag: None,
     }; MAX_STARS];
-    for (l, t) in lis.iter_mut().zip(trk.iter_mut()) {
+    for (((l, t), p), c) in lis
+        .iter_mut()
+        .zip(trk.iter_mut())
+        .zip(prd.iter_mut())
+        .zip(cnf.iter_mut())
+    {
         let q = random_quat(rng);
         let n = render(&cat, &cam, q, rng, &mut meas);
         let stars = meas.get(..n).ok_or("field")?;
@@ -170,6 +200,66 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
         });
         if !ok {
             return Err("a tracking field did not solve");
+        }
+        let from = PredictFrom {
+            attitude: Attitude {
+                q,
+                cov_rad2: small(0.5e-6),
+            },
+            rate: Rate {
+                w_rad_s,
+                cov_rad2_s2: small(0.2e-6),
+            },
+            scale: 1.0,
+            interval_s: 0.1,
+            exposure_s: 0.1,
+            period_s: 0.1,
+            velocity_m_s: None,
+        };
+        let mut next = PredictedStars::new();
+        let pcfg = PredictConfig::flight(7);
+        *p = bench.measure(|| {
+            ok = black_box(predict::predict(
+                &cat,
+                &cam,
+                black_box(&from),
+                [1024, 1024],
+                &pcfg,
+                &mut next,
+            ))
+            .is_ok()
+        });
+        if !ok || next.len() < 8 {
+            return Err("a field predicted too few stars");
+        }
+        let mut m = 0;
+        for ((k, i), s) in known.iter_mut().zip(ids.iter_mut()).zip(next.iter()) {
+            let dir = cam.direction(
+                f64::from(s.x_px) + SIGMA_PX * normal(&mut noise),
+                f64::from(s.y_px) + SIGMA_PX * normal(&mut noise),
+            );
+            *k = Measured {
+                dir,
+                sigma_rad: SIGMA_PX / FOCAL_PX * dir[2],
+            };
+            *i = s.catalog;
+            m += 1;
+        }
+        let (stars, ids) = (known.get(..m).ok_or("field")?, ids.get(..m).ok_or("ids")?);
+        let q_next = Quat::from_rotation_vector(w_rad_s.map(|c| c * 0.1)) * q;
+        *c = bench.measure(|| {
+            ok = black_box(ident::confirm(
+                &cat,
+                black_box(stars),
+                ids,
+                q_next,
+                1.0,
+                &cfg,
+            ))
+            .is_ok()
+        });
+        if !ok {
+            return Err("a field's predicted identities did not confirm");
         }
     }
     // Stack high-water mark of one field each way (a comment line: the CSV is instructions).
@@ -195,10 +285,14 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
     );
     lis.sort_unstable();
     trk.sort_unstable();
+    prd.sort_unstable();
+    cnf.sort_unstable();
     let at = |v: &[u64; FIELDS], p: usize| v.get((FIELDS - 1) * p / 100).copied().unwrap_or(0);
     bench.row(out, "ident_lost_in_space_p50", "field", at(&lis, 50), 1);
     bench.row(out, "ident_lost_in_space_p99", "field", at(&lis, 99), 1);
     bench.row(out, "ident_lost_in_space_max", "field", at(&lis, 100), 1);
     bench.row(out, "ident_track_p99", "field", at(&trk, 99), 1);
+    bench.row(out, "predict_catalog_windows_p99", "frame", at(&prd, 99), 1);
+    bench.row(out, "ident_confirm_p99", "frame", at(&cnf, 99), 1);
     Ok(())
 }

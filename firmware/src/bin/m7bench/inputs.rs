@@ -116,7 +116,23 @@ pub fn raw_line_noisy(
     rng: &mut Lcg,
     out: &mut [u16; RAW_COLS],
 ) {
+    raw_line_trailed(y, stars, 1, rng, out);
+}
+
+/// [`raw_line_noisy`] with each star trailed along the row: `steps` copies of it at 1 px
+/// intervals centred on its position (`steps` odd), each `1 / steps` of its signal (a trail
+/// of `steps - 1` px over the exposure).
+pub fn raw_line_trailed(
+    y: usize,
+    stars: &[(usize, usize)],
+    steps: usize,
+    rng: &mut Lcg,
+    out: &mut [u16; RAW_COLS],
+) {
     let first_active = usize::from(G.overscan_px + G.covered_px);
+    let steps = steps.max(1);
+    let half = steps / 2;
+    let peak = STAR_PEAK_ADU / steps as u32;
     for (col, v) in out.iter_mut().enumerate() {
         // The LCG's top bits: its low bits have short periods (bits 8..11 repeat every 4096
         // draws, about one line), which made correlated noise peaks.
@@ -124,9 +140,12 @@ pub fn raw_line_noisy(
         if col >= first_active && col < first_active + ACTIVE {
             let x = col - first_active;
             for star in stars {
-                let (dx, dy) = (x.abs_diff(star.0), y.abs_diff(star.1));
-                if dx <= 3 && dy <= 3 {
-                    s += STAR_PEAK_ADU * PSF_1000[3 + dx] / 1000 * PSF_1000[3 + dy] / 1000;
+                let dy = y.abs_diff(star.1);
+                for k in 0..steps {
+                    let dx = (x + half).abs_diff(star.0 + k);
+                    if dx <= 3 && dy <= 3 {
+                        s += peak * PSF_1000[3 + dx] / 1000 * PSF_1000[3 + dy] / 1000;
+                    }
                 }
             }
         }

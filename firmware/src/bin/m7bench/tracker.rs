@@ -1,5 +1,5 @@
-//! Stages `tracker_standby_frame`, `tracker_acquisition_frame`, `tracker_tracking_frame` and
-//! `tracker_tracking_frame_windowed`, per frame: the tracker application as the board runs it (`core/src/tracker`, the flight
+//! Stages `tracker_standby_frame`, `tracker_acquisition_frame`, `tracker_tracking_frame`,
+//! `tracker_tracking_frame_windowed` and `tracker_acquisition_frame_trailed`, per frame: the tracker application as the board runs it (`core/src/tracker`, the flight
 //! configuration: the Gauss fit in both modes), fed every line of a 1033-line CCD47-20 frame
 //! with [`STARS`] stars, as the board's free-running readout delivers them. The standby frame
 //! (commanded, as `startrack process` does) is the floor every frame pays: bias levels and
@@ -21,7 +21,7 @@
 //! Cost of the bench itself: two frames of raw lines, four LCG draws a sample.
 
 use crate::harness::{Bench, Out};
-use crate::inputs::{G, Lcg, PSF_SIGMA_PX, RAW_COLS, raw_line_noisy};
+use crate::inputs::{G, Lcg, PSF_SIGMA_PX, RAW_COLS, raw_line_noisy, raw_line_trailed};
 use startrack_core::readout::ReadoutRequest;
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
@@ -82,17 +82,7 @@ pub fn run(
             stars: 0,
             tracked: 0,
         };
-        let inputs = FrameInputs {
-            table: Some(*table),
-            temperature_k: None,
-            start_us: 0,
-        };
-        let mut ticks = bench.measure(|| {
-            tracker.begin_frame(inputs, &mut sink);
-        });
-        if tracker.mode() != mode {
-            return Err("tracker: unexpected mode");
-        }
+        let mut ticks = begin(bench, table, &mut tracker, &mut sink, mode)?;
         for y in 0..G.lines {
             raw_line_noisy(usize::from(y), &stars, rng, &mut line);
             ticks += bench.measure(|| {
@@ -112,7 +102,80 @@ pub fn run(
         }
         bench.row(out, stage, "frame_30_stars", ticks, 1);
     }
-    windowed(out, bench, table, &mut tracker, &stars, rng)
+    windowed(out, bench, table, &mut tracker, &stars, rng)?;
+    trailed_acquisition(out, bench, table, &mut tracker, &stars, rng)
+}
+
+/// Stars' trail along the rows in `tracker_acquisition_frame_trailed`, px (1 deg/s in
+/// 100 ms on the 15-degree field is 6.8 px).
+const TRAIL_PX: usize = 6;
+
+/// `tracker_acquisition_frame_trailed`: the acquisition frame with every star trailed
+/// [`TRAIL_PX`] along the rows, each found trailed by the trailed test and fitted with its
+/// trail unknown (else the bench fails).
+fn trailed_acquisition<'t>(
+    out: &mut Out,
+    bench: &Bench,
+    table: &CalibTable<'t>,
+    tracker: &mut Tracker<'t, '_, 32>,
+    stars: &[(usize, usize); STARS],
+    rng: &mut Lcg,
+) -> Result<(), &'static str> {
+    tracker
+        .command_mode(Mode::Acquisition)
+        .map_err(|_| "tracker: acquisition refused")?;
+    let mut sink = Count {
+        stars: 0,
+        tracked: 0,
+    };
+    let mut trailed = 0usize;
+    let mut ticks = begin(bench, table, tracker, &mut sink, Mode::Acquisition)?;
+    let mut line = [0u16; RAW_COLS];
+    for y in 0..G.lines {
+        raw_line_trailed(usize::from(y), stars, TRAIL_PX + 1, rng, &mut line);
+        ticks += bench.measure(|| {
+            tracker.push_line(y, &line, &mut sink);
+        });
+    }
+    ticks += bench.measure(|| {
+        tracker.end_frame(&mut sink);
+    });
+    for s in tracker.stars() {
+        trailed += usize::from(s.provenance.contains(Provenance::TRAILED));
+    }
+    if sink.stars != STARS || trailed != STARS {
+        return Err("tracker: not every trailed star reported as trailed");
+    }
+    bench.row(
+        out,
+        "tracker_acquisition_frame_trailed",
+        "frame_30_stars",
+        ticks,
+        1,
+    );
+    Ok(())
+}
+
+/// Begins a frame with `table` (ticks of `begin_frame`); an error unless it runs in `mode`.
+fn begin<'t>(
+    bench: &Bench,
+    table: &CalibTable<'t>,
+    tracker: &mut Tracker<'t, '_, 32>,
+    sink: &mut Count,
+    mode: Mode,
+) -> Result<u64, &'static str> {
+    let inputs = FrameInputs {
+        table: Some(*table),
+        temperature_k: None,
+        start_us: 0,
+    };
+    let ticks = bench.measure(|| {
+        tracker.begin_frame(inputs, sink);
+    });
+    if tracker.mode() != mode {
+        return Err("tracker: unexpected mode");
+    }
+    Ok(ticks)
 }
 
 /// The windowed tracking frame: the lines `tracker.readout_request()` reads, and no others.
@@ -128,17 +191,7 @@ fn windowed<'t>(
         stars: 0,
         tracked: 0,
     };
-    let inputs = FrameInputs {
-        table: Some(*table),
-        temperature_k: None,
-        start_us: 0,
-    };
-    let mut ticks = bench.measure(|| {
-        tracker.begin_frame(inputs, &mut sink);
-    });
-    if tracker.mode() != Mode::Tracking {
-        return Err("tracker: windowed frame not tracking");
-    }
+    let mut ticks = begin(bench, table, tracker, &mut sink, Mode::Tracking)?;
     // What the sequencer reads for this request (a copy: the request borrows the tracker).
     let mut reads = [false; G.lines as usize];
     let mut window_rows = 0usize;

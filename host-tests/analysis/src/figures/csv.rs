@@ -5,6 +5,16 @@ use super::{FigureError, Written};
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// The start of a CSV text: each of `comment` as a `# ` line, then the `columns` line.
+pub fn csv_head(comment: &[&str], columns: &str) -> String {
+    let mut s = String::new();
+    for c in comment {
+        let _ = writeln!(s, "# {c}");
+    }
+    let _ = writeln!(s, "{columns}");
+    s
+}
+
 /// Writes `out/name` with `header` lines (each prefixed by `# `), `columns`, and `rows`.
 pub fn write_csv(
     out: &Path,

@@ -597,3 +597,49 @@ fn trail_bound_table_is_the_trail_bound_csv() {
         assert!(matches(&row[2], rec["across_px"]), "{row:?} vs {rec:?}");
     }
 }
+
+const TRAIL_RATES: &str = "host-tests/figures/trail-rates.csv";
+
+/// The accuracy-against-rate table of docs/accuracy.md ("Trailed stars") is
+/// `host-tests/figures/trail-rates.csv`, row for row (a method's NaN written `-`).
+#[test]
+fn trail_rates_table_is_the_trail_rates_csv() {
+    let csv = Csv::read(TRAIL_RATES);
+    let recs = csv.records();
+    let (header, body) = table("docs/accuracy.md", "trail-rates");
+    assert_eq!(
+        header,
+        [
+            "rate, deg/s",
+            "trail, px",
+            "method",
+            "flagged",
+            "RMS, px",
+            "bound, px",
+            "RMS / bound",
+            "pull"
+        ]
+    );
+    assert_eq!(
+        body.len(),
+        recs.len(),
+        "{TRAIL_RATES}: one row a rate and method"
+    );
+    for (row, rec) in body.iter().zip(&recs) {
+        assert_eq!(row[2].replace('`', ""), rec["method"], "{row:?} vs {rec:?}");
+        let flagged = format!("{}/{}", rec["flagged"], rec["stars"]);
+        assert_eq!(row[3], flagged, "{row:?} vs {rec:?}");
+        for (i, col) in [
+            (0, "rate_deg_s"),
+            (1, "trail_px"),
+            (4, "rms_px"),
+            (5, "bound_px"),
+            (6, "ratio"),
+            (7, "pull"),
+        ] {
+            let (d, c) = (&row[i], rec[col]);
+            let same = if c == "NaN" { d == "-" } else { matches(d, c) };
+            assert!(same, "{col}: {row:?} vs {rec:?}");
+        }
+    }
+}
