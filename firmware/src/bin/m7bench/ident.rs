@@ -159,6 +159,7 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
     let mut known = [Measured {
         dir: [0.0, 0.0, 1.0],
         sigma_rad: 1.0,
+        inst_mag: None,
     }; MAX_STARS];
     let mut ids = [0u16; MAX_STARS];
     let w_rad_s = [0.0, 1f64.to_radians(), 0.0];
@@ -241,6 +242,7 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
             *k = Measured {
                 dir,
                 sigma_rad: SIGMA_PX / FOCAL_PX * dir[2],
+                inst_mag: None,
             };
             *i = s.catalog;
             m += 1;
