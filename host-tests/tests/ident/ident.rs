@@ -9,7 +9,7 @@ use startrack_core::attitude::Quat;
 use startrack_core::catalog::Catalog;
 use startrack_core::ident::{self, IdentConfig, IdentError, Solution};
 use startrack_sim::sky::build::default_catalog;
-use startrack_sim::sky::field::{self, FieldSpec, FieldStar};
+use startrack_sim::sky::field::{self, FLUX_E_AT_MAG0, FieldSpec, FieldStar};
 use std::sync::OnceLock;
 
 fn catalog_bytes() -> &'static [u8] {
@@ -146,20 +146,23 @@ fn lost_in_space_solves_noisy_fields_and_is_never_wrong() {
 
 #[test]
 fn random_point_sets_never_solve() {
-    let (solved, max_hyps) = random_point_sets(&catalog(), 7, 100, 10, 30);
+    let (solved, max_hyps) = random_point_sets(&catalog(), 7, 100, 10, 30, false);
     println!("random point sets: {solved} of 100 solved, at most {max_hyps} hypotheses tried");
     assert_eq!(solved, 0);
 }
 
 /// Lost in space on `sets` sets of uniformly random points (`min_n` to `min_n + span - 1` of
-/// them, seeded by `seed`) over the 15 degree field: how many solved, and the most
-/// hypotheses one set cost. Any other error than no match fails the test.
+/// them, seeded by `seed`) over the 15 degree field, all of one flux or, with `random_flux`,
+/// each of a magnitude uniform over Hp 1 to 6.5 (so the photometric test sees brightnesses
+/// unrelated to the sky): how many solved, and the most hypotheses one set cost. Any other
+/// error than no match fails the test.
 pub(crate) fn random_point_sets(
     cat: &Catalog<'_>,
     seed: u64,
     sets: usize,
     min_n: usize,
     span: u32,
+    random_flux: bool,
 ) -> (usize, u32) {
     let spec = FieldSpec::ccd47_15deg(0.3);
     let cfg = IdentConfig::for_camera(spec.camera.focal_length_px, spec.sigma_px);
@@ -171,7 +174,11 @@ pub(crate) fn random_point_sets(
             .map(|_| FieldStar {
                 x_px: rng.random::<f64>() * 1023.0,
                 y_px: rng.random::<f64>() * 1023.0,
-                flux_e: 1.0,
+                flux_e: if random_flux {
+                    FLUX_E_AT_MAG0 * 10f64.powf(-0.4 * (1.0 + 5.5 * rng.random::<f64>()))
+                } else {
+                    1.0
+                },
                 truth: None,
             })
             .collect();
