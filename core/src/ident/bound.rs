@@ -340,7 +340,7 @@ fn gated(
 /// The bound of a field of `n` measured stars, every one matched, in a field holding
 /// `field_stars` catalog stars, as the `j`-th hypothesis of the search, each star with the
 /// angular sigma `sigma_rad` and no prediction error (the fit's covariance only widens a
-/// gate): the smaller of the two counts', as [`false_match_bound`] has it. What a field needs
+/// gate): the smaller of the two counts', as the search's bound has it. What a field needs
 /// to be solved: the floor of sparse fields.
 pub fn bound_with_field_stars(
     cat: &Catalog<'_>,
