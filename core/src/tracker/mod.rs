@@ -97,10 +97,17 @@ pub const EARTH_MIN_COLUMNS: u32 = 48;
 /// shot noise (22 e-) then passes the CCD47-20's read and dark noise and the faint stars'
 /// SNR falls.
 pub const STRAY_LIGHT_LIMIT_E: f32 = 500.0;
-/// This many particle hits counted in a frame flag it: a quiet orbit's rate (~1 cm^-2 s^-1)
-/// gives a 1.77 cm^2 sensor about 0.2 hits a 100 ms frame, the South Atlantic Anomaly ~190,
-/// of which the monitor counts about one in six in an acquisition frame.
+/// The radiation limit, particle hits counted per whole active area and 100 ms read: a
+/// quiet orbit's rate (~1 cm^-2 s^-1) gives a 1.77 cm^2 sensor about 0.2 hits a 100 ms
+/// frame, the South Atlantic Anomaly ~190, of which the monitor counts about one in six.
+/// A tracking frame reads ~0.5 % of the area: its hits are scaled by the area and the
+/// exposure read, over the last [`RADIATION_FRAMES`] frames.
 pub const RADIATION_HITS: u16 = 5;
+/// Frames whose hits and read area the radiation rate sums: the last second at 20 Hz.
+pub const RADIATION_FRAMES: usize = 20;
+/// Fewest hits over [`RADIATION_FRAMES`] that can flag radiation: one hit (or an unlisted
+/// hot pixel's spike seen once) in a tracking frame's small area is no rate.
+pub const RADIATION_MIN_HITS: u32 = 2;
 
 use crate::calib::refresh::{Defect, DefectWatch};
 use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels};
@@ -207,9 +214,55 @@ pub struct Tracker<'t, 'b, const N: usize> {
     acq: Acquisition<'t, N>,
     trk: Tracking,
     work: FrameWork<N>,
-    /// The Moon and Earth bits of the last acquisition frame, which the tracking frames
-    /// after it carry (their windows do not see the whole field).
-    last_bright: Obstructions,
+    /// The last frames' hits and areas read, for the radiation rate.
+    radiation: RadiationWindow,
+}
+
+/// One frame's share of the radiation rate: hits counted, and the pixels and exposure read.
+#[derive(Clone, Copy, Debug, Default)]
+struct RadiationFrame {
+    hits: u16,
+    read_px: u32,
+    exposure_ms: u32,
+}
+
+/// The particle-hit rate over the last [`RADIATION_FRAMES`] frames (a ring).
+struct RadiationWindow {
+    frames: [RadiationFrame; RADIATION_FRAMES],
+    next: usize,
+}
+
+impl RadiationWindow {
+    const fn new() -> Self {
+        Self {
+            frames: [RadiationFrame {
+                hits: 0,
+                read_px: 0,
+                exposure_ms: 0,
+            }; RADIATION_FRAMES],
+            next: 0,
+        }
+    }
+
+    /// Adds a frame; returns whether the window's rate is above the limit: at least
+    /// [`RADIATION_MIN_HITS`], and `hits / (px ms) >= RADIATION_HITS / (area 100 ms)`.
+    /// The sums fit a u64: 20 frames of at most 2^32 px times 2^32 ms.
+    fn add(&mut self, f: RadiationFrame, active_px: u32) -> bool {
+        if let Some(slot) = self.frames.get_mut(self.next) {
+            *slot = f;
+        }
+        self.next = (self.next + 1) % RADIATION_FRAMES;
+        let (mut hits, mut px_ms) = (0u64, 0u64);
+        for g in &self.frames {
+            hits += u64::from(g.hits);
+            px_ms = px_ms.saturating_add(u64::from(g.read_px) * u64::from(g.exposure_ms));
+        }
+        // hits <= 20 * 65,535 and active_px * 100 < 2^39: the product fits.
+        hits >= u64::from(RADIATION_MIN_HITS)
+            && px_ms > 0
+            && u128::from(hits) * u128::from(active_px) * 100
+                >= u128::from(RADIATION_HITS) * u128::from(px_ms)
+    }
 }
 
 /// What a frame's measurements write into: one window's scratch, the star list, the
@@ -283,7 +336,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             policy: None,
             acq: Acquisition::new(),
             trk: Tracking::new(),
-            last_bright: Obstructions::empty(),
+            radiation: RadiationWindow::new(),
             work: FrameWork {
                 scratch: Scratch::new(),
                 stars: StarList::new(),
@@ -529,7 +582,11 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             Policy::new(method, &self.config, &t)
         });
         match to {
-            Mode::Acquisition => self.acq.start(&mut self.buffers.ring),
+            Mode::Acquisition => {
+                self.work.summary.read_px =
+                    u32::from(self.geometry.active_cols) * u32::from(self.geometry.active_rows);
+                self.acq.start(&mut self.buffers.ring)
+            }
             Mode::Tracking => {
                 let placed = self.trk.start(
                     &self.config,
@@ -707,30 +764,41 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
 }
 
 impl<const N: usize> Tracker<'_, '_, N> {
-    /// What took stars from the frame now ending (see [`Obstructions`]): in acquisition
-    /// the largest saturated region's size, in tracking the last acquisition's Moon and
-    /// Earth bits; in both the sky and the hits.
+    /// What took stars from the frame now ending (see [`Obstructions`]), each bit measured
+    /// in it: the Moon and the Earth from the width of its saturated columns (acquisition:
+    /// the largest saturated region over the active rows; tracking: the probe row's widest
+    /// run), the Sun from its sky, radiation from the hit rate of the last frames.
     fn obstructions(&mut self) -> Obstructions {
         let s = &self.work.summary;
         let rows = u32::from(self.geometry.active_rows);
         let mut o = Obstructions::empty();
-        match s.mode {
-            Mode::Acquisition => {
-                if s.saturated_px > EARTH_MIN_COLUMNS * rows {
-                    o |= Obstructions::EARTH;
-                } else if s.saturated_px >= MOON_MIN_COLUMNS * rows {
-                    o |= Obstructions::MOON;
-                }
-                self.last_bright = o;
-            }
-            Mode::Tracking => o |= self.last_bright,
-            _ => {}
+        // The acquisition's region in pixels over the active rows; the probe row's run.
+        let (moon, earth) = match (s.mode, s.probe_saturated_cols.map(u32::from)) {
+            (Mode::Acquisition, _) => (
+                s.saturated_px >= MOON_MIN_COLUMNS * rows,
+                s.saturated_px > EARTH_MIN_COLUMNS * rows,
+            ),
+            (Mode::Tracking, Some(c)) => (c >= MOON_MIN_COLUMNS, c > EARTH_MIN_COLUMNS),
+            _ => (false, false),
+        };
+        if earth {
+            o |= Obstructions::EARTH;
+        } else if moon {
+            o |= Obstructions::MOON;
         }
         if s.sky_e > STRAY_LIGHT_LIMIT_E {
             o |= Obstructions::SUN;
         }
-        if s.hits >= RADIATION_HITS {
-            o |= Obstructions::RADIATION;
+        if s.mode != Mode::Standby {
+            let frame = RadiationFrame {
+                hits: s.hits,
+                read_px: s.read_px,
+                exposure_ms: self.config.exposure_ms,
+            };
+            let active_px = u32::from(self.geometry.active_cols) * rows;
+            if self.radiation.add(frame, active_px) {
+                o |= Obstructions::RADIATION;
+            }
         }
         o
     }

@@ -57,7 +57,7 @@ use crate::centroid::CentroidInput;
 use crate::centroid::raw_cog::{PlanError, RawCogParams, RawWindow};
 use crate::detect::capture::CAPTURE_MAX_SIDE;
 use crate::detect::track::TrackResult;
-use crate::detect::{TrackFlags, track_detect};
+use crate::detect::track_detect;
 use crate::geometry::ReadoutGeometry;
 use crate::window::Rect;
 
@@ -99,7 +99,47 @@ pub(super) struct Tracking {
     /// The current frame's windows came from a prediction.
     predicted_frame: bool,
     placed: heapless::Vec<Placed, TRACK_WINDOWS>,
-    rects: heapless::Vec<Rect, TRACK_WINDOWS>,
+    /// The windows' rectangles (capture order), then the probe row's.
+    rects: heapless::Vec<Rect, { TRACK_WINDOWS + 1 }>,
+    /// This frame's probe row ([`probe_row`]) and its raw column range.
+    probe: Option<Probe>,
+}
+
+/// The full row a tracking frame reads besides its windows: a bloomed column crosses every
+/// row, so its widest run of saturated columns measures the Moon or the Earth in the field as
+/// the acquisition's largest saturated region does.
+#[derive(Clone, Copy, Debug)]
+struct Probe {
+    /// Active row read.
+    y: u16,
+    /// Raw index of its first active column.
+    first_col: usize,
+    /// Active columns.
+    cols: usize,
+}
+
+/// The probe row of tracking frame `frame`: one of four rows spread down the active area
+/// (at 1/8, 3/8, 5/8 and 7/8 of its height) in turn, so that a partial bloom or a defect
+/// row does not hold one answer for good.
+pub(super) fn probe_row(frame: u32, active_rows: u16) -> u16 {
+    let k = (frame % 4) as u16;
+    let y = u32::from(active_rows) * u32::from(2 * k + 1) / 8;
+    // Below active_rows, so it fits.
+    y as u16
+}
+
+/// The widest run of raw samples at or above `saturation_adu` in `row`.
+fn widest_saturated_run(row: &[u16], saturation_adu: u16) -> u16 {
+    let (mut best, mut run) = (0u16, 0u16);
+    for &v in row {
+        if v >= saturation_adu {
+            run = run.saturating_add(1);
+            best = best.max(run);
+        } else {
+            run = 0;
+        }
+    }
+    best
 }
 
 /// Flags of a fused result that send the window through the full path.
@@ -186,6 +226,7 @@ impl Tracking {
             predicted_frame: false,
             placed: heapless::Vec::new(),
             rects: heapless::Vec::new(),
+            probe: None,
         }
     }
 
@@ -222,7 +263,7 @@ impl Tracking {
         self.predicted_frame
     }
 
-    /// This frame's windows.
+    /// What this frame reads: its windows, then its probe row.
     pub(super) fn rects(&self) -> &[Rect] {
         &self.rects
     }
@@ -326,6 +367,30 @@ impl Tracking {
                 slot,
             });
             let _ = self.rects.push(rect);
+            summary.read_px = summary
+                .read_px
+                .saturating_add(u32::from(rect.width) * u32::from(rect.height));
+        }
+        self.probe = None;
+        if geometry.active_rows > 0 && geometry.active_cols > 0 {
+            let y = probe_row(summary.frame, geometry.active_rows);
+            let row = Rect {
+                x0: 0,
+                y0: y,
+                width: geometry.active_cols,
+                height: 1,
+            };
+            // One more than the windows' capacity: cannot fail.
+            if self.rects.push(row).is_ok() {
+                self.probe = Some(Probe {
+                    y,
+                    first_col: geometry.first_active_col(),
+                    cols: usize::from(geometry.active_cols),
+                });
+                summary.read_px = summary
+                    .read_px
+                    .saturating_add(u32::from(geometry.active_cols));
+            }
         }
         u16::try_from(self.placed.len()).unwrap_or(u16::MAX)
     }
@@ -345,6 +410,12 @@ impl Tracking {
         levels: &LineLevels,
         mut sh: Shared<'_, N>,
     ) -> LineOutcome {
+        if let Some(p) = self.probe.filter(|p| p.y == y)
+            && let Some(row) = samples.get(p.first_col..p.first_col + p.cols)
+        {
+            sh.summary.probe_saturated_cols =
+                Some(widest_saturated_run(row, cal.table().saturation_adu()));
+        }
         match sh.capture.push_line(y, samples, levels) {
             Ok(done) => {
                 let mut n = 0u8;
@@ -450,6 +521,15 @@ impl Tracking {
         if let Some((e, f)) = sh.scratch.calibrated_mut(rect) {
             sh.watch.apply(rect, e, f);
         }
+        // A window a saturated column crosses (saturated pixels in its top or bottom row) is
+        // on a bright object or its bloomed columns: masked before the window test (whose
+        // border, all saturated, has no background, so it would only call the star lost),
+        // never a star, and neither its sky nor its pixels feed the frame's background or
+        // the defect watch (a star whose core clipped is measured, flagged saturated).
+        if crossed_by_saturation(sh, rect) {
+            sh.summary.masked = sh.summary.masked.saturating_add(1);
+            return;
+        }
         let verdict = match sh.scratch.window(rect, clipped) {
             Some(input) => {
                 let verdict =
@@ -467,13 +547,6 @@ impl Tracking {
             return;
         }
         note_sky(sh.summary, verdict.background_e);
-        // A window a saturated column crosses (saturated pixels in its top or bottom row) is
-        // on a bright object or its bloomed columns: masked, never a star (a star whose
-        // core clipped is measured, flagged saturated).
-        if verdict.flags.contains(TrackFlags::SATURATED) && crossed_by_saturation(sh, rect) {
-            sh.summary.masked = sh.summary.masked.saturating_add(1);
-            return;
-        }
         if let Some(trail) = trail {
             let Some(input) = sh.scratch.window(rect, clipped) else {
                 sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);

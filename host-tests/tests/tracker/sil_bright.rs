@@ -22,6 +22,8 @@ pub const BRIGHT_CSV: &str = "host-tests/figures/bright-availability.csv";
 
 fn check_targets(r: &BrightRow) {
     assert_eq!(r.wrong, 0, "{r:?}");
+    // Every frame's flags are true of it: none stale, none without its cause.
+    assert_eq!(r.wrong_flags, 0, "{r:?}");
     if r.scene == "flare" {
         // Open: at a flare's rate tracking loses some frames (a hit beside a tracked star
         // moves its fit and identification refuses the frame); never a wrong attitude
