@@ -357,3 +357,51 @@ pub fn csv(rows: &[BrightRow], comment: &[&str]) -> String {
     }
     out
 }
+
+/// The flight cycle the turning scenes run: a frame every 50 ms (20 Hz), 39 ms exposures
+/// (`TrackerConfig::FLIGHT`), us.
+pub const TURNING_PERIOD_US: u64 = 50_000;
+
+/// The SIL over the sky turning at `rate_deg_s` across the boresight (about the camera's x
+/// axis: the stars trail along the columns) during each 39 ms exposure, a frame every
+/// [`TURNING_PERIOD_US`], from power-on, with `env`'s proton hits; seed `seed`.
+pub fn turning_config(env: ProtonEnv, rate_deg_s: f64, frames: u32, seed: u64) -> SilConfig {
+    use rand::SeedableRng;
+    use startrack_sim::sky::motion::{ExposureMotion, RateProfile};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x5455_524e);
+    let q0 = startrack_sim::sky::field::random_attitude(&mut rng);
+    let tracker = startrack_core::tracker::TrackerConfig::FLIGHT;
+    let period_s = TURNING_PERIOD_US as f64 * 1e-6;
+    let exposure_s = f64::from(tracker.exposure_ms) * 1e-3;
+    let profile = RateProfile::constant([rate_deg_s.to_radians(), 0.0, 0.0]);
+    // Valid by construction: a finite rate, the exposure inside the period.
+    let motion =
+        ExposureMotion::new(profile, period_s, exposure_s).unwrap_or_else(|e| unreachable!("{e}"));
+    SilConfig {
+        frames,
+        seed,
+        tracker,
+        period_us: TURNING_PERIOD_US,
+        sky: Some(startrack_sim::sky::scene::SkyScene::ccd47_15deg_moving(
+            q0, motion,
+        )),
+        bright: protons(env),
+        ..SilConfig::default()
+    }
+}
+
+/// A turning run's result: its row (as [`row`]) and the first frame with an attitude
+/// (`None`: none), lost in space's from power-on.
+pub fn run_turning(
+    env: ProtonEnv,
+    rate_deg_s: f64,
+    frames: u32,
+    seed: u64,
+) -> Result<(BrightRow, Option<usize>), String> {
+    let report = sil::run(&turning_config(env, rate_deg_s, frames, seed))?;
+    let first = report
+        .frames
+        .iter()
+        .position(|f| f.attitude.as_ref().is_some_and(|c| c.fix.as_ref().is_ok()));
+    Ok((row(env.name(), &report), first))
+}

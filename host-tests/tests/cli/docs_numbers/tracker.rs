@@ -294,10 +294,12 @@ fn bright_table_is_the_bright_availability_csv() {
             "clear frames",
             "clear, with attitude",
             "recovery, frames",
+            "with a cause",
             "flagged Moon",
             "flagged Earth",
             "flagged Sun",
             "flagged radiation",
+            "wrong flags",
             "hits counted",
             "masked"
         ]
@@ -311,12 +313,14 @@ fn bright_table_is_the_bright_availability_csv() {
             (3, "wrong"),
             (4, "eligible"),
             (5, "eligible_solved"),
-            (7, "flagged_moon"),
-            (8, "flagged_earth"),
-            (9, "flagged_sun"),
-            (10, "flagged_radiation"),
-            (11, "hits"),
-            (12, "masked"),
+            (7, "cause_frames"),
+            (8, "flagged_moon"),
+            (9, "flagged_earth"),
+            (10, "flagged_sun"),
+            (11, "flagged_radiation"),
+            (12, "wrong_flags"),
+            (13, "hits"),
+            (14, "masked"),
         ] {
             assert!(matches(&row[i], rec[col]), "{col}: {row:?} vs {rec:?}");
         }
