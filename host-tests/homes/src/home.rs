@@ -216,6 +216,7 @@ pub struct SimLines<F: FnMut(u32) -> Simulator> {
     pub readout_done_us: Rc<Cell<u64>>,
     readout_us: u64,
     timing: Option<FrameTiming>,
+    integrations_us: Vec<Option<(u64, u64)>>,
     integration: Option<Integration>,
 }
 
@@ -242,8 +243,16 @@ impl<F: FnMut(u32) -> Simulator> SimLines<F> {
             readout_done_us: Rc::new(Cell::new(0)),
             readout_us: 0,
             timing: None,
+            integrations_us: Vec::new(),
             integration: None,
         }
+    }
+
+    /// The source with frame `k` integrating over `integrations_us[k]` (start, end, us) where
+    /// that is `Some`, whatever the timing says: another run's instants replayed.
+    pub fn with_integrations(mut self, integrations_us: Vec<Option<(u64, u64)>>) -> Self {
+        self.integrations_us = integrations_us;
+        self
     }
 
     /// The source with frames taken as `timing` says (their [`Integration`] and readout
@@ -341,6 +350,9 @@ impl<F: FnMut(u32) -> Simulator> LineSource for SimLines<F> {
                 end_us: start_us + t.exposure_us,
             }
         });
+        if let Some(&Some((start_us, end_us))) = self.integrations_us.get(frame as usize) {
+            self.integration = Some(Integration { start_us, end_us });
+        }
         if let Some(i) = self.integration {
             // The frame transfer ends the exposure; the readout follows it.
             self.readout_us += i.duration_us();

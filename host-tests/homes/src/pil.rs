@@ -146,6 +146,9 @@ pub struct PilFrame {
     pub busy_counts: u64,
     /// The stack's high-water mark, bytes.
     pub stack_used_b: u32,
+    /// The frame's integration on the firmware's clock (start, end), us; `None` when its line
+    /// source gave none.
+    pub integration_us: Option<(u64, u64)>,
 }
 
 impl PilFrame {
@@ -575,6 +578,10 @@ fn read_outcome(r: &mut impl Read) -> Result<PilFrame, String> {
     let sigma_boresight_rad = read_f64(r)?;
     let sigma_roll_rad = read_f64(r)?;
     let false_probability = read_f64(r)?;
+    let integration_us = match (read_u64(r)?, read_u64(r)?) {
+        (u64::MAX, u64::MAX) => None,
+        (start, end) => Some((start, end)),
+    };
     let mut stars = Vec::with_capacity(usize::from(n));
     for _ in 0..n {
         stars.push(PilStar {
@@ -605,6 +612,7 @@ fn read_outcome(r: &mut impl Read) -> Result<PilFrame, String> {
         counts,
         busy_counts,
         stack_used_b,
+        integration_us,
     })
 }
 
@@ -633,7 +641,8 @@ pub struct Comparison {
 }
 
 /// Runs the SIL with the PIL's table and frame period (`period_us`, the firmware's frame
-/// time rounded) and compares it with `report`.
+/// time rounded), each frame integrating when the firmware's did (the tracker's rate, its
+/// predicted windows and trails follow the frames' instants), and compares it with `report`.
 pub fn compare(
     config: &SilConfig,
     report: &PilReport,
@@ -646,6 +655,7 @@ pub fn compare(
     let table = crate::flash_home::flash_table(config, &params)?;
     let sil_config = SilConfig {
         period_us,
+        integrations_us: report.frames.iter().map(|f| f.integration_us).collect(),
         ..config.clone()
     };
     let sil = sil::run_with_table(&sil_config, &table)?;

@@ -101,6 +101,11 @@ pub struct SilConfig {
     /// With a sky scene: the Moon, the Earth, the Sun's stray light, planets and proton hits
     /// ([`startrack_sim::sky::bright`]); empty by default.
     pub bright: BrightSky,
+    /// Frame `k`'s integration (start, end) on the tracker's clock, us, where the `k`-th entry
+    /// is `Some`, instead of the one [`frame_timing`] gives: another run's instants (the PIL's
+    /// firmware's), so that the two runs' rates and predictions are the same to the bit.
+    /// Empty by default.
+    pub integrations_us: Vec<Option<(u64, u64)>>,
 }
 
 /// The spacecraft time the SIL's commands take at counter 0 (`--spacecraft-time`'s
@@ -125,6 +130,7 @@ impl Default for SilConfig {
             false_stars: Vec::new(),
             false_stars_from: 0,
             bright: BrightSky::default(),
+            integrations_us: Vec::new(),
         }
     }
 }
@@ -464,7 +470,8 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
     let mut link = Box::new(LinkService::new());
     let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
     let mut source = SimLines::new(|frame| frame_simulator(config, &params, &base, catalog, frame))
-        .with_timing(frame_timing(config));
+        .with_timing(frame_timing(config))
+        .with_integrations(config.integrations_us.clone());
     let mut recorder = Recorder::default();
     let mut tables = FixedTable(Some(table));
     let mut thermometer = FixedTemperature(None);

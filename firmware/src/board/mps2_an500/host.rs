@@ -17,7 +17,7 @@
 //! |---|---|
 //! | boot | `b'B'`, reset cause u8, start-up SysTick counts u32 |
 //! | request | `b'Q'`, frame u32, exposure us u32, kind u8 (0 full frame, 1 windows), windows u16, per window x0, y0, width, height u16 |
-//! | outcome | `b'R'`, frame u32, mode u8, stars u16, SysTick counts since boot u64, of them busy u64, stack used bytes u32, attitude u8 (0 none, 1 fix, 2 refused), solve mode u8, matched u8, used u8, q f64 x 4, 1-sigma cross-boresight and roll rad f64, false-match probability f64, then per star x px, y px, flux e- f32, flags u32 |
+//! | outcome | `b'R'`, frame u32, mode u8, stars u16, SysTick counts since boot u64, of them busy u64, stack used bytes u32, attitude u8 (0 none, 1 fix, 2 refused), solve mode u8, matched u8, used u8, q f64 x 4, 1-sigma cross-boresight and roll rad f64, false-match probability f64, the frame's integration start and end us u64 x 2 (on the firmware's clock; all ones: none), then per star x px, y px, flux e- f32, flags u32 |
 //! | line (host) | line u16 (0xFFFF: the frame reads no more; 0xFFFD, 0xFFFC: hang or panic, the fault tests), last u8, 0 u8, ready us u32 (when the sequencer's program for this frame has taken the line's last sample, from the program's start at the end of the exposure; for 0xFFFF the program's end), then the line's samples u16 x 1072 |
 
 use crate::lines::{FrameRequest, LINE_LEN, LineBuf};
@@ -25,7 +25,7 @@ use semihosting::fs::File;
 use semihosting::io::{Read, Write};
 use startrack_core::cycle::FrameOutcome;
 use startrack_core::solver::SolveMode;
-use startrack_core::tracker::{Mode, StarRecord};
+use startrack_core::tracker::{Integration, Mode, StarRecord};
 
 /// The line header's "no more lines" value.
 pub const END_OF_FRAME: u16 = 0xFFFF;
@@ -138,9 +138,10 @@ impl HostChannel {
         counts: u64,
         busy_counts: u64,
         stack_used_b: u32,
+        integration: Option<Integration>,
     ) -> Result<(), ChannelError> {
         let s = &outcome.summary;
-        let mut b = [0u8; 88];
+        let mut b = [0u8; 104];
         b[0] = b'R';
         b[1..5].copy_from_slice(&s.frame.to_le_bytes());
         b[5] = match s.mode {
@@ -174,6 +175,12 @@ impl HostChannel {
                 }
             }
         }
+        // The frame's integration on the firmware's clock (all ones: none), so that the host's
+        // SIL can take its frames at the same instants.
+        let (start_us, end_us) =
+            integration.map_or((u64::MAX, u64::MAX), |i| (i.start_us, i.end_us));
+        b[88..96].copy_from_slice(&start_us.to_le_bytes());
+        b[96..104].copy_from_slice(&end_us.to_le_bytes());
         self.req.write_all(&b)?;
         for st in stars {
             let mut w = [0u8; 16];
