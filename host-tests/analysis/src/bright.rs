@@ -163,7 +163,7 @@ pub struct BrightRow {
     pub hits: usize,
     /// Detections and windows masked over the run.
     pub masked: usize,
-    /// Frames whose truth holds a cause ([`Cause::present`]): the Moon or the Earth in the
+    /// Frames whose truth holds a cause the flags should name: the Moon or the Earth in the
     /// field, the Sun's stray light above the limit, an SAA or flare proton rate.
     pub cause_frames: usize,
     /// Frames whose flags say what the truth does not ([`flag_errors`]): a stale flag.
