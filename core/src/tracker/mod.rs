@@ -80,6 +80,7 @@ pub use ports::{
     TelemetrySink, Thermometer,
 };
 pub use predicted::{PredictedStar, predicted_window_side};
+pub use track::TRAIL_SETTLE_FRAMES;
 pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Provenance, StarFlags,
     StarRecord, TemperatureSource,
@@ -406,6 +407,8 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             return Err(e);
         }
         loop {
+            // Known once the frame's first line is in (some sources know it at its start).
+            self.set_integration(source.integration());
             match source.next_line().await {
                 Ok(Some(l)) => {
                     self.push_line(l.line, l.samples, ports.telemetry);
@@ -418,6 +421,16 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             }
         }
         Ok(self.end_frame(ports.telemetry))
+    }
+
+    /// When the current frame's image was integrated, as the line source reports it
+    /// ([`LineSource::integration`]; a `None` keeps what it gave before): the trails of its
+    /// tracked stars are their motion over it. [`Self::run_frame`] gives it before each
+    /// line; a home that pushes lines itself gives it once it knows it. Without it a
+    /// trailed star's trail is not known, and the star is flagged
+    /// [`StarFlags::TRAIL_UNKNOWN`].
+    pub fn set_integration(&mut self, integration: Option<Integration>) {
+        self.trk.set_integration(integration);
     }
 
     /// Starts the next frame (ending an open one first) and returns its number: applies a
@@ -439,6 +452,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.started = true;
         self.frame = frame;
         self.open = true;
+        self.trk.next_integration();
         if let Some(c) = self.staged_config.take() {
             self.config = c;
             telemetry.event(&Event::ConfigApplied { frame });
