@@ -80,11 +80,11 @@ pub use ports::{
     TelemetrySink, Thermometer,
 };
 pub use predicted::{PredictedStar, predicted_window_side};
-pub use track::TRAIL_SETTLE_FRAMES;
 pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Provenance, StarFlags,
     StarRecord, TemperatureSource,
 };
+pub use track::TRAIL_SETTLE_FRAMES;
 
 use crate::calib::refresh::{Defect, DefectWatch};
 use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels};
@@ -304,6 +304,18 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
     /// the stars taken.
     pub fn predict_next(&mut self, stars: &[PredictedStar]) -> usize {
         self.trk.set_prediction(stars)
+    }
+
+    /// Asks for one more acquisition frame where the mode rules would hand the next frame
+    /// over to tracking after an acquisition frame (between frames; no effect otherwise,
+    /// and a command or a prediction of the next frame takes precedence). The attitude
+    /// stage asks it when the acquisition gave an attitude but no rate: one image holds no
+    /// star's direction of motion (a trail reads the same both ways), so the first
+    /// tracking frames on the tracker's own stars would measure moving stars whose motion
+    /// is not known yet (`TRAIL_UNKNOWN`), while a second lost-in-space attitude gives the
+    /// rate, and the catalog then predicts the next frame's windows with their trails.
+    pub fn acquire_again(&mut self) {
+        self.modes.acquire_again();
     }
 
     /// The calibration a window read now gets, as the tracker would calibrate it: the last

@@ -115,8 +115,8 @@ pub fn config(case: &RateCase, seed: u64, frames: u32) -> SilConfig {
     let q0 = random_attitude(&mut rng);
     let profile = RateProfile::constant(case.vector_deg_s().map(f64::to_radians));
     // Valid by construction: finite rate, exposure within the period.
-    let motion = ExposureMotion::new(profile, PERIOD_S, EXPOSURE_S)
-        .unwrap_or_else(|e| unreachable!("{e}"));
+    let motion =
+        ExposureMotion::new(profile, PERIOD_S, EXPOSURE_S).unwrap_or_else(|e| unreachable!("{e}"));
     // The tracker is told the exposure it runs with (its mid-exposure tags follow it).
     let mut tracker = SilConfig::default().tracker;
     tracker.exposure_ms = (EXPOSURE_S * 1e3).round() as u32;

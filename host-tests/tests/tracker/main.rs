@@ -12,6 +12,7 @@ mod frame_cycle;
 mod safe_states;
 mod sil_acquire_rate;
 mod sil_motion;
+mod sil_second_sky;
 mod sil_sky;
 mod tracker;
 mod tracker_rules;
