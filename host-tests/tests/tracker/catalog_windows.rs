@@ -470,7 +470,9 @@ fn any_input_predicts_valid_stars_or_an_error() {
                     for p in &stars {
                         prop_assert!(p.is_valid());
                         let side = startrack_core::tracker::predicted_window_side(
-                            7, p.bound_px, p.trail_px(exposure as f32),
+                            7,
+                            p.bound_px,
+                            p.trail_px(exposure as f32),
                         );
                         let half = f32::from(side / 2);
                         prop_assert!(p.x_px >= half && p.x_px <= 1023.0 - half, "{p:?}");
