@@ -384,6 +384,7 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
                 rate,
                 aberration_applied,
             );
+            r.flags |= crate::link::telemetry::Validity::of_obstructions(summary.obstructions);
             let latency = ports.clock.now_us().saturating_sub(mid_us);
             r.latency_us = u32::try_from(latency).unwrap_or(u32::MAX);
             self.link.send_attitude(&r);

@@ -3,9 +3,10 @@
 //!
 //! Each frame, the usable stars ([`StarRecord::is_centroid`], not saturated, their trail
 //! neither unknown nor clipped ([`StarFlags::TRAIL_UNKNOWN`], [`StarFlags::TRAIL_CLIPPED`]),
-//! with a finite
-//! positive sigma) are turned into camera-frame directions by the [`Camera`], brightest
-//! first, at most [`ident::MAX_STARS`]. With a prior no older than
+//! with a finite positive sigma) are turned into camera-frame directions by the [`Camera`],
+//! at most [`ident::MAX_STARS`], those the fitted PSF describes first (no
+//! [`StarFlags::POOR_FIT`]), then the brightest; with [`CLEAN_ENOUGH`] of those, the
+//! `POOR_FIT` ones are left out. With a prior no older than
 //! [`SolverConfig::max_prior_age_us`], [`ident::track`] identifies them near it; without one,
 //! or when tracking fails, [`ident::lost_in_space`] does. A solution replaces the prior; a
 //! frame with none leaves the prior to age out, so one bad frame does not send the next
@@ -280,10 +281,16 @@ impl<'c> Solver<'c> {
         applied: &mut bool,
     ) -> Result<Fix, SolveError> {
         self.identified = 0;
-        // Each usable star's flux, direction and the catalog star it was predicted to be
-        // (when it lies within its prediction's bound).
-        let mut measured: heapless::Vec<(f32, Measured, Option<u16>), { ident::MAX_STARS }> =
-            heapless::Vec::new();
+        // Ranked as the star list ranks: a window the PSF describes (no `POOR_FIT`: a
+        // particle hit is bright and fits badly) before one it does not, then the brighter;
+        // each with its direction and the catalog star it was predicted to be (when it lies
+        // within its prediction's bound).
+        let rank = |s: &StarRecord| (s.fit_is_clean(), s.flux_e);
+        let above = |a: &(bool, f32), b: &(bool, f32)| (a.0, a.1) > (b.0, b.1);
+        let mut measured: heapless::Vec<
+            ((bool, f32), Measured, Option<u16>),
+            { ident::MAX_STARS },
+        > = heapless::Vec::new();
         for (k, s) in stars.iter().enumerate() {
             let id = identity(k)
                 .filter(|p| p.matches(s.x_px, s.y_px))
@@ -294,16 +301,25 @@ impl<'c> Solver<'c> {
             // A position the camera model cannot invert (a fold) is not used.
             let Some(m) = self.measure(s) else { continue };
             if measured.len() < ident::MAX_STARS {
-                let _ = measured.push((s.flux_e, m, id));
-            } else if let Some(dimmest) = measured
+                let _ = measured.push((rank(s), m, id));
+            } else if let Some(lowest) = measured
                 .iter_mut()
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-                .filter(|d| d.0 < s.flux_e)
+                .min_by(|a, b| a.0.0.cmp(&b.0.0).then(a.0.1.total_cmp(&b.0.1)))
+                .filter(|d| above(&rank(s), &d.0))
             {
-                *dimmest = (s.flux_e, m, id);
+                *lowest = (rank(s), m, id);
             }
         }
-        crate::small_sort::sort_by(&mut measured, |a, b| b.0.total_cmp(&a.0));
+        crate::small_sort::sort_by(&mut measured, |a, b| {
+            b.0.0.cmp(&a.0.0).then(b.0.1.total_cmp(&a.0.1))
+        });
+        // With enough stars the PSF describes, those it does not are left out: their
+        // positions and sigmas are not clean (a proton hit inside a tracked star's window
+        // moves its fit by up to pixels while its sigma stays the star's).
+        let clean = measured.iter().filter(|m| m.0.0).count();
+        if clean >= CLEAN_ENOUGH {
+            measured.truncate(clean);
+        }
         let mut dirs: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
         let mut known: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
         let mut known_ids: heapless::Vec<u16, { ident::MAX_STARS }> = heapless::Vec::new();
@@ -435,6 +451,10 @@ impl<'c> Solver<'c> {
         })
     }
 }
+
+/// Stars the fitted PSF describes (no [`StarFlags::POOR_FIT`]) from which the others are
+/// left out of identification.
+pub const CLEAN_ENOUGH: usize = 6;
 
 /// A star whose position identification may use: a centroid, not saturated, its trail
 /// neither unknown nor clipped, with a finite position and a finite positive sigma.

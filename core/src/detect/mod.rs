@@ -11,6 +11,8 @@
 //!   eq. 8 SNR test.
 //! - `prefilter/`: the raw-domain pre-filtered scan ([`ScanDetector`]): quiet pixels are
 //!   compared in raw ADU against a per-tile level and never calibrated.
+//! - `hits.rs` ([`is_particle_hit`]): is a measured window sharper than the optics can make
+//!   (a proton's charge, spread only by diffusion)?
 //! - `capture.rs`: copies the raw pixels of a list of windows (tracking, [`WindowCapture`])
 //!   out of the streamed lines, and keeps a ring of the last raw lines (acquisition,
 //!   [`LineRing`]) so that a blob's window can be calibrated and centroided when the blob
@@ -27,11 +29,13 @@
 mod background;
 mod blobs;
 pub(crate) mod capture;
+mod hits;
 mod prefilter;
 pub(crate) mod track;
 
 pub use blobs::{Detection, DetectionFlags, LineDetector};
 pub use capture::{CAPTURE_MAX_SIDE, CaptureError, LineRing, RingError, WindowCapture};
+pub use hits::{HIT_SIGMAS, HitLimits, is_particle_hit};
 pub use prefilter::{ScanDetector, ScanError};
 pub use track::{TrackConfig, TrackFlags, TrackResult, track_detect};
 

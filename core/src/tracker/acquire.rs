@@ -35,7 +35,7 @@ use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord
 use super::{Ring, Shared};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::centroid::CentroidInput;
-use crate::detect::{CAPTURE_MAX_SIDE, Detection, ScanDetector};
+use crate::detect::{CAPTURE_MAX_SIDE, Detection, DetectionFlags, ScanDetector};
 use crate::geometry::ReadoutGeometry;
 use crate::units::Electrons;
 use crate::window::Rect;
@@ -87,6 +87,10 @@ pub(super) struct Acquisition<'t, const N: usize> {
     scan: Option<ScanDetector<'t, N>>,
     closed: heapless::Vec<Detection, N>,
     pending: heapless::Vec<Pending, N>,
+    /// Sum and count of the whole rows' mean sky (saturated and excluded pixels left out),
+    /// e- per pixel.
+    sky_sum_e: f32,
+    sky_rows: u32,
 }
 
 impl<'t, const N: usize> Acquisition<'t, N> {
@@ -95,6 +99,8 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             scan: None,
             closed: heapless::Vec::new(),
             pending: heapless::Vec::new(),
+            sky_sum_e: 0.0,
+            sky_rows: 0,
         }
     }
 
@@ -104,6 +110,8 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         self.scan = None;
         self.closed.clear();
         self.pending.clear();
+        self.sky_sum_e = 0.0;
+        self.sky_rows = 0;
     }
 
     /// Active row `y`: into the ring and the scan; the windows it completes are measured.
@@ -144,7 +152,13 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             return LineOutcome::Refused;
         }
         let outcome = match scan.whole_line() {
-            Some((e, f)) => row_mean(e, f),
+            Some((e, f)) => {
+                if let Some(sky) = sky_mean(e, f) {
+                    self.sky_sum_e += sky;
+                    self.sky_rows += 1;
+                }
+                row_mean(e, f)
+            }
             None => LineOutcome::Scanned,
         };
         self.queue_closed(config, geometry, sh.summary);
@@ -165,6 +179,9 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             scan.finish_closed(&mut self.closed);
             sh.summary.candidates_dropped = scan.detector().dropped();
             self.queue_closed(config, geometry, sh.summary);
+        }
+        if self.sky_rows > 0 {
+            sh.summary.sky_e = self.sky_sum_e / self.sky_rows as f32;
         }
         self.serve(cal, policy, config, None, sh);
     }
@@ -217,6 +234,14 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             }
             self.pending.swap_remove(i);
             measure_pending(cal, policy, config, &p, &mut sh);
+            // Measured: the star list (its rank: a window the PSF describes first) keeps it
+            // or not, so its place in the detector's bounded list goes to the next
+            // candidate. That list then holds only the candidates waiting for their rows;
+            // ranked by the blob alone, at a solar flare's rate the brighter proton hits
+            // filled it and the stars were never measured.
+            if let Some(scan) = self.scan.as_mut() {
+                scan.forget(&p.detection);
+            }
         }
     }
 }
@@ -261,14 +286,36 @@ fn trail_window(d: &Detection, config: &TrackerConfig, geometry: &ReadoutGeometr
 /// background.
 pub const TRAIL_MARGIN_PX: u16 = 3;
 
-/// Measures one pending window, or reports the detector's position with the reason.
+/// A trailed fit narrower across its trail than this fraction of the configured PSF's width
+/// is a particle's track, not a star, and the window is measured as a round one (where the
+/// particle-hit test judges it): the optics spread a star across its trail as they spread a
+/// still one, while a proton's charge is spread by diffusion only. The tracker's
+/// width-free fit serves stars down to two thirds of the configured width (docs/accuracy.md,
+/// "Each star's own width"); on the SIL at the South Atlantic Anomaly's rate the tracks the
+/// trailed test calls trails fit at 0.43 to 0.47 of it, its stars at 1.0.
+pub const TRAIL_MIN_WIDTH_FRACTION: f32 = 0.5;
+
+/// A saturated blob of more than this many pixels is masked ([`StarFlags`] would only flag
+/// a star's clipped core): four 7 x 7 windows' worth, more than the brightest star's wings
+/// above the join threshold; a bloomed column alone is 1,024.
+pub const MASK_MIN_PX: u32 = 196;
+
+/// Measures one pending window, or reports the detector's position with the reason;
+/// false when it is no star (masked on a saturated object, or a particle hit).
 fn measure_pending<const N: usize>(
     cal: &FrameCalibration<'_>,
     policy: &Policy<'_>,
     config: &TrackerConfig,
     p: &Pending,
     sh: &mut Shared<'_, N>,
-) {
+) -> bool {
+    // A saturated blob larger than any star's is a bright object or its bloomed columns:
+    // masked, never a star (a star whose core clipped is reported, flagged saturated).
+    if p.detection.flags.contains(DetectionFlags::SATURATED) && p.detection.pixels > MASK_MIN_PX {
+        sh.summary.masked = sh.summary.masked.saturating_add(1);
+        sh.summary.saturated_px = sh.summary.saturated_px.max(p.detection.pixels);
+        return false;
+    }
     let rect = p.rect;
     let detected = StarFlags::from_detection(p.detection.flags);
     let want_background = config.tracking_method == CentroidMethod::FusedCog1;
@@ -285,11 +332,15 @@ fn measure_pending<const N: usize>(
     } else if let Some(trail_start) = blob_trail(&p.detection) {
         // The trailed test on the blob's whole window; a round star is measured as any
         // other, on its centroid window around the peak.
+        // A trail is as wide across as the optics make a still star; a proton's track is
+        // narrower (charge diffusion only): such a "trail" is measured as a round window,
+        // where the particle-hit test judges it.
         if let Some(input) = sh.scratch.window(rect, p.clipped)
             && let Some(record) = policy.free_trailed_record(&input, detected, trail_start)
+            && record.psf_a_px >= TRAIL_MIN_WIDTH_FRACTION * config.psf_a_px
         {
             sh.stars.push(record, Carry::default());
-            return;
+            return true;
         }
         let (rel, _) = Rect::centred_clipped(
             p.detection.peak_x.saturating_sub(rect.x0),
@@ -306,14 +357,28 @@ fn measure_pending<const N: usize>(
         let sub_clipped =
             p.clipped || sub.width < config.window_px || sub.height < config.window_px;
         if let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) {
-            push_measured(policy, config, &input, detected, want_background, sh.stars);
-            return;
+            return push_measured(
+                policy,
+                config,
+                &input,
+                detected,
+                want_background,
+                sh.stars,
+                sh.summary,
+            );
         }
         sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
         StarFlags::CALIB_FAILED
     } else if let Some(input) = sh.scratch.window(rect, p.clipped) {
-        push_measured(policy, config, &input, detected, want_background, sh.stars);
-        return;
+        return push_measured(
+            policy,
+            config,
+            &input,
+            detected,
+            want_background,
+            sh.stars,
+            sh.summary,
+        );
     } else {
         sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
         StarFlags::CALIB_FAILED
@@ -335,11 +400,26 @@ fn measure_pending<const N: usize>(
         },
         Carry::default(),
     );
+    true
+}
+
+/// A whole calibrated row's mean sky: the mean of its pixels that are neither excluded nor
+/// saturated, e- (`None` without one).
+fn sky_mean(e: &[Electrons], f: &[PixelFlags]) -> Option<f32> {
+    let (mut sum, mut n) = (0i64, 0i64);
+    for (v, fl) in e.iter().zip(f.iter()) {
+        if !fl.is_excluded() && !fl.contains(PixelFlags::SATURATED) {
+            sum += i64::from(v.to_bits());
+            n += 1;
+        }
+    }
+    (n > 0).then(|| sum as f32 / (64.0 * n as f32))
 }
 
 /// Measures a round star's centroid window by the configured method and pushes it, flagged
 /// [`StarFlags::TRAIL_UNKNOWN`] when its fitted width says it is smeared
-/// ([`SMEARED_WIDTH_RATIO`]).
+/// ([`SMEARED_WIDTH_RATIO`]), and [`StarFlags::POOR_FIT`] (a particle hit is counted) when
+/// the window is sharper than a star.
 fn push_measured<const N: usize>(
     policy: &Policy<'_>,
     config: &TrackerConfig,
@@ -347,8 +427,19 @@ fn push_measured<const N: usize>(
     detected: StarFlags,
     want_background: bool,
     stars: &mut StarList<N>,
-) {
+    summary: &mut FrameSummary,
+) -> bool {
     let mut m = measure(policy, input, detected, want_background);
+    if m.hit_like {
+        summary.hits = summary.hits.saturating_add(1);
+    }
+    // A particle hit, or a star beside a hot pixel the table does not list yet (as sharp as
+    // a hit, and persistent): kept, flagged, so the star list ranks it below every clean
+    // star and identification leaves it out, while its window, if it gets one, goes on
+    // feeding the in-flight defect watch.
+    if m.hit {
+        m.record.flags |= StarFlags::POOR_FIT;
+    }
     if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {
         m.record.flags |= StarFlags::TRAIL_UNKNOWN;
     }
@@ -359,6 +450,7 @@ fn push_measured<const N: usize>(
             ..Carry::default()
         },
     );
+    true
 }
 
 /// A whole calibrated row's mean over the pixels that are not excluded, its OR-ed flags

@@ -1,5 +1,9 @@
-//! A frame's star list: bounded, the brightest kept, each record with what the next
-//! tracking frame needs of the star ([`Carry`]).
+//! A frame's star list: bounded, the best kept ([`ranks_above`]: a window the fitted PSF
+//! describes before one it does not, then the brighter), each record with what the next
+//! tracking frame needs of the star ([`Carry`]). A particle hit the sharpness test lets pass
+//! is bright and fits the Gaussian badly (`POOR_FIT`, chi^2 per degree of freedom in the
+//! tens to thousands on the SIL's proton model): ranked by flux alone, a South Atlantic
+//! Anomaly frame's ~190 hits filled the list and pushed out the stars.
 //!
 //! Cost: a push is O(1) while the list has room; once full, a scan for the faintest
 //! (at most `N` compares) per extra star.
@@ -63,7 +67,8 @@ impl<const N: usize> StarList<N> {
         &self.carries
     }
 
-    /// Adds a star; when the list is full the faintest is replaced by a brighter one.
+    /// Adds a star; when the list is full the lowest ranked ([`ranks_above`]) is replaced by
+    /// one ranked above it.
     pub(crate) fn push(&mut self, record: StarRecord, carry: Carry) {
         if self.records.len() < self.limit {
             // The limit is at most N: both pushes have room.
@@ -72,18 +77,29 @@ impl<const N: usize> StarList<N> {
             return;
         }
         self.dropped = self.dropped.saturating_add(1);
-        let faintest = self
-            .records
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.flux_e.total_cmp(&b.1.flux_e))
-            .map(|(i, s)| (i, s.flux_e));
-        if let Some((i, f)) = faintest
-            && record.flux_e > f
+        let mut lowest: Option<(usize, &StarRecord)> = None;
+        for (i, s) in self.records.iter().enumerate() {
+            if lowest.is_none_or(|(_, l)| ranks_above(l, s)) {
+                lowest = Some((i, s));
+            }
+        }
+        if let Some((i, l)) = lowest
+            && ranks_above(&record, l)
             && let (Some(r), Some(c)) = (self.records.get_mut(i), self.carries.get_mut(i))
         {
             *r = record;
             *c = carry;
         }
+    }
+}
+
+/// True when `a` ranks above `b` in a full list: a clean fit
+/// ([`StarRecord::fit_is_clean`]) above one that is not, then the larger flux.
+pub(crate) fn ranks_above(a: &StarRecord, b: &StarRecord) -> bool {
+    let poor = |s: &StarRecord| !s.fit_is_clean();
+    match (poor(a), poor(b)) {
+        (false, true) => true,
+        (true, false) => false,
+        _ => a.flux_e > b.flux_e,
     }
 }

@@ -73,7 +73,7 @@ mod track;
 pub use acquire::{SMEARED_WIDTH_RATIO, TRAIL_MARGIN_PX, TRAIL_SCREEN_PX};
 pub use config::{CentroidMethod, ConfigError, TrackerConfig};
 pub use drift::DarkDrift;
-pub use measure::{TRAIL_END_MARGIN_PX, select_curve};
+pub use measure::{HIT_MONITOR_FRACTION, HIT_WIDTH_FRACTION, TRAIL_END_MARGIN_PX, select_curve};
 pub use modes::CommandError;
 pub use ports::{
     Clock, FixedTable, FixedTemperature, Integration, LineSource, Ports, SourceLine, TableStore,
@@ -81,10 +81,27 @@ pub use ports::{
 };
 pub use predicted::{PredictedStar, predicted_window_side};
 pub use record::{
-    Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Provenance, StarFlags,
-    StarRecord, TemperatureSource,
+    Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Obstructions, Provenance,
+    StarFlags, StarRecord, TemperatureSource,
 };
 pub use track::TRAIL_SETTLE_FRAMES;
+
+/// A saturated region of at least this many whole columns of pixels is the Moon's: its disc,
+/// 35 px across on the 15 degree camera, blooms every column it crosses; a planet or a
+/// bright star blooms 1-3 columns, partly. Fewer: a bright object masked, no cause.
+pub const MOON_MIN_COLUMNS: u32 = 8;
+/// A saturated region of more than this many whole columns is larger than the Moon's
+/// (35 px and the PSF): the Earth. The image cannot tell a thin sliver of the Earth's limb
+/// from the Moon; the flag then says Moon.
+pub const EARTH_MIN_COLUMNS: u32 = 48;
+/// A sky background above this, e- per pixel (dark removed), is the Sun's stray light: its
+/// shot noise (22 e-) then passes the CCD47-20's read and dark noise and the faint stars'
+/// SNR falls.
+pub const STRAY_LIGHT_LIMIT_E: f32 = 500.0;
+/// This many particle hits counted in a frame flag it: a quiet orbit's rate (~1 cm^-2 s^-1)
+/// gives a 1.77 cm^2 sensor about 0.2 hits a 100 ms frame, the South Atlantic Anomaly ~190,
+/// of which the monitor counts about one in six in an acquisition frame.
+pub const RADIATION_HITS: u16 = 5;
 
 use crate::calib::refresh::{Defect, DefectWatch};
 use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels};
@@ -191,6 +208,9 @@ pub struct Tracker<'t, 'b, const N: usize> {
     acq: Acquisition<'t, N>,
     trk: Tracking,
     work: FrameWork<N>,
+    /// The Moon and Earth bits of the last acquisition frame, which the tracking frames
+    /// after it carry (their windows do not see the whole field).
+    last_bright: Obstructions,
 }
 
 /// What a frame's measurements write into: one window's scratch, the star list, the
@@ -264,6 +284,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             policy: None,
             acq: Acquisition::new(),
             trk: Tracking::new(),
+            last_bright: Obstructions::empty(),
             work: FrameWork {
                 scratch: Scratch::new(),
                 stars: StarList::new(),
@@ -689,6 +710,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.work.summary.dark_drift = self.drift.report();
         self.work.summary.defects_pending =
             u16::try_from(self.work.watch.confirmed().len()).unwrap_or(u16::MAX);
+        self.work.summary.obstructions = self.obstructions();
         let mut centroids = 0u16;
         for s in self.work.stars.records() {
             telemetry.star(self.frame, s);
@@ -707,6 +729,36 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
                 .end(centroids, &self.config, self.trk.predicted_frame());
         telemetry.frame(&self.work.summary);
         self.work.summary
+    }
+}
+
+impl<const N: usize> Tracker<'_, '_, N> {
+    /// What took stars from the frame now ending (see [`Obstructions`]): in acquisition
+    /// the largest saturated region's size, in tracking the last acquisition's Moon and
+    /// Earth bits; in both the sky and the hits.
+    fn obstructions(&mut self) -> Obstructions {
+        let s = &self.work.summary;
+        let rows = u32::from(self.geometry.active_rows);
+        let mut o = Obstructions::empty();
+        match s.mode {
+            Mode::Acquisition => {
+                if s.saturated_px > EARTH_MIN_COLUMNS * rows {
+                    o |= Obstructions::EARTH;
+                } else if s.saturated_px >= MOON_MIN_COLUMNS * rows {
+                    o |= Obstructions::MOON;
+                }
+                self.last_bright = o;
+            }
+            Mode::Tracking => o |= self.last_bright,
+            _ => {}
+        }
+        if s.sky_e > STRAY_LIGHT_LIMIT_E {
+            o |= Obstructions::SUN;
+        }
+        if s.hits >= RADIATION_HITS {
+            o |= Obstructions::RADIATION;
+        }
+        o
     }
 }
 

@@ -135,6 +135,32 @@ bitflags::bitflags! {
     }
 }
 
+bitflags::bitflags! {
+    /// What in the field took stars from a frame, one bit a cause (0: nothing). The bit
+    /// numbers are stable: housekeeping and the attitude report's validity flags carry them.
+    /// Told from the image alone ([`crate::tracker`]'s frame end): the Moon and the Earth by
+    /// the size of a saturated region, the Sun by the sky background, radiation by the
+    /// particle hits counted.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub struct Obstructions: u8 {
+        /// A saturated region of the Moon's size (its bloomed columns).
+        const MOON = 1 << 0;
+        /// A saturated region larger than the Moon can make: the Earth.
+        const EARTH = 1 << 1;
+        /// A sky background above the stray-light limit: the Sun's stray light.
+        const SUN = 1 << 2;
+        /// Particle hits above the radiation limit in the frame.
+        const RADIATION = 1 << 3;
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for Obstructions {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(f, "Obstructions({=u8:#x})", self.bits())
+    }
+}
+
 #[cfg(feature = "defmt")]
 impl defmt::Format for Provenance {
     fn format(&self, f: defmt::Formatter<'_>) {
@@ -242,6 +268,20 @@ pub struct StarRecord {
 }
 
 impl StarRecord {
+    /// Whether the fitted PSF describes the window and the fit's sigmas hold (none of
+    /// [`StarFlags::POOR_FIT`], [`StarFlags::SIGMA_UNRELIABLE`], [`StarFlags::NOT_CONVERGED`]):
+    /// the star list, the choice of tracking windows and identification rank such a star
+    /// above every other, then by flux. A particle hit or a star beside a hot pixel the table
+    /// does not list fits poorly; a lone hot pixel or a noise peak fits narrower than any
+    /// star, its sigma unreliable.
+    pub fn fit_is_clean(&self) -> bool {
+        !self.flags.intersects(
+            StarFlags::POOR_FIT
+                .union(StarFlags::SIGMA_UNRELIABLE)
+                .union(StarFlags::NOT_CONVERGED),
+        )
+    }
+
     /// A centroid as a record, with `flags` added to the centroid's own (no PSF measured:
     /// `psf_a_px` and `chi2_dof` 0; found by acquisition: no provenance bit).
     pub(crate) fn from_centroid(c: &Centroid, flags: StarFlags) -> Self {
@@ -340,6 +380,22 @@ pub struct FrameSummary {
     pub dark_drift: super::drift::DarkDrift,
     /// Pixels confirmed in flight that the table in force does not list yet (the overlay).
     pub defects_pending: u16,
+    /// Detections and tracking windows holding a saturated pixel: a bright object or its
+    /// bloomed columns, masked (never reported as stars).
+    pub masked: u16,
+    /// Windows sharper than any star the optics make, particle hits
+    /// ([`crate::detect::is_particle_hit`] at `HIT_MONITOR_FRACTION` of the PSF; those past
+    /// `HIT_WIDTH_FRACTION` are rejected): the frame's radiation monitor.
+    pub hits: u16,
+    /// Acquisition: pixels of the largest saturated region (0: none).
+    pub saturated_px: u32,
+    /// The mean sky background of the frame (acquisition: its whole rows; tracking: its
+    /// windows' borders), e- per pixel, dark removed; 0 when not measured.
+    pub sky_e: f32,
+    /// Tracking: windows whose border background `sky_e` averages.
+    pub sky_windows: u16,
+    /// What took stars from the frame.
+    pub obstructions: Obstructions,
 }
 
 impl FrameSummary {
@@ -373,6 +429,12 @@ impl FrameSummary {
                 out_of_band: false,
             },
             defects_pending: 0,
+            masked: 0,
+            hits: 0,
+            saturated_px: 0,
+            sky_e: 0.0,
+            sky_windows: 0,
+            obstructions: Obstructions::empty(),
         }
     }
 }

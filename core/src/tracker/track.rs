@@ -61,7 +61,7 @@ use crate::centroid::CentroidInput;
 use crate::centroid::raw_cog::{PlanError, RawCogParams, RawWindow};
 use crate::detect::capture::CAPTURE_MAX_SIDE;
 use crate::detect::track::TrackResult;
-use crate::detect::track_detect;
+use crate::detect::{TrackFlags, track_detect};
 use crate::geometry::ReadoutGeometry;
 use crate::window::Rect;
 
@@ -288,16 +288,19 @@ impl Tracking {
     /// Keeps the usable centroids of `stars`, the brightest `max` of them, for the next
     /// tracking frame.
     pub(super) fn keep_priors<const N: usize>(&mut self, stars: &StarList<N>, max: usize) {
-        let mut order: heapless::Vec<(f32, usize), N> = heapless::Vec::new();
+        let mut order: heapless::Vec<(bool, f32, usize), N> = heapless::Vec::new();
         for (i, (s, _)) in stars.iter().enumerate() {
             if s.is_centroid() {
                 // At most N stars in the list: cannot fail.
-                let _ = order.push((s.flux_e, i));
+                let _ = order.push((!s.fit_is_clean(), s.flux_e, i));
             }
         }
-        crate::small_sort::sort_by(&mut order, |a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        // The list's rank: clean fits first, then the brighter.
+        crate::small_sort::sort_by(&mut order, |a, b| {
+            a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2))
+        });
         self.priors.clear();
-        for (_, i) in order.iter().take(max.min(TRACK_WINDOWS)) {
+        for (_, _, i) in order.iter().take(max.min(TRACK_WINDOWS)) {
             if let Some((s, c)) = stars.iter().nth(*i) {
                 // At most TRACK_WINDOWS taken: cannot fail.
                 let _ = self.priors.push(Prior {
@@ -522,6 +525,14 @@ impl Tracking {
             sh.summary.track_lost = sh.summary.track_lost.saturating_add(1);
             return;
         }
+        note_sky(sh.summary, verdict.background_e);
+        // A window a saturated column crosses (saturated pixels in its top or bottom row) is
+        // on a bright object or its bloomed columns: masked, never a star (a star whose
+        // core clipped is measured, flagged saturated).
+        if verdict.flags.contains(TrackFlags::SATURATED) && crossed_by_saturation(sh, rect) {
+            sh.summary.masked = sh.summary.masked.saturating_add(1);
+            return;
+        }
         if let Some((trail, known)) = trail {
             let Some(input) = sh.scratch.window(rect, clipped) else {
                 sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
@@ -550,27 +561,57 @@ impl Tracking {
             );
             return;
         }
-        // The centroid window around the peak, inside the tracking window.
-        let (rel, _) = Rect::centred_clipped(
-            verdict.peak_x.saturating_sub(rect.x0),
-            verdict.peak_y.saturating_sub(rect.y0),
-            config.window_px,
-            rect.width,
-            rect.height,
-        );
-        let sub = Rect {
-            x0: rect.x0.saturating_add(rel.x0),
-            y0: rect.y0.saturating_add(rel.y0),
-            ..rel
-        };
-        let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;
         let want_background = config.tracking_method == CentroidMethod::FusedCog1;
         let flags = StarFlags::from_track(verdict.flags);
-        let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) else {
-            sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+        // The centroid window around the peak, inside the tracking window; when that is a
+        // particle hit, around the predicted pixel (the star may be beside the hit). When
+        // both are hits the star is kept, flagged `POOR_FIT` (its window holds a hit, or a
+        // hot pixel the table does not list yet): its window goes on being placed and
+        // watched for new defects, and identification ranks it last.
+        let mut m = None;
+        let mut last_hit = None;
+        for (k, (px, py)) in [(verdict.peak_x, verdict.peak_y), placed.anchor]
+            .into_iter()
+            .enumerate()
+        {
+            if k == 1 && px.abs_diff(verdict.peak_x).max(py.abs_diff(verdict.peak_y)) <= 1 {
+                break;
+            }
+            let (rel, _) = Rect::centred_clipped(
+                px.saturating_sub(rect.x0),
+                py.saturating_sub(rect.y0),
+                config.window_px,
+                rect.width,
+                rect.height,
+            );
+            let sub = Rect {
+                x0: rect.x0.saturating_add(rel.x0),
+                y0: rect.y0.saturating_add(rel.y0),
+                ..rel
+            };
+            let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;
+            let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) else {
+                sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
+                return;
+            };
+            let measured = measure(policy, &input, flags, want_background);
+            if measured.hit_like {
+                sh.summary.hits = sh.summary.hits.saturating_add(1);
+            }
+            if !measured.hit {
+                m = Some(measured);
+                break;
+            }
+            last_hit = Some(measured);
+        }
+        let Some(mut m) = m.or_else(|| {
+            last_hit.map(|mut h| {
+                h.record.flags |= StarFlags::POOR_FIT;
+                h
+            })
+        }) else {
             return;
         };
-        let mut m = measure(policy, &input, flags, want_background);
         m.record.provenance = Provenance::TRACKED;
         let v = velocity(&m.record);
         let tracked_frames = settle(&mut m.record, &placed.prior);
@@ -585,6 +626,32 @@ impl Tracking {
             },
         );
     }
+}
+
+/// True when a saturated pixel lies in the top or bottom row of the calibrated window
+/// `rect`.
+fn crossed_by_saturation<const N: usize>(sh: &mut Shared<'_, N>, rect: Rect) -> bool {
+    let w = usize::from(rect.width);
+    let h = usize::from(rect.height);
+    let Some((_, f)) = sh.scratch.calibrated_mut(rect) else {
+        return false;
+    };
+    let top = f.get(..w).unwrap_or(&[]);
+    let bottom = f.get(w * h.saturating_sub(1)..).unwrap_or(&[]);
+    top.iter()
+        .chain(bottom)
+        .any(|p| p.contains(crate::calib::PixelFlags::SATURATED))
+}
+
+/// Folds a tracking window's border background into the frame's mean sky (a running mean
+/// over the windows that held their star).
+fn note_sky(summary: &mut FrameSummary, background_e: f32) {
+    if !background_e.is_finite() {
+        return;
+    }
+    let n = f32::from(summary.sky_windows);
+    summary.sky_e = (summary.sky_e * n + background_e) / (n + 1.0);
+    summary.sky_windows = summary.sky_windows.saturating_add(1);
 }
 
 impl Tracking {

@@ -38,7 +38,8 @@ use startrack_core::tracker::{
 use startrack_sim::pixcorr::{CurveSpec, build_curves};
 use startrack_sim::sim::truth::TruthSections;
 use startrack_sim::sim::{SensorParams, Simulator, Star};
-use startrack_sim::sky::scene::{SkyScene, committed_catalog};
+use startrack_sim::sky::bright::BrightSky;
+use startrack_sim::sky::scene::{REFERENCE_EXPOSURE_S, SkyScene, committed_catalog};
 
 /// Stars a frame the SIL's tracker keeps: the board's capacity.
 pub const SIL_CAPACITY: usize = 32;
@@ -97,6 +98,9 @@ pub struct SilConfig {
     pub false_stars: Vec<Star>,
     /// The first frame with the false stars.
     pub false_stars_from: u32,
+    /// With a sky scene: the Moon, the Earth, the Sun's stray light, planets and proton hits
+    /// ([`startrack_sim::sky::bright`]); empty by default.
+    pub bright: BrightSky,
 }
 
 /// The spacecraft time the SIL's commands take at counter 0 (`--spacecraft-time`'s
@@ -120,6 +124,7 @@ impl Default for SilConfig {
             send_velocity: true,
             false_stars: Vec::new(),
             false_stars_from: 0,
+            bright: BrightSky::default(),
         }
     }
 }
@@ -190,6 +195,11 @@ pub struct SilFrame {
     pub predicted_windows: usize,
     /// The attitude stage's result and the truth (sky scenes only).
     pub attitude: Option<AttitudeCheck>,
+    /// In-field true stars clear of the bright scene ([`unaffected`]); `None` without one.
+    pub unaffected: Option<usize>,
+    /// The Moon or the Earth is on the active area ([`object_in_field`]); `None` without a
+    /// bright scene.
+    pub object_in_field: Option<bool>,
 }
 
 /// A frame's attitude against the truth.
@@ -477,6 +487,17 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
         } else {
             0
         };
+        if config.sky.is_some() && !config.bright.is_empty() {
+            let sim = frame_simulator(config, &params, &base, catalog, summary.frame);
+            frame.unaffected = Some(
+                frame
+                    .truth
+                    .iter()
+                    .filter(|t| in_field(t, &params) && unaffected(&sim, t))
+                    .count(),
+            );
+            frame.object_in_field = Some(object_in_field(&sim));
+        }
         if let (Some(fix), Some((scene, _))) = (outcome.attitude, sky.as_ref()) {
             let mid_us = outcome.report.map_or(0, |r| r.mid_exposure_us);
             frame.attitude = Some(AttitudeCheck {
@@ -543,21 +564,103 @@ pub fn frame_simulator(
     catalog: Option<&Catalog<'_>>,
     frame: u32,
 ) -> Simulator {
-    if let (Some(sky), Some(cat)) = (&config.sky, catalog)
+    let mut sim = if let (Some(sky), Some(cat)) = (&config.sky, catalog)
         && sky.motion.is_some()
     {
-        return Simulator {
+        Simulator {
             frame,
             trails: sky.trails(cat, frame, f64::from(config.tracker.psf_a_px)),
             ..Simulator::new(params.clone(), false_stars(config, frame))
-        };
+        }
+    } else {
+        let mut stars = frame_stars(config, base, catalog, frame);
+        stars.extend(false_stars(config, frame));
+        Simulator {
+            frame,
+            ..Simulator::new(params.clone(), stars)
+        }
+    };
+    if let Some(sky) = config.sky.as_ref().filter(|_| !config.bright.is_empty()) {
+        let exposure_s = sky.motion.map_or(REFERENCE_EXPOSURE_S, |m| m.exposure_s);
+        let (bright, planets) = config.bright.frame(
+            sky,
+            frame,
+            exposure_s,
+            f64::from(config.tracker.psf_a_px),
+            config.seed,
+        );
+        sim.stars.extend(planets);
+        sim.bright = Some(std::sync::Arc::new(bright));
     }
-    let mut stars = frame_stars(config, base, catalog, frame);
-    stars.extend(false_stars(config, frame));
-    Simulator {
-        frame,
-        ..Simulator::new(params.clone(), stars)
+    sim
+}
+
+/// Whether `sim`'s frame has the Moon's disc or the Earth on the active area (false without
+/// a bright scene).
+pub fn object_in_field(sim: &Simulator) -> bool {
+    let Some(b) = sim.bright.as_ref() else {
+        return false;
+    };
+    let g = sim.params.geometry;
+    let (cols, rows) = (f64::from(g.active_cols), f64::from(g.active_rows));
+    let moon = b.moon.is_some_and(|m| {
+        m.surface_e > 0.0
+            && m.centre_px[0] + m.radius_px >= -0.5
+            && m.centre_px[0] - m.radius_px <= cols - 0.5
+            && m.centre_px[1] + m.radius_px >= -0.5
+            && m.centre_px[1] - m.radius_px <= rows - 0.5
+    });
+    // The Earth's region is convex and large: on the area when a corner is in it.
+    let earth = b.earth.is_some_and(|e| {
+        [
+            (0.0, 0.0),
+            (cols - 1.0, 0.0),
+            (0.0, rows - 1.0),
+            (cols - 1.0, rows - 1.0),
+        ]
+        .iter()
+        .any(|&(x, y)| e.inside_px(x, y) > -0.5)
+    });
+    moon || earth
+}
+
+/// Half the side of the box around a true star that an object must stay out of for the
+/// star to be unaffected, px (the 11 px tracking window and a pixel).
+pub const UNAFFECTED_HALF_PX: i64 = 6;
+
+/// A proton deposit above this in a star's box affects it, e- (about 3 sigma of the
+/// SIL sensor's dark and read noise in a pixel).
+pub const UNAFFECTED_HIT_E: f64 = 50.0;
+
+/// Whether true star `s` of `sim`'s frame is clear of its bright scene: no bloomed or
+/// saturated column, no light of the Moon or the Earth and no proton charge above
+/// [`UNAFFECTED_HIT_E`] within [`UNAFFECTED_HALF_PX`] of it (stray light, a smooth
+/// background, leaves it unaffected). Every star is without a bright scene.
+pub fn unaffected(sim: &Simulator, s: &Star) -> bool {
+    let Some(b) = sim.bright.as_ref() else {
+        return true;
+    };
+    let g = sim.params.geometry;
+    let (cx, cy) = (s.x_px.round() as i64, s.y_px.round() as i64);
+    let bloomed = sim.bloomed();
+    for y in (cy - UNAFFECTED_HALF_PX)..=(cy + UNAFFECTED_HALF_PX) {
+        for x in (cx - UNAFFECTED_HALF_PX)..=(cx + UNAFFECTED_HALF_PX) {
+            if x < 0 || y < 0 || x >= i64::from(g.active_cols) || y >= i64::from(g.active_rows) {
+                continue;
+            }
+            let (x, y) = (x as usize, y as usize);
+            let (xf, yf) = (x as f64, y as f64);
+            let lit = b.moon.is_some_and(|m| m.at(xf, yf) > 0.0)
+                || b.earth.is_some_and(|e| e.at(xf, yf) > 0.0);
+            let bloom = bloomed
+                .get(&x)
+                .is_some_and(|c| c.at(y).is_none_or(|spill| spill > 0.0));
+            if lit || bloom || b.proton_e(x, y) > UNAFFECTED_HIT_E {
+                return false;
+            }
+        }
     }
+    true
 }
 
 /// The false stars of frame `frame` ([`SilConfig::false_stars`]).
@@ -684,5 +787,7 @@ fn match_frame(
         samples_read,
         predicted_windows: 0,
         attitude: None,
+        unaffected: None,
+        object_in_field: None,
     }
 }

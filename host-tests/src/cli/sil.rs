@@ -25,6 +25,7 @@ use super::{CliError, LabError};
 use startrack_core::tracker::{Event, Mode, TrackerConfig};
 use startrack_homes::home::csv_row;
 use startrack_homes::sil::{self, SilConfig, SilReport};
+use startrack_sim::sky::bright::BrightSky;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -120,6 +121,38 @@ pub struct SilArgs {
     /// its aberration uncorrected).
     #[arg(long, requires = "velocity_km_s")]
     pub apparent: bool,
+    /// With `--sky`: the Moon, its centre at frame 0 X,Y (active px) and its phase angle
+    /// (deg, 0 full to 180 new; default 0), fixed in the sky as the field turns: `X,Y[,PHASE]`.
+    #[arg(
+        long,
+        requires = "sky",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub moon: Option<Vec<f64>>,
+    /// With `--sky`: the sunlit Earth seen from 500 km, its limb across a corner of the
+    /// field at frame 0: CORNER,DEPTH (corner 0 at (0, 0), 1 last column, 2 last row, 3 both;
+    /// DEPTH px into the field along the corner's diagonal).
+    #[arg(long, requires = "sky", value_delimiter = ',')]
+    pub earth_limb: Option<Vec<f64>>,
+    /// With `--sky`: the Sun's stray light, the Sun A deg from the boresight (30, the
+    /// baffle's exclusion, to 180) at azimuth AZ on the image (deg from +x towards +y;
+    /// default 0): `A[,AZ]`.
+    #[arg(
+        long,
+        requires = "sky",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub sun_angle_deg: Option<Vec<f64>>,
+    /// With `--sky`: a planet at X,Y (active px, frame 0) of magnitude MAG (-5 to 6), fixed
+    /// in the sky: X,Y,MAG; repeat for more.
+    #[arg(long, requires = "sky", allow_hyphen_values = true)]
+    pub planet: Vec<String>,
+    /// With `--sky`: proton hits at the rate and spectrum of a quiet orbit, the South
+    /// Atlantic Anomaly or a solar flare (docs/cli.md states them).
+    #[arg(long, requires = "sky", value_parser = ["quiet", "saa", "flare"])]
+    pub protons: Option<String>,
     /// Serve the tracker's command and telemetry link on TCP 127.0.0.1:PORT (standing in
     /// for the UART) and run until stopped; `--frames`, `--telemetry` and `--truth` are then
     /// not used (drive it with `startrack gse --port PORT`). With `--sky` the attitude stage
@@ -216,6 +249,7 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
         }
     };
     let spacecraft_epoch_us = spacecraft_epoch_us.or(velocity_m_s.map(|_| sil::SIL_EPOCH_US));
+    let bright = bright_of(args)?;
     let mut config = SilConfig {
         velocity_m_s,
         send_velocity: !args.apparent,
@@ -227,6 +261,7 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
         drift_px: (dx, dy),
         tracker,
         sky,
+        bright,
         ..SilConfig::default()
     };
     if let (Some(sky), Some(motion)) = (config.sky.as_mut(), motion_of(args, config.period_us)?) {
@@ -237,6 +272,107 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
         sky.rate_rad_per_frame = [0.0; 3];
     }
     Ok(config)
+}
+
+/// The bright objects and protons of `args` (`--moon`, `--earth-limb`, `--sun-angle-deg`,
+/// `--planet`, `--protons`).
+pub fn bright_of(args: &SilArgs) -> Result<BrightSky, CliError> {
+    use startrack_sim::sim::protons::ProtonEnv;
+    use startrack_sim::sky::bright::{EarthSpec, MoonSpec, PlanetSpec, SUN_EXCLUSION_DEG, SunSpec};
+    let finite = |v: &[f64]| v.iter().all(|c| c.is_finite());
+    let in_reach = |x: f64| (-100.0..=1124.0).contains(&x);
+    let moon = match args.moon.as_deref() {
+        None => None,
+        Some(v)
+            if finite(v) && (v.len() == 2 || v.len() == 3) && in_reach(v[0]) && in_reach(v[1]) =>
+        {
+            let phase_deg = v.get(2).copied().unwrap_or(0.0);
+            if !(0.0..=180.0).contains(&phase_deg) {
+                return Err(CliError::Usage(
+                    "--moon: the phase angle is 0 to 180 deg".into(),
+                ));
+            }
+            Some(MoonSpec {
+                at_px: [v[0], v[1]],
+                phase_deg,
+            })
+        }
+        Some(_) => {
+            return Err(CliError::Usage(
+                "--moon takes X,Y[,PHASE_DEG], X and Y within -100 to 1124 px".into(),
+            ));
+        }
+    };
+    let earth = match args.earth_limb.as_deref() {
+        None => None,
+        Some(&[c, d])
+            if [0.0, 1.0, 2.0, 3.0].contains(&c)
+                && d.is_finite()
+                && (0.0..=1400.0).contains(&d) =>
+        {
+            Some(EarthSpec {
+                corner: c as u8,
+                depth_px: d,
+            })
+        }
+        Some(_) => {
+            return Err(CliError::Usage(
+                "--earth-limb takes CORNER,DEPTH_PX: corner 0 to 3, depth 0 to 1400 px".into(),
+            ));
+        }
+    };
+    let sun = match args.sun_angle_deg.as_deref() {
+        None => None,
+        Some(v)
+            if finite(v)
+                && (v.len() == 1 || v.len() == 2)
+                && (SUN_EXCLUSION_DEG..=180.0).contains(&v[0]) =>
+        {
+            Some(SunSpec {
+                angle_deg: v[0],
+                azimuth_deg: v.get(1).copied().unwrap_or(0.0),
+            })
+        }
+        Some(_) => {
+            return Err(CliError::Usage(format!(
+                "--sun-angle-deg takes A[,AZ], A from {SUN_EXCLUSION_DEG} (the baffle's exclusion) to 180 deg"
+            )));
+        }
+    };
+    let mut planets = Vec::new();
+    for p in &args.planet {
+        let v: Vec<f64> = p.split(',').filter_map(|c| c.trim().parse().ok()).collect();
+        match v[..] {
+            [x, y, mag]
+                if finite(&v) && in_reach(x) && in_reach(y) && (-5.0..=6.0).contains(&mag) =>
+            {
+                planets.push(PlanetSpec { at_px: [x, y], mag });
+            }
+            _ => {
+                return Err(CliError::Usage(
+                    "--planet takes X,Y,MAG: X and Y within -100 to 1124 px, MAG -5 to 6".into(),
+                ));
+            }
+        }
+    }
+    let protons = match args.protons.as_deref() {
+        None => None,
+        Some("quiet") => Some(ProtonEnv::Quiet),
+        Some("saa") => Some(ProtonEnv::Saa),
+        Some("flare") => Some(ProtonEnv::Flare),
+        Some(other) => {
+            return Err(CliError::Usage(format!(
+                "--protons: quiet, saa or flare, not {other}"
+            )));
+        }
+    };
+    Ok(BrightSky {
+        moon,
+        earth,
+        sun,
+        planets,
+        protons,
+    })
 }
 
 /// Largest rate component of `--rate-deg-s`, deg/s.

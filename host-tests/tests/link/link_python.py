@@ -53,11 +53,14 @@ def main() -> int:
         if "housekeeping" in want:
             sid, mode, next_mode = struct.unpack(">HBB", data[:4])
             assert (sid, mode, next_mode) == (1, want["mode"], want["next_mode"]), data[:4]
-            # uptime_us: the u64 before setup_faults u16, dark_ratio u16, status u8 and
-            # defects_pending u16 at the end.
-            assert struct.unpack(">Q", data[-15:-7])[0] == want["time_us"]
+            # uptime_us: the u64 before setup_faults u16, dark_ratio u16, status u8,
+            # defects_pending u16, hits u16, masked u16, obstructions u8, hits_total u32 and
+            # masked_total u32 at the end.
+            assert struct.unpack(">Q", data[-28:-20])[0] == want["time_us"]
             # dark_ratio, status, defects_pending: no dark law and no defects in this run.
-            assert struct.unpack(">HBH", data[-5:]) == (0, 0, 0), data[-5:]
+            assert struct.unpack(">HBH", data[-18:-13]) == (0, 0, 0), data[-18:-13]
+            # hits, masked, obstructions and their totals: no bright object, no proton.
+            assert struct.unpack(">HHBII", data[-13:]) == (0, 0, 0, 0, 0), data[-13:]
     print(f"spacepackets decoded {len(packets)} packets")
     return 0
 

@@ -11,6 +11,7 @@ mod demo;
 mod frame_cycle;
 mod safe_states;
 mod sil_acquire_rate;
+mod sil_bright;
 mod sil_motion;
 mod sil_second_sky;
 mod sil_sky;

@@ -1,6 +1,7 @@
 //! From a closed blob to a star candidate: the counting rules of the configuration (pixels,
 //! peak sigmas, saturation), the measured SNR (eq. 8), the shape test for blends, the flags,
-//! and the bounded list that keeps the `N` brightest; plus the reporting of the candidates a
+//! and the bounded list that keeps the `N` best ranked (round before elongated, then the
+//! brightest); plus the reporting of the candidates a
 //! line completed, for the firmware's acquisition centroiding.
 //!
 //! # Cost
@@ -72,19 +73,31 @@ impl<const N: usize> LineDetector<N> {
         };
         if let Err(d) = self.candidates.push(d) {
             self.dropped += 1;
-            let faintest = self
-                .candidates
-                .iter()
-                .enumerate()
-                .min_by(|a, b| a.1.flux_e.total_cmp(&b.1.flux_e))
-                .map(|(i, c)| (i, c.flux_e));
-            if let Some((i, f)) = faintest
-                && d.flux_e > f
+            let mut lowest: Option<(usize, &Detection)> = None;
+            for (i, c) in self.candidates.iter().enumerate() {
+                if lowest.is_none_or(|(_, l)| ranks_above(l, c)) {
+                    lowest = Some((i, c));
+                }
+            }
+            if let Some((i, _)) = lowest.filter(|(_, l)| ranks_above(&d, l))
                 && let Some(slot) = self.candidates.get_mut(i)
             {
                 *slot = d;
             }
         }
+    }
+}
+
+/// True when candidate `a` ranks above `b` in a full list: a round blob above an elongated
+/// one ([`DetectionFlags::BLENDED`]: a pair, a trailed star, or a proton's track), then the
+/// larger flux. A solar flare's proton tracks, brighter than most stars and elongated,
+/// then take no place a round star could have.
+fn ranks_above(a: &Detection, b: &Detection) -> bool {
+    let long = |d: &Detection| d.flags.contains(DetectionFlags::BLENDED);
+    match (long(a), long(b)) {
+        (false, true) => true,
+        (true, false) => false,
+        _ => a.flux_e > b.flux_e,
     }
 }
 

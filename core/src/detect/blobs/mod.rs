@@ -10,8 +10,9 @@
 //! affected candidates are flagged.
 //!
 //! Candidates live in a `heapless::Vec` of capacity `N`. When it is full, a new candidate
-//! replaces the faintest one if it is brighter; either way one candidate is lost and
-//! counted in [`LineDetector::dropped`]: the list always holds the `N` brightest.
+//! replaces the lowest ranked one if it ranks above it (a round blob above an elongated
+//! one, then the brighter); either way one candidate is lost and counted in
+//! [`LineDetector::dropped`]: the list always holds the `N` best ranked.
 //!
 //! Blob positions are means of the blob's pixels weighted by their positive signal: a seed for the centroid
 //! methods, not a measurement.
@@ -301,5 +302,19 @@ impl<const N: usize> LineDetector<N> {
     /// Above-threshold pixels dropped because a run or blob table was full.
     pub fn dropped_pixels(&self) -> u32 {
         self.dropped_pixels
+    }
+
+    /// Takes candidate `d` out of the list (the tracker found it is no star: a particle hit,
+    /// a saturated object), so that it no longer holds a place a star could take; false when
+    /// the list does not hold it. The list's order changes (the last candidate takes its
+    /// place). Cost: a scan of the list.
+    pub fn forget(&mut self, d: &Detection) -> bool {
+        match self.candidates.iter().position(|c| c == d) {
+            Some(i) => {
+                self.candidates.swap_remove(i);
+                true
+            }
+            None => false,
+        }
     }
 }

@@ -292,6 +292,11 @@ impl<'t, const N: usize> ScanDetector<'t, N> {
         self.det.candidates()
     }
 
+    /// [`LineDetector::forget`].
+    pub fn forget(&mut self, d: &Detection) -> bool {
+        self.det.forget(d)
+    }
+
     /// Pixels calibrated so far (whole background rows plus the chunks that passed).
     pub fn calibrated_px(&self) -> u32 {
         self.calibrated_px

@@ -140,6 +140,8 @@ impl LinkService {
                 track_refused: 0,
                 track_lost: 0,
                 stars_dropped: 0,
+                hits: 0,
+                masked: 0,
             },
             last: None,
             stars: heapless::Vec::new(),

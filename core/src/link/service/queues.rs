@@ -60,6 +60,9 @@ impl LinkService {
                 0
             },
             defects_pending: s.map_or(0, |s| s.defects_pending),
+            hits: s.map_or(0, |s| s.hits),
+            masked: s.map_or(0, |s| s.masked),
+            obstructions: s.map_or(0, |s| s.obstructions.bits()),
         }
     }
 
@@ -171,6 +174,8 @@ impl TelemetrySink for LinkService {
         add(&mut t.track_refused, u32::from(s.track_refused));
         add(&mut t.track_lost, u32::from(s.track_lost));
         add(&mut t.stars_dropped, u32::from(s.stars_dropped));
+        add(&mut t.hits, u32::from(s.hits));
+        add(&mut t.masked, u32::from(s.masked));
         self.last = Some(*s);
         if self.star_frames != Some(0) {
             let len = encode_stars(s.frame, s.mode, &self.stars, &mut self.data).unwrap_or(0);

@@ -38,7 +38,7 @@ pub const ATTITUDE_FIELDS: [(&str, &str, &str); 31] = [
     (
         "flags",
         "u16",
-        "validity bits: 0 time not synchronised, 1 no velocity (attitude apparent), 2 too few stars, 3 rate too high, 4 no rate",
+        "validity bits: 0 time not synchronised, 1 no velocity (attitude apparent), 2 too few stars, 3 rate too high, 4 no rate, 5 Moon in the field, 6 Earth in the field, 7 Sun stray light, 8 radiation (particle hits): what took stars from the frame",
     ),
     (
         "time_coarse",
@@ -132,6 +132,28 @@ bitflags::bitflags! {
         /// No rate yet (fewer than two attitudes in the filter's window): the rate fields
         /// are 0.
         const NO_RATE = 1 << 4;
+        /// The Moon took stars from the frame (its saturated, bloomed columns masked): the
+        /// attitude rests on the stars left, or there is none for want of them.
+        const MOON_IN_FIELD = 1 << 5;
+        /// The Earth took stars from the frame (its saturated region masked).
+        const EARTH_IN_FIELD = 1 << 6;
+        /// The Sun's stray light raised the sky background above its limit: faint stars lost.
+        const SUN_STRAY_LIGHT = 1 << 7;
+        /// Particle hits above the radiation limit were counted in the frame.
+        const RADIATION = 1 << 8;
+    }
+}
+
+impl Validity {
+    /// The validity bits of a frame's [`crate::tracker::Obstructions`].
+    pub fn of_obstructions(o: crate::tracker::Obstructions) -> Self {
+        use crate::tracker::Obstructions as O;
+        let mut v = Self::empty();
+        v.set(Self::MOON_IN_FIELD, o.contains(O::MOON));
+        v.set(Self::EARTH_IN_FIELD, o.contains(O::EARTH));
+        v.set(Self::SUN_STRAY_LIGHT, o.contains(O::SUN));
+        v.set(Self::RADIATION, o.contains(O::RADIATION));
+        v
     }
 }
 

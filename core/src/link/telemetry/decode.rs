@@ -49,6 +49,8 @@ impl Housekeeping {
             track_refused: r.u32()?,
             track_lost: r.u32()?,
             stars_dropped: r.u32()?,
+            hits: 0,
+            masked: 0,
         };
         let link = LinkCounters {
             rx_bytes: r.u32()?,
@@ -74,6 +76,14 @@ impl Housekeeping {
         let dark_ratio_u8f8 = r.u16()?;
         let status = r.u8()?;
         let defects_pending = r.u16()?;
+        let hits = r.u16()?;
+        let masked = r.u16()?;
+        let obstructions = r.u8()?;
+        let totals = FrameTotals {
+            hits: r.u32()?,
+            masked: r.u32()?,
+            ..totals
+        };
         Some(Self {
             mode,
             next_mode,
@@ -91,6 +101,9 @@ impl Housekeeping {
             dark_ratio_u8f8,
             status,
             defects_pending,
+            hits,
+            masked,
+            obstructions,
         })
     }
 }

@@ -54,6 +54,10 @@ pub struct FrameTotals {
     pub track_lost: u32,
     /// Stars not reported because the star list was full.
     pub stars_dropped: u32,
+    /// Windows counted as particle hits.
+    pub hits: u32,
+    /// Detections and windows masked on a bright object.
+    pub masked: u32,
 }
 
 /// The housekeeping report `TM[3,25]` (structure id 1).
@@ -92,6 +96,12 @@ pub struct Housekeeping {
     pub status: u8,
     /// Pixels confirmed in flight that the table in force does not list yet.
     pub defects_pending: u16,
+    /// The last frame's windows counted as particle hits (the radiation monitor).
+    pub hits: u16,
+    /// The last frame's detections and windows masked on a bright object.
+    pub masked: u16,
+    /// The last frame's [`crate::tracker::Obstructions`] bits.
+    pub obstructions: u8,
 }
 
 /// Bits of housekeeping's `status` field.
@@ -101,7 +111,7 @@ pub mod status {
 }
 
 /// Every housekeeping field in order: name, type, meaning.
-pub const HK_FIELDS: [(&str, &str, &str); 37] = [
+pub const HK_FIELDS: [(&str, &str, &str); 42] = [
     ("sid", "u16", "structure id, 1"),
     (
         "mode",
@@ -195,6 +205,31 @@ pub const HK_FIELDS: [(&str, &str, &str); 37] = [
         "u16",
         "pixels confirmed in flight, not yet in the table",
     ),
+    (
+        "hits",
+        "u16",
+        "last frame's windows counted as particle hits (the radiation monitor; the sharpest flagged `POOR_FIT`)",
+    ),
+    (
+        "masked",
+        "u16",
+        "last frame's detections and windows masked on a bright object (saturated)",
+    ),
+    (
+        "obstructions",
+        "u8",
+        "what took stars from the last frame: bit 0 MOON, 1 EARTH, 2 SUN (stray light), 3 RADIATION",
+    ),
+    (
+        "hits_total",
+        "u32",
+        "windows counted as particle hits, since start",
+    ),
+    (
+        "masked_total",
+        "u32",
+        "detections and windows masked, since start",
+    ),
 ];
 
 /// Length of the housekeeping source data, bytes.
@@ -272,7 +307,12 @@ impl Housekeeping {
             .u16(self.setup_faults)
             .u16(self.dark_ratio_u8f8)
             .u8(self.status)
-            .u16(self.defects_pending);
+            .u16(self.defects_pending)
+            .u16(self.hits)
+            .u16(self.masked)
+            .u8(self.obstructions)
+            .u32(t.hits)
+            .u32(t.masked);
         w.finish()
     }
 }

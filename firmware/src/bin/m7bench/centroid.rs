@@ -3,7 +3,8 @@
 //! pixel-phase curve; the fused CoG replaces it in tracking) and each of [`METHOD_NAMES`] on
 //! the 7x7 window and on its central 5x5, the box filling the window
 //! (`centroid_<method>_<n>x<n>`). The windows come from [`crate::window`]'s
-//! `calibrate_window`. Cost: seventeen centroids a window.
+//! `calibrate_window`; with them the particle-hit test every measured star gets
+//! (`particle_hit_7x7`). Cost: seventeen centroids and a hit test a window.
 
 use crate::harness::{Bench, Out};
 use crate::inputs::PSF_SIGMA_PX;
@@ -16,6 +17,7 @@ use startrack_core::centroid::gauss_fit::{
 };
 use startrack_core::centroid::trail_fit::{TrailFitParams, trail_fit};
 use startrack_core::centroid::{Background, CentroidInput};
+use startrack_core::detect::{HitLimits, is_particle_hit};
 use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::PixCorr;
 use startrack_core::units::Electrons;
@@ -34,9 +36,11 @@ pub const METHOD_NAMES: [&str; METHODS] = [
     "trail_fit",
 ];
 
-/// Ticks summed over the windows: the corrected CoG, and every method on 5x5 and 7x7.
+/// Ticks summed over the windows: the corrected CoG, the particle-hit test, and every
+/// method on 5x5 and 7x7.
 pub struct CentroidTimes {
     cog1c: u64,
+    hit: u64,
     methods: [[u64; METHODS]; 2],
 }
 
@@ -44,6 +48,7 @@ impl CentroidTimes {
     pub const fn new() -> Self {
         Self {
             cog1c: 0,
+            hit: 0,
             methods: [[0; METHODS]; 2],
         }
     }
@@ -82,6 +87,12 @@ impl CentroidTimes {
             let c = curve.apply(cog(input7, &CogParams::new(CogPower::One, 7)));
             black_box(c.x_px + c.y_px);
         });
+        // The particle-hit test every measured star gets (the flight limits: half the
+        // configured PSF's 80 % radius).
+        let limits = HitLimits::of_min_a(0.6);
+        self.hit += bench.measure(|| {
+            black_box(is_particle_hit(input7, black_box(&limits)));
+        });
         for (input, acc) in inputs.iter().zip(self.methods.iter_mut()) {
             let side = input.window.rect.width as u8;
             for (m, slot) in acc.iter_mut().enumerate() {
@@ -94,9 +105,10 @@ impl CentroidTimes {
         Ok(())
     }
 
-    /// Prints `centroid_cog1c_7x7` over `reps` windows.
+    /// Prints `centroid_cog1c_7x7` and `particle_hit_7x7` over `reps` windows.
     pub fn print_corrected(&self, out: &mut Out, bench: &Bench, reps: u64) {
         bench.row(out, "centroid_cog1c_7x7", "star", self.cog1c, reps);
+        bench.row(out, "particle_hit_7x7", "star", self.hit, reps);
     }
 
     /// Prints every method's row, 5x5 then 7x7, over `reps` windows.

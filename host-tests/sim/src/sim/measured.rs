@@ -144,10 +144,8 @@ impl Simulator {
         let mut line = vec![0u16; g.line_len()];
         for k in 0..frames {
             let dark = Simulator {
-                params: self.params.clone(),
-                stars: Vec::new(),
                 frame: first_frame.wrapping_add(k),
-                trails: Vec::new(),
+                ..Simulator::new(self.params.clone(), Vec::new())
             };
             for y in covered_lines.clone() {
                 if y >= usize::from(g.lines) {

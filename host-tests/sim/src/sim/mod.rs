@@ -13,11 +13,15 @@
 //! quadratic response non-linearity per output (`nonlinearity_at_full_well`, off by default),
 //! 16-bit ADC rounding and saturation. Optional, in [`effects`]: defocus or coma PSFs, a dark
 //! temperature law, hot pixels with their own law, telegraph pixels, cosmic rays and CTI
-//! trails. [`measured`] gives calibration maps measured from simulated dark and flat frames.
+//! trails. [`bright`]: the Moon, the Earth's limb, the Sun's stray light, proton hits
+//! ([`protons`]) and the blooming of saturated columns. [`measured`] gives calibration maps
+//! measured from simulated dark and flat frames.
 
+pub mod bright;
 pub mod effects;
 pub mod measured;
 pub mod params;
+pub mod protons;
 pub mod psf;
 pub mod render;
 pub mod rng;

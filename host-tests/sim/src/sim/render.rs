@@ -4,6 +4,7 @@
 //! Cost: per raw sample, up to six ChaCha8 streams (column bias, relative dark, flat, photon,
 //! dark and read noise) and an erf difference per axis for each star within 8 sigma + 1 px.
 
+use super::bright::{BloomedColumn, BrightFrame, bloom_column};
 use super::effects::{COSMIC_CORE, PsfShape};
 use super::params::{SensorParams, Star};
 use super::psf::{pixel_fraction, sigma_of_a};
@@ -12,6 +13,7 @@ use rand::RngExt;
 use rand_distr::{Distribution, Normal, Poisson};
 use startrack_core::geometry::Segment;
 use startrack_core::window::Rect;
+use std::collections::HashMap;
 
 /// What stops a pixel's signal from rising ([`Simulator::saturation_e`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -35,6 +37,12 @@ pub struct Simulator {
     /// ([`crate::trail::TrailedImage`], Gaussian whatever [`super::effects::PsfShape`] the
     /// still stars have), added to the still `stars`' light. Empty by default.
     pub trails: Vec<crate::trail::TrailedImage>,
+    /// The Moon, the Earth, stray light, proton hits and blooming ([`super::bright`]);
+    /// `None` by default (and then every sample is the sensor's without them).
+    pub bright: Option<std::sync::Arc<BrightFrame>>,
+    /// The frame's bloomed columns (active column to its rows), made on first use by
+    /// [`Self::bloomed`]: a cache, left as [`Simulator::new`] makes it.
+    pub bloomed_cache: std::sync::OnceLock<std::sync::Arc<HashMap<usize, BloomedColumn>>>,
 }
 
 fn normal(r: &mut rand_chacha::ChaCha8Rng) -> f64 {
@@ -57,6 +65,8 @@ impl Simulator {
             stars,
             frame: 0,
             trails: Vec::new(),
+            bright: None,
+            bloomed_cache: std::sync::OnceLock::new(),
         }
     }
 
@@ -90,6 +100,24 @@ impl Simulator {
         }
     }
 
+    /// The raw level at and above which a sample may be a full pixel or the ADC's top, for
+    /// the calibration table: over both outputs the lowest of 65535 and the full well as the
+    /// output reads it ([`Self::saturation_e`]'s limit through the output's bias and gain),
+    /// less 5 column-bias sigmas and 3 read-noise sigmas (a full pixel of the lowest column
+    /// bias, read low, is still flagged).
+    pub fn saturation_level_adu(&self) -> u16 {
+        let p = &self.params;
+        let level = (0..2)
+            .map(|out| {
+                let well = p.full_well_e * (1.0 - p.nonlinearity_at_full_well[out]);
+                p.bias_adu[out] + well / p.gain_e_per_adu[out]
+                    - 5.0 * p.column_bias_sigma_adu
+                    - 3.0 * p.read_noise_e / p.gain_e_per_adu[out]
+            })
+            .fold(65535.0f64, f64::min);
+        level.floor().clamp(1.0, 65535.0) as u16
+    }
+
     /// Relative dark of raw element (`col`, `line`): 1 + dsnu N(0,1), clipped at 0.
     pub fn dark_rel(&self, col: usize, line: usize) -> f64 {
         let p = &self.params;
@@ -117,6 +145,91 @@ impl Simulator {
             return still;
         }
         still + self.trails.iter().map(|t| t.at(x, y)).sum::<f64>()
+    }
+
+    /// Expected light of the bright scene (the Moon, the Earth, stray light) in active pixel
+    /// (`x`, `y`) before the flat, e- (0 without one).
+    pub fn extended_e(&self, x: usize, y: usize) -> f64 {
+        self.bright.as_ref().map_or(0.0, |b| b.light_e(x, y))
+    }
+
+    /// The active column of raw element (`col`, `line`), if it is an active pixel.
+    fn active_x(&self, col: usize, line: usize) -> Option<usize> {
+        let g = &self.params.geometry;
+        (matches!(g.segment(col), Some(Segment::Active)) && line < usize::from(g.active_rows))
+            .then(|| col - g.first_active_col())
+    }
+
+    /// The frame's bloomed columns, by active column ([`super::bright`]); made once a frame.
+    /// Only columns that may pass the full well are evaluated: those of the Moon's and the
+    /// Earth's light and of stars whose brightest pixel may reach half the well.
+    pub fn bloomed(&self) -> &HashMap<usize, BloomedColumn> {
+        self.bloomed_cache
+            .get_or_init(|| std::sync::Arc::new(self.bloom_columns()))
+    }
+
+    fn bloom_columns(&self) -> HashMap<usize, BloomedColumn> {
+        let mut out = HashMap::new();
+        let Some(b) = self.bright.as_ref().filter(|b| b.bloom) else {
+            return out;
+        };
+        let g = self.params.geometry;
+        let (cols, rows) = (usize::from(g.active_cols), usize::from(g.active_rows));
+        let fw = self.params.full_well_e;
+        let mut candidate = vec![false; cols];
+        let mut mark = |lo: f64, hi: f64| {
+            let lo = lo.floor().max(0.0) as usize;
+            let hi = (hi.ceil().max(0.0) as usize).min(cols.saturating_sub(1));
+            for c in candidate.iter_mut().take(hi + 1).skip(lo) {
+                *c = true;
+            }
+        };
+        if let Some(m) = b.moon {
+            mark(
+                m.centre_px[0] - m.radius_px - 1.0,
+                m.centre_px[0] + m.radius_px + 1.0,
+            );
+        }
+        if let Some(e) = b.earth {
+            for x in 0..cols {
+                let touched = (0..rows)
+                    .step_by(4)
+                    .chain([rows.saturating_sub(1)])
+                    .any(|y| e.inside_px(x as f64, y as f64) > -4.0);
+                if touched {
+                    mark(x as f64, x as f64);
+                }
+            }
+        }
+        for s in &self.stars {
+            let sig = sigma_of_a(s.a_px);
+            let peak = s.signal_e * pixel_fraction(0.0, 0.0, sig).powi(2) * 1.2;
+            if peak > 0.5 * fw {
+                let reach = 8.0 * sig + 1.0;
+                mark(s.x_px - reach, s.x_px + reach);
+            }
+        }
+        let first = g.first_active_col();
+        for (x, _) in candidate.iter().enumerate().filter(|(_, c)| **c) {
+            // Bright light alone that overfills the column (through the lowest flat the
+            // PRNU gives) fills it whole.
+            let light: f64 = (0..rows).map(|y| b.light_e(x, y)).sum();
+            let floor = (1.0 - 5.0 * self.params.prnu).max(0.05);
+            if light * floor >= 1.05 * fw * rows as f64 {
+                out.insert(x, BloomedColumn::Full);
+                continue;
+            }
+            let q: Vec<f64> = (0..rows)
+                .map(|y| {
+                    let (l, d) = self.expected_e(first + x, y);
+                    l + d + b.proton_e(x, y)
+                })
+                .collect();
+            if let Some(c) = bloom_column(&q, fw) {
+                out.insert(x, c);
+            }
+        }
+        out
     }
 
     /// Expected electrons of the still stars in active pixel (`x`, `y`) before the flat.
@@ -274,7 +387,8 @@ impl Simulator {
             Some(Segment::Active) if line < usize::from(g.active_rows) => {
                 let x = col - g.first_active_col();
                 (
-                    (self.star_e(x, line) + self.params.sky_e) * self.flat(x, line),
+                    (self.star_e(x, line) + self.params.sky_e + self.extended_e(x, line))
+                        * self.flat(x, line),
                     dark,
                 )
             }
@@ -302,6 +416,19 @@ impl Simulator {
         };
         if p.effects.cosmics.is_some() {
             e += self.cosmic_e(col, line);
+        }
+        if let Some(b) = &self.bright
+            && let Some(x) = self.active_x(col, line)
+        {
+            e += b.proton_e(x, line);
+            if b.bloom
+                && let Some(c) = self.bloomed().get(&x)
+            {
+                e = match c.at(line) {
+                    None => p.full_well_e,
+                    Some(spill) => e + spill,
+                };
+            }
         }
         e = e.min(p.full_well_e);
         let out = usize::from(g.output_of_col(col).0);

@@ -151,7 +151,7 @@ impl Simulator {
         let (hot, telegraph) = (self.hot_pixels_truth(), self.telegraph_truth());
         let spec = TableSpec {
             geometry: g,
-            saturation_adu: 65535,
+            saturation_adu: self.saturation_level_adu(),
             gains: &gains,
             column_bias: sections.column_bias.then_some(&column_bias[..]),
             dark_rel: sections.dark.then_some(MapSpec {
@@ -243,7 +243,7 @@ impl Simulator {
         });
         let spec = TableSpec {
             geometry: g,
-            saturation_adu: 65535,
+            saturation_adu: self.saturation_level_adu(),
             gains: &gains,
             column_bias: column_bias.then_some(&bias[..]),
             dark_rel: dark.as_deref().map(|tiles| MapSpec {

@@ -1,8 +1,10 @@
 //! The sky on the host: the Hipparcos star list the repo carries, the on-board catalog built
 //! from it (`startrack catalog build`), and star fields rendered from it at a known attitude
-//! for the identification and attitude tests, and the spacecraft's turn during the exposure
-//! (`motion`).
+//! for the identification and attitude tests, the spacecraft's turn during the exposure
+//! (`motion`), and the Moon, the Earth, the Sun's stray light, planets and proton hits beside
+//! the stars (`bright`).
 
+pub mod bright;
 pub mod build;
 pub mod field;
 pub mod motion;

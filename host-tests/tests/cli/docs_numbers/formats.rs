@@ -1,7 +1,8 @@
-//! `docs/formats.md`'s bit tables against the code: the star flags and provenance bits.
+//! `docs/formats.md`'s bit tables against the code: the star flags, provenance and
+//! obstruction bits.
 
 use super::helpers::table;
-use startrack_core::tracker::{Provenance, StarFlags};
+use startrack_core::tracker::{Obstructions, Provenance, StarFlags};
 
 /// The bit table under `marker` in docs/formats.md against `bits` (name, value), in order:
 /// one row each, its bit, value and name.
@@ -38,6 +39,19 @@ fn star_provenance_table_is_the_provenance_bits() {
         .collect();
     check_bit_table(
         "star-provenance",
+        &["bit", "value", "flag", "meaning"],
+        &bits,
+    );
+}
+
+#[test]
+fn obstruction_table_is_the_obstruction_bits() {
+    let bits: Vec<(&str, u32)> = Obstructions::all()
+        .iter_names()
+        .map(|(n, f)| (n, u32::from(f.bits())))
+        .collect();
+    check_bit_table(
+        "frame-obstructions",
         &["bit", "value", "flag", "meaning"],
         &bits,
     );

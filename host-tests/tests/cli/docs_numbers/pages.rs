@@ -24,7 +24,7 @@ fn pages() -> Vec<(String, String)> {
 }
 
 /// The checked tables, by marker name.
-const CHECKED: [&str; 30] = [
+const CHECKED: [&str; 32] = [
     "m7-costs",
     "m7-targets",
     "frontier",
@@ -36,6 +36,7 @@ const CHECKED: [&str; 30] = [
     "fig5-fig6",
     "star-flags",
     "star-provenance",
+    "frame-obstructions",
     "tracker-config",
     "tracker-memory",
     "readout-plan",
@@ -47,6 +48,7 @@ const CHECKED: [&str; 30] = [
     "trail-rates",
     "acquisition-rates",
     "sil-rates",
+    "bright-availability",
     "first-attitude",
     "exposure-chart",
     "ident-tetra3rs",

@@ -273,3 +273,58 @@ fn acquisition_rate_table_is_the_acquisition_rates_csv() {
         }
     }
 }
+
+const BRIGHT: &str = "host-tests/figures/bright-availability.csv";
+
+/// The bright-object availability table of docs/tracker.md is
+/// `host-tests/figures/bright-availability.csv`, row for row.
+#[test]
+fn bright_table_is_the_bright_availability_csv() {
+    use super::helpers::{Csv, matches};
+    let csv = Csv::read(BRIGHT);
+    let recs = csv.records();
+    let (header, body) = table("docs/tracker.md", "bright-availability");
+    assert_eq!(
+        header,
+        [
+            "scene",
+            "frames",
+            "with attitude",
+            "wrong",
+            "clear frames",
+            "clear, with attitude",
+            "recovery, frames",
+            "flagged Moon",
+            "flagged Earth",
+            "flagged Sun",
+            "flagged radiation",
+            "hits counted",
+            "masked"
+        ]
+    );
+    assert_eq!(body.len(), recs.len(), "{BRIGHT}: one row a scene");
+    for (row, rec) in body.iter().zip(&recs) {
+        assert_eq!(row[0], rec["scene"], "{row:?} vs {rec:?}");
+        for (i, col) in [
+            (1, "frames"),
+            (2, "solved"),
+            (3, "wrong"),
+            (4, "eligible"),
+            (5, "eligible_solved"),
+            (7, "flagged_moon"),
+            (8, "flagged_earth"),
+            (9, "flagged_sun"),
+            (10, "flagged_radiation"),
+            (11, "hits"),
+            (12, "masked"),
+        ] {
+            assert!(matches(&row[i], rec[col]), "{col}: {row:?} vs {rec:?}");
+        }
+        let recovery = if rec["recovery_frames"].is_empty() {
+            "-"
+        } else {
+            rec["recovery_frames"]
+        };
+        assert_eq!(row[6], recovery, "{row:?} vs {rec:?}");
+    }
+}
