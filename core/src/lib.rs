@@ -29,6 +29,7 @@ pub mod attitude;
 pub mod calib;
 pub mod catalog;
 pub mod centroid;
+mod clamp;
 pub mod cycle;
 pub mod detect;
 pub mod geometry;

@@ -4,7 +4,8 @@
 //!
 //! - [`mount`] mounts the store at start-up; [`load_calibration`] copies the calibration
 //!   table in force into [`TABLE_RAM_B`] bytes of RAM (checking its CRC again) and has the
-//!   core parse it there.
+//!   core parse it there. The copy is in `.d2sram` ([`crate::d2_ram`]: the H7's D2 SRAM),
+//!   written and read by the CPU only (no DMA), cached.
 //! - [`erase_pending`] is the erase step of an upload, run by [`erase_task`]: never the
 //!   frame loop.
 //! - The link's uploads: the mounted store is shared ([`share`], [`SHARED`], an embassy-sync
@@ -25,6 +26,7 @@
 //! reset. Swapping the RAM copy under a running tracker would need a second 192 KB buffer.
 
 use crate::board::{Flash, STORE_LAYOUT, StoreFlash};
+use crate::d2_ram::{D2Cell, D2Ready, D2Static};
 use crate::lines::GEOMETRY;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::mutex::Mutex;
@@ -34,15 +36,18 @@ use startrack_core::link::protocol::TABLE_KIND_CALIBRATION;
 use startrack_core::link::{FlashTables, TableInfo, TableUpload, UploadRefusal};
 use startrack_core::store::{EraseProgress, FlashStore, StoreError, TableKind};
 use startrack_core::table::{CalibTable, TableError};
-use static_cell::ConstStaticCell;
 
 /// Largest calibration table the tracker can use (its RAM copy), bytes: 192 KB, enough for
 /// the CCD47-20's dark map in 4x4 tiles (64 KB) and flat map in 8x8 tiles (32 KB) with
 /// every list. A larger table can be stored but is refused at start-up.
 pub const TABLE_RAM_B: usize = 192 * 1024;
 
-/// The RAM copy of the calibration table in force (zeroed `.bss` in the AXI SRAM).
-static TABLE_RAM: ConstStaticCell<[u8; TABLE_RAM_B]> = ConstStaticCell::new([0; TABLE_RAM_B]);
+/// The RAM copy of the calibration table in force: in `.d2sram` (the H7's SRAM1-2), which
+/// the start-up code leaves as it is, so handed out zeroed by [`TABLE_RAM`].
+#[unsafe(link_section = ".d2sram.TABLE_RAM")]
+static TABLE_CELL: D2Cell<[u8; TABLE_RAM_B]> = D2Cell::new();
+/// [`TABLE_CELL`], handed out once.
+static TABLE_RAM: D2Static<[u8; TABLE_RAM_B]> = D2Static::new(&TABLE_CELL);
 
 /// The store on this board.
 pub type Store = FlashStore<Flash>;
@@ -92,8 +97,8 @@ pub enum LoadError {
 /// Copies the calibration table in force into RAM and returns it parsed (once per start).
 /// Every error is logged; the firmware then runs uncalibrated, which every frame summary
 /// flags and housekeeping counts.
-pub fn load_calibration(store: &mut Store) -> Result<CalibTable<'static>, LoadError> {
-    let result = load(store);
+pub fn load_calibration(store: &mut Store, d2: D2Ready) -> Result<CalibTable<'static>, LoadError> {
+    let result = load(store, d2);
     match &result {
         Ok(table) => defmt::info!(
             "calib: table in force {} ({} bytes), saturation {} ADU, column bias {}, dark map {}, flat map {}, {} hot, {} telegraph",
@@ -111,8 +116,8 @@ pub fn load_calibration(store: &mut Store) -> Result<CalibTable<'static>, LoadEr
     result
 }
 
-fn load(store: &mut Store) -> Result<CalibTable<'static>, LoadError> {
-    let ram: &'static mut [u8; TABLE_RAM_B] = TABLE_RAM.try_take().ok_or(LoadError::NoBuffer)?;
+fn load(store: &mut Store, d2: D2Ready) -> Result<CalibTable<'static>, LoadError> {
+    let ram: &'static mut [u8; TABLE_RAM_B] = TABLE_RAM.try_take(d2).ok_or(LoadError::NoBuffer)?;
     let bytes: &'static [u8] = store
         .read_active(TableKind::Calibration, ram)
         .map_err(LoadError::Store)?;

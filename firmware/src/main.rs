@@ -18,6 +18,7 @@
 mod app;
 mod board;
 mod catalog;
+mod d2_ram;
 mod flash_store;
 mod lines;
 mod link;
@@ -57,6 +58,7 @@ async fn main(spawner: Spawner) {
         flash,
         thermometer,
         thermometer_faults,
+        d2_ready,
         io,
     } = board::init();
     let cause = board::reset_cause();
@@ -77,7 +79,7 @@ async fn main(spawner: Spawner) {
 
     let table = match flash_store::mount(flash) {
         Ok(mut store) => {
-            let table = flash_store::load_calibration(&mut store);
+            let table = flash_store::load_calibration(&mut store, d2_ready);
             if let Err(e) = &table {
                 faults |= match e {
                     flash_store::LoadError::GeometryMismatch { .. } => SetupFaults::TABLE_GEOMETRY,

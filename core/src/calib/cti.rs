@@ -32,6 +32,7 @@
 //! Cost: one `powf` and one `erff` (libm), about 15 flops and a few integer operations per
 //! star.
 
+use crate::clamp::clamp;
 use crate::geometry::{Output, ReadoutGeometry};
 use crate::table::{CalibTable, CtiCoeffs};
 
@@ -100,9 +101,15 @@ impl CtiCorrection {
         let g = &self.geometry;
         let last_x = f32::from(g.active_cols.saturating_sub(1));
         let last_y = f32::from(g.active_rows.saturating_sub(1));
-        let clamp = |v: f32, hi: f32| if v.is_finite() { v.clamp(0.0, hi) } else { 0.0 };
-        let x = (clamp(x_px, last_x) + 0.5) as usize;
-        let y = clamp(y_px, last_y) + 0.5;
+        let limit = |v: f32, hi: f32| {
+            if v.is_finite() {
+                clamp(v, 0.0, hi)
+            } else {
+                0.0
+            }
+        };
+        let x = (limit(x_px, last_x) + 0.5) as usize;
+        let y = limit(y_px, last_y) + 0.5;
         let col = g.raw_col_of_x(x);
         let out = g.output_of_col(col);
         let n_par = (g.raw_line_of_y(y as usize) + 1) as f32;

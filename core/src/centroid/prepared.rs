@@ -17,6 +17,7 @@ use super::background::{
 use super::math::pos;
 use super::{Centroid, CentroidFlags, CentroidInput, LOW_SNR_LIMIT, MAX_SIDE};
 use crate::calib::PixelFlags;
+use crate::clamp::clamp;
 use crate::units::Electrons;
 use crate::window::{Rect, Window};
 
@@ -349,14 +350,14 @@ pub(crate) fn finish_in(
     }
     let mut flags = flags;
     let (wmax, hmax) = (f32::from(area.width) - 0.5, f32::from(area.height) - 0.5);
-    let col = m.col.clamp(-0.5, wmax);
-    let row = m.row.clamp(-0.5, hmax);
+    let col = clamp(m.col, -0.5, wmax);
+    let row = clamp(m.row, -0.5, hmax);
     if col != m.col || row != m.row {
         flags |= CentroidFlags::CLAMPED;
     }
     let sigma = |v: f32| {
         if v.is_finite() {
-            v.clamp(0.0, 2.0 * half)
+            clamp(v, 0.0, 2.0 * half)
         } else {
             half
         }

@@ -35,6 +35,7 @@ use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord
 use super::{Ring, Shared};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::centroid::CentroidInput;
+use crate::clamp::clamp;
 use crate::detect::{CAPTURE_MAX_SIDE, Detection, DetectionFlags, ScanDetector};
 use crate::geometry::ReadoutGeometry;
 use crate::units::Electrons;
@@ -264,14 +265,17 @@ pub const SMEARED_WIDTH_RATIO: f32 = 1.5;
 fn trail_window(d: &Detection, config: &TrackerConfig, geometry: &ReadoutGeometry) -> (Rect, bool) {
     let [x0, x1, y0, y1] = d.extent;
     let side = |lo: u16, hi: u16| {
-        (hi.saturating_sub(lo)
-            .saturating_add(1 + 2 * TRAIL_MARGIN_PX)
-            | 1)
-        .clamp(config.window_px, CAPTURE_MAX_SIDE)
+        clamp(
+            hi.saturating_sub(lo)
+                .saturating_add(1 + 2 * TRAIL_MARGIN_PX)
+                | 1,
+            config.window_px,
+            CAPTURE_MAX_SIDE,
+        )
     };
     let centre = |v: f32, lo: u16, hi: u16| {
         let v = if v.is_finite() { v } else { f32::from(lo) };
-        (v + 0.5).clamp(f32::from(lo), f32::from(hi)) as u16
+        clamp(v + 0.5, f32::from(lo), f32::from(hi)) as u16
     };
     let (cx, cy) = (centre(d.x_px, x0, x1), centre(d.y_px, y0, y1));
     let (wx, wy) = (side(x0, x1), side(y0, y1));

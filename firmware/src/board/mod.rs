@@ -17,6 +17,7 @@
 //! | `Parts::watchdog: Watchdog` ([`WatchdogPort`]) | started and fed by [`crate::watchdog`] |
 //! | `Parts::flash: Flash` ([`StoreFlash`]) | the table store's NOR flash ([`crate::flash_store`]), laid out as `STORE_LAYOUT` |
 //! | `Parts::thermometer: Thermometer` (the core's `SourcedThermometer`), `Parts::thermometer_faults` | the frame's sensor temperature, and the set-up fault when the board's sensor is missing |
+//! | `Parts::d2_ready: D2Ready` | the word that the second RAM (`.d2sram`, [`crate::d2_ram`]) is usable: on the STM32H743 its D2 SRAM clocked |
 //! | `Parts::io: Io` | what `start_io` and `start_lines` need (board-private) |
 //! | `reset_cause()` | why the MCU reset, for the fault record ([`crate::safe_state`]) |
 //! | `CATALOG_ADDRESS`, `CATALOG_REGION_B` | where the star catalog lies, memory-mapped ([`crate::catalog`]) |

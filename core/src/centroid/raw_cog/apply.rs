@@ -18,6 +18,7 @@ use crate::centroid::background::{level_to_bits, sanitize_var};
 use crate::centroid::cog::{Anchor, CogParams, cog};
 use crate::centroid::prepared::{Measured, finish_in};
 use crate::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
+use crate::clamp::clamp;
 use crate::table::pixcorr::CogPower;
 use crate::units::Electrons;
 use crate::window::{Rect, Window};
@@ -92,7 +93,7 @@ impl RawCogPlan {
             // Move once to the CoG's pixel; offsets beyond the box are noise: at most h pixels.
             let h = f32::from(side / 2);
             let step = |o: f32| {
-                let o = o.clamp(-h, h);
+                let o = clamp(o, -h, h);
                 (if o >= 0.0 { o + 0.5 } else { o - 0.5 }) as i32
             };
             let nx = i32::from(ax) + step(m.ox);

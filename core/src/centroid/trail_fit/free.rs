@@ -63,6 +63,7 @@ use crate::centroid::math::{self, pos};
 use crate::centroid::pixel_box::PixelBox;
 use crate::centroid::prepared::{Measured, Prepared};
 use crate::centroid::{Background, Centroid, CentroidFlags, CentroidInput};
+use crate::clamp::clamp;
 use crate::table::pixcorr::CogPower;
 
 /// Parameters of [`trail_fit_free`].
@@ -344,9 +345,9 @@ fn fit(
         let [sx, sy, sn, sb, ss, sl, sphi] = step;
         let dx = sx.clamp(-1.0, 1.0);
         let dy = sy.clamp(-1.0, 1.0);
-        let ds = ss.clamp(-0.5 * theta.s, 0.5 * theta.s);
+        let ds = clamp(ss, -0.5 * theta.s, 0.5 * theta.s);
         let lim_l = (0.5 * theta.l).max(1.0);
-        let dl = sl.clamp(-lim_l, lim_l);
+        let dl = clamp(sl, -lim_l, lim_l);
         if dx.abs() < tol && dy.abs() < tol && ds.abs() < tol && dl.abs() < tol {
             return Some(Fit {
                 theta,
@@ -360,7 +361,7 @@ fn fit(
             y: theta.y + dy,
             flux: theta.flux + sn,
             bg: theta.bg + sb,
-            s: (theta.s + ds).clamp(0.3, s_max),
+            s: clamp(theta.s + ds, 0.3, s_max),
             l: (theta.l + dl).min(l_max),
             ..rotated(theta, sphi.clamp(-0.5, 0.5))
         };

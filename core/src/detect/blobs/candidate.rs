@@ -11,6 +11,7 @@
 
 use super::{Blob, Detection, DetectionFlags, LineDetector};
 use crate::calib::PixelFlags;
+use crate::clamp::clamp;
 use crate::detect::DetectError;
 use crate::units::Electrons;
 
@@ -60,8 +61,8 @@ impl<const N: usize> LineDetector<N> {
             flags |= DetectionFlags::EDGE;
         }
         let d = Detection {
-            x_px: x.clamp(f32::from(b.x_min), f32::from(b.x_max)),
-            y_px: y.clamp(f32::from(b.y_min), f32::from(b.last_y)),
+            x_px: clamp(x, f32::from(b.x_min), f32::from(b.x_max)),
+            y_px: clamp(y, f32::from(b.y_min), f32::from(b.last_y)),
             peak_x: b.peak_x,
             peak_y: b.peak_y,
             flux_e: s,

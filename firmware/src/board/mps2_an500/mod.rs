@@ -25,6 +25,7 @@ pub mod time;
 pub mod uart;
 
 use super::{Started, WatchdogPort};
+use crate::d2_ram::D2Ready;
 use crate::lines::{BUFFERS, FILLED, FREE, LINE_LEN, LineBuf, REQUESTS, RawLine};
 use crate::spawn::spawn_or_log;
 use core::cell::RefCell;
@@ -220,6 +221,8 @@ pub struct Parts {
     pub thermometer: Thermometer,
     /// `EXTERNAL_THERMOMETER`: the board has no sensor.
     pub thermometer_faults: SetupFaults,
+    /// `.d2sram` usable (plain RAM here, as the H7's D2 SRAM once clocked).
+    pub d2_ready: D2Ready,
     /// Nothing.
     pub io: Io,
 }
@@ -252,6 +255,8 @@ pub fn init() -> Parts {
         flash,
         thermometer: FixedTemperature(None),
         thermometer_faults: SetupFaults::EXTERNAL_THERMOMETER,
+        // SAFETY: the map puts `.d2sram` in QEMU's SSRAM2/3, always readable and writable.
+        d2_ready: unsafe { D2Ready::new() },
         io: Io,
     }
 }

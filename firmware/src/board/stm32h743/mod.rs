@@ -18,6 +18,7 @@ pub mod sequencer;
 pub mod uart;
 
 use super::{Started, WatchdogPort};
+use crate::d2_ram::D2Ready;
 use crate::lines::LINE_LEN;
 use crate::spawn::spawn_or_log;
 use embassy_executor::Spawner;
@@ -181,13 +182,17 @@ pub struct Parts {
     pub thermometer: Thermometer,
     /// `EXTERNAL_THERMOMETER` when no TMP117 answered.
     pub thermometer_faults: SetupFaults,
+    /// SRAM1-3 (the D2 domain's, `.d2sram`) clocked.
+    pub d2_ready: D2Ready,
     /// The rest, for [`start_io`].
     pub io: Io,
 }
 
-/// Clocks up, the watchdog configured (not started), the flash driver, the thermometers.
+/// Clocks up, SRAM1-3 clocked, the watchdog configured (not started), the flash driver, the
+/// thermometers.
 pub fn init() -> Parts {
     let p = embassy_stm32::init(clock_config());
+    let d2_ready = enable_d2_sram();
     let watchdog = Watchdog(IndependentWatchdog::new(
         p.IWDG1,
         crate::watchdog::TIMEOUT_US,
@@ -227,6 +232,7 @@ pub fn init() -> Parts {
         flash,
         thermometer,
         thermometer_faults,
+        d2_ready,
         io: Io {
             usart: p.USART3,
             usart_rx: p.PD9,
@@ -248,6 +254,26 @@ pub fn init() -> Parts {
             },
         },
     }
+}
+
+/// Clocks the D2 domain's SRAM1, SRAM2 and SRAM3 (RCC_AHB2ENR; off after reset, when an
+/// access to them is a bus fault), where the map puts `.d2sram`. The enable bits also
+/// allocate the SRAMs to the CPU, so the D2 domain stays in DRun while the CPU runs (it does
+/// anyway while DMA1 and the D2 peripherals are enabled). The read-back and DSB make the
+/// enable take effect before the first access (RM0433: a delay of a few bus cycles after
+/// setting a clock enable).
+fn enable_d2_sram() -> D2Ready {
+    let rcc = embassy_stm32::pac::RCC;
+    rcc.ahb2enr().modify(|w| {
+        w.set_sram1en(true);
+        w.set_sram2en(true);
+        w.set_sram3en(true);
+    });
+    let _ = rcc.ahb2enr().read();
+    cortex_m::asm::dsb();
+    // SAFETY: SRAM1-3 are clocked from here on (the bits are set above and nothing clears
+    // them), and the map puts `.d2sram` in them.
+    unsafe { D2Ready::new() }
 }
 
 /// Why the MCU reset (RCC_RSR), and clears the flags so the next reset reads its own.

@@ -17,6 +17,7 @@ use crate::centroid::cog::cog_in_box;
 use crate::centroid::gauss_fit::step_usable;
 use crate::centroid::math;
 use crate::centroid::prepared::{Measured, Prepared};
+use crate::clamp::clamp;
 use crate::table::pixcorr::CogPower;
 
 /// The width fit of a prepared window (see the module docs), free or with a prior.
@@ -79,8 +80,8 @@ pub(super) fn fit_z<const CLEAN: bool>(
     let (mut level_e, mut var1) = (bg.level_e(), bg.variance_e2 + 1.0);
     // With a prior the model's width starts the fit (and the moments' only the free one).
     let s_start = match prior {
-        Some(pr) => pr.s_model.clamp(MIN_SIGMA_PX, max_s),
-        None => s0.clamp(MIN_START_SIGMA_PX, max_s),
+        Some(pr) => clamp(pr.s_model, MIN_SIGMA_PX, max_s),
+        None => clamp(s0, MIN_START_SIGMA_PX, max_s),
     };
     let it = Iteration {
         params,
@@ -236,7 +237,7 @@ impl Iteration<'_> {
             let [dx, dy, dn, ds] = f.solve(nrm.b);
             let (sx, sy) = (dx.clamp(-1.0, 1.0), dy.clamp(-1.0, 1.0));
             let half = 0.5 * theta.3;
-            let s_new = (theta.3 + ds.clamp(-half, half)).clamp(MIN_SIGMA_PX, self.max_s);
+            let s_new = clamp(theta.3 + clamp(ds, -half, half), MIN_SIGMA_PX, self.max_s);
             let ss = s_new - theta.3;
             theta = (theta.0 + sx, theta.1 + sy, theta.2 + dn, s_new);
             let (x, y, flux, s) = theta;
