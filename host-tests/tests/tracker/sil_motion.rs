@@ -162,7 +162,11 @@ fn a_bright_star_smeared_below_the_screen_is_fitted_as_a_trail() {
     let report = sil::run(&sil_rates::config(&case, 102, 1)).unwrap();
     let f = &report.frames[0];
     assert_eq!(f.summary.mode, Mode::Acquisition);
-    let mut bright: Vec<_> = f.truth.iter().filter(|t| sil::in_field(t, &Default::default())).collect();
+    let mut bright: Vec<_> = f
+        .truth
+        .iter()
+        .filter(|t| sil::in_field(t, &Default::default()))
+        .collect();
     bright.sort_by(|a, b| b.signal_e.total_cmp(&a.signal_e));
     for t in bright.iter().take(5) {
         let m = f
@@ -170,14 +174,21 @@ fn a_bright_star_smeared_below_the_screen_is_fitted_as_a_trail() {
             .iter()
             .find(|m| m.truth.is_some_and(|u| u == **t))
             .unwrap_or_else(|| panic!("{t:?} not in the list"));
-        assert!(m.star.provenance.contains(Provenance::TRAILED), "{:?}", m.star);
+        assert!(
+            m.star.provenance.contains(Provenance::TRAILED),
+            "{:?}",
+            m.star
+        );
         assert!(m.star.fit_is_clean(), "{:?}", m.star);
     }
     let c = f.attitude.as_ref().unwrap();
     let fix = c.fix.as_ref().unwrap();
     let e = c.error_rad().unwrap();
     let a = &fix.attitude;
-    assert!(!sil_rates::is_wrong(e, a.boresight_sigma_rad(), a.roll_sigma_rad()), "{e:?}");
+    assert!(
+        !sil_rates::is_wrong(e, a.boresight_sigma_rad(), a.roll_sigma_rad()),
+        "{e:?}"
+    );
 }
 
 /// The committed rate table (docs/tracker.md, "At body rate").
@@ -399,7 +410,8 @@ fn slew_frames() {
                 (Ok(fix), Some(e)) => {
                     let a = &fix.attitude;
                     let s: Vec<f64> = (0..3).map(|i| a.cov_rad2[i][i].sqrt()).collect();
-                    let is_wrong = sil_rates::is_wrong(e, a.boresight_sigma_rad(), a.roll_sigma_rad());
+                    let is_wrong =
+                        sil_rates::is_wrong(e, a.boresight_sigma_rad(), a.roll_sigma_rad());
                     wrong += usize::from(is_wrong);
                     worst = worst.max((e[0] / s[0]).abs()).max((e[1] / s[1]).abs());
                     format!(
