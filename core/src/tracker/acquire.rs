@@ -368,7 +368,6 @@ fn measure_pending<const N: usize>(
         if let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) {
             return push_measured(
                 policy,
-                config,
                 &input,
                 detected,
                 want_background,
@@ -382,7 +381,6 @@ fn measure_pending<const N: usize>(
     } else if let Some(input) = sh.scratch.window(rect, p.clipped) {
         return push_measured(
             policy,
-            config,
             &input,
             detected,
             want_background,
@@ -439,7 +437,6 @@ fn sky_mean(e: &[Electrons], f: &[PixelFlags]) -> Option<f32> {
 /// the window is sharper than a star.
 fn push_measured<const N: usize>(
     policy: &Policy<'_>,
-    config: &TrackerConfig,
     input: &CentroidInput<'_>,
     detected: StarFlags,
     want_background: bool,
@@ -456,7 +453,7 @@ fn push_measured<const N: usize>(
         && let Some(e) = elongation
         && let Some(record) = policy.free_trailed_record(input, detected, e)
         && record.fit_is_clean()
-        && record.psf_a_px >= TRAIL_MIN_WIDTH_FRACTION * config.psf_a_px
+        && record.psf_a_px >= TRAIL_MIN_WIDTH_FRACTION * policy.psf_a_px
     {
         stars.push(record, Carry::default());
         return true;
@@ -468,7 +465,7 @@ fn push_measured<const N: usize>(
     if m.hit {
         m.record.flags |= StarFlags::POOR_FIT;
     }
-    if m.record.psf_a_px > SMEARED_WIDTH_RATIO * config.psf_a_px {
+    if m.record.psf_a_px > SMEARED_WIDTH_RATIO * policy.psf_a_px {
         m.record.flags |= StarFlags::TRAIL_UNKNOWN;
     }
     stars.push(
