@@ -302,7 +302,7 @@ fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Vec<Option<([f64; 3], f64, 
 /// On this file's sky at the flight timing, at rest, 1 and 2 deg/s across the boresight
 /// and 1 deg/s in roll (one seeded attitude, 40 frames each): every frame has an attitude,
 /// none is wrong ([`sil_rates::is_wrong`]), and the RMS cross-boresight error is within
-/// 1.25 times the RMS of its reported bound (the rate table's 1.1 on 1000 frames a rate,
+/// 1.25 times the RMS of its reported bound (the rate table's 1.1 on 3000 frames a rate,
 /// with room for 40 frames' scatter: the RMS of 40 frames' errors scatters by about 11 %).
 /// About a minute in the test profile.
 #[test]
