@@ -84,6 +84,7 @@ pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Obstructions, Provenance,
     StarFlags, StarRecord, TemperatureSource,
 };
+pub use track::TRAIL_SETTLE_FRAMES;
 
 /// A saturated region of at least this many whole columns of pixels is the Moon's: its disc,
 /// 35 px across on the 15 degree camera, blooms every column it crosses; a planet or a
@@ -379,6 +380,18 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.trk.set_prediction(stars)
     }
 
+    /// Asks for one more acquisition frame where the mode rules would hand the next frame
+    /// over to tracking after an acquisition frame (between frames; no effect otherwise,
+    /// and a command or a prediction of the next frame takes precedence). The attitude
+    /// stage asks it when the acquisition gave an attitude but no rate: one image holds no
+    /// star's direction of motion (a trail reads the same both ways), so the first
+    /// tracking frames on the tracker's own stars would measure moving stars whose motion
+    /// is not known yet (`TRAIL_UNKNOWN`), while a second lost-in-space attitude gives the
+    /// rate, and the catalog then predicts the next frame's windows with their trails.
+    pub fn acquire_again(&mut self) {
+        self.modes.acquire_again();
+    }
+
     /// The calibration a window read now gets, as the tracker would calibrate it: the last
     /// frame's table, the last complete dark scale, the configured exposure and the last
     /// frame's temperature (the link's diagnostic windows use it); `None` before a frame
@@ -480,6 +493,8 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             return Err(e);
         }
         loop {
+            // Known once the frame's first line is in (some sources know it at its start).
+            self.set_integration(source.integration());
             match source.next_line().await {
                 Ok(Some(l)) => {
                     self.push_line(l.line, l.samples, ports.telemetry);
@@ -492,6 +507,16 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             }
         }
         Ok(self.end_frame(ports.telemetry))
+    }
+
+    /// When the current frame's image was integrated, as the line source reports it
+    /// ([`LineSource::integration`]; a `None` keeps what it gave before): the trails of its
+    /// tracked stars are their motion over it. [`Self::run_frame`] gives it before each
+    /// line; a home that pushes lines itself gives it once it knows it. Without it a
+    /// trailed star's trail is not known, and the star is flagged
+    /// [`StarFlags::TRAIL_UNKNOWN`].
+    pub fn set_integration(&mut self, integration: Option<Integration>) {
+        self.trk.set_integration(integration);
     }
 
     /// Starts the next frame (ending an open one first) and returns its number: applies a
@@ -513,6 +538,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.started = true;
         self.frame = frame;
         self.open = true;
+        self.trk.next_integration();
         if let Some(c) = self.staged_config.take() {
             self.config = c;
             telemetry.event(&Event::ConfigApplied { frame });

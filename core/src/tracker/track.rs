@@ -14,14 +14,18 @@
 //! fused CoG reads raw samples and would not exclude it). The fused path feeds no watch.
 //!
 //!
-//! A star whose last motion is at least [`TRAIL_MIN_PX`] a frame is trailed: its window is
-//! widened by that motion (up to [`CAPTURE_MAX_SIDE`]), and it is measured with the
-//! trailed-star fit ([`crate::centroid::trail_fit`]) on the whole window, its trail taken as
-//! that motion (the exposure taken to span the frame period, as a frame-transfer sensor
-//! integrates while the last frame is read; a shorter exposure makes the trail held too
-//! long, which leaves the position along it nearly unbiased), reported
-//! [`Provenance::TRAILED`] at mid-exposure. A slower star is measured by the configured
-//! method, whose fit flags a smear it cannot follow. A star that moved at least
+//! A star's trail is its image's motion over the frame's own integration, as the line
+//! source reports it ([`super::Integration`], known once the frame's first line is in): a
+//! tracked star's last motion scaled by this frame's integration over the interval between
+//! the mid-integrations the motion was measured across. A star whose trail is at least
+//! [`TRAIL_MIN_PX`] is trailed: its window is widened by its last motion (up to
+//! [`CAPTURE_MAX_SIDE`]), and it is measured with the trailed-star fit
+//! ([`crate::centroid::trail_fit`]) on the whole window, reported [`Provenance::TRAILED`] at
+//! mid-exposure. A slower star is measured by the configured method, whose fit flags a
+//! smear it cannot follow. When the integration (or the interval) is not known, the trail
+//! is not either: the star is fitted with its last motion (a predicted star with its trail
+//! over the configured exposure) to place its next window, and flagged
+//! [`StarFlags::TRAIL_UNKNOWN`]. A star that moved at least
 //! [`TRAIL_MIN_PX`] before [`TRAIL_SETTLE_FRAMES`] tracking frames measured its motion is
 //! flagged [`StarFlags::TRAIL_UNKNOWN`]: it places the next window, the attitude stage skips
 //! it. A trail longer than the window holds (a component beyond its side less 1 px: with
@@ -32,8 +36,8 @@
 //! With the attitude stage's prediction ([`super::PredictedStar`]) the windows are placed
 //! on the catalog's stars at their predicted positions instead, each sized by
 //! [`super::predicted_window_side`] (the centroid window, the prediction's bound and the
-//! predicted trail), and a star is measured with the trailed-star fit from its predicted
-//! trail in its first tracked frame (no settling, never `TRAIL_UNKNOWN`); its prediction
+//! trail over the configured exposure), and a star is measured with the trailed-star fit
+//! from its predicted velocity times the frame's integration in its first tracked frame (no settling, never `TRAIL_UNKNOWN`); its prediction
 //! goes with its record to the attitude stage, which checks it and keeps its identity.
 //!
 //! Cost per line: a row test per window and the copy of the rows inside windows; per
@@ -49,7 +53,7 @@ use super::list::{Carry, StarList};
 use super::measure::{Policy, StarBackground, measure};
 use super::predicted::{PredictedStar, predicted_window_side};
 use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord};
-use super::{Capture, TRACK_WINDOWS, Watch};
+use super::{Capture, Integration, TRACK_WINDOWS, Watch};
 use crate::calib::refresh::WatchedWindow;
 use crate::calib::{FrameCalibration, LineLevels};
 use crate::centroid::CentroidFlags;
@@ -103,6 +107,13 @@ pub(super) struct Tracking {
     rects: heapless::Vec<Rect, { TRACK_WINDOWS + 1 }>,
     /// This frame's probe row ([`probe_row`]) and its raw column range.
     probe: Option<Probe>,
+    /// This frame's integration, as the line source reported it (`None` until it does).
+    integration: Option<Integration>,
+    /// The last frame's mid-integration, us (`None`: not known).
+    last_mid_us: Option<u64>,
+    /// From the mid-integration of the frame before the last to the last's, us: the
+    /// interval the stars' carried motion was measured over (`None`: not known).
+    motion_interval_us: Option<u64>,
 }
 
 /// The full row a tracking frame reads besides its windows: a bloomed column crosses every
@@ -227,7 +238,54 @@ impl Tracking {
             placed: heapless::Vec::new(),
             rects: heapless::Vec::new(),
             probe: None,
+            integration: None,
+            last_mid_us: None,
+            motion_interval_us: None,
         }
+    }
+
+    /// A new frame: the last frame's integration closes the interval its stars' motion
+    /// was measured over; this frame's is not known yet.
+    pub(super) fn next_integration(&mut self) {
+        let mid = self.integration.take().map(|i| i.mid_us());
+        self.motion_interval_us = match (mid, self.last_mid_us) {
+            (Some(m), Some(l)) if m > l => Some(m - l),
+            _ => None,
+        };
+        self.last_mid_us = mid;
+    }
+
+    /// This frame's integration, once the line source knows it (a `None` keeps what it
+    /// gave before).
+    pub(super) fn set_integration(&mut self, integration: Option<Integration>) {
+        self.integration = integration.or(self.integration);
+    }
+
+    /// The trail of the star `prior` over this frame's integration, px (exposure start to
+    /// end), if it is trailed ([`TRAIL_MIN_PX`]), and whether it is known: a predicted
+    /// star's velocity, or a tracked star's last motion over the interval it was measured
+    /// across, times the integration. Without the integration (or the interval) it is not
+    /// known, and is taken as the predicted star's trail over the configured exposure, or
+    /// the tracked star's last motion.
+    fn trail(&self, prior: &Prior, config: &TrackerConfig) -> Option<((f32, f32), bool)> {
+        let integration_s = self.integration.map(|i| i.duration_us() as f32 * 1e-6);
+        let (trail, known) = match prior.carry.predicted {
+            Some(p) => match integration_s {
+                Some(t) => (p.trail_px(t), true),
+                None => (p.trail_px(config.exposure_s()), false),
+            },
+            None => {
+                let v = prior.carry.velocity_px?;
+                match (integration_s, self.motion_interval_us) {
+                    (Some(t), Some(dt)) => {
+                        let k = t / (dt as f32 * 1e-6);
+                        ((v.0 * k, v.1 * k), true)
+                    }
+                    _ => (v, false),
+                }
+            }
+        };
+        trail_of(Some(trail)).map(|t| (t, known))
     }
 
     /// Stars the next tracking frame would look for.
@@ -337,7 +395,11 @@ impl Tracking {
                 pixel_of(p.y_px + vy, geometry.active_rows),
             );
             let side = match p.carry.predicted {
-                Some(pr) => predicted_window_side(config.window_px, pr.bound_px, pr.trail_px),
+                Some(pr) => predicted_window_side(
+                    config.window_px,
+                    pr.bound_px,
+                    pr.trail_px(config.exposure_s()),
+                ),
                 None => trail_of(p.carry.velocity_px).map_or(side, |t| trailed_side(side, t)),
             };
             let (rect, clipped) = Rect::centred_clipped(
@@ -473,10 +535,7 @@ impl Tracking {
             .capture
             .window(i)
             .is_some_and(|w| sh.watch.touches(w.rect));
-        let trail = match predicted {
-            Some(p) => trail_of(Some(p.trail_px)),
-            None => trail_of(placed.prior.carry.velocity_px),
-        };
+        let trail = self.trail(&placed.prior, config);
         if policy.method == CentroidMethod::FusedCog1
             && !found
             && trail.is_none()
@@ -547,7 +606,7 @@ impl Tracking {
             return;
         }
         note_sky(sh.summary, verdict.background_e);
-        if let Some(trail) = trail {
+        if let Some((trail, known)) = trail {
             let Some(input) = sh.scratch.window(rect, clipped) else {
                 sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
                 return;
@@ -557,6 +616,9 @@ impl Tracking {
             record.provenance = Provenance::TRACKED | Provenance::TRAILED;
             if trail_clipped(trail, rect) {
                 record.flags |= StarFlags::TRAIL_CLIPPED;
+            }
+            if !known {
+                record.flags |= StarFlags::TRAIL_UNKNOWN;
             }
             let v = velocity(&record);
             let tracked_frames = settle(&mut record, &placed.prior);

@@ -74,13 +74,19 @@ fn rate_table_is_the_sil_rates_csv() {
             "motion",
             "rate, deg/s",
             "frames",
-            "with attitude",
             "with attitude, %",
+            "from the first attitude, %",
+            "full frames after it",
             "wrong",
             "worst error, arcsec",
             "cross-boresight RMS, arcsec",
             "bound, arcsec",
-            "error / bound"
+            "error / bound",
+            "attitude NEES",
+            "rate RMS, arcsec/s",
+            "rate bound, arcsec/s",
+            "roll rate RMS, arcsec/s",
+            "rate NEES"
         ]
     );
     assert_eq!(body.len(), recs.len(), "{SIL_RATES}: one row a rate");
@@ -89,19 +95,26 @@ fn rate_table_is_the_sil_rates_csv() {
         for (i, col) in [
             (1, "rate_deg_s"),
             (2, "frames"),
-            (3, "solved"),
-            (5, "wrong"),
-            (6, "worst_arcsec"),
-            (7, "rms_cross_arcsec"),
-            (8, "bound_cross_arcsec"),
-            (9, "ratio"),
+            (5, "acquisitions_after_first"),
+            (6, "wrong"),
+            (7, "worst_arcsec"),
+            (8, "rms_cross_arcsec"),
+            (9, "bound_cross_arcsec"),
+            (10, "ratio"),
+            (11, "attitude_nees"),
+            (12, "rate_cross_arcsec_s"),
+            (13, "rate_bound_cross_arcsec_s"),
+            (14, "rate_roll_arcsec_s"),
+            (15, "rate_nees"),
         ] {
             assert!(matches(&row[i], rec[col]), "{col}: {row:?} vs {rec:?}");
         }
-        assert!(
-            matches_value(&row[4], 100.0 * num(rec["availability"])),
-            "{row:?} vs {rec:?}"
-        );
+        for (i, col) in [(3, "availability"), (4, "availability_after_first")] {
+            assert!(
+                matches_value(&row[i], 100.0 * num(rec[col])),
+                "{col}: {row:?} vs {rec:?}"
+            );
+        }
     }
 }
 
