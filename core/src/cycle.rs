@@ -14,6 +14,9 @@
 //!                     with the link's velocity command (within [`VELOCITY_MAX_AGE_S`] of
 //!                     the frame's spacecraft time) the attitude is of the ICRF, stellar
 //!                     aberration removed, else of the apparent sky and flagged so
+//!                  -> an acquisition frame's attitude with no rate yet: one more
+//!                     acquisition frame ([`Tracker::acquire_again`]), whose attitude
+//!                     gives the rate
 //!                  -> the next frame's windows: with a rate and an attitude no older than
 //!                     [`PREDICT_MAX_AGE_US`] at the next frame's mid-exposure, the catalog's
 //!                     stars there ([`Solver::predict`]), handed to the tracker
@@ -58,7 +61,7 @@ use crate::safe::{Health, ThermoSource};
 use crate::solver::{Fix, SolveError, Solver};
 use crate::time::{SpacecraftClock, SyncPulse};
 use crate::tracker::{
-    Clock, Event, FrameSummary, LineSource, LineSummary, Ports, StarRecord, TableStore,
+    Clock, Event, FrameSummary, LineSource, LineSummary, Mode, Ports, StarRecord, TableStore,
     TelemetrySink, Thermometer, Tracker,
 };
 use crate::units::Kelvin;
@@ -367,6 +370,11 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
                 .and_then(|f| self.rate.push(f.time_us, &f.attitude));
             if result.is_ok() {
                 self.last_rate = rate;
+                // An acquisition's attitude without a rate: acquire once more for the rate
+                // rather than track stars whose motion is not known.
+                if rate.is_none() && self.predicting && summary.mode == Mode::Acquisition {
+                    self.tracker.acquire_again();
+                }
             }
             let mut r = crate::link::telemetry::AttitudeReport::of(
                 summary.frame,

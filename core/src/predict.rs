@@ -24,9 +24,11 @@
 //! sigma is the root trace of that covariance mapped through the tangent-plane projection
 //! at the star (so roll counts in proportion to the star's distance from the boresight),
 //! and its bound is [`PredictConfig::bound_sigmas`] sigmas plus [`PredictConfig::floor_px`]
-//! (the centroid's own error, the camera model's, an unmodelled acceleration). The trail is
-//! the star's projected path from `dt - T/2` to `dt + T/2` (`T` the exposure), its motion
-//! the projection's change over one more frame interval.
+//! (the centroid's own error, the camera model's, an unmodelled acceleration). The image's
+//! velocity is the star's projected path from `dt - T/2` to `dt + T/2` over `T` (the
+//! expected exposure; 1 ms when that is shorter), so that the tracker takes the trail over
+//! the integration the frame really has; its motion is the projection's change over one
+//! more frame interval.
 //!
 //! Cost: one cone search of the catalog (a binary search and a scan of the field's
 //! declination band, a few hundred stars), a rotation and a projection a star in the cone
@@ -103,7 +105,8 @@ pub struct PredictFrom {
     pub scale: f64,
     /// From the fix's mid-exposure to the next frame's, s.
     pub interval_s: f64,
-    /// The next frame's exposure, s.
+    /// The next frame's expected exposure, s: a star is kept only where its window, sized
+    /// for the trail over it, fits.
     pub exposure_s: f64,
     /// The frame interval after the next frame, s (for each star's motion).
     pub period_s: f64,
@@ -286,7 +289,9 @@ pub fn predict(
         gy * grid + gx
     };
     let max = cfg.max_stars.min(MAX_PREDICTED);
-    let half_t = 0.5 * from.exposure_s;
+    // The span the image's velocity is taken over: the exposure, at least 1 ms.
+    let span_s = from.exposure_s.max(1e-3);
+    let half_t = 0.5 * span_s;
     let (q_start, q_end, q_next) = (
         turn(from.interval_s - half_t),
         turn(from.interval_s + half_t),
@@ -310,13 +315,17 @@ pub fn predict(
             x_px: c.x_px,
             y_px: c.y_px,
             bound_px: (cfg.bound_sigmas * sigma_px + cfg.floor_px) as f32,
-            trail_px: ((pe[0] - ps[0]) as f32, (pe[1] - ps[1]) as f32),
+            rate_px_s: (
+                ((pe[0] - ps[0]) / span_s) as f32,
+                ((pe[1] - ps[1]) / span_s) as f32,
+            ),
             motion_px: (
                 (pn[0] - f64::from(c.x_px)) as f32,
                 (pn[1] - f64::from(c.y_px)) as f32,
             ),
         };
-        let half = f32::from(predicted_window_side(cfg.window_px, p.bound_px, p.trail_px) / 2);
+        let trail = p.trail_px(from.exposure_s as f32);
+        let half = f32::from(predicted_window_side(cfg.window_px, p.bound_px, trail) / 2);
         let inside = p.x_px >= half
             && p.y_px >= half
             && p.x_px <= cols as f32 - 1.0 - half

@@ -18,12 +18,12 @@
 //! stale rate is never reported: the next report then has no rate until a second attitude.
 //!
 //! Cost: per attitude, one quaternion product and logarithm per kept attitude, three 3x3
-//! inversions and a few hundred flops; 8 x 104 bytes of state. No allocation, no panic.
+//! inversions and a few hundred flops; 12 x 112 bytes of state. No allocation, no panic.
 
 use super::{Attitude, Quat, dot, inverse3, mat_vec};
 
 /// Attitudes the rate filter keeps.
-pub const RATE_WINDOW: usize = 8;
+pub const RATE_WINDOW: usize = 12;
 
 /// An angular rate and its covariance.
 #[derive(Clone, Copy, Debug, PartialEq)]

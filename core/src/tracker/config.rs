@@ -156,6 +156,11 @@ impl TrackerConfig {
         u8::try_from(self.window_px.saturating_sub(2)).unwrap_or(u8::MAX)
     }
 
+    /// The configured exposure, s.
+    pub fn exposure_s(&self) -> f32 {
+        self.exposure_ms as f32 * 1e-3
+    }
+
     /// The tracking capture window's side, px.
     pub fn track_window_px(&self) -> u16 {
         self.window_px

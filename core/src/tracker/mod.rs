@@ -84,6 +84,7 @@ pub use record::{
     Event, FrameSummary, LineOutcome, LineSummary, Mode, ModeReason, Obstructions, Provenance,
     StarFlags, StarRecord, TemperatureSource,
 };
+pub use track::TRAIL_SETTLE_FRAMES;
 
 /// A saturated region of at least this many whole columns of pixels is the Moon's: its disc,
 /// 35 px across on the 15 degree camera, blooms every column it crosses; a planet or a
@@ -97,10 +98,17 @@ pub const EARTH_MIN_COLUMNS: u32 = 48;
 /// shot noise (22 e-) then passes the CCD47-20's read and dark noise and the faint stars'
 /// SNR falls.
 pub const STRAY_LIGHT_LIMIT_E: f32 = 500.0;
-/// This many particle hits counted in a frame flag it: a quiet orbit's rate (~1 cm^-2 s^-1)
-/// gives a 1.77 cm^2 sensor about 0.2 hits a 100 ms frame, the South Atlantic Anomaly ~190,
-/// of which the monitor counts about one in six in an acquisition frame.
+/// The radiation limit, particle hits counted per whole active area and 100 ms read: a
+/// quiet orbit's rate (~1 cm^-2 s^-1) gives a 1.77 cm^2 sensor about 0.2 hits a 100 ms
+/// frame, the South Atlantic Anomaly ~190, of which the monitor counts about one in six.
+/// A tracking frame reads ~0.5 % of the area: its hits are scaled by the area and the
+/// exposure read, over the last [`RADIATION_FRAMES`] frames.
 pub const RADIATION_HITS: u16 = 5;
+/// Frames whose hits and read area the radiation rate sums: the last second at 20 Hz.
+pub const RADIATION_FRAMES: usize = 20;
+/// Fewest hits over [`RADIATION_FRAMES`] that can flag radiation: one hit (or an unlisted
+/// hot pixel's spike seen once) in a tracking frame's small area is no rate.
+pub const RADIATION_MIN_HITS: u32 = 2;
 
 use crate::calib::refresh::{Defect, DefectWatch};
 use crate::calib::{DarkScaleEstimator, FrameCalibration, FrameConditions, LineLevels};
@@ -207,9 +215,55 @@ pub struct Tracker<'t, 'b, const N: usize> {
     acq: Acquisition<'t, N>,
     trk: Tracking,
     work: FrameWork<N>,
-    /// The Moon and Earth bits of the last acquisition frame, which the tracking frames
-    /// after it carry (their windows do not see the whole field).
-    last_bright: Obstructions,
+    /// The last frames' hits and areas read, for the radiation rate.
+    radiation: RadiationWindow,
+}
+
+/// One frame's share of the radiation rate: hits counted, and the pixels and exposure read.
+#[derive(Clone, Copy, Debug, Default)]
+struct RadiationFrame {
+    hits: u16,
+    read_px: u32,
+    exposure_ms: u32,
+}
+
+/// The particle-hit rate over the last [`RADIATION_FRAMES`] frames (a ring).
+struct RadiationWindow {
+    frames: [RadiationFrame; RADIATION_FRAMES],
+    next: usize,
+}
+
+impl RadiationWindow {
+    const fn new() -> Self {
+        Self {
+            frames: [RadiationFrame {
+                hits: 0,
+                read_px: 0,
+                exposure_ms: 0,
+            }; RADIATION_FRAMES],
+            next: 0,
+        }
+    }
+
+    /// Adds a frame; returns whether the window's rate is above the limit: at least
+    /// [`RADIATION_MIN_HITS`], and `hits / (px ms) >= RADIATION_HITS / (area 100 ms)`.
+    /// The sums fit a u64: 20 frames of at most 2^32 px times 2^32 ms.
+    fn add(&mut self, f: RadiationFrame, active_px: u32) -> bool {
+        if let Some(slot) = self.frames.get_mut(self.next) {
+            *slot = f;
+        }
+        self.next = (self.next + 1) % RADIATION_FRAMES;
+        let (mut hits, mut px_ms) = (0u64, 0u64);
+        for g in &self.frames {
+            hits += u64::from(g.hits);
+            px_ms = px_ms.saturating_add(u64::from(g.read_px) * u64::from(g.exposure_ms));
+        }
+        // hits <= 20 * 65,535 and active_px * 100 < 2^39: the product fits.
+        hits >= u64::from(RADIATION_MIN_HITS)
+            && px_ms > 0
+            && u128::from(hits) * u128::from(active_px) * 100
+                >= u128::from(RADIATION_HITS) * u128::from(px_ms)
+    }
 }
 
 /// What a frame's measurements write into: one window's scratch, the star list, the
@@ -283,7 +337,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             policy: None,
             acq: Acquisition::new(),
             trk: Tracking::new(),
-            last_bright: Obstructions::empty(),
+            radiation: RadiationWindow::new(),
             work: FrameWork {
                 scratch: Scratch::new(),
                 stars: StarList::new(),
@@ -324,6 +378,18 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
     /// the stars taken.
     pub fn predict_next(&mut self, stars: &[PredictedStar]) -> usize {
         self.trk.set_prediction(stars)
+    }
+
+    /// Asks for one more acquisition frame where the mode rules would hand the next frame
+    /// over to tracking after an acquisition frame (between frames; no effect otherwise,
+    /// and a command or a prediction of the next frame takes precedence). The attitude
+    /// stage asks it when the acquisition gave an attitude but no rate: one image holds no
+    /// star's direction of motion (a trail reads the same both ways), so the first
+    /// tracking frames on the tracker's own stars would measure moving stars whose motion
+    /// is not known yet (`TRAIL_UNKNOWN`), while a second lost-in-space attitude gives the
+    /// rate, and the catalog then predicts the next frame's windows with their trails.
+    pub fn acquire_again(&mut self) {
+        self.modes.acquire_again();
     }
 
     /// The calibration a window read now gets, as the tracker would calibrate it: the last
@@ -427,6 +493,8 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             return Err(e);
         }
         loop {
+            // Known once the frame's first line is in (some sources know it at its start).
+            self.set_integration(source.integration());
             match source.next_line().await {
                 Ok(Some(l)) => {
                     self.push_line(l.line, l.samples, ports.telemetry);
@@ -439,6 +507,16 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             }
         }
         Ok(self.end_frame(ports.telemetry))
+    }
+
+    /// When the current frame's image was integrated, as the line source reports it
+    /// ([`LineSource::integration`]; a `None` keeps what it gave before): the trails of its
+    /// tracked stars are their motion over it. [`Self::run_frame`] gives it before each
+    /// line; a home that pushes lines itself gives it once it knows it. Without it a
+    /// trailed star's trail is not known, and the star is flagged
+    /// [`StarFlags::TRAIL_UNKNOWN`].
+    pub fn set_integration(&mut self, integration: Option<Integration>) {
+        self.trk.set_integration(integration);
     }
 
     /// Starts the next frame (ending an open one first) and returns its number: applies a
@@ -460,6 +538,7 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
         self.started = true;
         self.frame = frame;
         self.open = true;
+        self.trk.next_integration();
         if let Some(c) = self.staged_config.take() {
             self.config = c;
             telemetry.event(&Event::ConfigApplied { frame });
@@ -529,7 +608,11 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
             Policy::new(method, &self.config, &t)
         });
         match to {
-            Mode::Acquisition => self.acq.start(&mut self.buffers.ring),
+            Mode::Acquisition => {
+                self.work.summary.read_px =
+                    u32::from(self.geometry.active_cols) * u32::from(self.geometry.active_rows);
+                self.acq.start(&mut self.buffers.ring)
+            }
             Mode::Tracking => {
                 let placed = self.trk.start(
                     &self.config,
@@ -707,30 +790,41 @@ impl<'t, 'b, const N: usize> Tracker<'t, 'b, N> {
 }
 
 impl<const N: usize> Tracker<'_, '_, N> {
-    /// What took stars from the frame now ending (see [`Obstructions`]): in acquisition
-    /// the largest saturated region's size, in tracking the last acquisition's Moon and
-    /// Earth bits; in both the sky and the hits.
+    /// What took stars from the frame now ending (see [`Obstructions`]), each bit measured
+    /// in it: the Moon and the Earth from the width of its saturated columns (acquisition:
+    /// the largest saturated region over the active rows; tracking: the probe row's widest
+    /// run), the Sun from its sky, radiation from the hit rate of the last frames.
     fn obstructions(&mut self) -> Obstructions {
         let s = &self.work.summary;
         let rows = u32::from(self.geometry.active_rows);
         let mut o = Obstructions::empty();
-        match s.mode {
-            Mode::Acquisition => {
-                if s.saturated_px > EARTH_MIN_COLUMNS * rows {
-                    o |= Obstructions::EARTH;
-                } else if s.saturated_px >= MOON_MIN_COLUMNS * rows {
-                    o |= Obstructions::MOON;
-                }
-                self.last_bright = o;
-            }
-            Mode::Tracking => o |= self.last_bright,
-            _ => {}
+        // The acquisition's region in pixels over the active rows; the probe row's run.
+        let (moon, earth) = match (s.mode, s.probe_saturated_cols.map(u32::from)) {
+            (Mode::Acquisition, _) => (
+                s.saturated_px >= MOON_MIN_COLUMNS * rows,
+                s.saturated_px > EARTH_MIN_COLUMNS * rows,
+            ),
+            (Mode::Tracking, Some(c)) => (c >= MOON_MIN_COLUMNS, c > EARTH_MIN_COLUMNS),
+            _ => (false, false),
+        };
+        if earth {
+            o |= Obstructions::EARTH;
+        } else if moon {
+            o |= Obstructions::MOON;
         }
         if s.sky_e > STRAY_LIGHT_LIMIT_E {
             o |= Obstructions::SUN;
         }
-        if s.hits >= RADIATION_HITS {
-            o |= Obstructions::RADIATION;
+        if s.mode != Mode::Standby {
+            let frame = RadiationFrame {
+                hits: s.hits,
+                read_px: s.read_px,
+                exposure_ms: self.config.exposure_ms,
+            };
+            let active_px = u32::from(self.geometry.active_cols) * rows;
+            if self.radiation.add(frame, active_px) {
+                o |= Obstructions::RADIATION;
+            }
         }
         o
     }

@@ -6,7 +6,9 @@
 //!   command; tracking needs stars from the last frame;
 //! - no calibration table: standby ([`ModeReason::NoTable`]), then acquisition when one is
 //!   in force ([`ModeReason::TableAvailable`]);
-//! - acquisition -> tracking with at least `min_track_stars` usable centroids;
+//! - acquisition -> tracking with at least `min_track_stars` usable centroids, unless the
+//!   attitude stage asks for one more acquisition frame ([`Modes::acquire_again`]: an
+//!   attitude with no rate yet, which a second lost-in-space attitude gives);
 //! - tracking -> acquisition with fewer, or after `reacquire_every` tracking frames in a row
 //!   whose windows the tracker placed on its own last stars;
 //! - with a prediction from the attitude stage (the catalog's stars at the next frame,
@@ -53,6 +55,8 @@ pub(super) struct Modes {
     standby_held: bool,
     /// Tracking frames in a row up to the current one.
     tracking_run: u32,
+    /// The attitude stage asked for one more acquisition frame after this one.
+    again: bool,
 }
 
 impl Modes {
@@ -64,7 +68,16 @@ impl Modes {
             commanded: None,
             standby_held: false,
             tracking_run: 0,
+            again: false,
         }
+    }
+
+    /// After an acquisition frame that would hand over to tracking: the next frame
+    /// acquires once more instead (no mode change, so no event). A command, a prediction
+    /// or too few stars take precedence.
+    pub(super) fn acquire_again(&mut self) {
+        self.again =
+            self.mode == Mode::Acquisition && self.next == (Mode::Tracking, ModeReason::Acquired);
     }
 
     /// The current (or last) frame's mode.
@@ -91,6 +104,9 @@ impl Modes {
         predicted: bool,
     ) -> (Mode, Option<(Mode, ModeReason)>) {
         let (mut to, mut reason) = self.next;
+        if core::mem::take(&mut self.again) && !predicted {
+            (to, reason) = (Mode::Acquisition, ModeReason::Acquired);
+        }
         if predicted
             && to == Mode::Acquisition
             && matches!(reason, ModeReason::TooFewStars | ModeReason::Reacquire)

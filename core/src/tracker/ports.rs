@@ -76,10 +76,13 @@ pub trait LineSource {
     /// the next call.
     async fn next_line(&mut self) -> Result<Option<SourceLine<'_>>, Self::Error>;
 
-    /// When the image of the frame just read was integrated, asked once its lines have
-    /// ended; `None` when the source does not know (a recorded frame, a frame that read no
-    /// line), and the frame cycle then takes the configured exposure before the frame's
-    /// start.
+    /// When the image of the frame being read was integrated: known once the frame's first
+    /// line is in (a source may know it from the frame's start), asked before each line and
+    /// once its lines have ended. The tracker takes its tracked stars' trails over it, the
+    /// frame cycle tags the attitude at its middle. `None` when the source does not know (a
+    /// recorded frame, a frame that read no line): trailed stars are then flagged
+    /// [`super::StarFlags::TRAIL_UNKNOWN`], and the frame cycle takes the configured
+    /// exposure before the frame's start.
     fn integration(&self) -> Option<Integration> {
         None
     }

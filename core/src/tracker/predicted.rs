@@ -4,13 +4,15 @@
 //! the camera or the solver.
 //!
 //! Each [`PredictedStar`] is one catalog star at its predicted position at the next frame's
-//! mid-exposure, the bound within which it must be found, and its predicted trail. The
-//! tracker places one window per star ([`predicted_window_side`]: the centroid window, the bound on
-//! each side and the trail), measures a trailed star with the trailed-star fit from that
-//! trail in its first tracked frame (no settling: its motion comes from the attitude, not
-//! from its own last positions), and reports each star with the prediction it was measured
-//! for ([`super::Tracker::identities`]), so that the attitude stage can check the star
-//! against its prediction and use its identity.
+//! mid-exposure, the bound within which it must be found, and its image's velocity there.
+//! The tracker places one window per star ([`predicted_window_side`]: the centroid window,
+//! the bound on each side and the trail over the configured exposure), measures a trailed
+//! star with the trailed-star fit from its trail over the frame's own integration (the
+//! velocity times the integration the line source reports, [`super::Integration`]) in its
+//! first tracked frame (no settling: its motion comes from the attitude, not from its own
+//! last positions), and reports each star with the prediction it was measured for
+//! ([`super::Tracker::identities`]), so that the attitude stage can check the star against
+//! its prediction and use its identity.
 //!
 //! Cost: a copy of at most [`super::TRACK_WINDOWS`] entries of 28 bytes a frame.
 
@@ -29,9 +31,9 @@ pub struct PredictedStar {
     /// The prediction's bound, px: the measured star must lie within this of the predicted
     /// position (a multiple of the prediction's sigma plus the model's error floor).
     pub bound_px: f32,
-    /// The star's predicted trail over the exposure, from its start to its end (column,
-    /// row), px.
-    pub trail_px: (f32, f32),
+    /// The star's image velocity over the exposure (column, row), px/s: its trail over an
+    /// integration of `T` s, from its start to its end, is `T` times this.
+    pub rate_px_s: (f32, f32),
     /// The star's predicted motion from this frame's mid-exposure to the next one's (column,
     /// row), px: what the tracker places the next window by if the attitude stage gives no
     /// prediction then.
@@ -45,14 +47,22 @@ impl PredictedStar {
             self.x_px,
             self.y_px,
             self.bound_px,
-            self.trail_px.0,
-            self.trail_px.1,
+            self.rate_px_s.0,
+            self.rate_px_s.1,
             self.motion_px.0,
             self.motion_px.1,
         ]
         .iter()
         .all(|v| v.is_finite())
             && self.bound_px > 0.0
+    }
+
+    /// The star's trail over an integration of `integration_s` s, px (column, row).
+    pub fn trail_px(&self, integration_s: f32) -> (f32, f32) {
+        (
+            self.rate_px_s.0 * integration_s,
+            self.rate_px_s.1 * integration_s,
+        )
     }
 
     /// Whether a star measured at (`x_px`, `y_px`) matches the prediction: within

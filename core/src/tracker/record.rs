@@ -138,18 +138,22 @@ bitflags::bitflags! {
 bitflags::bitflags! {
     /// What in the field took stars from a frame, one bit a cause (0: nothing). The bit
     /// numbers are stable: housekeeping and the attitude report's validity flags carry them.
-    /// Told from the image alone ([`crate::tracker`]'s frame end): the Moon and the Earth by
-    /// the size of a saturated region, the Sun by the sky background, radiation by the
-    /// particle hits counted.
+    /// Each bit is measured in the frame it is in, in acquisition and tracking alike, from
+    /// the image alone ([`crate::tracker`]'s frame end): the Moon and the Earth by the width
+    /// of the saturated columns (acquisition: the largest saturated region; tracking: the
+    /// probe row it reads besides its windows), the Sun by the sky background (the whole
+    /// rows', or the windows' borders), radiation by the particle hits counted per pixel
+    /// and second read over the last second's frames.
     #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
     pub struct Obstructions: u8 {
-        /// A saturated region of the Moon's size (its bloomed columns).
+        /// Saturated columns of the Moon's width in this frame (its bloomed columns).
         const MOON = 1 << 0;
-        /// A saturated region larger than the Moon can make: the Earth.
+        /// Saturated columns wider than the Moon can make in this frame: the Earth.
         const EARTH = 1 << 1;
-        /// A sky background above the stray-light limit: the Sun's stray light.
+        /// This frame's sky background above the stray-light limit: the Sun's stray light.
         const SUN = 1 << 2;
-        /// Particle hits above the radiation limit in the frame.
+        /// A particle-hit rate above the radiation limit: the hits counted over the frames
+        /// of the last second, up to and with this one, per pixel and second read.
         const RADIATION = 1 << 3;
     }
 }
@@ -389,6 +393,13 @@ pub struct FrameSummary {
     pub hits: u16,
     /// Acquisition: pixels of the largest saturated region (0: none).
     pub saturated_px: u32,
+    /// Tracking: the widest run of saturated columns on the frame's probe row, the one full
+    /// row it reads besides its windows (a bloomed column crosses every row); `None` when
+    /// the row was not read (acquisition, standby, a lost line).
+    pub probe_saturated_cols: Option<u16>,
+    /// Active pixels the frame read: the whole area (acquisition), else its windows' and
+    /// its probe row's (what its particle hits are counted on).
+    pub read_px: u32,
     /// The mean sky background of the frame (acquisition: its whole rows; tracking: its
     /// windows' borders), e- per pixel, dark removed; 0 when not measured.
     pub sky_e: f32,
@@ -432,6 +443,8 @@ impl FrameSummary {
             masked: 0,
             hits: 0,
             saturated_px: 0,
+            probe_saturated_cols: None,
+            read_px: 0,
             sky_e: 0.0,
             sky_windows: 0,
             obstructions: Obstructions::empty(),

@@ -14,14 +14,18 @@
 //! fused CoG reads raw samples and would not exclude it). The fused path feeds no watch.
 //!
 //!
-//! A star whose last motion is at least [`TRAIL_MIN_PX`] a frame is trailed: its window is
-//! widened by that motion (up to [`CAPTURE_MAX_SIDE`]), and it is measured with the
-//! trailed-star fit ([`crate::centroid::trail_fit`]) on the whole window, its trail taken as
-//! that motion (the exposure taken to span the frame period, as a frame-transfer sensor
-//! integrates while the last frame is read; a shorter exposure makes the trail held too
-//! long, which leaves the position along it nearly unbiased), reported
-//! [`Provenance::TRAILED`] at mid-exposure. A slower star is measured by the configured
-//! method, whose fit flags a smear it cannot follow. A star that moved at least
+//! A star's trail is its image's motion over the frame's own integration, as the line
+//! source reports it ([`super::Integration`], known once the frame's first line is in): a
+//! tracked star's last motion scaled by this frame's integration over the interval between
+//! the mid-integrations the motion was measured across. A star whose trail is at least
+//! [`TRAIL_MIN_PX`] is trailed: its window is widened by its last motion (up to
+//! [`CAPTURE_MAX_SIDE`]), and it is measured with the trailed-star fit
+//! ([`crate::centroid::trail_fit`]) on the whole window, reported [`Provenance::TRAILED`] at
+//! mid-exposure. A slower star is measured by the configured method, whose fit flags a
+//! smear it cannot follow. When the integration (or the interval) is not known, the trail
+//! is not either: the star is fitted with its last motion (a predicted star with its trail
+//! over the configured exposure) to place its next window, and flagged
+//! [`StarFlags::TRAIL_UNKNOWN`]. A star that moved at least
 //! [`TRAIL_MIN_PX`] before [`TRAIL_SETTLE_FRAMES`] tracking frames measured its motion is
 //! flagged [`StarFlags::TRAIL_UNKNOWN`]: it places the next window, the attitude stage skips
 //! it. A trail longer than the window holds (a component beyond its side less 1 px: with
@@ -32,8 +36,8 @@
 //! With the attitude stage's prediction ([`super::PredictedStar`]) the windows are placed
 //! on the catalog's stars at their predicted positions instead, each sized by
 //! [`super::predicted_window_side`] (the centroid window, the prediction's bound and the
-//! predicted trail), and a star is measured with the trailed-star fit from its predicted
-//! trail in its first tracked frame (no settling, never `TRAIL_UNKNOWN`); its prediction
+//! trail over the configured exposure), and a star is measured with the trailed-star fit
+//! from its predicted velocity times the frame's integration in its first tracked frame (no settling, never `TRAIL_UNKNOWN`); its prediction
 //! goes with its record to the attitude stage, which checks it and keeps its identity.
 //!
 //! Cost per line: a row test per window and the copy of the rows inside windows; per
@@ -49,7 +53,7 @@ use super::list::{Carry, StarList};
 use super::measure::{Policy, StarBackground, measure};
 use super::predicted::{PredictedStar, predicted_window_side};
 use super::record::{FrameSummary, LineOutcome, Provenance, StarFlags, StarRecord};
-use super::{Capture, TRACK_WINDOWS, Watch};
+use super::{Capture, Integration, TRACK_WINDOWS, Watch};
 use crate::calib::refresh::WatchedWindow;
 use crate::calib::{FrameCalibration, LineLevels};
 use crate::centroid::CentroidFlags;
@@ -57,7 +61,7 @@ use crate::centroid::CentroidInput;
 use crate::centroid::raw_cog::{PlanError, RawCogParams, RawWindow};
 use crate::detect::capture::CAPTURE_MAX_SIDE;
 use crate::detect::track::TrackResult;
-use crate::detect::{TrackFlags, track_detect};
+use crate::detect::track_detect;
 use crate::geometry::ReadoutGeometry;
 use crate::window::Rect;
 
@@ -99,7 +103,54 @@ pub(super) struct Tracking {
     /// The current frame's windows came from a prediction.
     predicted_frame: bool,
     placed: heapless::Vec<Placed, TRACK_WINDOWS>,
-    rects: heapless::Vec<Rect, TRACK_WINDOWS>,
+    /// The windows' rectangles (capture order), then the probe row's.
+    rects: heapless::Vec<Rect, { TRACK_WINDOWS + 1 }>,
+    /// This frame's probe row ([`probe_row`]) and its raw column range.
+    probe: Option<Probe>,
+    /// This frame's integration, as the line source reported it (`None` until it does).
+    integration: Option<Integration>,
+    /// The last frame's mid-integration, us (`None`: not known).
+    last_mid_us: Option<u64>,
+    /// From the mid-integration of the frame before the last to the last's, us: the
+    /// interval the stars' carried motion was measured over (`None`: not known).
+    motion_interval_us: Option<u64>,
+}
+
+/// The full row a tracking frame reads besides its windows: a bloomed column crosses every
+/// row, so its widest run of saturated columns measures the Moon or the Earth in the field as
+/// the acquisition's largest saturated region does.
+#[derive(Clone, Copy, Debug)]
+struct Probe {
+    /// Active row read.
+    y: u16,
+    /// Raw index of its first active column.
+    first_col: usize,
+    /// Active columns.
+    cols: usize,
+}
+
+/// The probe row of tracking frame `frame`: one of four rows spread down the active area
+/// (at 1/8, 3/8, 5/8 and 7/8 of its height) in turn, so that a partial bloom or a defect
+/// row does not hold one answer for good.
+pub(super) fn probe_row(frame: u32, active_rows: u16) -> u16 {
+    let k = (frame % 4) as u16;
+    let y = u32::from(active_rows) * u32::from(2 * k + 1) / 8;
+    // Below active_rows, so it fits.
+    y as u16
+}
+
+/// The widest run of raw samples at or above `saturation_adu` in `row`.
+fn widest_saturated_run(row: &[u16], saturation_adu: u16) -> u16 {
+    let (mut best, mut run) = (0u16, 0u16);
+    for &v in row {
+        if v >= saturation_adu {
+            run = run.saturating_add(1);
+            best = best.max(run);
+        } else {
+            run = 0;
+        }
+    }
+    best
 }
 
 /// Flags of a fused result that send the window through the full path.
@@ -186,7 +237,55 @@ impl Tracking {
             predicted_frame: false,
             placed: heapless::Vec::new(),
             rects: heapless::Vec::new(),
+            probe: None,
+            integration: None,
+            last_mid_us: None,
+            motion_interval_us: None,
         }
+    }
+
+    /// A new frame: the last frame's integration closes the interval its stars' motion
+    /// was measured over; this frame's is not known yet.
+    pub(super) fn next_integration(&mut self) {
+        let mid = self.integration.take().map(|i| i.mid_us());
+        self.motion_interval_us = match (mid, self.last_mid_us) {
+            (Some(m), Some(l)) if m > l => Some(m - l),
+            _ => None,
+        };
+        self.last_mid_us = mid;
+    }
+
+    /// This frame's integration, once the line source knows it (a `None` keeps what it
+    /// gave before).
+    pub(super) fn set_integration(&mut self, integration: Option<Integration>) {
+        self.integration = integration.or(self.integration);
+    }
+
+    /// The trail of the star `prior` over this frame's integration, px (exposure start to
+    /// end), if it is trailed ([`TRAIL_MIN_PX`]), and whether it is known: a predicted
+    /// star's velocity, or a tracked star's last motion over the interval it was measured
+    /// across, times the integration. Without the integration (or the interval) it is not
+    /// known, and is taken as the predicted star's trail over the configured exposure, or
+    /// the tracked star's last motion.
+    fn trail(&self, prior: &Prior, config: &TrackerConfig) -> Option<((f32, f32), bool)> {
+        let integration_s = self.integration.map(|i| i.duration_us() as f32 * 1e-6);
+        let (trail, known) = match prior.carry.predicted {
+            Some(p) => match integration_s {
+                Some(t) => (p.trail_px(t), true),
+                None => (p.trail_px(config.exposure_s()), false),
+            },
+            None => {
+                let v = prior.carry.velocity_px?;
+                match (integration_s, self.motion_interval_us) {
+                    (Some(t), Some(dt)) => {
+                        let k = t / (dt as f32 * 1e-6);
+                        ((v.0 * k, v.1 * k), true)
+                    }
+                    _ => (v, false),
+                }
+            }
+        };
+        trail_of(Some(trail)).map(|t| (t, known))
     }
 
     /// Stars the next tracking frame would look for.
@@ -222,7 +321,7 @@ impl Tracking {
         self.predicted_frame
     }
 
-    /// This frame's windows.
+    /// What this frame reads: its windows, then its probe row.
     pub(super) fn rects(&self) -> &[Rect] {
         &self.rects
     }
@@ -296,7 +395,11 @@ impl Tracking {
                 pixel_of(p.y_px + vy, geometry.active_rows),
             );
             let side = match p.carry.predicted {
-                Some(pr) => predicted_window_side(config.window_px, pr.bound_px, pr.trail_px),
+                Some(pr) => predicted_window_side(
+                    config.window_px,
+                    pr.bound_px,
+                    pr.trail_px(config.exposure_s()),
+                ),
                 None => trail_of(p.carry.velocity_px).map_or(side, |t| trailed_side(side, t)),
             };
             let (rect, clipped) = Rect::centred_clipped(
@@ -326,6 +429,30 @@ impl Tracking {
                 slot,
             });
             let _ = self.rects.push(rect);
+            summary.read_px = summary
+                .read_px
+                .saturating_add(u32::from(rect.width) * u32::from(rect.height));
+        }
+        self.probe = None;
+        if geometry.active_rows > 0 && geometry.active_cols > 0 {
+            let y = probe_row(summary.frame, geometry.active_rows);
+            let row = Rect {
+                x0: 0,
+                y0: y,
+                width: geometry.active_cols,
+                height: 1,
+            };
+            // One more than the windows' capacity: cannot fail.
+            if self.rects.push(row).is_ok() {
+                self.probe = Some(Probe {
+                    y,
+                    first_col: geometry.first_active_col(),
+                    cols: usize::from(geometry.active_cols),
+                });
+                summary.read_px = summary
+                    .read_px
+                    .saturating_add(u32::from(geometry.active_cols));
+            }
         }
         u16::try_from(self.placed.len()).unwrap_or(u16::MAX)
     }
@@ -345,6 +472,12 @@ impl Tracking {
         levels: &LineLevels,
         mut sh: Shared<'_, N>,
     ) -> LineOutcome {
+        if let Some(p) = self.probe.filter(|p| p.y == y)
+            && let Some(row) = samples.get(p.first_col..p.first_col + p.cols)
+        {
+            sh.summary.probe_saturated_cols =
+                Some(widest_saturated_run(row, cal.table().saturation_adu()));
+        }
         match sh.capture.push_line(y, samples, levels) {
             Ok(done) => {
                 let mut n = 0u8;
@@ -402,10 +535,7 @@ impl Tracking {
             .capture
             .window(i)
             .is_some_and(|w| sh.watch.touches(w.rect));
-        let trail = match predicted {
-            Some(p) => trail_of(Some(p.trail_px)),
-            None => trail_of(placed.prior.carry.velocity_px),
-        };
+        let trail = self.trail(&placed.prior, config);
         if policy.method == CentroidMethod::FusedCog1
             && !found
             && trail.is_none()
@@ -450,6 +580,15 @@ impl Tracking {
         if let Some((e, f)) = sh.scratch.calibrated_mut(rect) {
             sh.watch.apply(rect, e, f);
         }
+        // A window a saturated column crosses (saturated pixels in its top or bottom row) is
+        // on a bright object or its bloomed columns: masked before the window test (whose
+        // border, all saturated, has no background, so it would only call the star lost),
+        // never a star, and neither its sky nor its pixels feed the frame's background or
+        // the defect watch (a star whose core clipped is measured, flagged saturated).
+        if crossed_by_saturation(sh, rect) {
+            sh.summary.masked = sh.summary.masked.saturating_add(1);
+            return;
+        }
         let verdict = match sh.scratch.window(rect, clipped) {
             Some(input) => {
                 let verdict =
@@ -467,14 +606,7 @@ impl Tracking {
             return;
         }
         note_sky(sh.summary, verdict.background_e);
-        // A window a saturated column crosses (saturated pixels in its top or bottom row) is
-        // on a bright object or its bloomed columns: masked, never a star (a star whose
-        // core clipped is measured, flagged saturated).
-        if verdict.flags.contains(TrackFlags::SATURATED) && crossed_by_saturation(sh, rect) {
-            sh.summary.masked = sh.summary.masked.saturating_add(1);
-            return;
-        }
-        if let Some(trail) = trail {
+        if let Some((trail, known)) = trail {
             let Some(input) = sh.scratch.window(rect, clipped) else {
                 sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
                 return;
@@ -484,6 +616,9 @@ impl Tracking {
             record.provenance = Provenance::TRACKED | Provenance::TRAILED;
             if trail_clipped(trail, rect) {
                 record.flags |= StarFlags::TRAIL_CLIPPED;
+            }
+            if !known {
+                record.flags |= StarFlags::TRAIL_UNKNOWN;
             }
             let v = velocity(&record);
             let tracked_frames = settle(&mut record, &placed.prior);

@@ -9,7 +9,8 @@
 //! own sigmas). A true star is unaffected when no object and no proton charge is within
 //! 6 px of it ([`sil::unaffected`]). The recovery is counted from the first frame whose
 //! image holds neither the Moon nor the Earth ([`sil::object_in_field`]) after one that
-//! did, to the first frame from it with an attitude (0: that frame has one).
+//! did, to the first frame from it with an attitude (0: that frame has one). Each frame's
+//! [`Obstructions`] are checked against its truth ([`sil::causes`], [`flag_errors`]).
 //!
 //! The scenes: the SIL's still sky (seeded attitude), the flight tracker, 100 ms exposures
 //! every 100 ms; each bright object fixed in the sky as the field drifts by `drift_px` a
@@ -19,6 +20,7 @@
 //! frame and the truth's).
 
 use crate::sil_rates::is_wrong;
+use startrack_core::tracker::{MOON_MIN_COLUMNS, Obstructions, STRAY_LIGHT_LIMIT_E};
 use startrack_homes::sil::{self, SilConfig, SilReport};
 use startrack_sim::sim::protons::ProtonEnv;
 use startrack_sim::sky::bright::{BrightSky, EarthSpec, MoonSpec, PlanetSpec, SunSpec};
@@ -161,6 +163,63 @@ pub struct BrightRow {
     pub hits: usize,
     /// Detections and windows masked over the run.
     pub masked: usize,
+    /// Frames whose truth holds a cause the flags should name: the Moon or the Earth in the
+    /// field, the Sun's stray light above the limit, an SAA or flare proton rate.
+    pub cause_frames: usize,
+    /// Frames whose flags say what the truth does not ([`flag_errors`]): a stale flag.
+    pub wrong_flags: usize,
+    /// The first such frame, its flags, truth and errors (not in the CSV).
+    pub first_wrong_flags: Option<String>,
+}
+
+/// What a frame's flags say wrongly against its truth: each bit set without its cause in the
+/// frame, and each of the Moon, the Earth and the Sun missing where the frame holds it (the
+/// Moon spanning at least [`MOON_SURE_COLS`] columns: a thinner sliver at the edge is
+/// narrower than the tracker's Moon and may go either way). Radiation is a rate over the
+/// last second's frames, and a tracking frame reads ~0.5 % of the area: a frame of an SAA
+/// or flare run without the bit is not counted, one of a run without protons (or at the
+/// quiet rate) with it is.
+pub fn flag_errors(flags: Obstructions, truth: &sil::Causes) -> Vec<&'static str> {
+    let mut e = Vec::new();
+    let moon = truth.moon_cols > 0.0;
+    let moon_sure = truth.moon_cols >= MOON_SURE_COLS;
+    if flags.contains(Obstructions::MOON) && !moon && !truth.earth {
+        e.push("Moon flagged, not in the field");
+    }
+    if !flags.intersects(Obstructions::MOON | Obstructions::EARTH) && moon_sure {
+        e.push("Moon in the field, not flagged");
+    }
+    if flags.contains(Obstructions::EARTH) && !truth.earth {
+        e.push("Earth flagged, not in the field");
+    }
+    if !flags.contains(Obstructions::EARTH) && truth.earth {
+        e.push("Earth in the field, not flagged");
+    }
+    let sun = truth.stray_e > f64::from(STRAY_LIGHT_LIMIT_E);
+    if flags.contains(Obstructions::SUN) != sun {
+        e.push(if sun {
+            "stray light, not flagged"
+        } else {
+            "Sun flagged, no stray light"
+        });
+    }
+    let radiation = matches!(truth.protons, Some(ProtonEnv::Saa | ProtonEnv::Flare));
+    if flags.contains(Obstructions::RADIATION) && !radiation {
+        e.push("radiation flagged, no protons");
+    }
+    e
+}
+
+/// A Moon spanning at least this many columns of the active area must be flagged (the
+/// tracker's [`MOON_MIN_COLUMNS`] and two for its limb's unsaturated edge).
+pub const MOON_SURE_COLS: f64 = MOON_MIN_COLUMNS as f64 + 2.0;
+
+/// Whether the truth holds a cause the flags should name.
+fn cause_present(truth: &sil::Causes) -> bool {
+    truth.moon_cols > 0.0
+        || truth.earth
+        || truth.stray_e > f64::from(STRAY_LIGHT_LIMIT_E)
+        || matches!(truth.protons, Some(ProtonEnv::Saa | ProtonEnv::Flare))
 }
 
 /// The SIL configuration of `case` with `seed`.
@@ -213,15 +272,35 @@ pub fn row(name: &str, report: &SilReport) -> BrightRow {
             r.eligible += 1;
             r.eligible_solved += usize::from(solved.is_some());
         }
-        let flags = f
+        // Every frame's summary carries its flags (the attitude report only a solved
+        // frame's, the same bits).
+        let flags = f.summary.obstructions;
+        let report_differs = f
             .attitude
             .as_ref()
             .and_then(|c| c.report)
-            .map_or(Validity::empty(), |rep| rep.flags);
-        r.flagged_moon += usize::from(flags.contains(Validity::MOON_IN_FIELD));
-        r.flagged_earth += usize::from(flags.contains(Validity::EARTH_IN_FIELD));
-        r.flagged_sun += usize::from(flags.contains(Validity::SUN_STRAY_LIGHT));
-        r.flagged_radiation += usize::from(flags.contains(Validity::RADIATION));
+            .is_some_and(|rep| {
+                rep.flags & Validity::of_obstructions(Obstructions::all())
+                    != Validity::of_obstructions(flags)
+            });
+        r.flagged_moon += usize::from(flags.contains(Obstructions::MOON));
+        r.flagged_earth += usize::from(flags.contains(Obstructions::EARTH));
+        r.flagged_sun += usize::from(flags.contains(Obstructions::SUN));
+        r.flagged_radiation += usize::from(flags.contains(Obstructions::RADIATION));
+        if let Some(truth) = f.causes.as_ref() {
+            r.cause_frames += usize::from(cause_present(truth));
+            let mut errors = flag_errors(flags, truth);
+            if report_differs {
+                errors.push("the report's bits are not the summary's");
+            }
+            if !errors.is_empty() {
+                r.wrong_flags += 1;
+                if r.first_wrong_flags.is_none() {
+                    r.first_wrong_flags =
+                        Some(format!("frame {k}: {flags:?} {truth:?}: {errors:?}"));
+                }
+            }
+        }
         r.hits += usize::from(f.summary.hits);
         r.masked += usize::from(f.summary.masked);
         let inside = f.object_in_field.unwrap_or(false);
@@ -251,14 +330,14 @@ pub fn run_case(case: &BrightCase, seed: u64) -> Result<BrightRow, String> {
 }
 
 /// The CSV header of [`csv`].
-pub const CSV_HEADER: &str = "scene,frames,solved,wrong,eligible,eligible_solved,recovery_frames,flagged_moon,flagged_earth,flagged_sun,flagged_radiation,hits,masked";
+pub const CSV_HEADER: &str = "scene,frames,solved,wrong,eligible,eligible_solved,recovery_frames,cause_frames,flagged_moon,flagged_earth,flagged_sun,flagged_radiation,wrong_flags,hits,masked";
 
 /// The rows as CSV, after `comment` lines (each prefixed `# `).
 pub fn csv(rows: &[BrightRow], comment: &[&str]) -> String {
     let mut out = crate::figures::csv::csv_head(comment, CSV_HEADER);
     for r in rows {
         out.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.scene,
             r.frames,
             r.solved,
@@ -266,13 +345,63 @@ pub fn csv(rows: &[BrightRow], comment: &[&str]) -> String {
             r.eligible,
             r.eligible_solved,
             r.recovery_frames.map_or(String::new(), |v| v.to_string()),
+            r.cause_frames,
             r.flagged_moon,
             r.flagged_earth,
             r.flagged_sun,
             r.flagged_radiation,
+            r.wrong_flags,
             r.hits,
             r.masked
         ));
     }
     out
+}
+
+/// The flight cycle the turning scenes run: a frame every 50 ms (20 Hz), 39 ms exposures
+/// (`TrackerConfig::FLIGHT`), us.
+pub const TURNING_PERIOD_US: u64 = 50_000;
+
+/// The SIL over the sky turning at `rate_deg_s` across the boresight (about the camera's x
+/// axis: the stars trail along the columns) during each 39 ms exposure, a frame every
+/// [`TURNING_PERIOD_US`], from power-on, with `env`'s proton hits; seed `seed`.
+pub fn turning_config(env: ProtonEnv, rate_deg_s: f64, frames: u32, seed: u64) -> SilConfig {
+    use rand::SeedableRng;
+    use startrack_sim::sky::motion::{ExposureMotion, RateProfile};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x5455_524e);
+    let q0 = startrack_sim::sky::field::random_attitude(&mut rng);
+    let tracker = startrack_core::tracker::TrackerConfig::FLIGHT;
+    let period_s = TURNING_PERIOD_US as f64 * 1e-6;
+    let exposure_s = f64::from(tracker.exposure_ms) * 1e-3;
+    let profile = RateProfile::constant([rate_deg_s.to_radians(), 0.0, 0.0]);
+    // Valid by construction: a finite rate, the exposure inside the period.
+    let motion =
+        ExposureMotion::new(profile, period_s, exposure_s).unwrap_or_else(|e| unreachable!("{e}"));
+    SilConfig {
+        frames,
+        seed,
+        tracker,
+        period_us: TURNING_PERIOD_US,
+        sky: Some(startrack_sim::sky::scene::SkyScene::ccd47_15deg_moving(
+            q0, motion,
+        )),
+        bright: protons(env),
+        ..SilConfig::default()
+    }
+}
+
+/// A turning run's result: its row (as [`row`]) and the first frame with an attitude
+/// (`None`: none), lost in space's from power-on.
+pub fn run_turning(
+    env: ProtonEnv,
+    rate_deg_s: f64,
+    frames: u32,
+    seed: u64,
+) -> Result<(BrightRow, Option<usize>), String> {
+    let report = sil::run(&turning_config(env, rate_deg_s, frames, seed))?;
+    let first = report
+        .frames
+        .iter()
+        .position(|f| f.attitude.as_ref().is_some_and(|c| c.fix.as_ref().is_ok()));
+    Ok((row(env.name(), &report), first))
 }

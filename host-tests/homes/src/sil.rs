@@ -206,6 +206,48 @@ pub struct SilFrame {
     /// The Moon or the Earth is on the active area ([`object_in_field`]); `None` without a
     /// bright scene.
     pub object_in_field: Option<bool>,
+    /// What of the bright scene is in the frame ([`causes`]); `None` without one.
+    pub causes: Option<Causes>,
+}
+
+/// The truth of a frame's bright scene that its [`startrack_core::tracker::Obstructions`]
+/// bits name.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Causes {
+    /// Columns of the active area the Moon's lit disc spans, px (0: not on the area).
+    pub moon_cols: f64,
+    /// The Earth is on the active area.
+    pub earth: bool,
+    /// The Sun's stray light at the active area's centre, e- a pixel in the exposure (0:
+    /// none).
+    pub stray_e: f64,
+    /// The proton environment (`None`: no protons rendered).
+    pub protons: Option<startrack_sim::sim::protons::ProtonEnv>,
+}
+
+/// What of the bright scene `bright` is in `sim`'s frame.
+pub fn causes(sim: &Simulator, bright: &BrightSky) -> Causes {
+    let Some(b) = sim.bright.as_ref() else {
+        return Causes::default();
+    };
+    let g = sim.params.geometry;
+    let (cols, rows) = (f64::from(g.active_cols), f64::from(g.active_rows));
+    let moon_cols = b.moon.map_or(0.0, |m| {
+        let on_rows =
+            m.centre_px[1] + m.radius_px >= -0.5 && m.centre_px[1] - m.radius_px <= rows - 0.5;
+        if m.surface_e <= 0.0 || !on_rows {
+            return 0.0;
+        }
+        let lo = (m.centre_px[0] - m.radius_px).max(-0.5);
+        let hi = (m.centre_px[0] + m.radius_px).min(cols - 0.5);
+        (hi - lo).max(0.0)
+    });
+    Causes {
+        moon_cols,
+        earth: earth_in_field(sim),
+        stray_e: b.stray.map_or(0.0, |s| s.centre_e),
+        protons: bright.protons,
+    }
 }
 
 /// A frame's attitude against the truth.
@@ -504,6 +546,7 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
                     .count(),
             );
             frame.object_in_field = Some(object_in_field(&sim));
+            frame.causes = Some(causes(&sim, &config.bright));
         }
         if let (Some(fix), Some((scene, _))) = (outcome.attitude, sky.as_ref()) {
             let mid_us = outcome.report.map_or(0, |r| r.mid_exposure_us);
@@ -617,8 +660,18 @@ pub fn object_in_field(sim: &Simulator) -> bool {
             && m.centre_px[1] + m.radius_px >= -0.5
             && m.centre_px[1] - m.radius_px <= rows - 0.5
     });
-    // The Earth's region is convex and large: on the area when a corner is in it.
-    let earth = b.earth.is_some_and(|e| {
+    moon || earth_in_field(sim)
+}
+
+/// Whether the Earth is on `sim`'s active area: its region is convex and large, so on the
+/// area when a corner is in it.
+fn earth_in_field(sim: &Simulator) -> bool {
+    let Some(b) = sim.bright.as_ref() else {
+        return false;
+    };
+    let g = sim.params.geometry;
+    let (cols, rows) = (f64::from(g.active_cols), f64::from(g.active_rows));
+    b.earth.is_some_and(|e| {
         [
             (0.0, 0.0),
             (cols - 1.0, 0.0),
@@ -627,8 +680,7 @@ pub fn object_in_field(sim: &Simulator) -> bool {
         ]
         .iter()
         .any(|&(x, y)| e.inside_px(x, y) > -0.5)
-    });
-    moon || earth
+    })
 }
 
 /// Half the side of the box around a true star that an object must stay out of for the
@@ -796,5 +848,6 @@ fn match_frame(
         attitude: None,
         unaffected: None,
         object_in_field: None,
+        causes: None,
     }
 }

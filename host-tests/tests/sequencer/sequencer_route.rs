@@ -209,8 +209,8 @@ fn same_bits(
 
 /// `firmware/src/board/stm32h743/sequencer.rs`'s `MAX_WORDS` and `MAX_STEPS` (the firmware crate does not
 /// build for the host; keep them equal).
-const BOARD_MAX_WORDS: usize = 1152;
-const BOARD_MAX_STEPS: usize = 4096;
+pub(crate) const BOARD_MAX_WORDS: usize = 1152;
+pub(crate) const BOARD_MAX_STEPS: usize = 4096;
 
 /// Every plan the board compiles (1 MHz, both outputs, binning 1: a full frame, or up to the
 /// plan's 64 windows of 11 x 11) fits one of the board's table buffers.

@@ -113,8 +113,10 @@ fn predicted_stars_are_the_catalog_stars_where_the_propagated_attitude_puts_them
             let d = (f64::from(p.x_px) - t.x_px).hypot(f64::from(p.y_px) - t.y_px);
             assert!(d < 1e-3, "star {}: {d} px off", p.catalog);
             assert!(p.bound_px >= 1.0 && p.bound_px < 1.1, "{}", p.bound_px);
-            assert!((p.trail_px.0.abs() - 6.8).abs() < 0.3 && p.trail_px.1.abs() < 0.5);
-            assert!((p.motion_px.0 - p.trail_px.0).abs() < 0.1);
+            // The image's velocity over the 100 ms exposure: 68 px/s along the motion.
+            let trail = p.trail_px(0.1);
+            assert!((trail.0.abs() - 6.8).abs() < 0.3 && trail.1.abs() < 0.5);
+            assert!((p.motion_px.0 - trail.0).abs() < 0.1);
             cells[cell_of(f64::from(p.x_px), f64::from(p.y_px))] = true;
             for o in &stars {
                 let d = (o.x_px - p.x_px).hypot(o.y_px - p.y_px);
@@ -468,7 +470,9 @@ fn any_input_predicts_valid_stars_or_an_error() {
                     for p in &stars {
                         prop_assert!(p.is_valid());
                         let side = startrack_core::tracker::predicted_window_side(
-                            7, p.bound_px, p.trail_px,
+                            7,
+                            p.bound_px,
+                            p.trail_px(exposure as f32),
                         );
                         let half = f32::from(side / 2);
                         prop_assert!(p.x_px >= half && p.x_px <= 1023.0 - half, "{p:?}");

@@ -74,13 +74,19 @@ fn rate_table_is_the_sil_rates_csv() {
             "motion",
             "rate, deg/s",
             "frames",
-            "with attitude",
             "with attitude, %",
+            "from the first attitude, %",
+            "full frames after it",
             "wrong",
             "worst error, arcsec",
             "cross-boresight RMS, arcsec",
             "bound, arcsec",
-            "error / bound"
+            "error / bound",
+            "attitude NEES",
+            "rate RMS, arcsec/s",
+            "rate bound, arcsec/s",
+            "roll rate RMS, arcsec/s",
+            "rate NEES"
         ]
     );
     assert_eq!(body.len(), recs.len(), "{SIL_RATES}: one row a rate");
@@ -89,19 +95,26 @@ fn rate_table_is_the_sil_rates_csv() {
         for (i, col) in [
             (1, "rate_deg_s"),
             (2, "frames"),
-            (3, "solved"),
-            (5, "wrong"),
-            (6, "worst_arcsec"),
-            (7, "rms_cross_arcsec"),
-            (8, "bound_cross_arcsec"),
-            (9, "ratio"),
+            (5, "acquisitions_after_first"),
+            (6, "wrong"),
+            (7, "worst_arcsec"),
+            (8, "rms_cross_arcsec"),
+            (9, "bound_cross_arcsec"),
+            (10, "ratio"),
+            (11, "attitude_nees"),
+            (12, "rate_cross_arcsec_s"),
+            (13, "rate_bound_cross_arcsec_s"),
+            (14, "rate_roll_arcsec_s"),
+            (15, "rate_nees"),
         ] {
             assert!(matches(&row[i], rec[col]), "{col}: {row:?} vs {rec:?}");
         }
-        assert!(
-            matches_value(&row[4], 100.0 * num(rec["availability"])),
-            "{row:?} vs {rec:?}"
-        );
+        for (i, col) in [(3, "availability"), (4, "availability_after_first")] {
+            assert!(
+                matches_value(&row[i], 100.0 * num(rec[col])),
+                "{col}: {row:?} vs {rec:?}"
+            );
+        }
     }
 }
 
@@ -294,10 +307,12 @@ fn bright_table_is_the_bright_availability_csv() {
             "clear frames",
             "clear, with attitude",
             "recovery, frames",
+            "with a cause",
             "flagged Moon",
             "flagged Earth",
             "flagged Sun",
             "flagged radiation",
+            "wrong flags",
             "hits counted",
             "masked"
         ]
@@ -311,12 +326,14 @@ fn bright_table_is_the_bright_availability_csv() {
             (3, "wrong"),
             (4, "eligible"),
             (5, "eligible_solved"),
-            (7, "flagged_moon"),
-            (8, "flagged_earth"),
-            (9, "flagged_sun"),
-            (10, "flagged_radiation"),
-            (11, "hits"),
-            (12, "masked"),
+            (7, "cause_frames"),
+            (8, "flagged_moon"),
+            (9, "flagged_earth"),
+            (10, "flagged_sun"),
+            (11, "flagged_radiation"),
+            (12, "wrong_flags"),
+            (13, "hits"),
+            (14, "masked"),
         ] {
             assert!(matches(&row[i], rec[col]), "{col}: {row:?} vs {rec:?}");
         }
