@@ -268,16 +268,20 @@ fn m7_stage(stage: &str) -> f64 {
 }
 
 /// The M7 work of a 30-window tracking frame on the board against its cycle at 1 MHz
-/// (49.0 ms), counting one QEMU instruction a cycle of the 480 MHz core (QEMU counts
+/// (49.6 ms with the probe row), counting one QEMU instruction a cycle of the 480 MHz core (QEMU counts
 /// instructions, not cycles): the tracker fed the 330 lines the windows cross
 /// (`tracker_tracking_frame_windowed`), the frame's compile, the MDMA nodes of its chain
-/// (`sequencer_chain_nodes`) and its line jobs, under a quarter of the cycle. The word
-/// feed the chain replaces (`sequencer_feed_words`) and the tracker fed every line are
-/// printed beside it.
+/// (`sequencer_chain_nodes`) and its line jobs, under a quarter of the cycle. Printed beside
+/// it: the same with the attitude stage of a tracking frame (the catalog's stars predicted for
+/// the next frame, `predict_catalog_windows_p99`, and the identities confirmed with the
+/// attitude, `ident_confirm_p99`), the word feed the chain replaces (`sequencer_feed_words`)
+/// and the tracker fed every line.
 #[test]
 fn tracking_frame_m7_work_share_of_the_cycle() {
     let c = cost(&args(Mode::Windows, 1_000_000, 30, 2));
-    let cycle_ns = c.cost.cycle_ns() as f64;
+    // The cycle a tracking frame runs: its windows and its probe row (the windowed bench's
+    // tracker reads the probe row too).
+    let cycle_ns = probe_row_cycle_ns(&c, false) as f64;
     let share = |stages: &[&str]| {
         let instructions: f64 = stages.iter().map(|s| m7_stage(s)).sum();
         (instructions, instructions / 480e6 * 1e9 / cycle_ns)
@@ -295,7 +299,7 @@ fn tracking_frame_m7_work_share_of_the_cycle() {
         "sequencer_feed_jobs",
     ]);
     println!(
-        "30-window frame, {:.2} ms cycle: {:.2} M instructions, {:.1} % (every line and the \
+        "30-window frame and its probe row, {:.2} ms cycle: {:.2} M instructions, {:.1} % (every line and the \
          word feed: {:.2} M, {:.1} %)",
         cycle_ns / 1e6,
         board / 1e6,
@@ -304,9 +308,23 @@ fn tracking_frame_m7_work_share_of_the_cycle() {
         before_share * 100.0
     );
     assert!(board_share <= 0.25, "{board_share}");
+    let (whole, whole_share) = share(&[
+        "tracker_tracking_frame_windowed",
+        "sequencer_compile",
+        "sequencer_chain_nodes",
+        "sequencer_feed_jobs",
+        "predict_catalog_windows_p99",
+        "ident_confirm_p99",
+    ]);
+    println!(
+        "with the attitude stage (the catalog's prediction, the identities confirmed, the \
+         attitude): {:.2} M instructions, {:.1} %",
+        whole / 1e6,
+        whole_share * 100.0
+    );
     // The tracker alone fed every line (a readout that digitises whole lines while
     // tracking) is not under a quarter since the width-free fit and the in-flight defect
-    // watch (30.1 % when last measured): the quarter holds only with the windowed readout,
+    // watch (31.0 % when last measured): the quarter holds only with the windowed readout,
     // which is what the board's sequencer does. Printed, so the margin stays visible.
     let (_, tracker_share) = share(&["tracker_tracking_frame"]);
     println!(
@@ -324,6 +342,16 @@ fn tracking_frame_m7_work_share_of_the_cycle() {
 #[test]
 fn thirty_windows_and_the_probe_row_stay_inside_20_hz() {
     let base = cost(&args(Mode::Windows, 1_000_000, 30, 2));
+    let worst = probe_row_cycle_ns(&base, true);
+    let added = worst - base.cost.cycle_ns();
+    assert!((400_000..700_000).contains(&added), "{added} ns");
+    assert!(worst < 50_000_000, "{worst} ns");
+}
+
+/// The longest cycle of `base`'s windows with each of the four probe rows, ns; each frame
+/// compiled into the board's tables (a panic if one overflows them), and printed when
+/// `print`.
+fn probe_row_cycle_ns(base: &PlanCost, print: bool) -> u64 {
     let ticks = Timing::at_pixel_rate(1_000_000)
         .validate(&Limits::CCD47_20)
         .unwrap_or_else(|e| unreachable!("{e}"));
@@ -347,6 +375,10 @@ fn thirty_windows_and_the_probe_row_stay_inside_20_hz() {
         let p = compile(&plan, &ticks, &PinMap::IN_ORDER, &mut w, &mut s)
             .unwrap_or_else(|e| panic!("the probe row's frame overflows the board's tables: {e}"));
         let c = Cost::of(&p);
+        if !print {
+            worst = worst.max(c.cycle_ns());
+            continue;
+        }
         println!(
             "probe row {}: {:.3} ms cycle ({:+.3} ms), {:.2} Hz; {}",
             g.active_rows * (2 * k + 1) / 8,
@@ -357,7 +389,5 @@ fn thirty_windows_and_the_probe_row_stay_inside_20_hz() {
         );
         worst = worst.max(c.cycle_ns());
     }
-    let added = worst - base.cost.cycle_ns();
-    assert!((400_000..700_000).contains(&added), "{added} ns");
-    assert!(worst < 50_000_000, "{worst} ns");
+    worst
 }
