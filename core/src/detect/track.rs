@@ -45,9 +45,8 @@
 //! 34, 68, 87, 97 %; pairs 4 px apart at 2:1 are flagged blended 100 %, single stars 0.3 %.
 //!
 //! # Cost
-//! For an `n x n` window: two insertion sorts of at most `4 n - 4` border values (median,
-//! then MAD: at most `(4n - 4)(4n - 5) / 2` comparisons each, 496 for n = 9, far fewer on
-//! a flat border); one pass over the interior for the peak;
+//! For an `n x n` window: two sorts of at most `4 n - 4` border values (median, then MAD;
+//! the slice sort, O(m log m)); one pass over the interior for the peak;
 //! the aperture by repeated forward/backward sweeps of a 32-bit-per-row mask (each sweep
 //! ~10 integer operations per interior pixel; two or three sweeps for a compact star, at
 //! most one per aperture pixel); the box and the 8 neighbours; for each interior local
@@ -242,7 +241,10 @@ pub fn track_detect(
         return out;
     }
     let vals = border.get_mut(..m).unwrap_or(&mut []);
-    crate::small_sort::sort_by(vals, Ord::cmp);
+    // The slice sort (the instance the dark scale already links): i32 keys sort to one
+    // order, so any sort gives the insertion sort's medians, in ~a third of its work for
+    // an 11x11 window's 40 border values.
+    vals.sort_unstable();
     let median = median_bits(vals);
     for v in vals.iter_mut() {
         // |v - median| < 2^32 fits i64; saturate into i32 (a MAD that large is meaningless).
@@ -252,7 +254,7 @@ pub fn track_detect(
             .try_into()
             .unwrap_or(i32::MAX);
     }
-    crate::small_sort::sort_by(vals, Ord::cmp);
+    vals.sort_unstable();
     let mad_e = median_bits(vals) as f32 / 64.0;
     let sigma = (1.4826 * mad_e).max(1.0 / 64.0);
     let var_bg = sigma * sigma;
@@ -260,7 +262,11 @@ pub fn track_detect(
     out.background_e = finite(median as f32 / 64.0);
     out.sigma_e = finite(sigma);
 
-    let signal = |i: usize| (i64::from(bits(i)) - median) as f32 / 64.0;
+    // In f64 the difference of two i32 values is exact, and rounding it to f32 gives what
+    // converting the i64 difference does, in the M7's hardware (it converts no 64-bit
+    // integer: that is a library call).
+    let median_f64 = median as f64;
+    let signal = |i: usize| (f64::from(bits(i)) - median_f64) as f32 / 64.0;
     let usable = |i: usize| {
         let f = flag(i);
         !f.is_excluded() && !f.contains(PixelFlags::HOT_CORRECTED)
@@ -393,6 +399,7 @@ fn has_second_peak(
     var_bg: f32,
 ) -> bool {
     let (pc, pr) = ((p % w) as isize, (p / w) as isize);
+    let peak_thr = blend_sigmas * libm::sqrtf(var_bg);
     let at = |c: isize, r: isize| -> Option<usize> {
         (c >= 0 && r >= 0 && (c as usize) < w && (r as usize) < h)
             .then(|| r as usize * w + c as usize)
@@ -405,7 +412,7 @@ fn has_second_peak(
                 continue;
             }
             let fq = signal(q);
-            if fq <= blend_sigmas * libm::sqrtf(var_bg) {
+            if fq <= peak_thr {
                 continue;
             }
             let is_max = (-1..=1).all(|dr| {
