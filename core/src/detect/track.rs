@@ -443,3 +443,42 @@ fn has_second_peak(
     }
     false
 }
+
+#[cfg(test)]
+mod tests {
+    /// The window test's signal conversion: the i32 pixel less the i64 median through f64
+    /// rounds to the f32 that converting the i64 difference gives, over the whole i32 range.
+    #[test]
+    fn f64_conversion_is_the_i64_conversion() {
+        let mut seed = 0x9e37_79b9u32;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed as i32
+        };
+        let edges = [
+            i32::MIN,
+            i32::MIN + 1,
+            -(1 << 24) - 1,
+            -1,
+            0,
+            1,
+            1 << 24,
+            (1 << 24) + 3,
+            i32::MAX,
+        ];
+        let pairs = edges
+            .iter()
+            .flat_map(|&b| edges.iter().map(move |&m| (b, m)))
+            .collect::<heapless::Vec<(i32, i32), 81>>();
+        for k in 0..200_000 {
+            let (b, m) = pairs.get(k).copied().unwrap_or_else(|| (next(), next()));
+            // The median: the floor of the mean of two i32 values, in i32's range.
+            let median = (i64::from(m) + i64::from(b / 3)).div_euclid(2);
+            let want = (i64::from(b) - median) as f32;
+            let got = (f64::from(b) - median as f64) as f32;
+            assert_eq!(got.to_bits(), want.to_bits(), "{b} {median}");
+        }
+    }
+}
