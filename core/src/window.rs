@@ -53,6 +53,24 @@ impl Rect {
         let clipped = r.width != n || r.height != n;
         (r, clipped)
     }
+
+    /// An `n` x `n` square centred on active pixel (cx, cy) and clipped to this rectangle, in
+    /// active coordinates (a star's sub-window inside a larger window); whether it lost a
+    /// pixel is `width < n || height < n`.
+    pub fn centred_within(&self, cx: u16, cy: u16, n: u16) -> Rect {
+        let (rel, _) = Rect::centred_clipped(
+            cx.saturating_sub(self.x0),
+            cy.saturating_sub(self.y0),
+            n,
+            self.width,
+            self.height,
+        );
+        Rect {
+            x0: self.x0.saturating_add(rel.x0),
+            y0: self.y0.saturating_add(rel.y0),
+            ..rel
+        }
+    }
 }
 
 /// Calibrated pixels of a [`Rect`], row-major, borrowed from the caller's buffer.
@@ -74,6 +92,28 @@ impl<'a> Window<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sub_window_inside_a_window() {
+        let w = Rect {
+            x0: 100,
+            y0: 200,
+            width: 15,
+            height: 15,
+        };
+        let inner = |x0, y0, width, height| Rect {
+            x0,
+            y0,
+            width,
+            height,
+        };
+        assert_eq!(w.centred_within(107, 207, 11), inner(102, 202, 11, 11));
+        // Near the window's corner: clipped to it, not to the frame.
+        assert_eq!(w.centred_within(101, 201, 11), inner(100, 200, 7, 7));
+        assert_eq!(w.centred_within(114, 214, 11), inner(109, 209, 6, 6));
+        // A centre outside the window (left of it) clips to its first column.
+        assert_eq!(w.centred_within(90, 207, 11), inner(100, 202, 6, 11));
+    }
 
     #[test]
     fn clipping_at_edges() {

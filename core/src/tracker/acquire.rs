@@ -351,18 +351,7 @@ fn measure_pending<const N: usize>(
             sh.stars.push(record, Carry::default());
             return true;
         }
-        let (rel, _) = Rect::centred_clipped(
-            p.detection.peak_x.saturating_sub(rect.x0),
-            p.detection.peak_y.saturating_sub(rect.y0),
-            config.window_px,
-            rect.width,
-            rect.height,
-        );
-        let sub = Rect {
-            x0: rect.x0.saturating_add(rel.x0),
-            y0: rect.y0.saturating_add(rel.y0),
-            ..rel
-        };
+        let sub = rect.centred_within(p.detection.peak_x, p.detection.peak_y, config.window_px);
         let sub_clipped =
             p.clipped || sub.width < config.window_px || sub.height < config.window_px;
         if let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) {

@@ -650,18 +650,7 @@ impl Tracking {
             if k == 1 && px.abs_diff(verdict.peak_x).max(py.abs_diff(verdict.peak_y)) <= 1 {
                 break;
             }
-            let (rel, _) = Rect::centred_clipped(
-                px.saturating_sub(rect.x0),
-                py.saturating_sub(rect.y0),
-                config.window_px,
-                rect.width,
-                rect.height,
-            );
-            let sub = Rect {
-                x0: rect.x0.saturating_add(rel.x0),
-                y0: rect.y0.saturating_add(rel.y0),
-                ..rel
-            };
+            let sub = rect.centred_within(px, py, config.window_px);
             let sub_clipped = sub.width < config.window_px || sub.height < config.window_px;
             let Some(input) = sh.scratch.sub_window(rect, sub, sub_clipped) else {
                 sh.summary.calib_failed = sh.summary.calib_failed.saturating_add(1);
