@@ -288,7 +288,7 @@ pub async fn tracker_task(
             Some(Err(e)) => defmt::info!("frame {}: no attitude ({})", outcome.summary.frame, e),
             None => {}
         }
-        board::after_frame(&outcome, cycle.tracker().stars());
+        board::after_frame(&outcome, cycle.tracker().stars(), source.integration());
         watchdog::progress();
         safe_state::set_health(cycle.health());
     }

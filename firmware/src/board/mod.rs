@@ -23,7 +23,7 @@
 //! | `CATALOG_ADDRESS`, `CATALOG_REGION_B` | where the star catalog lies, memory-mapped ([`crate::catalog`]) |
 //! | `start_io(spawner, io) -> Io2` | the link's byte tasks (into [`crate::link::RX`], out of [`crate::link::TX`]), the PPS capture where the board has one (into [`crate::pps::PULSES`]) and the line buffers ([`crate::lines::init`]); set-up faults |
 //! | `start_lines(spawner, lines) -> bool` | the tasks that turn each [`crate::lines::REQUESTS`] into lines on [`crate::lines::FILLED`] |
-//! | `after_frame(&FrameOutcome, &[StarRecord])` | the board's own use of each frame's outcome and stars, after the application's |
+//! | `after_frame(&FrameOutcome, &[StarRecord], Option<Integration>)` | the board's own use of each frame's outcome, stars and integration (as its line source gave it), after the application's |
 //! | `system_reset(ResetCause) -> !` | a commanded reset (the cause for a board that must note it itself) |
 //!
 //! Costs are each board's (its module says them).

@@ -216,7 +216,7 @@ pub struct SimLines<F: FnMut(u32) -> Simulator> {
     pub readout_done_us: Rc<Cell<u64>>,
     readout_us: u64,
     timing: Option<FrameTiming>,
-    integrations_us: Vec<Option<(u64, u64)>>,
+    integrations: Vec<Option<Integration>>,
     integration: Option<Integration>,
 }
 
@@ -243,15 +243,15 @@ impl<F: FnMut(u32) -> Simulator> SimLines<F> {
             readout_done_us: Rc::new(Cell::new(0)),
             readout_us: 0,
             timing: None,
-            integrations_us: Vec::new(),
+            integrations: Vec::new(),
             integration: None,
         }
     }
 
-    /// The source with frame `k` integrating over `integrations_us[k]` (start, end, us) where
-    /// that is `Some`, whatever the timing says: another run's instants replayed.
-    pub fn with_integrations(mut self, integrations_us: Vec<Option<(u64, u64)>>) -> Self {
-        self.integrations_us = integrations_us;
+    /// The source with frame `k` integrating over `integrations[k]` where that is `Some`,
+    /// whatever the timing says: another run's instants replayed.
+    pub fn with_integrations(mut self, integrations: Vec<Option<Integration>>) -> Self {
+        self.integrations = integrations;
         self
     }
 
@@ -350,8 +350,8 @@ impl<F: FnMut(u32) -> Simulator> LineSource for SimLines<F> {
                 end_us: start_us + t.exposure_us,
             }
         });
-        if let Some(&Some((start_us, end_us))) = self.integrations_us.get(frame as usize) {
-            self.integration = Some(Integration { start_us, end_us });
+        if let Some(&Some(i)) = self.integrations.get(frame as usize) {
+            self.integration = Some(i);
         }
         if let Some(i) = self.integration {
             // The frame transfer ends the exposure; the readout follows it.

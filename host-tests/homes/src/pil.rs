@@ -30,7 +30,7 @@ use startrack_core::readout::ReadoutRequest;
 use startrack_core::sequencer::{
     Binning, CompileError, Limits, LineJobs, PinMap, ReadoutPlan, Step, Timing, compile,
 };
-use startrack_core::tracker::{LineSource, Mode};
+use startrack_core::tracker::{Integration, LineSource, Mode};
 use startrack_core::window::Rect;
 use startrack_sim::sim::{SensorParams, Simulator};
 use startrack_sim::sky::scene::committed_catalog;
@@ -146,9 +146,9 @@ pub struct PilFrame {
     pub busy_counts: u64,
     /// The stack's high-water mark, bytes.
     pub stack_used_b: u32,
-    /// The frame's integration on the firmware's clock (start, end), us; `None` when its line
-    /// source gave none.
-    pub integration_us: Option<(u64, u64)>,
+    /// The frame's integration on the firmware's clock; `None` when its line source gave
+    /// none.
+    pub integration: Option<Integration>,
 }
 
 impl PilFrame {
@@ -578,9 +578,9 @@ fn read_outcome(r: &mut impl Read) -> Result<PilFrame, String> {
     let sigma_boresight_rad = read_f64(r)?;
     let sigma_roll_rad = read_f64(r)?;
     let false_probability = read_f64(r)?;
-    let integration_us = match (read_u64(r)?, read_u64(r)?) {
+    let integration = match (read_u64(r)?, read_u64(r)?) {
         (u64::MAX, u64::MAX) => None,
-        (start, end) => Some((start, end)),
+        (start_us, end_us) => Some(Integration { start_us, end_us }),
     };
     let mut stars = Vec::with_capacity(usize::from(n));
     for _ in 0..n {
@@ -612,7 +612,7 @@ fn read_outcome(r: &mut impl Read) -> Result<PilFrame, String> {
         counts,
         busy_counts,
         stack_used_b,
-        integration_us,
+        integration,
     })
 }
 
@@ -655,7 +655,7 @@ pub fn compare(
     let table = crate::flash_home::flash_table(config, &params)?;
     let sil_config = SilConfig {
         period_us,
-        integrations_us: report.frames.iter().map(|f| f.integration_us).collect(),
+        integrations: report.frames.iter().map(|f| f.integration).collect(),
         ..config.clone()
     };
     let sil = sil::run_with_table(&sil_config, &table)?;

@@ -32,8 +32,8 @@ use startrack_core::table::CalibTable;
 use startrack_core::table::pixcorr::CogPower;
 use startrack_core::table::pixcorr::PixCorrBackground;
 use startrack_core::tracker::{
-    Event, FixedTable, FixedTemperature, FrameSummary, Mode, StarRecord, Tracker, TrackerBuffers,
-    TrackerConfig,
+    Event, FixedTable, FixedTemperature, FrameSummary, Integration, Mode, StarRecord, Tracker,
+    TrackerBuffers, TrackerConfig,
 };
 use startrack_sim::pixcorr::{CurveSpec, build_curves};
 use startrack_sim::sim::truth::TruthSections;
@@ -101,11 +101,11 @@ pub struct SilConfig {
     /// With a sky scene: the Moon, the Earth, the Sun's stray light, planets and proton hits
     /// ([`startrack_sim::sky::bright`]); empty by default.
     pub bright: BrightSky,
-    /// Frame `k`'s integration (start, end) on the tracker's clock, us, where the `k`-th entry
-    /// is `Some`, instead of the one [`frame_timing`] gives: another run's instants (the PIL's
+    /// Frame `k`'s integration on the tracker's clock where the `k`-th entry is `Some`,
+    /// instead of the one [`frame_timing`] gives: another run's instants (the PIL's
     /// firmware's), so that the two runs' rates and predictions are the same to the bit.
     /// Empty by default.
-    pub integrations_us: Vec<Option<(u64, u64)>>,
+    pub integrations: Vec<Option<Integration>>,
 }
 
 /// The spacecraft time the SIL's commands take at counter 0 (`--spacecraft-time`'s
@@ -130,7 +130,7 @@ impl Default for SilConfig {
             false_stars: Vec::new(),
             false_stars_from: 0,
             bright: BrightSky::default(),
-            integrations_us: Vec::new(),
+            integrations: Vec::new(),
         }
     }
 }
@@ -471,7 +471,7 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
     let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
     let mut source = SimLines::new(|frame| frame_simulator(config, &params, &base, catalog, frame))
         .with_timing(frame_timing(config))
-        .with_integrations(config.integrations_us.clone());
+        .with_integrations(config.integrations.clone());
     let mut recorder = Recorder::default();
     let mut tables = FixedTable(Some(table));
     let mut thermometer = FixedTemperature(None);

@@ -202,13 +202,6 @@ static PROGRAMMED: ConstStaticCell<[u32; (H743_BANK_B / 32 / 32) as usize]> =
     ConstStaticCell::new([0; (H743_BANK_B / 32 / 32) as usize]);
 
 /// The channel to the host, shared by the line task and [`after_frame`] (both thread mode).
-/// The last frame's integration as the line task gave it with the frame's lines (its frame
-/// number, the instants), for [`after_frame`]'s outcome record.
-static LAST_INTEGRATION: Mutex<
-    CriticalSectionRawMutex,
-    core::cell::Cell<Option<(u32, Integration)>>,
-> = Mutex::new(core::cell::Cell::new(None));
-
 static HOST: Mutex<CriticalSectionRawMutex, RefCell<Option<host::HostChannel>>> =
     Mutex::new(RefCell::new(None));
 
@@ -339,7 +332,6 @@ async fn host_lines_task() {
             start_us: exposure_start.as_micros(),
             end_us: program_start.as_micros(),
         });
-        LAST_INTEGRATION.lock(|c| c.set(integration.map(|i| (req.frame, i))));
         loop {
             let header = HOST.lock(|h| h.borrow_mut().as_mut().map(|ch| ch.line_header()));
             let Some(Ok(header)) = header else {
@@ -421,16 +413,12 @@ pub fn stack_used_b() -> u32 {
     (top - at) as u32
 }
 
-/// The frame's outcome, its stars, the emulated time (read first) and the stack's
-/// high-water mark to the host.
-pub fn after_frame(outcome: &FrameOutcome, stars: &[StarRecord]) {
+/// The frame's outcome, its stars and integration, the emulated time (read first) and the
+/// stack's high-water mark to the host.
+pub fn after_frame(outcome: &FrameOutcome, stars: &[StarRecord], integration: Option<Integration>) {
     let counts = time::now_counts();
     let busy = time::busy_counts();
     let stack = stack_used_b();
-    let integration = LAST_INTEGRATION
-        .lock(core::cell::Cell::get)
-        .filter(|(frame, _)| *frame == outcome.summary.frame)
-        .map(|(_, i)| i);
     HOST.lock(|h| {
         if let Some(ch) = h.borrow_mut().as_mut()
             && let Err(e) = ch.outcome(outcome, stars, counts, busy, stack, integration)

@@ -30,7 +30,7 @@ use embassy_stm32::{Config, Peri, bind_interrupts, dma, flash, interrupt, periph
 use startrack_core::cycle::FrameOutcome;
 use startrack_core::safe::{FallbackThermometer, ResetCause, SetupFaults};
 use startrack_core::store::{H743_BANK2, Layout};
-use startrack_core::tracker::StarRecord;
+use startrack_core::tracker::{Integration, StarRecord};
 use static_cell::ConstStaticCell;
 
 use defmt_rtt as _;
@@ -425,7 +425,12 @@ pub fn start_lines(spawner: Spawner, lines: LinePath) -> bool {
 }
 
 /// Nothing more: the frame's outcome is in the log and on the link.
-pub fn after_frame(_outcome: &FrameOutcome, _stars: &[StarRecord]) {}
+pub fn after_frame(
+    _outcome: &FrameOutcome,
+    _stars: &[StarRecord],
+    _integration: Option<Integration>,
+) {
+}
 
 /// Resets the MCU (RCC_RSR tells the next boot why: no mark needed).
 pub fn system_reset(_cause: ResetCause) -> ! {
