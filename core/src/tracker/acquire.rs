@@ -36,7 +36,9 @@ use super::{Ring, Shared};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::centroid::CentroidInput;
 use crate::clamp::clamp;
-use crate::detect::{CAPTURE_MAX_SIDE, Detection, DetectionFlags, ScanDetector};
+use crate::detect::{
+    CAPTURE_MAX_SIDE, CommonMotion, Detection, DetectionFlags, MotionKey, ScanDetector,
+};
 use crate::geometry::ReadoutGeometry;
 use crate::units::Electrons;
 use crate::window::Rect;
@@ -53,7 +55,7 @@ struct Pending {
 /// (`sqrt(12 (l1 - l2))`, the covariance's eigenvalues: a segment of length `L` adds
 /// `L^2 / 12` along itself). The moments are of the pixels above the join level, so a
 /// trail's reads short; the fit finds its length.
-pub const TRAIL_SCREEN_PX: f32 = 1.5;
+pub const TRAIL_SCREEN_PX: f32 = crate::detect::MIN_TRAIL_PX;
 
 /// The trail the trailed test starts from when blob `d` may be a trail (its moments give at
 /// least [`TRAIL_SCREEN_PX`]), px over the exposure: `sqrt(12 (l1 - l2))` along the larger
@@ -239,7 +241,11 @@ impl<'t, const N: usize> Acquisition<'t, N> {
                 continue;
             }
             self.pending.swap_remove(i);
-            measure_pending(cal, policy, config, &p, &mut sh);
+            let motion = self
+                .scan
+                .as_ref()
+                .map_or(&CommonMotion::EMPTY, |s| s.detector().motion());
+            measure_pending(cal, policy, config, &p, motion, &mut sh);
             // Measured: the star list (its rank: a window the PSF describes first) keeps it
             // or not, so its place in the detector's bounded list goes to the next
             // candidate. That list then holds only the candidates waiting for their rows;
@@ -310,14 +316,17 @@ pub const TRAIL_MIN_WIDTH_FRACTION: f32 = 0.5;
 pub const MASK_MIN_PX: u32 = 196;
 
 /// Measures one pending window, or reports the detector's position with the reason;
-/// false when it is no star (masked on a saturated object, or a particle hit).
+/// false when it is no star (masked on a saturated object, or a particle hit). The star
+/// list ranks it by its blob's agreement with the frame's common motion `motion`.
 fn measure_pending<const N: usize>(
     cal: &FrameCalibration<'_>,
     policy: &Policy<'_>,
     config: &TrackerConfig,
     p: &Pending,
+    motion: &CommonMotion,
     sh: &mut Shared<'_, N>,
 ) -> bool {
+    let key = p.detection.motion;
     // A saturated blob larger than any star's is a bright object or its bloomed columns:
     // masked, never a star (a star whose core clipped is reported, flagged saturated).
     if p.detection.flags.contains(DetectionFlags::SATURATED) && p.detection.pixels > MASK_MIN_PX {
@@ -348,7 +357,7 @@ fn measure_pending<const N: usize>(
             && let Some(record) = policy.free_trailed_record(&input, detected, trail_start)
             && record.psf_a_px >= TRAIL_MIN_WIDTH_FRACTION * config.psf_a_px
         {
-            sh.stars.push(record, Carry::default());
+            sh.stars.push_keyed(record, Carry::default(), key, motion);
             return true;
         }
         let sub = rect.centred_within(p.detection.peak_x, p.detection.peak_y, config.window_px);
@@ -361,6 +370,7 @@ fn measure_pending<const N: usize>(
                 detected,
                 want_background,
                 None,
+                (key, motion),
                 sh.stars,
                 sh.summary,
             );
@@ -374,6 +384,7 @@ fn measure_pending<const N: usize>(
             detected,
             want_background,
             blob_elongation(&p.detection),
+            (key, motion),
             sh.stars,
             sh.summary,
         );
@@ -383,7 +394,7 @@ fn measure_pending<const N: usize>(
     };
     let d = &p.detection;
     let half = f32::from(config.window_px) / 2.0;
-    sh.stars.push(
+    sh.stars.push_keyed(
         StarRecord {
             x_px: d.x_px,
             y_px: d.y_px,
@@ -397,6 +408,8 @@ fn measure_pending<const N: usize>(
             chi2_dof: 0.0,
         },
         Carry::default(),
+        key,
+        motion,
     );
     true
 }
@@ -423,13 +436,19 @@ fn sky_mean(e: &[Electrons], f: &[PixelFlags]) -> Option<f32> {
 /// (0.5 deg/s in 39 ms, 1.3 px). Otherwise the round result is pushed, flagged
 /// [`StarFlags::TRAIL_UNKNOWN`] when its fitted width says it is smeared
 /// ([`SMEARED_WIDTH_RATIO`]), and [`StarFlags::POOR_FIT`] (a particle hit is counted) when
-/// the window is sharper than a star.
+/// the window is sharper than a star. The list ranks it by its blob's key in the common
+/// motion (`ranked`).
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one call per measured window from measure_pending"
+)]
 fn push_measured<const N: usize>(
     policy: &Policy<'_>,
     input: &CentroidInput<'_>,
     detected: StarFlags,
     want_background: bool,
     elongation: Option<(f32, f32)>,
+    (key, motion): (MotionKey, &CommonMotion),
     stars: &mut StarList<N>,
     summary: &mut FrameSummary,
 ) -> bool {
@@ -444,7 +463,7 @@ fn push_measured<const N: usize>(
         && record.fit_is_clean()
         && record.psf_a_px >= TRAIL_MIN_WIDTH_FRACTION * policy.psf_a_px
     {
-        stars.push(record, Carry::default());
+        stars.push_keyed(record, Carry::default(), key, motion);
         return true;
     }
     // A particle hit, or a star beside a hot pixel the table does not list yet (as sharp as
@@ -457,12 +476,14 @@ fn push_measured<const N: usize>(
     if m.record.psf_a_px > SMEARED_WIDTH_RATIO * policy.psf_a_px {
         m.record.flags |= StarFlags::TRAIL_UNKNOWN;
     }
-    stars.push(
+    stars.push_keyed(
         m.record,
         Carry {
             background: m.background,
             ..Carry::default()
         },
+        key,
+        motion,
     );
     true
 }
