@@ -62,21 +62,22 @@ pub const LEN_BINS: usize = 6;
 
 /// The length bins' lower edges to the fourth power, px^4 (1.5, 2.25, 3.38, 5.06, 7.59,
 /// 11.39 px): a trail `L` has `L^4 = 144 ((xx - yy)^2 + 4 xy^2)`, no square root needed.
-const LEN_EDGES_PX4: [f32; LEN_BINS] = {
-    let mut e = [0.0; LEN_BINS];
-    let mut l = MIN_TRAIL_PX;
-    let mut i = 0;
-    while i < LEN_BINS {
-        e[i] = l * l * l * l;
-        l *= 1.5;
-        i += 1;
-    }
-    e
-};
+const LEN_EDGES_PX4: [f32; LEN_BINS] = [
+    5.0625,
+    25.628_906,
+    129.746_34,
+    656.840_8,
+    3_325.257,
+    16_834.11,
+];
 
 /// The in-quadrant boundaries of the doubled axis angle's 22.5-degree sectors as a
 /// diamond angle (`tan b / (1 + tan b)` at 22.5, 45 and 67.5 degrees).
-const DIAMOND_EDGES: [f32; 3] = [0.292_893_2, 0.5, 0.707_106_8];
+const DIAMOND_EDGES: [f32; 3] = [
+    1.0 - core::f32::consts::FRAC_1_SQRT_2,
+    0.5,
+    core::f32::consts::FRAC_1_SQRT_2,
+];
 
 /// Sigmas of the Poisson excess a common block must show over isotropic tracks.
 const SETTLE_SIGMAS: f32 = 5.0;
@@ -374,7 +375,7 @@ mod tests {
         assert_eq!(m.agreement(star), Agreement::Agrees);
         assert_eq!(m.agreement(off), Agreement::Disagrees);
         assert_eq!(m.agreement(MotionKey::ROUND), Agreement::Neutral);
-        let (deg, _) = m.trail().unwrap();
-        assert!((deg - 70.0).abs() < 12.0, "{deg}");
+        let deg = m.trail().map(|t| t.0);
+        assert!(deg.is_some_and(|d| (d - 70.0).abs() < 12.0), "{deg:?}");
     }
 }
