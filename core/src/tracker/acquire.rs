@@ -22,6 +22,15 @@
 //! 8 SNR sums its pixels, the matched filter's statistic over the pixels above the join
 //! level, at no cost per pixel (docs/tracker.md, "Lost in space at body rate").
 //!
+//! # Ranking while turning
+//! Both bounded lists, the scan's candidates and the star list, rank a blob by its
+//! agreement with the frame's common motion first ([`crate::detect::CommonMotion`]: the
+//! trail axis and length most of the frame's star-wide elongated blobs share), after the
+//! clean fit in the star list: at a solar flare's rate while the spacecraft turns, the
+//! trailed stars are kept before the round hits that fit a narrow Gaussian cleanly and
+//! before the tracks. Without a common motion (at rest) every blob is neutral and the lists
+//! rank as they would without it.
+//!
 //! The candidates are bit for bit those of a `LineDetector` with the same background
 //! stride fed every calibrated row (host test `scan`). Cost per line: the scan (~13 M7
 //! instructions a pixel, `cargo m7-bench` `scan_detect`), a 2 KB copy into the ring and a
@@ -436,12 +445,8 @@ fn sky_mean(e: &[Electrons], f: &[PixelFlags]) -> Option<f32> {
 /// (0.5 deg/s in 39 ms, 1.3 px). Otherwise the round result is pushed, flagged
 /// [`StarFlags::TRAIL_UNKNOWN`] when its fitted width says it is smeared
 /// ([`SMEARED_WIDTH_RATIO`]), and [`StarFlags::POOR_FIT`] (a particle hit is counted) when
-/// the window is sharper than a star. The list ranks it by its blob's key in the common
-/// motion (`ranked`).
-#[allow(
-    clippy::too_many_arguments,
-    reason = "one call per measured window from measure_pending"
-)]
+/// the window is sharper than a star. The list ranks it by its blob's key against the
+/// frame's common motion (the pair `(key, motion)`).
 fn push_measured<const N: usize>(
     policy: &Policy<'_>,
     input: &CentroidInput<'_>,
