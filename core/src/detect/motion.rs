@@ -63,12 +63,7 @@ pub const LEN_BINS: usize = 6;
 /// The length bins' lower edges to the fourth power, px^4 (1.5, 2.25, 3.38, 5.06, 7.59,
 /// 11.39 px): a trail `L` has `L^4 = 144 ((xx - yy)^2 + 4 xy^2)`, no square root needed.
 const LEN_EDGES_PX4: [f32; LEN_BINS] = [
-    5.0625,
-    25.628_906,
-    129.746_34,
-    656.840_8,
-    3_325.257,
-    16_834.11,
+    5.0625, 25.628_906, 129.746_34, 656.840_8, 3_325.257, 16_834.11,
 ];
 
 /// The in-quadrant boundaries of the doubled axis angle's 22.5-degree sectors as a

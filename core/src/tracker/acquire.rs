@@ -145,7 +145,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         y: u16,
         samples: &[u16],
         levels: &LineLevels,
-        sh: Shared<'_, N>,
+        mut sh: Shared<'_, N>,
     ) -> LineOutcome {
         // The line has the geometry's length, at most the ring's: cannot fail.
         let _ = sh.ring.push(y, samples, levels);
@@ -179,7 +179,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             None => LineOutcome::Scanned,
         };
         self.queue_closed(config, geometry, sh.summary);
-        self.serve(cal, policy, config, Some(y), sh);
+        self.serve(cal, policy, config, Some(y), &mut sh);
         outcome
     }
 
@@ -190,7 +190,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         policy: &Policy<'_>,
         config: &TrackerConfig,
         geometry: &ReadoutGeometry,
-        sh: Shared<'_, N>,
+        mut sh: Shared<'_, N>,
     ) {
         if let Some(scan) = self.scan.as_mut() {
             scan.finish_closed(&mut self.closed);
@@ -200,7 +200,14 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         if self.sky_rows > 0 {
             sh.summary.sky_e = self.sky_sum_e / self.sky_rows as f32;
         }
-        self.serve(cal, policy, config, None, sh);
+        self.serve(cal, policy, config, None, &mut sh);
+        // The second pass: the common motion as the whole frame settled it.
+        if let Some(scan) = self.scan.as_ref() {
+            sh.stars.flag_off_motion(
+                scan.detector().motion(),
+                OFF_MOTION_WIDTH_FRACTION * config.psf_a_px,
+            );
+        }
     }
 
     /// Moves the candidates the last line closed into the pending list.
@@ -240,7 +247,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         policy: &Policy<'_>,
         config: &TrackerConfig,
         y: Option<u16>,
-        mut sh: Shared<'_, N>,
+        sh: &mut Shared<'_, N>,
     ) {
         let mut i = 0;
         while let Some(p) = self.pending.get(i).copied() {
@@ -254,7 +261,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
                 .scan
                 .as_ref()
                 .map_or(&CommonMotion::EMPTY, |s| s.detector().motion());
-            measure_pending(cal, policy, config, &p, motion, &mut sh);
+            measure_pending(cal, policy, config, &p, motion, sh);
             // Measured: the star list (its rank: a window the PSF describes first) keeps it
             // or not, so its place in the detector's bounded list goes to the next
             // candidate. That list then holds only the candidates waiting for their rows;
@@ -318,6 +325,15 @@ pub const TRAIL_MARGIN_PX: u16 = 3;
 /// "Each star's own width"); on the SIL at the South Atlantic Anomaly's rate the tracks the
 /// trailed test calls trails fit at 0.43 to 0.47 of it, its stars at 1.0.
 pub const TRAIL_MIN_WIDTH_FRACTION: f32 = 0.5;
+
+/// In a frame whose stars share a common trail, a record measured round, off that trail,
+/// brighter than the median of the records on it and fitted narrower than this fraction
+/// of the configured PSF's width is no star of the frame ([`StarFlags::TRAIL_UNKNOWN`],
+/// the star list's second pass): a trail only widens a star, while a proton that crossed
+/// the silicon near the normal fits at 0.46 to 0.53 of it on the SIL (the flare's hits
+/// while turning at 1 deg/s); a star smeared by a trail below the moments' screen (1.3 px,
+/// 0.5 deg/s in 39 ms) fits at 1.0 or wider.
+pub const OFF_MOTION_WIDTH_FRACTION: f32 = 0.75;
 
 /// A saturated blob of more than this many pixels is masked ([`StarFlags`] would only flag
 /// a star's clipped core): four 7 x 7 windows' worth, more than the brightest star's wings

@@ -17,7 +17,7 @@
 
 use super::measure::StarBackground;
 use super::predicted::PredictedStar;
-use super::record::StarRecord;
+use super::record::{StarFlags, StarRecord};
 use crate::detect::{Agreement, CommonMotion, MotionKey};
 
 /// What a star carries to the next tracking frame besides its position.
@@ -124,6 +124,57 @@ impl<const N: usize> StarList<N> {
         }
     }
 }
+
+impl<const N: usize> StarList<N> {
+    /// The second pass over an acquisition frame's list once the frame's common motion
+    /// settled (`motion`, the whole frame's): a record measured round (not
+    /// [`super::Provenance::TRAILED`]) whose blob does not agree with it, brighter than the
+    /// median of those that do and narrower than `narrow_a_px` (the fit's 80 % radius) is
+    /// no star of this frame (a proton hit that fits a narrow Gaussian cleanly: a star as
+    /// bright as the frame's trailed stars shows their trail, and a trail only widens a
+    /// star), and is flagged [`StarFlags::TRAIL_UNKNOWN`] (kept, not used for the
+    /// attitude). Fainter ones are left alone (a faint star's trail may hide in its noise),
+    /// and wider ones (a trail shorter than the moments' screen reads round on a bright
+    /// star too). Nothing happens without a settled motion or with fewer than
+    /// [`MIN_AGREEING`] agreeing records. Returns the records flagged. Cost: two scans of
+    /// the list and a sort of at most `N` fluxes.
+    pub(crate) fn flag_off_motion(&mut self, motion: &CommonMotion, narrow_a_px: f32) -> u16 {
+        if !motion.is_settled() {
+            return 0;
+        }
+        let mut agreeing: heapless::Vec<f32, N> = heapless::Vec::new();
+        for (r, k) in self.records.iter().zip(self.keys.iter()) {
+            if motion.agreement(*k) == Agreement::Agrees && r.is_centroid() {
+                // At most N records: cannot fail.
+                let _ = agreeing.push(r.flux_e);
+            }
+        }
+        if agreeing.len() < MIN_AGREEING {
+            return 0;
+        }
+        agreeing.sort_unstable_by(f32::total_cmp);
+        let Some(&median_e) = agreeing.get(agreeing.len() / 2) else {
+            return 0;
+        };
+        let mut flagged = 0u16;
+        for (r, k) in self.records.iter_mut().zip(self.keys.iter()) {
+            if motion.agreement(*k) != Agreement::Agrees
+                && !r.provenance.contains(super::Provenance::TRAILED)
+                && r.flux_e > median_e
+                && r.psf_a_px > 0.0
+                && r.psf_a_px < narrow_a_px
+            {
+                r.flags |= StarFlags::TRAIL_UNKNOWN;
+                flagged = flagged.saturating_add(1);
+            }
+        }
+        flagged
+    }
+}
+
+/// Records agreeing with the common motion [`StarList::flag_off_motion`] needs for a
+/// median.
+pub(crate) const MIN_AGREEING: usize = 3;
 
 /// True when `a` ranks above `b` in a full list, each a record and its blob's agreement
 /// with the frame's common motion: a clean fit ([`StarRecord::fit_is_clean`]) above one that

@@ -236,11 +236,12 @@ fn sharpness_limit_holds_at_every_phase() {
 /// Radiation while turning: the SIL's sky turning at 1 deg/s across the boresight (2.65 px
 /// trails in the flight's 39 ms exposures, a frame every 50 ms) from power-on, at the SAA's
 /// and a solar flare's proton rates, three seeded attitudes of 20 frames each: no wrong
-/// attitude in any frame, every frame's flags true of it, radiation flagged. The SAA's runs
-/// find their first attitude by lost in space in the first frame and keep one in every
-/// frame; at the flare's rate the acquisition's lists keep the stars that agree with the
-/// frame's common trail before the round hits ([`startrack_core::detect::CommonMotion`]):
-/// 54 of the 60 frames have an attitude (docs/tracker.md states the figures).
+/// attitude in any frame, every frame's flags true of it, radiation flagged, and at both
+/// rates lost in space from power-on in the first frame and an attitude in every frame (60
+/// of 60): the acquisition's lists keep the stars that agree with the frame's common trail
+/// before the round hits and the tracks ([`startrack_core::detect::CommonMotion`]), and
+/// the kept records off it and brighter than the stars on it are left out of the attitude
+/// (docs/tracker.md, "Radiation while turning").
 #[test]
 fn turning_with_protons_is_never_wrong() {
     for env in [ProtonEnv::Saa, ProtonEnv::Flare] {
@@ -255,20 +256,9 @@ fn turning_with_protons_is_never_wrong() {
             assert_eq!(r.wrong_flags, 0, "{r:?}");
             assert!(r.flagged_radiation > 0, "{r:?}");
             solved += r.solved;
-            match env {
-                ProtonEnv::Saa => {
-                    assert_eq!(first, Some(0), "lost in space from power-on: {r:?}");
-                    assert_eq!(r.solved, r.frames, "{r:?}");
-                }
-                _ => assert!(
-                    first.is_some_and(|k| k <= 3) && r.solved >= 15,
-                    "flare: {r:?}"
-                ),
-            }
+            assert_eq!(first, Some(0), "lost in space from power-on: {r:?}");
+            assert_eq!(r.solved, r.frames, "{r:?}");
         }
         eprintln!("{}: {solved} of 60 frames with an attitude", env.name());
-        if env == ProtonEnv::Flare {
-            assert!(solved >= 54, "{solved}");
-        }
     }
 }
