@@ -463,6 +463,10 @@ fn sky_mean(e: &[Electrons], f: &[PixelFlags]) -> Option<f32> {
 /// ([`SMEARED_WIDTH_RATIO`]), and [`StarFlags::POOR_FIT`] (a particle hit is counted) when
 /// the window is sharper than a star. The list ranks it by its blob's key against the
 /// frame's common motion (the pair `(key, motion)`).
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one call per measured window from measure_pending"
+)]
 fn push_measured<const N: usize>(
     policy: &Policy<'_>,
     input: &CentroidInput<'_>,

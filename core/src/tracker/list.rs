@@ -137,7 +137,7 @@ impl<const N: usize> StarList<N> {
     /// and wider ones (a trail shorter than the moments' screen reads round on a bright
     /// star too). Nothing happens without a settled motion or with fewer than
     /// [`MIN_AGREEING`] agreeing records. Returns the records flagged. Cost: two scans of
-    /// the list and a sort of at most `N` fluxes.
+    /// the list and a median of at most `N` fluxes (`N^2` compares).
     pub(crate) fn flag_off_motion(&mut self, motion: &CommonMotion, narrow_a_px: f32) -> u16 {
         if !motion.is_settled() {
             return 0;
@@ -152,8 +152,7 @@ impl<const N: usize> StarList<N> {
         if agreeing.len() < MIN_AGREEING {
             return 0;
         }
-        agreeing.sort_unstable_by(f32::total_cmp);
-        let Some(&median_e) = agreeing.get(agreeing.len() / 2) else {
+        let Some(median_e) = upper_median(&agreeing) else {
             return 0;
         };
         let mut flagged = 0u16;
@@ -170,6 +169,17 @@ impl<const N: usize> StarList<N> {
         }
         flagged
     }
+}
+
+/// The element of `v` at index `len / 2` in ascending order (`None` when empty), by
+/// counting rather than sorting: at most `N^2` compares, no sort code in the image.
+fn upper_median(v: &[f32]) -> Option<f32> {
+    let k = v.len() / 2;
+    v.iter().copied().find(|&x| {
+        let below = v.iter().filter(|&&y| y < x).count();
+        let equal = v.iter().filter(|&&y| y == x).count();
+        below <= k && k < below + equal
+    })
 }
 
 /// Records agreeing with the common motion [`StarList::flag_off_motion`] needs for a
