@@ -34,10 +34,10 @@
 //! rest; a rolling frame at a flare's rate keeps the round hits as before.
 //!
 //! # Cost
-//! State: 16 x 6 counters, 6 band totals and 6 block maxima, 228 bytes. An elongated blob's
-//! key: a few compares and divides and one square root, no trigonometry. A vote: the nine 3 x 3 block sums around its
-//! cell (81 adds) and the six bands' significance tests (a multiply and compare each); a
-//! lookup ([`CommonMotion::agreement`]): two compares.
+//! State: 16 x 6 block counters, 6 band totals and 6 block maxima, about 230 bytes. An
+//! elongated blob's key: a few compares and divides and one square root, no trigonometry.
+//! A vote: nine increments and compares, and the six bands' significance tests (a few
+//! multiplies and a compare each); a lookup ([`CommonMotion::agreement`]): two compares.
 
 /// A blob is elongated (may vote, and may agree) from this trail, px: the acquisition's
 /// trailed-test screen.
@@ -152,7 +152,9 @@ pub enum Agreement {
 /// The histogram of a frame's elongated blobs and its common block; see the module doc.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct CommonMotion {
-    counts: [[u16; LEN_BINS]; ORIENT_BINS],
+    /// The blobs in the 3 x 3 block of cells centred on each (axis, length) cell (the axis
+    /// wraps, the length does not): a vote adds one to the nine blocks holding its cell.
+    blocks: [[u16; LEN_BINS]; ORIENT_BINS],
     /// Each length bin's blobs over every axis.
     band: [u16; LEN_BINS],
     /// Each length bin's largest 3 x 3 block (centred on that length bin) and its axis bin.
@@ -164,7 +166,7 @@ pub struct CommonMotion {
 impl CommonMotion {
     /// No blobs: nothing agrees or disagrees.
     pub const EMPTY: Self = Self {
-        counts: [[0; LEN_BINS]; ORIENT_BINS],
+        blocks: [[0; LEN_BINS]; ORIENT_BINS],
         band: [0; LEN_BINS],
         row_max: [(0, 0); LEN_BINS],
         settled: None,
@@ -175,47 +177,30 @@ impl CommonMotion {
         *self = Self::EMPTY;
     }
 
-    /// Counts blob `key` (a round one, or one too narrow across to vote, counts nothing).
+    /// Counts blob `key` (a round one, or one too narrow across to vote, counts nothing):
+    /// one more in each of the nine blocks holding its cell.
     pub fn vote(&mut self, key: MotionKey) {
         let Some((o, l)) = key.bins().filter(|_| key.votes()) else {
             return;
         };
-        if let Some(c) = self.counts.get_mut(o).and_then(|r| r.get_mut(l)) {
-            *c = c.saturating_add(1);
-        }
         if let Some(b) = self.band.get_mut(l) {
             *b = b.saturating_add(1);
         }
-        // Only the blocks holding cell (o, l) grew.
-        for dl in 0..3 {
-            let Some(lc) = (l + dl).checked_sub(1).filter(|&lc| lc < LEN_BINS) else {
+        for lc in l.saturating_sub(1)..=(l + 1).min(LEN_BINS - 1) {
+            let Some(m) = self.row_max.get_mut(lc) else {
                 continue;
             };
             for d_o in 0..3 {
                 let oc = (o + ORIENT_BINS + d_o - 1) % ORIENT_BINS;
-                let n = self.block(oc, lc);
-                if let Some(m) = self.row_max.get_mut(lc)
-                    && n > m.0
-                {
-                    *m = (n, oc as u8);
+                if let Some(n) = self.blocks.get_mut(oc).and_then(|r| r.get_mut(lc)) {
+                    *n = n.saturating_add(1);
+                    if *n > m.0 {
+                        *m = (*n, oc as u8);
+                    }
                 }
             }
         }
         self.settled = self.settle();
-    }
-
-    /// Blobs in the 3 x 3 block centred on axis bin `o`, length bin `l`.
-    fn block(&self, o: usize, l: usize) -> u16 {
-        let mut n = 0u16;
-        for d_o in 0..3 {
-            let Some(row) = self.counts.get((o + ORIENT_BINS + d_o - 1) % ORIENT_BINS) else {
-                continue;
-            };
-            for lc in l.saturating_sub(1)..=(l + 1).min(LEN_BINS - 1) {
-                n = n.saturating_add(row.get(lc).copied().unwrap_or(0));
-            }
-        }
-        n
     }
 
     /// The block with the largest excess over isotropic axes among those that clear the
