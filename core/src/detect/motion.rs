@@ -29,9 +29,11 @@
 //! agrees once the common motion shows. What was dropped before is lost.
 //!
 //! Roll about the boresight trails the stars tangentially, their length growing with the
-//! distance from the axis: no single block holds them, the histogram finds no common motion
-//! (or the part of the field where the trails happen to align) and the lists rank as at
-//! rest; a rolling frame at a flare's rate keeps the round hits as before.
+//! distance from the axis: no single block holds them, and the histogram settles only when
+//! the stars of one part of the field align enough (those then rank first, the others as
+//! at rest); a rolling frame at a flare's rate mostly keeps the round hits, as a frame
+//! without the histogram does. Not handled: a histogram of the axis about the tangent to
+//! the boresight would find it, at a second histogram's cost.
 //!
 //! # Cost
 //! State: 16 x 6 block counters, 6 band totals and 6 block maxima, about 230 bytes. An
