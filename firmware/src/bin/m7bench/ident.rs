@@ -211,6 +211,7 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
                 w_rad_s,
                 cov_rad2_s2: small(0.2e-6),
             },
+            accel_rad_s2: [0.0; 3],
             scale: 1.0,
             interval_s: 0.1,
             exposure_s: 0.1,
