@@ -28,9 +28,10 @@
 //! attitude.
 //!
 //! Cost: per attitude, one quaternion product and logarithm per kept attitude for each fit,
-//! a 6x6 and a 9x9 normal matrix built and inverted by Gauss-Jordan elimination (about
-//! 2,000 flops), and the same again for the gate; 12 x 112 bytes of state and the last
-//! fit's acceleration. No allocation, no panic. `cargo m7-bench`'s `rate_filter_push`
+//! a 6x6 and a 9x9 normal matrix built and inverted through its Cholesky factor (a few
+//! thousand flops), and under 4 attitudes the constant rate's bias from an acceleration
+//! (three more right-hand sides); the gate reuses the last push's fit. 12 x 112 bytes of
+//! window and about 900 bytes of the last fit. No allocation, no panic. `cargo m7-bench`'s `rate_filter_push`
 //! counts a push into a full window.
 
 use super::{Attitude, Quat, dot, inverse3, mat_vec};
@@ -124,6 +125,9 @@ pub struct RateFilter {
     samples: heapless::Deque<Sample, RATE_WINDOW>,
     /// The last push's quadratic fit's acceleration (`None` under 4 attitudes).
     acceleration: Option<Acceleration>,
+    /// The last push's chosen fit and its bias from an unmeasured acceleration, which the
+    /// next attitude is gated by (`None` under 2 attitudes).
+    gate: Option<Gate>,
     /// The platform's largest angular acceleration, rad/s^2: what is assumed of an
     /// acceleration the window cannot yet estimate.
     max_accel_rad_s2: f64,
@@ -164,7 +168,7 @@ fn vadd<const K: usize>(v: &mut [f64; K], i: usize, x: f64) {
 /// A polynomial fit of the window: `terms` of 2 (constant rate) or 3 (constant
 /// acceleration), the coefficients `c[k]` of `dt^k / k!` and their covariance, the newest
 /// attitude the reference.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct Fit {
     terms: usize,
     c: [[f64; 3]; 3],
@@ -224,6 +228,14 @@ impl Fit {
         let inv = inverse3(&a.cov_rad2_s4)?;
         Some(dot(a.alpha_rad_s2, mat_vec(&inv, a.alpha_rad_s2)))
     }
+}
+
+/// What the next attitude is gated by: the chosen fit, and for the constant rate with the
+/// platform's bound, what a unit acceleration does to its intercept and rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Gate {
+    fit: Fit,
+    bias: Option<(M3, M3)>,
 }
 
 /// The model's basis at `dt`: `1, dt, dt^2 / 2`.
@@ -305,6 +317,7 @@ impl RateFilter {
         Self {
             samples: heapless::Deque::new(),
             acceleration: None,
+            gate: None,
             max_accel_rad_s2: if max_accel_rad_s2.is_finite() && max_accel_rad_s2 > 0.0 {
                 max_accel_rad_s2
             } else {
@@ -317,6 +330,7 @@ impl RateFilter {
     pub fn clear(&mut self) {
         self.samples.clear();
         self.acceleration = None;
+        self.gate = None;
     }
 
     /// Attitudes in the window.
@@ -376,13 +390,18 @@ impl RateFilter {
         }
         // Cannot fail: a place was made above.
         let _ = self.samples.push_back(s);
-        let (fit, quadratic) = self.chosen()?;
+        let Some((fit, quadratic)) = self.chosen() else {
+            self.gate = None;
+            return None;
+        };
         self.acceleration = quadratic.map(|q| q.acceleration());
+        let bias = self.unmeasured_bias(&fit);
+        self.gate = Some(Gate { fit, bias });
         let mut rate = fit.rate();
         if quadratic.is_none() {
             // A constant rate fitted under an acceleration the window cannot measure yet
             // lags the newest attitude's: by `B alpha`, `alpha` within the platform's bound.
-            if let Some((_, b1)) = self.unmeasured_bias(&fit) {
+            if let Some((_, b1)) = bias {
                 add_spread(&mut rate.cov_rad2_s2, &b1, self.max_accel_rad_s2);
             }
         }
@@ -438,9 +457,9 @@ impl RateFilter {
         }
     }
 
-    /// Whether the chosen fit of the window predicts `s` within the gate.
+    /// Whether the last push's chosen fit predicts `s` within the gate.
     fn predicts(&self, s: &Sample, attitude: &Attitude) -> bool {
-        let Some((fit, _)) = self.chosen() else {
+        let Some(Gate { fit, bias }) = self.gate else {
             return true;
         };
         let Some(r) = self.samples.back() else {
@@ -451,7 +470,7 @@ impl RateFilter {
         let (pred, pred_cov) = fit.predict(dt);
         let e = sub_v(theta, pred);
         let mut cov = attitude.cov_rad2;
-        if let Some((b0, b1)) = self.unmeasured_bias(&fit) {
+        if let Some((b0, b1)) = bias {
             // The constant rate's prediction misses an acceleration by
             // `(B0 + dt B1 - dt^2 / 2) alpha`.
             let d: M3 = core::array::from_fn(|i| {
