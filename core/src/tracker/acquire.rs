@@ -330,9 +330,9 @@ pub const TRAIL_MIN_WIDTH_FRACTION: f32 = 0.5;
 /// brighter than the median of the records on it and fitted narrower than this fraction
 /// of the configured PSF's width is no star of the frame ([`StarFlags::TRAIL_UNKNOWN`],
 /// the star list's second pass): a trail only widens a star, while a proton that crossed
-/// the silicon near the normal fits at 0.46 to 0.53 of it on the SIL (the flare's hits
-/// while turning at 1 deg/s); a star smeared by a trail below the moments' screen (1.3 px,
-/// 0.5 deg/s in 39 ms) fits at 1.0 or wider.
+/// the silicon near the normal fits narrower than the PSF (its charge spreads by diffusion
+/// only); a star smeared by a trail below the moments' screen (1.3 px, 0.5 deg/s in 39 ms)
+/// fits as wide as the PSF or wider.
 pub const OFF_MOTION_WIDTH_FRACTION: f32 = 0.75;
 
 /// A saturated blob of more than this many pixels is masked ([`StarFlags`] would only flag
