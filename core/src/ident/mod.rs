@@ -47,10 +47,13 @@
 //! non-basis star's gate holds a catalog star with probability `p` (the field's catalog
 //! stars times the gate's area over the field's), the chance that `c` or more match is a
 //! Poisson binomial tail `T`, counted twice (at the match radius; and in gates of
-//! [`GATE_SIGMAS`] of each star's leave-one-out error with the photometry agreeing), each
-//! held to half the level, and the level `alpha` spent along the search, `s_j` of it on the
-//! `j`-th hypothesis, the shares summing to at most 1 over
-//! [`IdentConfig::max_hypotheses`]. A solution is accepted only when `2 T / s_j` is at most
+//! [`GATE_SIGMAS`] of each star's leave-one-out error with the photometry agreeing, ranked
+//! then by how close the counted stars fall), each held to half the level, and the level
+//! `alpha` spent along the search, `s_j` of it on the `j`-th hypothesis, the shares summing
+//! to at most 1 over [`IdentConfig::max_hypotheses`]. A catalog triangle whose three stars'
+//! brightness disagrees (a star off the triangle's zero point by more than
+//! [`IdentConfig::photometric_tolerance_mag`]) is no hypothesis and is not counted: the
+//! test reads the triangle only, never the stars the bound counts. A solution is accepted only when `2 T / s_j` is at most
 //! [`IdentConfig::max_false_probability`]; that bound is reported.
 //!
 //! # Tracking
@@ -460,8 +463,14 @@ pub fn lost_in_space(
                     {
                         continue;
                     }
-                    hyps += 1;
+                    // A triangle whose brightness disagrees is no hypothesis: it is not
+                    // counted, so the level is spent on the triangles that can be the
+                    // field's (the test reads the triangle only: bound.rs).
                     let basis = [(i, a), (j, b), (k, c)];
+                    if !bound::triangle_agrees(cat, stars, &basis, cfg.photometric_tolerance_mag) {
+                        continue;
+                    }
+                    hyps += 1;
                     if let Some(sol) =
                         hypothesis(cat, stars, n, &crowd, basis, s, (s_lo, s_hi), cfg, hyps)
                     {
