@@ -75,7 +75,7 @@
 //! scale range, a few thousand), a hypothesis a quick check of a few cone searches and, for
 //! the few that pass it, a 3-star q-method, `n` cone searches and rounds of the joint fit; a
 //! tracking triangle a few dozen angle checks. On the Cortex-M7 (`cargo m7-bench`, 15 degree
-//! fields) lost in space takes about 3.4 M instructions a field (median) and 15.8 M at the
+//! fields) lost in space takes about 3.3 M instructions a field (median) and 15.7 M at the
 //! 99th percentile, tracking 0.67 M.
 
 use crate::attitude::{self, Attitude, Observation, Quat, angle_between, cross, dot};
