@@ -12,7 +12,7 @@ use startrack_core::catalog::Catalog;
 use startrack_core::ident::{self, IdentConfig, IdentError, Measured};
 use startrack_sim::sky::field::{self, FLUX_E_AT_MAG0, FieldSpec, FieldStar};
 
-use super::ident::{catalog, is_right};
+use super::ident::{catalog, count_from_env, is_right};
 
 /// The camera model identification is told: a pinhole at the true camera's principal point,
 /// its focal length `1 + focal_error` times the true camera's, none of its distortion.
@@ -109,7 +109,8 @@ fn misidentified(cat: &Catalog<'_>, sol: &ident::Solution, stars: &[FieldStar]) 
 }
 
 /// `fields` fields, each with a focal error drawn uniformly in `+-max_focal_error`, the
-/// stars cut at `mag_limit`.
+/// stars cut at `mag_limit`, identified at the acceptance level `alpha` (`None`: the
+/// configuration's, 10^-9).
 fn run_lis(
     fields: usize,
     seed: u64,
@@ -117,21 +118,12 @@ fn run_lis(
     max_focal_error: f64,
     mag_limit: f64,
     band: Option<&Band>,
+    alpha: Option<f64>,
 ) -> Tally {
-    let cfg = IdentConfig::for_camera(spec.camera.focal_length_px, spec.sigma_px);
-    run_lis_with(fields, seed, spec, max_focal_error, mag_limit, band, &cfg)
-}
-
-/// [`run_lis`] with the identification settings `cfg`.
-fn run_lis_with(
-    fields: usize,
-    seed: u64,
-    spec: &FieldSpec,
-    max_focal_error: f64,
-    mag_limit: f64,
-    band: Option<&Band>,
-    cfg: &IdentConfig,
-) -> Tally {
+    let mut cfg = IdentConfig::for_camera(spec.camera.focal_length_px, spec.sigma_px);
+    if let Some(a) = alpha {
+        cfg.max_false_probability = a;
+    }
     let cat = catalog();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut t = Tally {
@@ -150,7 +142,7 @@ fn run_lis_with(
         if let Some(b) = band {
             into_band(&cat, &mut meas, &stars, b, seed ^ (f as u64) << 20);
         }
-        let r = ident::lost_in_space(&cat, &meas, cfg);
+        let r = ident::lost_in_space(&cat, &meas, &cfg);
         match r {
             Ok(sol) => {
                 t.solved += 1;
@@ -328,7 +320,7 @@ fn lost_in_space_with_distortion_not_in_the_model() {
         .project(spec.camera.direction(0.0, 0.0))
         .expect("the corner is in front of the camera");
     println!("the corner (0, 0) through the pinhole: {corner:.3?}");
-    let t = run_lis(1000, 37, &spec, 0.02, 99.0, None);
+    let t = run_lis(1000, 37, &spec, 0.02, 99.0, None, None);
     print(
         "lost in space, distortion not in the model, focal length off by up to 2 %",
         &t,
@@ -344,7 +336,7 @@ fn lost_in_space_with_distortion_not_in_the_model() {
 
 #[test]
 fn lost_in_space_with_the_focal_length_off_by_2_percent() {
-    let t = run_lis(1000, 31, &nominal_spec(), 0.02, 99.0, None);
+    let t = run_lis(1000, 31, &nominal_spec(), 0.02, 99.0, None, None);
     print("lost in space, focal length off by up to 2 %", &t);
     assert_eq!(t.wrong, 0);
     assert!(
@@ -390,7 +382,15 @@ fn lost_in_space_at_each_end_of_the_scale_range() {
 
 #[test]
 fn sparse_fields_solve_or_say_no_and_are_never_wrong() {
-    let t = run_lis(1000, 51, &sparse_spec(), 0.02, 5.5, Some(&CAMERA_BAND));
+    let t = run_lis(
+        1000,
+        51,
+        &sparse_spec(),
+        0.02,
+        5.5,
+        Some(&CAMERA_BAND),
+        None,
+    );
     print("sparse (Hp <= 5.5), focal length off by up to 2 %", &t);
     assert_eq!(t.wrong, 0);
     assert!(t.worst_bound <= 1e-9, "{}", t.worst_bound);
@@ -471,10 +471,7 @@ fn random_point_sets_never_solve_with_the_scale_searched() {
 #[test]
 #[ignore]
 fn random_point_sets_long_run() {
-    let sets = std::env::var("IDENT_SETS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(10_000);
+    let sets = count_from_env("IDENT_SETS", 10_000);
     let (solved, max_hyps) = super::ident::random_point_sets(&catalog(), 67, sets, 4, 36, true);
     println!(
         "random point sets of random brightness: {solved} of {sets} solved, at most {max_hyps} hypotheses"
@@ -594,27 +591,32 @@ fn sparse_fields_once_beyond_1_mrad_are_right_or_within_their_covariance() {
 #[test]
 #[ignore]
 fn long_runs() {
-    let fields = std::env::var("IDENT_FIELDS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(100_000);
-    let t = run_lis(fields, 3031, &nominal_spec(), 0.02, 99.0, None);
+    let fields = count_from_env("IDENT_FIELDS", 100_000);
+    let t = run_lis(fields, 3031, &nominal_spec(), 0.02, 99.0, None, None);
     print("lost in space, focal length off by up to 2 %", &t);
     assert_eq!(t.wrong, 0);
     // A false star can fall on a catalog star that dropped out, indistinguishable from it
     // (10 % dropped): counted, not failed.
     assert_eq!(t.beyond_covariance, 0);
-    let d = run_lis(fields, 3041, &distorted_spec(), 0.02, 99.0, None);
+    let d = run_lis(fields, 3041, &distorted_spec(), 0.02, 99.0, None, None);
     print(
         "distortion not in the model, focal length off by up to 2 %",
         &d,
     );
     assert_eq!(d.wrong, 0);
-    let f = run_lis(fields / 10, 3061, &storm_spec(), 0.02, 99.0, None);
+    let f = run_lis(fields / 10, 3061, &storm_spec(), 0.02, 99.0, None, None);
     print("15 false stars, focal length off by up to 2 %", &f);
     assert_eq!(f.wrong, 0);
     assert_eq!(f.beyond_covariance, 0);
-    let s = run_lis(fields, 3051, &sparse_spec(), 0.02, 5.5, Some(&CAMERA_BAND));
+    let s = run_lis(
+        fields,
+        3051,
+        &sparse_spec(),
+        0.02,
+        5.5,
+        Some(&CAMERA_BAND),
+        None,
+    );
     print("sparse (Hp <= 5.5), focal length off by up to 2 %", &s);
     // The cut at Hp 5.5 hides the catalog's fainter stars as dropouts do: a false star on one
     // is counted, not failed.
@@ -631,15 +633,18 @@ fn long_runs() {
 #[test]
 #[ignore]
 fn sparse_acceptance_levels() {
-    let fields = std::env::var("IDENT_FIELDS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(100_000);
+    let fields = count_from_env("IDENT_FIELDS", 100_000);
     let spec = sparse_spec();
     for alpha in [1e-9, 1e-8, 1e-7, 1e-6] {
-        let mut cfg = IdentConfig::for_camera(spec.camera.focal_length_px, spec.sigma_px);
-        cfg.max_false_probability = alpha;
-        let mut t = run_lis_with(fields, 3051, &spec, 0.02, 5.5, Some(&CAMERA_BAND), &cfg);
+        let mut t = run_lis(
+            fields,
+            3051,
+            &spec,
+            0.02,
+            5.5,
+            Some(&CAMERA_BAND),
+            Some(alpha),
+        );
         t.accepted_at.sort_unstable();
         let at = |f: usize| t.accepted_at.get(t.accepted_at.len() * f / 100).copied();
         println!(
