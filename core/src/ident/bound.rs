@@ -40,10 +40,10 @@
 //!   stars' `u` (each at least [`MIN_CLOSENESS`]), and its tail is
 //!   `P(C > c) + P(C = c) F_c(x)`, `F_c(x) = x sum_{s < c} (-ln x)^s / s!` the
 //!   distribution of a product of `c` uniforms: never above the count's `P(C >= c)`, and
-//!   for three stars at a true star's median residual (1.18 sigma) about 1/50 of it. No
-//!   model error is added: this count serves a calibrated camera, whose model error is a fraction of the
-//!   centroid sigma (`startrack optics fit`); an uncalibrated one falls back on the wide
-//!   count. `p` shrinks with the gate squared: at 0.3 px a 4-sigma gate of 1.2 px holds a
+//!   for three stars at a true star's median residual (1.18 sigma) about 1/40 of it. No
+//!   model error is added: this count serves a calibrated camera, whose model error is a
+//!   fraction of the centroid sigma (`startrack optics fit`); an uncalibrated one falls
+//!   back on the wide count. `p` shrinks with the gate squared: at 0.3 px a 4-sigma gate of 1.2 px holds a
 //!   quarter of the 2.5 px match radius's area. It is made only when the hypothesis
 //!   explains the field: its matched non-basis stars at least as many as the stars it left
 //!   unmatched (`2 m >= n + 3`). The model covers a wrong sky, not a partly right one: a

@@ -53,8 +53,9 @@
 //! to at most 1 over [`IdentConfig::max_hypotheses`]. A catalog triangle whose three stars'
 //! brightness disagrees (a star off the triangle's zero point by more than
 //! [`IdentConfig::photometric_tolerance_mag`]) is no hypothesis and is not counted: the
-//! test reads the triangle only, never the stars the bound counts. A solution is accepted only when `2 T / s_j` is at most
-//! [`IdentConfig::max_false_probability`]; that bound is reported.
+//! test reads the triangle only, never the stars the bound counts. A solution is accepted
+//! only when `2 T / s_j` is at most [`IdentConfig::max_false_probability`]; that bound is
+//! reported.
 //!
 //! # Tracking
 //! The prior attitude maps each pattern star to the sky; its candidates are the catalog
