@@ -23,7 +23,8 @@ use startrack_core::link::LinkService;
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    FixedTable, FixedTemperature, Tracker, TrackerBuffers, TrackerConfig,
+    FixedTable, FixedTemperature, FrameSummary, Obstructions, Tracker, TrackerBuffers,
+    TrackerConfig,
 };
 use startrack_homes::home::{FrameTiming, ReadoutClock, Recorder, SimLines, block_on, host_health};
 use startrack_homes::sil::{self, SilConfig};
@@ -175,7 +176,32 @@ const EXPOSURE_US: u64 = 39_000;
 /// Runs the flight frame cycle for `frames` frames on this file's sky turning at `w_deg_s`
 /// (camera frame) from the seeded attitude of `seed`; per frame the attitude's error
 /// against the truth at mid-exposure and its bounds, `None` without an attitude.
+/// A frame's outcome on this file's sky.
+pub(crate) struct SecondFrame {
+    /// The attitude's error against the truth (rad, camera frame), its cross-boresight and
+    /// roll sigmas (rad); `None` without an attitude.
+    pub fix: Option<([f64; 3], f64, f64)>,
+    /// The frame's obstruction flags.
+    pub obstructions: Obstructions,
+    /// The tracker's summary of the frame.
+    pub summary: FrameSummary,
+}
+
 fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Vec<Option<([f64; 3], f64, f64)>> {
+    run_with(seed, w_deg_s, frames, &|_, _| Vec::new())
+        .into_iter()
+        .map(|f| f.fix)
+        .collect()
+}
+
+/// [`run`] with `extra(frame, sensor)`'s light (mean electrons before the flat) added to
+/// each frame's stars: another generator's bright objects.
+pub(crate) fn run_with(
+    seed: u64,
+    w_deg_s: [f64; 3],
+    frames: u32,
+    extra: &dyn Fn(u32, &SensorParams) -> Vec<TrailedImage>,
+) -> Vec<SecondFrame> {
     let catalog_bytes = committed_catalog().unwrap();
     let cat = Catalog::parse(&catalog_bytes).unwrap();
     let q0 = random_attitude(&mut rand_chacha::ChaCha8Rng::seed_from_u64(
@@ -244,6 +270,7 @@ fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Vec<Option<([f64; 3], f64, 
                     &mut rng,
                 )
             })
+            .chain(extra(k, &params))
             .collect();
         Simulator {
             frame: k,
@@ -287,14 +314,18 @@ fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Vec<Option<([f64; 3], f64, 
         };
         let Ok(outcome) = block_on(cycle.run_frame(&mut source, &mut ports));
         let truth = q_at(f64::from(k) * period_s + 0.5 * exposure_s);
-        out.push(outcome.attitude.and_then(|r| r.ok()).map(|fix| {
-            let a = fix.attitude;
-            (
-                a.q.error_vector(truth),
-                a.boresight_sigma_rad(),
-                a.roll_sigma_rad(),
-            )
-        }));
+        out.push(SecondFrame {
+            fix: outcome.attitude.and_then(|r| r.ok()).map(|fix| {
+                let a = fix.attitude;
+                (
+                    a.q.error_vector(truth),
+                    a.boresight_sigma_rad(),
+                    a.roll_sigma_rad(),
+                )
+            }),
+            obstructions: outcome.summary.obstructions,
+            summary: outcome.summary,
+        });
     }
     out
 }
