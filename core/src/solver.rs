@@ -24,7 +24,7 @@
 //! the q-method take.
 //!
 //! Cost: what identification costs (docs/attitude.md: on the Cortex-M7 tracking and attitude
-//! about 0.67 M instructions a frame, lost in space 3.4 M median and 15.8 M at the 99th
+//! about 0.67 M instructions a frame, lost in space 3.3 M median and 15.7 M at the 99th
 //! percentile) plus a sort of at most 32 stars; no allocation, about 1 KB of state beyond
 //! identification's stack.
 

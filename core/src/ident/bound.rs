@@ -33,10 +33,17 @@
 //!   residual `r / (1 - h)` of variance `sigma^2 / (1 - h)`, so it counts when its residual
 //!   `r <= GATE_SIGMAS sigma sqrt(1 - h)`, and its gate has radius
 //!   `GATE_SIGMAS sigma / sqrt(1 - h)`; a star not matched has the gate
-//!   `GATE_SIGMAS sqrt(sigma^2 + v)`, `v` its predicted variance per axis. No model error is
-//!   added: this count serves a calibrated camera, whose model error is a fraction of the
-//!   centroid sigma (`startrack optics fit`); an uncalibrated one falls back on the wide
-//!   count. `p` shrinks with the gate squared: at 0.3 px a 4-sigma gate of 1.2 px holds a
+//!   `GATE_SIGMAS sqrt(sigma^2 + v)`, `v` its predicted variance per axis. How close a
+//!   counted star falls counts too: under a wrong hypothesis a catalog star in a gate is
+//!   anywhere in it, so its squared distance over the gate's radius squared, `u`, is
+//!   uniform; the outcome is ranked by the count, then by the product `x` of the counted
+//!   stars' `u` (each at least [`MIN_CLOSENESS`]), and its tail is
+//!   `P(C > c) + P(C = c) F_c(x)`, `F_c(x) = x sum_{s < c} (-ln x)^s / s!` the
+//!   distribution of a product of `c` uniforms: never above the count's `P(C >= c)`, and
+//!   for three stars at a true star's median residual (1.18 sigma) about 1/40 of it. No
+//!   model error is added: this count serves a calibrated camera, whose model error is a
+//!   fraction of the centroid sigma (`startrack optics fit`); an uncalibrated one falls
+//!   back on the wide count. `p` shrinks with the gate squared: at 0.3 px a 4-sigma gate of 1.2 px holds a
 //!   quarter of the 2.5 px match radius's area. It is made only when the hypothesis
 //!   explains the field: its matched non-basis stars at least as many as the stars it left
 //!   unmatched (`2 m >= n + 3`). The model covers a wrong sky, not a partly right one: a
@@ -62,6 +69,13 @@ const TIERS: f64 = 2.0;
 /// misses it with probability `exp(-GATE_SIGMAS^2 / 2)`, 3.4e-4: it is then only not
 /// counted).
 pub const GATE_SIGMAS: f64 = 4.0;
+
+/// A counted star's squared distance over its gate's radius squared is taken as at least
+/// this (a residual of a tenth of its leave-one-out sigma, `(0.1 / GATE_SIGMAS)^2`): a
+/// position is not known better than that (the camera model's error is a fraction of the
+/// centroid sigma), so no star carries more evidence than one a tenth of a sigma from its
+/// prediction. A true star falls closer with probability 0.5 %.
+const MIN_CLOSENESS: f64 = 0.1 * 0.1 / (GATE_SIGMAS * GATE_SIGMAS);
 
 /// The share of the level spent on the `j`-th hypothesis (from 1) of a search of at most
 /// `h_max`: `1 / (2 j L) + 1 / (2 h_max)`, `L` an upper bound of the harmonic number
@@ -96,13 +110,15 @@ pub(crate) fn binomial_tail(n: usize, m: usize, p: f64) -> f64 {
     tail.min(1.0)
 }
 
-/// Probability that at least `m` of independent events of probabilities `p` happen (the
-/// Poisson binomial's tail, by the recurrence over the events: `len(p)^2 / 2` multiply-adds).
-pub(crate) fn poisson_binomial_tail(p: &[f64], m: usize) -> f64 {
-    if m == 0 {
-        return 1.0;
-    }
-    if m > p.len() {
+/// The tail of the gated count: the probability that independent gates of probabilities
+/// `p` (each a catalog star uniformly within it when it holds one) give a count above
+/// `counted`, or `counted` with the product of the counted stars' squared distances over
+/// their gates' radii squared at most `closeness`: `P(C > c) + P(C = c) F_c(closeness)`,
+/// `C` the Poisson binomial of `p` and `F_c(x) = x sum_{s < c} (-ln x)^s / s!` the
+/// distribution of a product of `c` uniforms. At most the tail `P(C >= c)` of the count
+/// alone (`F_c <= 1`). Cost: `len(p)^2 / 2` multiply-adds and `c` more.
+pub(crate) fn counted_tail(p: &[f64], counted: usize, closeness: f64) -> f64 {
+    if counted > p.len() {
         return 0.0;
     }
     // dist[c]: the probability of exactly c events among those seen so far.
@@ -122,8 +138,27 @@ pub(crate) fn poisson_binomial_tail(p: &[f64], m: usize) -> f64 {
             }
         }
     }
-    let tail: f64 = dist.iter().skip(m).sum();
-    tail.clamp(0.0, 1.0)
+    let above: f64 = dist.iter().skip(counted + 1).sum();
+    let at = dist.get(counted).copied().unwrap_or(0.0);
+    (above + at * product_of_uniforms_cdf(counted, closeness)).clamp(0.0, 1.0)
+}
+
+/// `P(U_1 ... U_c <= x)` for `c` independent uniforms on `[0, 1]`: `x sum_{s < c} (-ln
+/// x)^s / s!` (1 for `c = 0` or `x >= 1`).
+pub(crate) fn product_of_uniforms_cdf(c: usize, x: f64) -> f64 {
+    if c == 0 || x >= 1.0 || x.is_nan() {
+        return 1.0;
+    }
+    if x <= 0.0 {
+        return 0.0;
+    }
+    let l = -libm::log(x);
+    let (mut term, mut sum) = (1.0f64, 0.0f64);
+    for s in 0..c {
+        sum += term;
+        term *= l / (s + 1) as f64;
+    }
+    (x * sum).min(1.0)
 }
 
 /// The probability that a gate of radius `gate_rad` holds one of `field_stars` catalog stars
@@ -250,13 +285,14 @@ impl MagHistogram {
     }
 }
 
-/// The zero point of the hypothesis's triangle: catalog Hp minus instrumental magnitude, the
-/// median of its three stars (the mean of two when one has no magnitude; `None` with fewer).
-fn zero_point(cat: &Catalog<'_>, h: &Verified<'_>) -> Option<f64> {
+/// The zero point of a triangle `basis` (measured index, catalog index): catalog Hp minus
+/// instrumental magnitude, the median of its three stars (the mean of two when one has no
+/// magnitude; `None` with fewer).
+fn zero_point(cat: &Catalog<'_>, stars: &[Measured], basis: &[(usize, u16); 3]) -> Option<f64> {
     let mut d = [0.0f64; 3];
     let mut k = 0;
-    for &(m, c) in &h.basis {
-        let (Some(inst), Some(s)) = (h.stars.get(m).and_then(|s| s.inst_mag), cat.star(c.into()))
+    for &(m, c) in basis {
+        let (Some(inst), Some(s)) = (stars.get(m).and_then(|s| s.inst_mag), cat.star(c.into()))
         else {
             continue;
         };
@@ -275,6 +311,32 @@ fn zero_point(cat: &Catalog<'_>, h: &Verified<'_>) -> Option<f64> {
     }
 }
 
+/// Whether the triangle `basis` agrees in brightness: each of its stars with a magnitude
+/// within `tol_mag` of its catalog Hp less the triangle's zero point (the rule the gated
+/// count holds every other star to). True when fewer than two magnitudes are known. It
+/// reads the triangle only, never the stars a bound counts, so a search may leave the
+/// triangles that fail it out of its hypotheses' count. Cost: six catalog reads (kept out
+/// of line: the search's inner loop over the catalog pairs stays as lean as without it).
+#[inline(never)]
+pub(crate) fn triangle_agrees(
+    cat: &Catalog<'_>,
+    stars: &[Measured],
+    basis: &[(usize, u16); 3],
+    tol_mag: f64,
+) -> bool {
+    let Some(zp) = zero_point(cat, stars, basis) else {
+        return true;
+    };
+    basis.iter().all(
+        |&(m, c)| match (stars.get(m).and_then(|s| s.inst_mag), cat.star(c.into())) {
+            (Some(inst), Some(s)) => {
+                (f64::from(s.hp_mmag) / 1000.0 - f64::from(inst) - zp).abs() <= tol_mag
+            }
+            _ => true,
+        },
+    )
+}
+
 /// The gated count's bound (module documentation) with `field_stars` catalog stars in the
 /// field.
 fn gated(
@@ -284,13 +346,13 @@ fn gated(
     field_stars: f64,
     by_mag: &MagHistogram,
 ) -> f64 {
-    let zp = zero_point(cat, h);
+    let zp = zero_point(cat, h.stars, &h.basis);
     let tol = cfg.photometric_tolerance_mag;
     let s = h.joint.scale.value;
     let scaled = rescaled(h.stars, h.n, s);
     let q = h.joint.attitude.q;
     let mut p = [0.0f64; MAX_STARS];
-    let (mut len, mut counted) = (0usize, 0usize);
+    let (mut len, mut counted, mut closeness) = (0usize, 0usize, 1.0f64);
     for (i, st) in scaled.iter().enumerate().take(h.n) {
         if h.basis.iter().any(|&(b, _)| b == i) {
             continue;
@@ -321,9 +383,14 @@ fn gated(
                     let resid = cat
                         .dir(m.catalog.into())
                         .map_or(f64::INFINITY, |r| angle_between(q.rotate(r), st.dir));
-                    let inside = resid <= GATE_SIGMAS * st.sigma_rad * libm::sqrt(1.0 - lev);
-                    counted += usize::from(inside && agrees(m.catalog));
-                    GATE_SIGMAS * st.sigma_rad / libm::sqrt(1.0 - lev)
+                    let gate = GATE_SIGMAS * st.sigma_rad / libm::sqrt(1.0 - lev);
+                    // The leave-one-out residual `r / (1 - h)` over the gate, squared.
+                    let v = (resid / (1.0 - lev) / gate) * (resid / (1.0 - lev) / gate);
+                    if v <= 1.0 && agrees(m.catalog) {
+                        counted += 1;
+                        closeness *= v.max(MIN_CLOSENESS);
+                    }
+                    gate
                 }
             }
             None => GATE_SIGMAS * libm::sqrt(var + v_pred),
@@ -333,15 +400,16 @@ fn gated(
             len += 1;
         }
     }
-    let tail = poisson_binomial_tail(p.get(..len).unwrap_or(&[]), counted);
+    let tail = counted_tail(p.get(..len).unwrap_or(&[]), counted, closeness);
     reported(tail, h.j, cfg)
 }
 
 /// The bound of a field of `n` measured stars, every one matched, in a field holding
 /// `field_stars` catalog stars, as the `j`-th hypothesis of the search, each star with the
-/// angular sigma `sigma_rad` and no prediction error (the fit's covariance only widens a
-/// gate): the smaller of the two counts', as the search's bound has it. What a field needs
-/// to be solved: the floor of sparse fields.
+/// angular sigma `sigma_rad`, no prediction error (the fit's covariance only widens a
+/// gate) and its residual the median of a true star's (1.18 of its sigmas: a squared
+/// distance of `2 ln 2` sigma^2): the smaller of the two counts', as the search's bound has
+/// it. What a field needs to be solved: the floor of sparse fields.
 pub fn bound_with_field_stars(
     cat: &Catalog<'_>,
     cfg: &IdentConfig,
@@ -350,9 +418,71 @@ pub fn bound_with_field_stars(
     sigma_rad: f64,
     j: u32,
 ) -> f64 {
-    let others = n.saturating_sub(3);
+    let others = n.saturating_sub(3).min(MAX_STARS);
     let wide = gate_probability(field_stars, cfg.match_radius_rad, cat.field_radius_rad());
     let gated = gate_probability(field_stars, GATE_SIGMAS * sigma_rad, cat.field_radius_rad());
-    let tail = binomial_tail(others, others, wide).min(binomial_tail(others, others, gated));
+    let median_closeness = 2.0 * core::f64::consts::LN_2 / (GATE_SIGMAS * GATE_SIGMAS);
+    let closeness = libm::pow(median_closeness, others as f64);
+    let gates = [gated; MAX_STARS];
+    let gated_tail = counted_tail(gates.get(..others).unwrap_or(&[]), others, closeness);
+    let tail = binomial_tail(others, others, wide).min(gated_tail);
     reported(tail, j, cfg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{counted_tail, product_of_uniforms_cdf};
+
+    /// A uniform on [0, 1) from a 64-bit LCG (Knuth's MMIX constants).
+    fn uniform(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// The tail of the gated count against a simulation of its null: each gate holds a
+    /// star with its probability, uniformly over its area (the squared distance over the
+    /// radius squared uniform), and the outcome is as extreme when the count is larger, or
+    /// equal with a product of squared distances no larger. Within 4 binomial sigmas.
+    #[test]
+    fn the_gated_tail_is_its_null_distribution() {
+        let p = [0.3, 0.1, 0.5, 0.05];
+        let mut state = 7u64;
+        for (counted, closeness) in [(1, 0.2), (2, 0.05), (2, 1.0), (3, 0.01), (0, 1.0)] {
+            let want = counted_tail(&p, counted, closeness);
+            let trials = 400_000;
+            let mut hits = 0u32;
+            for _ in 0..trials {
+                let (mut c, mut x) = (0usize, 1.0f64);
+                for &pi in &p {
+                    if uniform(&mut state) < pi {
+                        c += 1;
+                        x *= uniform(&mut state);
+                    }
+                }
+                hits += u32::from(c > counted || (c == counted && x <= closeness));
+            }
+            let got = f64::from(hits) / f64::from(trials);
+            let sigma = (want * (1.0 - want) / f64::from(trials)).sqrt();
+            assert!(
+                (got - want).abs() <= 4.0 * sigma + 1e-12,
+                "{counted} {closeness}: {got} against {want}"
+            );
+        }
+    }
+
+    /// The product of uniforms' distribution in closed form at two and one, and never above
+    /// the count alone.
+    #[test]
+    fn the_product_of_uniforms_has_its_closed_form() {
+        for x in [1e-12, 1e-3, 0.2, 0.9] {
+            let f2 = x * (1.0 - libm::log(x));
+            assert!((product_of_uniforms_cdf(2, x) - f2).abs() < 1e-15 + 1e-12 * f2);
+            assert_eq!(product_of_uniforms_cdf(1, x), x);
+            assert!(counted_tail(&[1e-4; 5], 3, x) <= counted_tail(&[1e-4; 5], 3, 1.0));
+        }
+        assert_eq!(product_of_uniforms_cdf(0, 0.1), 1.0);
+        assert_eq!(product_of_uniforms_cdf(3, 0.0), 0.0);
+    }
 }

@@ -47,11 +47,15 @@
 //! non-basis star's gate holds a catalog star with probability `p` (the field's catalog
 //! stars times the gate's area over the field's), the chance that `c` or more match is a
 //! Poisson binomial tail `T`, counted twice (at the match radius; and in gates of
-//! [`GATE_SIGMAS`] of each star's leave-one-out error with the photometry agreeing), each
-//! held to half the level, and the level `alpha` spent along the search, `s_j` of it on the
-//! `j`-th hypothesis, the shares summing to at most 1 over
-//! [`IdentConfig::max_hypotheses`]. A solution is accepted only when `2 T / s_j` is at most
-//! [`IdentConfig::max_false_probability`]; that bound is reported.
+//! [`GATE_SIGMAS`] of each star's leave-one-out error with the photometry agreeing, ranked
+//! then by how close the counted stars fall), each held to half the level, and the level
+//! `alpha` spent along the search, `s_j` of it on the `j`-th hypothesis, the shares summing
+//! to at most 1 over [`IdentConfig::max_hypotheses`]. A catalog triangle whose three stars'
+//! brightness disagrees (a star off the triangle's zero point by more than
+//! [`IdentConfig::photometric_tolerance_mag`]) is no hypothesis and is not counted: the
+//! test reads the triangle only, never the stars the bound counts. A solution is accepted
+//! only when `2 T / s_j` is at most [`IdentConfig::max_false_probability`]; that bound is
+//! reported.
 //!
 //! # Tracking
 //! The prior attitude maps each pattern star to the sky; its candidates are the catalog
@@ -72,7 +76,7 @@
 //! scale range, a few thousand), a hypothesis a quick check of a few cone searches and, for
 //! the few that pass it, a 3-star q-method, `n` cone searches and rounds of the joint fit; a
 //! tracking triangle a few dozen angle checks. On the Cortex-M7 (`cargo m7-bench`, 15 degree
-//! fields) lost in space takes about 3.4 M instructions a field (median) and 15.8 M at the
+//! fields) lost in space takes about 3.3 M instructions a field (median) and 15.7 M at the
 //! 99th percentile, tracking 0.67 M.
 
 use crate::attitude::{self, Attitude, Observation, Quat, angle_between, cross, dot};
@@ -460,8 +464,14 @@ pub fn lost_in_space(
                     {
                         continue;
                     }
-                    hyps += 1;
+                    // A triangle whose brightness disagrees is no hypothesis: it is not
+                    // counted, so the level is spent on the triangles that can be the
+                    // field's (the test reads the triangle only: bound.rs).
                     let basis = [(i, a), (j, b), (k, c)];
+                    if !bound::triangle_agrees(cat, stars, &basis, cfg.photometric_tolerance_mag) {
+                        continue;
+                    }
+                    hyps += 1;
                     if let Some(sol) =
                         hypothesis(cat, stars, n, &crowd, basis, s, (s_lo, s_hi), cfg, hyps)
                     {

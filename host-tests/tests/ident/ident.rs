@@ -22,6 +22,14 @@ pub(crate) fn catalog() -> Catalog<'static> {
     Catalog::parse(catalog_bytes()).unwrap_or_else(|e| panic!("catalog: {e}"))
 }
 
+/// A long run's size: the environment variable `name` when it parses, else `default`.
+pub(crate) fn count_from_env(name: &str, default: usize) -> usize {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
 /// A solution is right when its attitude is within 1 mrad (4 px) of the truth: a wrong
 /// identification is off by degrees.
 pub(crate) fn is_right(sol: &Solution, truth: Quat) -> bool {
@@ -238,10 +246,7 @@ fn tracking_solves_with_a_prior_2_degrees_off() {
 #[test]
 #[ignore]
 fn lost_in_space_long_run() {
-    let fields = std::env::var("IDENT_FIELDS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(100_000);
+    let fields = count_from_env("IDENT_FIELDS", 100_000);
     let t = run_lis(fields, 1914, &noisy_spec());
     println!(
         "lost in space: {}/{} solved, {} wrong, worst false-match bound {:.1e}, at most {} hypotheses, {} of {} matched stars not the true one",
