@@ -149,6 +149,10 @@ pub const MIN_PREDICTED: usize = crate::ident::MIN_MATCHES;
 /// by 4 degrees a minute, 0.4" of aberration at 7.7 km/s.
 pub const VELOCITY_MAX_AGE_S: f64 = 60.0;
 
+/// The platform's largest angular acceleration a cycle assumes until it is told
+/// ([`FrameCycle::set_max_acceleration`]), rad/s^2: 1 deg/s^2.
+pub const DEFAULT_MAX_ACCEL_RAD_S2: f64 = 0.017_453_292_519_943_295;
+
 /// The home's sink and the link, each given every record.
 struct Both<'a> {
     home: &'a mut dyn TelemetrySink,
@@ -194,7 +198,7 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             solver,
             health,
             clock: SpacecraftClock::new(),
-            rate: crate::attitude::RateFilter::new(),
+            rate: crate::attitude::RateFilter::new(DEFAULT_MAX_ACCEL_RAD_S2),
             velocity: None,
             last_exposure_us: None,
             last_mid_us: None,
@@ -212,6 +216,16 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         if !on {
             self.tracker.predict_next(&[]);
         }
+    }
+
+    /// The platform's largest angular acceleration, rad/s^2 (from the spacecraft's
+    /// specification): until the rate filter has the 4 attitudes that measure the
+    /// acceleration, each attitude's covariance carries what this much acceleration could
+    /// shift a star's mean position over the exposure by, and the rate's what it could make
+    /// the rate lag by ([`crate::attitude::RateFilter`]). Forgets the rate filter's window.
+    pub fn set_max_acceleration(&mut self, max_accel_rad_s2: f64) {
+        self.rate = crate::attitude::RateFilter::new(max_accel_rad_s2);
+        self.last_rate = None;
     }
 
     /// Stars the attitude stage predicted for the next frame (0: none, the tracker follows
@@ -345,6 +359,10 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
             || summary.start_us.saturating_sub(integrated_us / 2),
             |i| i.mid_us(),
         );
+        let integration_s = source
+            .integration()
+            .map_or(integrated_us, |i| i.duration_us()) as f64
+            * 1e-6;
         let mut report = None;
         let attitude = self.solver.as_mut().map(|solver| {
             let time = self.clock.time_of(mid_us);
@@ -363,6 +381,30 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
                 mid_us,
                 velocity,
             );
+            // Under an acceleration the stars' centroids are past their mid-exposure
+            // positions: the attitude is turned back to its middle by the acceleration the
+            // rate filter measured up to the last frame (none yet: the platform's bound in
+            // the covariance), how far depending on the trails' length against the PSF,
+            // from the last rate across the boresight. The filter is given the attitude at
+            // mid-exposure, so that its samples are the motion's own.
+            let accel = self.rate.acceleration();
+            let trail_px = self.last_rate.map_or(0.0, |r| {
+                libm::hypot(r.w_rad_s[0], r.w_rad_s[1])
+                    * integration_s
+                    * solver.camera().focal_length_px
+            });
+            let psf_px = f64::from(self.tracker.config().psf_sigma_px());
+            let width_px = libm::sqrt(psf_px * psf_px + 1.0 / 12.0);
+            let k = crate::centroid::trail_fit::accel_offset_fraction(trail_px, width_px);
+            let result = result.map(|mut fix| {
+                fix.attitude = accel.mid_exposure(
+                    &fix.attitude,
+                    integration_s,
+                    k,
+                    crate::centroid::trail_fit::ACCEL_OFFSET_SIGMA,
+                );
+                fix
+            });
             // The rate of the attitudes so far, this frame's the newest (none without it).
             let rate = result
                 .as_ref()
@@ -431,6 +473,7 @@ impl<const N: usize> FrameCycle<'_, '_, '_, '_, N> {
                 && solver
                     .predict(
                         rate,
+                        self.rate.acceleration().alpha_rad_s2,
                         next_mid_us,
                         exposure_s,
                         interval_us as f64 * 1e-6,

@@ -4,8 +4,9 @@
 //!
 //! What it is for: with an attitude, tracking needs neither the last frame's stars nor a
 //! full frame to find stars entering the field. The attitude `q` of the last fix (at its
-//! mid-exposure) is propagated by the rate `w` over the interval `dt` to the next frame's
-//! mid-exposure, `q' = exp(w dt) q` (the convention of [`crate::attitude::RateFilter`]); the
+//! mid-exposure) is propagated by the rate `w` and the acceleration `alpha` over the
+//! interval `dt` to the next frame's mid-exposure, `q' = exp(w dt + alpha dt^2 / 2) q` (the
+//! convention of [`crate::attitude::RateFilter`]); the
 //! catalog stars in the field cone around its boresight (aberrated for the observer's
 //! velocity when the attitude is of the ICRF) are projected through the camera model with
 //! the focal-length scale identification fitted ([`crate::ident::FocalScale`]) and each
@@ -101,6 +102,9 @@ pub struct PredictFrom {
     pub attitude: Attitude,
     /// The angular rate and its covariance.
     pub rate: Rate,
+    /// The angular acceleration, rad/s^2 (zero when none is measured): the propagation is
+    /// `exp(w dt + alpha dt^2 / 2) q`.
+    pub accel_rad_s2: [f64; 3],
     /// True focal length over the camera model's ([`crate::ident::FocalScale::value`]).
     pub scale: f64,
     /// From the fix's mid-exposure to the next frame's, s.
@@ -153,10 +157,16 @@ struct Candidate {
     out: bool,
 }
 
-/// `q0` turned by the rate `w` (rad/s) for `dt` s: `exp(w dt) q0`.
+/// `q0` turned by the rate `w` (rad/s) and the acceleration `a` (rad/s^2) for `dt` s:
+/// `exp(w dt + a dt^2 / 2) q0`.
 #[inline(never)]
-fn turned(q0: Quat, w: [f64; 3], dt: f64) -> Quat {
-    Quat::from_rotation_vector(w.map(|c| c * dt)) * q0
+fn turned(q0: Quat, w: [f64; 3], a: [f64; 3], dt: f64) -> Quat {
+    let h = 0.5 * dt * dt;
+    let mut v = [0.0; 3];
+    for ((o, wi), ai) in v.iter_mut().zip(w).zip(a) {
+        *o = wi * dt + ai * h;
+    }
+    Quat::from_rotation_vector(v) * q0
 }
 
 /// The pixel position of the catalog direction `dir` of colour `bv_mmag` at attitude `q`
@@ -191,6 +201,7 @@ pub fn predict(
     let ok = finite33(&from.attitude.cov_rad2)
         && finite33(&from.rate.cov_rad2_s2)
         && finite3(&from.rate.w_rad_s)
+        && finite3(&from.accel_rad_s2)
         && from.scale.is_finite()
         && (0.9..=1.1).contains(&from.scale)
         && from.interval_s.is_finite()
@@ -215,8 +226,8 @@ pub fn predict(
     if from.interval_s > cfg.max_interval_s {
         return Err(PredictError::TooOld);
     }
-    let w = from.rate.w_rad_s;
-    let turn = |dt: f64| turned(q0, w, dt);
+    let (w, a) = (from.rate.w_rad_s, from.accel_rad_s2);
+    let turn = |dt: f64| turned(q0, w, a, dt);
     let q = turn(from.interval_s);
     let cam = Camera {
         focal_length_px: camera.focal_length_px * from.scale,

@@ -178,7 +178,7 @@ impl<'c> Solver<'c> {
 
     /// The catalog stars of the next frame ([`predict::predict`]): the last fix (its
     /// attitude, covariance and focal-length scale, at its time, and the velocity its
-    /// aberration was removed for) propagated by `rate` to
+    /// aberration was removed for) propagated by `rate` and `accel_rad_s2` (rad/s^2) to
     /// `next_mid_us`, the next frame's mid-exposure, its stars trailed over `exposure_s` and
     /// moving over `period_s` after it, on an active area of `active_px` (columns, rows),
     /// into `out`. No fix, a fix after `next_mid_us` or older than the configuration allows
@@ -190,6 +190,7 @@ impl<'c> Solver<'c> {
     pub fn predict(
         &self,
         rate: &Rate,
+        accel_rad_s2: [f64; 3],
         next_mid_us: u64,
         exposure_s: f64,
         period_s: f64,
@@ -205,6 +206,7 @@ impl<'c> Solver<'c> {
         let from = PredictFrom {
             attitude,
             rate: *rate,
+            accel_rad_s2,
             scale: self.scale.map_or(1.0, |s| s.value),
             interval_s: (next_mid_us - t) as f64 * 1e-6,
             exposure_s,
@@ -219,6 +221,11 @@ impl<'c> Solver<'c> {
             cfg,
             out,
         )
+    }
+
+    /// The camera model that turns pixels into directions.
+    pub fn camera(&self) -> &Camera {
+        &self.config.camera
     }
 
     /// Forgets the prior (the next frame is lost in space).

@@ -40,7 +40,7 @@ mod rate;
 pub use camera::{Camera, CameraError};
 pub use quat::{Quat, angle_between};
 pub(crate) use quat::{cross, dot, mat_vec, norm};
-pub use rate::{RATE_WINDOW, Rate, RateFilter};
+pub use rate::{Acceleration, RATE_WINDOW, Rate, RateFilter};
 
 /// Most Jacobi sweeps; a 4x4 converges to f64 precision in 5-6.
 pub(crate) const MAX_SWEEPS: usize = 12;

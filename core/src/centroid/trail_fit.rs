@@ -67,8 +67,10 @@ use super::prepared::{Measured, Prepared};
 use super::{Background, Centroid, CentroidFlags, CentroidInput};
 use crate::table::pixcorr::CogPower;
 
+mod accel;
 mod free;
 
+pub use accel::{ACCEL_OFFSET_SIGMA, accel_offset_fraction};
 pub use free::{FreeTrailParams, TRAIL_FALSE_ALARM, TrailedFit, trail_dchi2_limit, trail_fit_free};
 
 /// The result of [`trail_fit`]: the centroid at mid-exposure and the covariance of its column

@@ -106,6 +106,10 @@ pub struct SilConfig {
     /// firmware's), so that the two runs' rates and predictions are the same to the bit.
     /// Empty by default.
     pub integrations: Vec<Option<Integration>>,
+    /// The platform's largest angular acceleration, rad/s^2, told to the attitude stage
+    /// ([`FrameCycle::set_max_acceleration`]); the cycle's default,
+    /// [`startrack_core::cycle::DEFAULT_MAX_ACCEL_RAD_S2`] (1 deg/s^2), by default.
+    pub max_accel_rad_s2: f64,
 }
 
 /// The spacecraft time the SIL's commands take at counter 0 (`--spacecraft-time`'s
@@ -131,6 +135,7 @@ impl Default for SilConfig {
             false_stars_from: 0,
             bright: BrightSky::default(),
             integrations: Vec::new(),
+            max_accel_rad_s2: startrack_core::cycle::DEFAULT_MAX_ACCEL_RAD_S2,
         }
     }
 }
@@ -469,6 +474,7 @@ pub fn run_with_table(config: &SilConfig, table_bytes: &[u8]) -> Result<SilRepor
         .map_err(|e| e.to_string())?;
     let mut link = Box::new(LinkService::new());
     let mut cycle = Box::new(FrameCycle::new(tracker, &mut link, solver, host_health()));
+    cycle.set_max_acceleration(config.max_accel_rad_s2);
     let mut source = SimLines::new(|frame| frame_simulator(config, &params, &base, catalog, frame))
         .with_timing(frame_timing(config))
         .with_integrations(config.integrations.clone());

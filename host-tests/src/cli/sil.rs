@@ -90,6 +90,11 @@ pub struct SilArgs {
     /// acceleration, deg/s^2 (above 0; default: at the rate from the start).
     #[arg(long, requires = "rate_deg_s")]
     pub slew_accel_deg_s2: Option<f64>,
+    /// The platform's largest angular acceleration told to the attitude stage, deg/s^2 (0 to
+    /// 100; default 1): until the rate filter measures the acceleration, the attitude's
+    /// and the rate's covariances carry what this much could do.
+    #[arg(long, value_name = "DEG_S2")]
+    pub max_accel_deg_s2: Option<f64>,
     /// The spacecraft time at the tracker's counter 0, CUC seconds (1958 TAI epoch): the SIL
     /// runs the PPS line and sends the time-set command for its next pulse before the first
     /// frame, so the attitude reports are on spacecraft time. Without it they flag the time
@@ -264,6 +269,17 @@ pub fn config_of(args: &SilArgs) -> Result<SilConfig, CliError> {
         bright,
         ..SilConfig::default()
     };
+    match args.max_accel_deg_s2 {
+        None => {}
+        Some(a) if a.is_finite() && (0.0..=100.0).contains(&a) => {
+            config.max_accel_rad_s2 = a.to_radians();
+        }
+        Some(_) => {
+            return Err(CliError::Usage(
+                "--max-accel-deg-s2: 0 to 100 deg/s^2".into(),
+            ));
+        }
+    }
     if let (Some(sky), Some(motion)) = (config.sky.as_mut(), motion_of(args, config.period_us)?) {
         config.period_us = (motion.period_s * 1e6).round() as u64;
         // The tracker is told the exposure it runs with (its mid-exposure tags follow it).

@@ -11,6 +11,7 @@ mod centroid_degenerate;
 mod centroid_gauss_fit;
 mod centroid_gauss_fit_width;
 mod centroid_math;
+mod centroid_trail_accel;
 mod centroid_trail_fit;
 mod centroid_trail_free;
 mod detect;

@@ -38,7 +38,7 @@ fn monte_carlo(w: [f64; 3], runs: usize, seed: u64) -> (f64, [f64; 3], [f64; 3])
     let period_us = 100_000u64;
     for run in 0..runs {
         let q0 = startrack_sim::sky::field::random_attitude(&mut rng);
-        let mut f = RateFilter::new();
+        let mut f = RateFilter::new(0.0);
         let mut last = None;
         // One more than the window: the first attitude has left it.
         for k in 0..=RATE_WINDOW as u64 {
@@ -106,7 +106,7 @@ fn a_step_restarts_the_window_and_odd_input_gives_no_rate() {
     let (cov, _) = noise();
     let q0 = Quat::from_axis_angle([0.0, 0.6, 0.8], 1.0);
     let w = [0.01, 0.0, 0.0];
-    let mut f = RateFilter::new();
+    let mut f = RateFilter::new(0.0);
     let at = |t: f64| Attitude {
         q: Quat::from_rotation_vector(w.map(|c| c * t)) * q0,
         cov_rad2: cov,
@@ -144,7 +144,7 @@ proptest! {
     #[test]
     fn the_filter_never_panics(steps in proptest::collection::vec(
         (any::<u32>(), proptest::array::uniform4(-2.0f64..2.0), proptest::array::uniform3(any::<f64>())), 0..24)) {
-        let mut f = RateFilter::new();
+        let mut f = RateFilter::new(0.0);
         for (t, q, d) in steps {
             let a = Attitude {
                 q: Quat(q),
@@ -155,4 +155,81 @@ proptest! {
             }
         }
     }
+}
+
+/// Attitudes of a slew at a constant angular acceleration, 20 a second with the noise
+/// above: once the window has 4 attitudes the filter measures the acceleration within its
+/// covariance, its rate is the one at the newest attitude (no lag), and no attitude restarts
+/// the window.
+#[test]
+fn a_constant_acceleration_is_measured_and_the_rate_does_not_lag() {
+    let (cov, l) = noise();
+    let deg = 1f64.to_radians();
+    let alpha = [2.0 * deg, -deg, 0.5 * deg];
+    let mut rng = ChaCha8Rng::seed_from_u64(77);
+    let q0 = Quat::from_axis_angle([0.0, 0.6, 0.8], 1.0);
+    let mut f = RateFilter::new(5.0 * deg);
+    let (mut nees_a, mut nees_w, mut n) = (0.0, 0.0, 0.0);
+    for k in 0..40u64 {
+        let t = k as f64 * 0.05;
+        let truth = Quat::from_rotation_vector(alpha.map(|a| 0.5 * a * t * t)) * q0;
+        let z: [f64; 3] = std::array::from_fn(|_| StandardNormal.sample(&mut rng));
+        let e: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| l[i][j] * z[j]).sum());
+        let a = Attitude {
+            q: Quat::from_rotation_vector(e) * truth,
+            cov_rad2: cov,
+        };
+        let r = f.push(k * 50_000, &a);
+        assert_eq!(f.len(), (k as usize + 1).min(RATE_WINDOW), "attitude {k}");
+        let acc = f.acceleration();
+        if k >= 3 {
+            let ea: [f64; 3] = std::array::from_fn(|i| acc.alpha_rad_s2[i] - alpha[i]);
+            let inv = invert(acc.cov_rad2_s4);
+            nees_a += quad(&inv, ea);
+            let r = r.expect("a rate");
+            let ew: [f64; 3] = std::array::from_fn(|i| r.w_rad_s[i] - alpha[i] * t);
+            nees_w += r.nees(ew).expect("invertible");
+            n += 1.0;
+        } else {
+            assert_eq!(
+                acc.alpha_rad_s2, [0.0; 3],
+                "attitude {k}: nothing measured yet"
+            );
+        }
+    }
+    println!(
+        "acceleration NEES {:.2}, rate NEES {:.2}",
+        nees_a / n,
+        nees_w / n
+    );
+    assert!(nees_a / n < 6.0, "acceleration NEES {}", nees_a / n);
+    assert!(nees_w / n < 6.0, "rate NEES {}", nees_w / n);
+}
+
+fn invert(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let [[a, b, c], [d, e, f], [g, h, i]] = m;
+    let det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g);
+    [
+        [
+            (e * i - f * h) / det,
+            (c * h - b * i) / det,
+            (b * f - c * e) / det,
+        ],
+        [
+            (f * g - d * i) / det,
+            (a * i - c * g) / det,
+            (c * d - a * f) / det,
+        ],
+        [
+            (d * h - e * g) / det,
+            (b * g - a * h) / det,
+            (a * e - b * d) / det,
+        ],
+    ]
+}
+
+fn quad(m: &[[f64; 3]; 3], v: [f64; 3]) -> f64 {
+    (0..3)
+        .map(|i| (0..3).map(|j| v[i] * m[i][j] * v[j]).sum::<f64>())
+        .sum()
 }

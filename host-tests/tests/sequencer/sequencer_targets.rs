@@ -273,8 +273,8 @@ fn m7_stage(stage: &str) -> f64 {
 /// (`tracker_tracking_frame_windowed`), the frame's compile, the MDMA nodes of its chain
 /// (`sequencer_chain_nodes`) and its line jobs, under a quarter of the cycle, and so with the
 /// attitude stage of a tracking frame (the catalog's stars predicted for the next frame,
-/// `predict_catalog_windows_p99`, and the identities confirmed with the attitude,
-/// `ident_confirm_p99`). Printed beside them: the word feed the chain replaces
+/// `predict_catalog_windows_p99`, the identities confirmed with the attitude,
+/// `ident_confirm_p99`, and the rate filter's push, `rate_filter_push`). Printed beside them: the word feed the chain replaces
 /// (`sequencer_feed_words`) and the tracker fed every line.
 #[test]
 fn tracking_frame_m7_work_share_of_the_cycle() {
@@ -315,10 +315,11 @@ fn tracking_frame_m7_work_share_of_the_cycle() {
         "sequencer_feed_jobs",
         "predict_catalog_windows_p99",
         "ident_confirm_p99",
+        "rate_filter_push",
     ]);
     println!(
         "with the attitude stage (the catalog's prediction, the identities confirmed, the \
-         attitude): {:.2} M instructions, {:.1} %",
+         attitude, the rate): {:.2} M instructions, {:.1} %",
         whole / 1e6,
         whole_share * 100.0
     );

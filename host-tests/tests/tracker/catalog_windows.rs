@@ -43,6 +43,7 @@ fn from(q: Quat, w_deg_s: [f64; 3], interval_s: f64) -> PredictFrom {
         interval_s,
         exposure_s: 0.1,
         period_s: 0.1,
+        accel_rad_s2: [0.0; 3],
         velocity_m_s: None,
     }
 }
@@ -464,6 +465,7 @@ fn any_input_predicts_valid_stars_or_an_error() {
                     interval_s: interval,
                     exposure_s: exposure,
                     period_s: 0.1,
+                    accel_rad_s2: w,
                     velocity_m_s: (scale > 0.5).then_some(w.map(|c| c * 3.0e5)),
                 };
                 if let Ok(stars) = predicted(&cat, &f) {

@@ -13,6 +13,7 @@ mod safe_states;
 mod sil_acquire_rate;
 mod sil_bright;
 mod sil_motion;
+mod sil_second_bright;
 mod sil_second_sky;
 mod sil_sky;
 mod tracker;

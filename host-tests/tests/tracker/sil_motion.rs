@@ -387,23 +387,29 @@ fn slew(
     }
     config.tracker.exposure_ms = exposure_ms;
     config.period_us = period_us;
+    // The platform's bound is the slew's own acceleration (at least the cycle's default).
+    config.max_accel_rad_s2 = accel_deg_s2.to_radians().max(config.max_accel_rad_s2);
     config
 }
 
 /// A slew from rest to 3 deg/s across the boresight (2 deg/s^2, the rate reached at 1.5 s,
 /// frame 30) at the flight timing, 39 ms exposures every 49.4 ms (7.9 px trails at 3 deg/s):
 /// after the first two frames' lost-in-space attitudes (the second for the rate) the
-/// tracker never acquires again; every
-/// frame has an attitude and none is wrong ([`sil_rates::is_wrong`]: while the rate changes
-/// a trailed star's centroid is its mean position over the exposure, not its position at
-/// mid-exposure, `alpha T^2 / 24` off, 0.46 arcsec here); and once at the rate (from frame
-/// 34, the rate filter predicting again) every frame tracks the catalog's predicted
-/// windows, its attitude from their identities and within 5 of its sigmas on each axis.
-/// Seconds in the test profile.
+/// tracker never acquires again; every frame has an attitude, none is wrong
+/// ([`sil_rates::is_wrong`]), and every frame's attitude is within 5 of its sigmas on each
+/// axis: while the rate changes a star's centroid is past its mid-exposure position
+/// (`k alpha T^2`, 0.46 to 1 arcsec here), which the attitude stage takes out with the
+/// acceleration the rate filter measures, its uncertainty in the covariance (and before
+/// the filter has the 4 attitudes that measure it, the platform's bound). The rate is
+/// within 5 of its sigmas across the boresight too, but around the ramp's end (frames 28 to
+/// 35: the jerk, which no model here holds, restarts the filter). From frame 2 every frame
+/// but one (the restart's) tracks the catalog's predicted windows, its attitude from their
+/// identities. Seconds in the test profile.
 #[test]
 fn catalog_windows_hold_a_slew_to_3_deg_s() {
     let config = slew(3.0, 2.0, 39, 49_400, 45);
     let report = sil::run(&config).unwrap();
+    let mut unpredicted = 0;
     for f in &report.frames {
         let n = f.summary.frame;
         let expected = if n < 2 {
@@ -418,22 +424,36 @@ fn catalog_windows_hold_a_slew_to_3_deg_s() {
         let a = &fix.attitude;
         let wrong = sil_rates::is_wrong(e, a.boresight_sigma_rad(), a.roll_sigma_rad());
         assert!(!wrong, "frame {n}: {e:?}");
-        if n >= 34 {
-            for (i, v) in e.iter().enumerate() {
-                let sigma = a.cov_rad2[i][i].sqrt();
+        for (i, v) in e.iter().enumerate() {
+            let sigma = a.cov_rad2[i][i].sqrt();
+            assert!(
+                v.abs() < 5.0 * sigma,
+                "frame {n}: axis {i} {v:e} rad, sigma {sigma:e}"
+            );
+        }
+        if let Some(r) = c.report.and_then(|r| r.rate)
+            && !(28..=35).contains(&n)
+        {
+            for i in 0..2 {
+                // The report's rate is the negative of the scene's body rate.
+                let d = r.w_rad_s[i] + c.true_rate_rad_s[i];
+                let sigma = r.cov_rad2_s2[i][i].sqrt();
                 assert!(
-                    v.abs() < 5.0 * sigma,
-                    "frame {n}: axis {i} {v:e} rad, sigma {sigma:e}"
+                    d.abs() < 5.0 * sigma,
+                    "frame {n}: rate axis {i} {d:e} rad/s, sigma {sigma:e}"
                 );
             }
-            assert!(
-                f.predicted_windows >= 20,
-                "frame {n}: {}",
-                f.predicted_windows
-            );
+        }
+        if n >= 2 && f.predicted_windows < 20 {
+            unpredicted += 1;
+        } else if n >= 2 {
             assert!(c.identified >= 20, "frame {n}: {} identified", c.identified);
         }
     }
+    assert!(
+        unpredicted <= 1,
+        "{unpredicted} tracking frames without the catalog's windows"
+    );
 }
 
 /// Slews from rest across the boresight (seed 100), each frame's mode, predicted windows,
@@ -454,31 +474,54 @@ fn slew_frames() {
         (2.0, 1.0, 100, 100_000, 30),
     ] {
         let report = sil::run(&slew(rate, accel, exposure_ms, period_us, frames)).unwrap();
-        let (mut wrong, mut worst) = (0, 0.0f64);
+        let (mut wrong, mut worst, mut worst_rate) = (0, 0.0f64, 0.0f64);
+        let (mut nees, mut n, mut rate_nees, mut n_rate) = (0.0, 0, 0.0, 0);
         for f in &report.frames {
             let c = f.attitude.as_ref().unwrap();
-            let line = match (&c.fix, c.error_rad()) {
-                (Ok(fix), Some(e)) => {
-                    let a = &fix.attitude;
-                    let s: Vec<f64> = (0..3).map(|i| a.cov_rad2[i][i].sqrt()).collect();
-                    let is_wrong =
-                        sil_rates::is_wrong(e, a.boresight_sigma_rad(), a.roll_sigma_rad());
-                    wrong += usize::from(is_wrong);
-                    worst = worst.max((e[0] / s[0]).abs()).max((e[1] / s[1]).abs());
-                    format!(
-                        "error {:+.2} {:+.2} {:+.2} arcsec, sigma {:.2} {:.2} {:.2}{}",
-                        e[0] * ARCSEC,
-                        e[1] * ARCSEC,
-                        e[2] * ARCSEC,
-                        s[0] * ARCSEC,
-                        s[1] * ARCSEC,
-                        s[2] * ARCSEC,
-                        if is_wrong { ", wrong" } else { "" }
-                    )
-                }
-                (Err(e), _) => e.to_string(),
-                _ => String::new(),
-            };
+            let line =
+                match (&c.fix, c.error_rad()) {
+                    (Ok(fix), Some(e)) => {
+                        let a = &fix.attitude;
+                        let s: Vec<f64> = (0..3).map(|i| a.cov_rad2[i][i].sqrt()).collect();
+                        let is_wrong =
+                            sil_rates::is_wrong(e, a.boresight_sigma_rad(), a.roll_sigma_rad());
+                        wrong += usize::from(is_wrong);
+                        worst = worst.max((e[0] / s[0]).abs()).max((e[1] / s[1]).abs());
+                        nees += a.nees(e).unwrap_or(f64::INFINITY);
+                        n += 1;
+                        let rate = c.report.and_then(|r| r.rate).map(|r| {
+                        // The report's rate is the negative of the scene's body rate.
+                        let d: [f64; 3] =
+                            std::array::from_fn(|i| r.w_rad_s[i] + c.true_rate_rad_s[i]);
+                        let sr: [f64; 3] = std::array::from_fn(|i| r.cov_rad2_s2[i][i].sqrt());
+                        worst_rate = worst_rate.max((d[0] / sr[0]).abs()).max((d[1] / sr[1]).abs());
+                        rate_nees += r.nees(d).unwrap_or(f64::INFINITY);
+                        n_rate += 1;
+                        format!(
+                            "; rate error {:+.1} {:+.1} {:+.1} arcsec/s, sigma {:.1} {:.1} {:.1}",
+                            d[0] * ARCSEC,
+                            d[1] * ARCSEC,
+                            d[2] * ARCSEC,
+                            sr[0] * ARCSEC,
+                            sr[1] * ARCSEC,
+                            sr[2] * ARCSEC
+                        )
+                    });
+                        format!(
+                            "error {:+.2} {:+.2} {:+.2} arcsec, sigma {:.2} {:.2} {:.2}{}{}",
+                            e[0] * ARCSEC,
+                            e[1] * ARCSEC,
+                            e[2] * ARCSEC,
+                            s[0] * ARCSEC,
+                            s[1] * ARCSEC,
+                            s[2] * ARCSEC,
+                            rate.unwrap_or_default(),
+                            if is_wrong { ", wrong" } else { "" }
+                        )
+                    }
+                    (Err(e), _) => e.to_string(),
+                    _ => String::new(),
+                };
             eprintln!(
                 "frame {:2} {:11} predicted {:2} identified {:2}: {line}",
                 f.summary.frame,
@@ -488,8 +531,10 @@ fn slew_frames() {
             );
         }
         eprintln!(
-            "slew to {rate} deg/s at {accel} deg/s^2, {exposure_ms} ms every {period_us} us: {} frames, {wrong} wrong, largest cross-boresight error {worst:.1} of its sigmas",
-            report.frames.len()
+            "slew to {rate} deg/s at {accel} deg/s^2, {exposure_ms} ms every {period_us} us: {} frames, {wrong} wrong, largest cross-boresight error {worst:.1} of its sigmas, mean NEES {:.2}; rate: largest cross-boresight error {worst_rate:.1} of its sigmas, mean NEES {:.2}",
+            report.frames.len(),
+            nees / f64::from(n.max(1)),
+            rate_nees / f64::from(n_rate.max(1))
         );
     }
 }

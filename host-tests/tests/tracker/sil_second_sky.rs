@@ -23,7 +23,8 @@ use startrack_core::link::LinkService;
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    FixedTable, FixedTemperature, Provenance, Tracker, TrackerBuffers, TrackerConfig,
+    FixedTable, FixedTemperature, FrameSummary, Obstructions, Provenance, Tracker, TrackerBuffers,
+    TrackerConfig,
 };
 use startrack_homes::home::{FrameTiming, ReadoutClock, Recorder, SimLines, block_on, host_health};
 use startrack_homes::sil::{self, SilConfig};
@@ -172,21 +173,32 @@ fn star_image(
 const PERIOD_US: u64 = 49_400;
 const EXPOSURE_US: u64 = 39_000;
 
-/// One run of [`run`].
-struct Run {
-    /// Per frame the attitude's error against the truth at mid-exposure and its bounds,
-    /// `None` without an attitude.
-    attitudes: Vec<Option<([f64; 3], f64, f64)>>,
+/// A frame's outcome on this file's sky.
+pub(crate) struct SecondFrame {
+    /// The attitude's error against the truth (rad, camera frame), its cross-boresight and
+    /// roll sigmas (rad); `None` without an attitude.
+    pub fix: Option<([f64; 3], f64, f64)>,
+    /// The frame's obstruction flags.
+    pub obstructions: Obstructions,
+    /// The tracker's summary of the frame.
+    pub summary: FrameSummary,
     /// The normalised errors squared along and across the trail
-    /// ([`sil_rates::principal_nees`]) of every star measured as trailed, clean, within
+    /// ([`sil_rates::principal_nees`]) of each star measured as trailed, clean, within
     /// [`sil::MATCH_PX`] of a true star at mid-exposure and with no other within
     /// [`sil_rates::BLEND_PX`].
-    trailed: Vec<[f64; 2]>,
+    pub trailed: Vec<[f64; 2]>,
 }
 
 /// Runs the flight frame cycle for `frames` frames on this file's sky turning at `w_deg_s`
-/// (camera frame) from the seeded attitude of `seed`.
-fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Run {
+/// (camera frame) from the seeded attitude of `seed`, with `extra(frame, sensor)`'s light
+/// (mean electrons before the flat) added to each frame's stars (another generator's bright
+/// objects; none: `&|_, _| Vec::new()`).
+pub(crate) fn run_with(
+    seed: u64,
+    w_deg_s: [f64; 3],
+    frames: u32,
+    extra: &dyn Fn(u32, &SensorParams) -> Vec<TrailedImage>,
+) -> Vec<SecondFrame> {
     let catalog_bytes = committed_catalog().unwrap();
     let cat = Catalog::parse(&catalog_bytes).unwrap();
     let q0 = random_attitude(&mut rand_chacha::ChaCha8Rng::seed_from_u64(
@@ -255,6 +267,7 @@ fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Run {
                     &mut rng,
                 )
             })
+            .chain(extra(k, &params))
             .collect();
         Simulator {
             frame: k,
@@ -282,7 +295,6 @@ fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Run {
     let mut tables = FixedTable(Some(table));
     let mut thermometer = FixedTemperature(None);
     let mut out = Vec::new();
-    let mut trailed = Vec::new();
     for k in 0..frames {
         source.readout_done_us.set(0);
         let mut clock = ReadoutClock {
@@ -308,6 +320,7 @@ fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Run {
             )
             .filter_map(|(_, dir)| sky.pixel(dir, t_mid))
             .collect();
+        let mut trailed = Vec::new();
         for s in recorder.frames.last().map_or(&[][..], |f| &f.stars[..]) {
             if !(s.is_centroid() && s.fit_is_clean() && s.provenance.contains(Provenance::TRAILED))
             {
@@ -325,19 +338,21 @@ fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Run {
                 trailed.push(n);
             }
         }
-        out.push(outcome.attitude.and_then(|r| r.ok()).map(|fix| {
-            let a = fix.attitude;
-            (
-                a.q.error_vector(truth),
-                a.boresight_sigma_rad(),
-                a.roll_sigma_rad(),
-            )
-        }));
+        out.push(SecondFrame {
+            fix: outcome.attitude.and_then(|r| r.ok()).map(|fix| {
+                let a = fix.attitude;
+                (
+                    a.q.error_vector(truth),
+                    a.boresight_sigma_rad(),
+                    a.roll_sigma_rad(),
+                )
+            }),
+            obstructions: outcome.summary.obstructions,
+            summary: outcome.summary,
+            trailed,
+        });
     }
-    Run {
-        attitudes: out,
-        trailed,
-    }
+    out
 }
 
 /// On this file's sky at the flight timing, at rest, 1 and 2 deg/s across the boresight
@@ -356,13 +371,12 @@ fn a_second_sky_gives_no_wrong_attitude_and_errors_within_their_bound() {
         [0.0, 2.0, 0.0],
         [0.0, 0.0, 1.0],
     ] {
-        let Run {
-            attitudes: frames,
-            trailed,
-        } = run(7, w, 40);
+        let run = run_with(7, w, 40, &|_, _| Vec::new());
+        let frames: Vec<_> = run.iter().map(|f| f.fix).collect();
         if w[1] > 0.0 {
             // The trailed stars' covariance on this sky, as on the SIL's
             // (`sil_motion::trailed_stars_covariance_says_what_their_errors_are`).
+            let trailed: Vec<[f64; 2]> = run.iter().flat_map(|f| f.trailed.clone()).collect();
             let n = trailed.len();
             let mean = |i: usize| trailed.iter().map(|v| v[i]).sum::<f64>() / n.max(1) as f64;
             let nees = [mean(0), mean(1)];

@@ -1,5 +1,6 @@
 //! Stages `ident_lost_in_space_p50`, `ident_lost_in_space_p99`, `ident_lost_in_space_max`,
-//! `ident_track_p99`, `predict_catalog_windows_p99` and `ident_confirm_p99`, per field: star identification with the attitude from all matched
+//! `ident_track_p99`, `predict_catalog_windows_p99` and `ident_confirm_p99`, per field, and
+//! `rate_filter_push` (below): star identification with the attitude from all matched
 //! stars (`core/src/ident`, `core/src/attitude`) against the repo's 15 degree catalog
 //! (`host-tests/data/catalog-15deg.bin`, `startrack catalog build`), on [`FIELDS`] fields
 //! rendered here at pseudo-random attitudes: each catalog star in the 1024 x 1024 frame
@@ -213,6 +214,7 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
                 w_rad_s,
                 cov_rad2_s2: small(0.2e-6),
             },
+            accel_rad_s2: [0.0; 3],
             scale: 1.0,
             interval_s: 0.1,
             exposure_s: 0.1,
@@ -300,6 +302,46 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
     bench.row(out, "ident_track_p99", "field", at(&trk, 99), 1);
     bench.row(out, "predict_catalog_windows_p99", "frame", at(&prd, 99), 1);
     bench.row(out, "ident_confirm_p99", "frame", at(&cnf, 99), 1);
+    rate_filter(out, bench, rng)
+}
+
+/// Stage `rate_filter_push`, per attitude: the largest cost of a push into the frame
+/// cycle's rate filter (`core/src/attitude/rate.rs`) over 40 attitudes of a slew at
+/// 2 deg/s^2 across the boresight, 49.4 ms apart, 0.1" and 1" of noise: the window full
+/// from the twelfth, both fits each push, the acceleration's fit chosen.
+fn rate_filter(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static str> {
+    const ARCSEC: f64 = 4.848_136_811e-6;
+    let q0 = random_quat(rng);
+    let alpha = [2f64.to_radians(), 0.0, 0.0];
+    let cov = [
+        [0.01 * ARCSEC * ARCSEC, 0.0, 0.0],
+        [0.0, 0.01 * ARCSEC * ARCSEC, 0.0],
+        [0.0, 0.0, ARCSEC * ARCSEC],
+    ];
+    let mut f = startrack_core::attitude::RateFilter::new(1f64.to_radians());
+    let mut worst = 0u64;
+    let mut rated = 0;
+    for k in 0..40u64 {
+        let t = k as f64 * 0.0494;
+        let e = [
+            0.1 * ARCSEC * normal(rng),
+            0.1 * ARCSEC * normal(rng),
+            ARCSEC * normal(rng),
+        ];
+        let truth = Quat::from_rotation_vector(alpha.map(|a| 0.5 * a * t * t)) * q0;
+        let a = Attitude {
+            q: Quat::from_rotation_vector(e) * truth,
+            cov_rad2: cov,
+        };
+        let mut rate = None;
+        let c = bench.measure(|| rate = black_box(f.push(black_box(k * 49_400), &a)));
+        worst = worst.max(c);
+        rated += usize::from(rate.is_some());
+    }
+    if rated < 39 || f.len() != startrack_core::attitude::RATE_WINDOW {
+        return Err("the rate filter restarted during the slew");
+    }
+    bench.row(out, "rate_filter_push", "attitude", worst, 1);
     Ok(())
 }
 
