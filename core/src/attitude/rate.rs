@@ -92,6 +92,7 @@ impl Acceleration {
     /// `(sigma_k T^2)^2 alpha alpha^T` (the acceleration comes from earlier attitudes'
     /// differences, so it is independent of this frame's error). At 5 deg/s^2 and 39 ms the
     /// turn is 1.1 to 2.4 arcsec.
+    #[inline(never)]
     pub fn mid_exposure(
         &self,
         attitude: &Attitude,
@@ -200,6 +201,7 @@ impl Fit {
     }
 
     /// The fit's rotation `dt` s from the reference and its covariance.
+    #[inline(never)]
     fn predict(&self, dt: f64) -> ([f64; 3], M3) {
         let g = basis(dt);
         let mut mean = [0.0; 3];
@@ -262,6 +264,7 @@ fn sub_v(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 /// The inverse of the leading `n x n` block of the symmetric positive-definite `m` by its
 /// Cholesky factor (`None` when not positive definite or not finite).
+#[inline(never)]
 fn inverse_spd(m: &MN, n: usize) -> Option<MN> {
     let mut l = [[0.0; MAX_UNKNOWNS]; MAX_UNKNOWNS];
     for j in 0..n {
@@ -360,6 +363,7 @@ impl RateFilter {
     /// window, or `None` with fewer than two attitudes. An attitude not after the newest,
     /// with a covariance that is not invertible, or far from the fit's prediction restarts
     /// the window.
+    #[inline(never)]
     pub fn push(&mut self, time_us: u64, attitude: &Attitude) -> Option<Rate> {
         self.acceleration = None;
         let Some(info) = inverse3(&attitude.cov_rad2) else {
@@ -412,6 +416,7 @@ impl RateFilter {
     /// does to its intercept and rate: the fit's coefficients for the attitudes
     /// `alpha dt_i^2 / 2` (column `k` for the unit acceleration about axis `k`). `None`
     /// for a fit of the acceleration (it has no such bias) or no platform bound.
+    #[inline(never)]
     fn unmeasured_bias(&self, fit: &Fit) -> Option<(M3, M3)> {
         if fit.terms != 2 || self.max_accel_rad_s2 == 0.0 {
             return None;
@@ -444,6 +449,7 @@ impl RateFilter {
 
     /// The fit the rate comes from (the constant rate's unless the acceleration is
     /// significant) and the quadratic fit when there is one.
+    #[inline(never)]
     fn chosen(&self) -> Option<(Fit, Option<Fit>)> {
         let linear = self.fit(2)?;
         let quadratic = if self.samples.len() >= 4 {
@@ -458,6 +464,7 @@ impl RateFilter {
     }
 
     /// Whether the last push's chosen fit predicts `s` within the gate.
+    #[inline(never)]
     fn predicts(&self, s: &Sample, attitude: &Attitude) -> bool {
         let Some(Gate { fit, bias }) = self.gate else {
             return true;
@@ -491,6 +498,7 @@ impl RateFilter {
     /// The weighted least-squares fit of `terms` (2 or 3) coefficients per axis to the
     /// window, the newest attitude the reference (`None` with fewer than `terms` attitudes,
     /// or singular).
+    #[inline(never)]
     fn fit(&self, terms: usize) -> Option<Fit> {
         if self.samples.len() < terms || !(2..=3).contains(&terms) {
             return None;

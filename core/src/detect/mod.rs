@@ -11,6 +11,8 @@
 //!   eq. 8 SNR test.
 //! - `prefilter/`: the raw-domain pre-filtered scan ([`ScanDetector`]): quiet pixels are
 //!   compared in raw ADU against a per-tile level and never calibrated.
+//! - `motion.rs` ([`CommonMotion`]): the frame's common trail (a turning spacecraft's stars
+//!   all trail the same way, proton tracks at random), by which the bounded lists rank.
 //! - `hits.rs` ([`is_particle_hit`]): is a measured window sharper than the optics can make
 //!   (a proton's charge, spread only by diffusion)?
 //! - `capture.rs`: copies the raw pixels of a list of windows (tracking, [`WindowCapture`])
@@ -30,12 +32,14 @@ mod background;
 mod blobs;
 pub(crate) mod capture;
 mod hits;
+mod motion;
 mod prefilter;
 pub(crate) mod track;
 
 pub use blobs::{Detection, DetectionFlags, LineDetector};
 pub use capture::{CAPTURE_MAX_SIDE, CaptureError, LineRing, RingError, WindowCapture};
 pub use hits::{HIT_SIGMAS, HitLimits, is_particle_hit};
+pub use motion::{Agreement, CommonMotion, MIN_ACROSS_PX2, MIN_TRAIL_PX, MotionKey};
 pub use prefilter::{ScanDetector, ScanError};
 pub use track::{TrackConfig, TrackFlags, TrackResult, track_detect};
 

@@ -22,6 +22,15 @@
 //! 8 SNR sums its pixels, the matched filter's statistic over the pixels above the join
 //! level, at no cost per pixel (docs/tracker.md, "Lost in space at body rate").
 //!
+//! # Ranking while turning
+//! Both bounded lists, the scan's candidates and the star list, rank a blob by its
+//! agreement with the frame's common motion first ([`crate::detect::CommonMotion`]: the
+//! trail axis and length most of the frame's star-wide elongated blobs share), after the
+//! clean fit in the star list: at a solar flare's rate while the spacecraft turns, the
+//! trailed stars are kept before the round hits that fit a narrow Gaussian cleanly and
+//! before the tracks. Without a common motion (at rest) every blob is neutral and the lists
+//! rank as they would without it.
+//!
 //! The candidates are bit for bit those of a `LineDetector` with the same background
 //! stride fed every calibrated row (host test `scan`). Cost per line: the scan (~13 M7
 //! instructions a pixel, `cargo m7-bench` `scan_detect`), a 2 KB copy into the ring and a
@@ -36,7 +45,9 @@ use super::{Ring, Shared};
 use crate::calib::{FrameCalibration, LineLevels, PixelFlags};
 use crate::centroid::CentroidInput;
 use crate::clamp::clamp;
-use crate::detect::{CAPTURE_MAX_SIDE, Detection, DetectionFlags, ScanDetector};
+use crate::detect::{
+    CAPTURE_MAX_SIDE, CommonMotion, Detection, DetectionFlags, MotionKey, ScanDetector,
+};
 use crate::geometry::ReadoutGeometry;
 use crate::units::Electrons;
 use crate::window::Rect;
@@ -53,7 +64,7 @@ struct Pending {
 /// (`sqrt(12 (l1 - l2))`, the covariance's eigenvalues: a segment of length `L` adds
 /// `L^2 / 12` along itself). The moments are of the pixels above the join level, so a
 /// trail's reads short; the fit finds its length.
-pub const TRAIL_SCREEN_PX: f32 = 1.5;
+pub const TRAIL_SCREEN_PX: f32 = crate::detect::MIN_TRAIL_PX;
 
 /// The trail the trailed test starts from when blob `d` may be a trail (its moments give at
 /// least [`TRAIL_SCREEN_PX`]), px over the exposure: `sqrt(12 (l1 - l2))` along the larger
@@ -134,7 +145,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         y: u16,
         samples: &[u16],
         levels: &LineLevels,
-        sh: Shared<'_, N>,
+        mut sh: Shared<'_, N>,
     ) -> LineOutcome {
         // The line has the geometry's length, at most the ring's: cannot fail.
         let _ = sh.ring.push(y, samples, levels);
@@ -168,7 +179,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
             None => LineOutcome::Scanned,
         };
         self.queue_closed(config, geometry, sh.summary);
-        self.serve(cal, policy, config, Some(y), sh);
+        self.serve(cal, policy, config, Some(y), &mut sh);
         outcome
     }
 
@@ -179,7 +190,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         policy: &Policy<'_>,
         config: &TrackerConfig,
         geometry: &ReadoutGeometry,
-        sh: Shared<'_, N>,
+        mut sh: Shared<'_, N>,
     ) {
         if let Some(scan) = self.scan.as_mut() {
             scan.finish_closed(&mut self.closed);
@@ -189,7 +200,14 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         if self.sky_rows > 0 {
             sh.summary.sky_e = self.sky_sum_e / self.sky_rows as f32;
         }
-        self.serve(cal, policy, config, None, sh);
+        self.serve(cal, policy, config, None, &mut sh);
+        // The second pass: the common motion as the whole frame settled it.
+        if let Some(scan) = self.scan.as_ref() {
+            sh.stars.flag_off_motion(
+                scan.detector().motion(),
+                OFF_MOTION_WIDTH_FRACTION * config.psf_a_px,
+            );
+        }
     }
 
     /// Moves the candidates the last line closed into the pending list.
@@ -229,7 +247,7 @@ impl<'t, const N: usize> Acquisition<'t, N> {
         policy: &Policy<'_>,
         config: &TrackerConfig,
         y: Option<u16>,
-        mut sh: Shared<'_, N>,
+        sh: &mut Shared<'_, N>,
     ) {
         let mut i = 0;
         while let Some(p) = self.pending.get(i).copied() {
@@ -239,7 +257,11 @@ impl<'t, const N: usize> Acquisition<'t, N> {
                 continue;
             }
             self.pending.swap_remove(i);
-            measure_pending(cal, policy, config, &p, &mut sh);
+            let motion = self
+                .scan
+                .as_ref()
+                .map_or(&CommonMotion::EMPTY, |s| s.detector().motion());
+            measure_pending(cal, policy, config, &p, motion, sh);
             // Measured: the star list (its rank: a window the PSF describes first) keeps it
             // or not, so its place in the detector's bounded list goes to the next
             // candidate. That list then holds only the candidates waiting for their rows;
@@ -304,20 +326,32 @@ pub const TRAIL_MARGIN_PX: u16 = 3;
 /// trailed test calls trails fit at 0.43 to 0.47 of it, its stars at 1.0.
 pub const TRAIL_MIN_WIDTH_FRACTION: f32 = 0.5;
 
+/// In a frame whose stars share a common trail, a record measured round, off that trail,
+/// brighter than the median of the records on it and fitted narrower than this fraction
+/// of the configured PSF's width is no star of the frame ([`StarFlags::TRAIL_UNKNOWN`],
+/// the star list's second pass): a trail only widens a star, while a proton that crossed
+/// the silicon near the normal fits narrower than the PSF (its charge spreads by diffusion
+/// only); a star smeared by a trail below the moments' screen (1.3 px, 0.5 deg/s in 39 ms)
+/// fits as wide as the PSF or wider.
+pub const OFF_MOTION_WIDTH_FRACTION: f32 = 0.75;
+
 /// A saturated blob of more than this many pixels is masked ([`StarFlags`] would only flag
 /// a star's clipped core): four 7 x 7 windows' worth, more than the brightest star's wings
 /// above the join threshold; a bloomed column alone is 1,024.
 pub const MASK_MIN_PX: u32 = 196;
 
 /// Measures one pending window, or reports the detector's position with the reason;
-/// false when it is no star (masked on a saturated object, or a particle hit).
+/// false when it is no star (masked on a saturated object, or a particle hit). The star
+/// list ranks it by its blob's agreement with the frame's common motion `motion`.
 fn measure_pending<const N: usize>(
     cal: &FrameCalibration<'_>,
     policy: &Policy<'_>,
     config: &TrackerConfig,
     p: &Pending,
+    motion: &CommonMotion,
     sh: &mut Shared<'_, N>,
 ) -> bool {
+    let key = p.detection.motion;
     // A saturated blob larger than any star's is a bright object or its bloomed columns:
     // masked, never a star (a star whose core clipped is reported, flagged saturated).
     if p.detection.flags.contains(DetectionFlags::SATURATED) && p.detection.pixels > MASK_MIN_PX {
@@ -348,7 +382,7 @@ fn measure_pending<const N: usize>(
             && let Some(record) = policy.free_trailed_record(&input, detected, trail_start)
             && record.psf_a_px >= TRAIL_MIN_WIDTH_FRACTION * config.psf_a_px
         {
-            sh.stars.push(record, Carry::default());
+            sh.stars.push_keyed(record, Carry::default(), key, motion);
             return true;
         }
         let sub = rect.centred_within(p.detection.peak_x, p.detection.peak_y, config.window_px);
@@ -361,6 +395,7 @@ fn measure_pending<const N: usize>(
                 detected,
                 want_background,
                 None,
+                (key, motion),
                 sh.stars,
                 sh.summary,
             );
@@ -374,6 +409,7 @@ fn measure_pending<const N: usize>(
             detected,
             want_background,
             blob_elongation(&p.detection),
+            (key, motion),
             sh.stars,
             sh.summary,
         );
@@ -383,7 +419,7 @@ fn measure_pending<const N: usize>(
     };
     let d = &p.detection;
     let half = f32::from(config.window_px) / 2.0;
-    sh.stars.push(
+    sh.stars.push_keyed(
         StarRecord {
             x_px: d.x_px,
             y_px: d.y_px,
@@ -398,6 +434,8 @@ fn measure_pending<const N: usize>(
             chi2_dof: 0.0,
         },
         Carry::default(),
+        key,
+        motion,
     );
     true
 }
@@ -424,13 +462,19 @@ fn sky_mean(e: &[Electrons], f: &[PixelFlags]) -> Option<f32> {
 /// (0.5 deg/s in 39 ms, 1.3 px). Otherwise the round result is pushed, flagged
 /// [`StarFlags::TRAIL_UNKNOWN`] when its fitted width says it is smeared
 /// ([`SMEARED_WIDTH_RATIO`]), and [`StarFlags::POOR_FIT`] (a particle hit is counted) when
-/// the window is sharper than a star.
+/// the window is sharper than a star. The list ranks it by its blob's key against the
+/// frame's common motion (the pair `(key, motion)`).
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one call per measured window from measure_pending"
+)]
 fn push_measured<const N: usize>(
     policy: &Policy<'_>,
     input: &CentroidInput<'_>,
     detected: StarFlags,
     want_background: bool,
     elongation: Option<(f32, f32)>,
+    (key, motion): (MotionKey, &CommonMotion),
     stars: &mut StarList<N>,
     summary: &mut FrameSummary,
 ) -> bool {
@@ -445,7 +489,7 @@ fn push_measured<const N: usize>(
         && record.fit_is_clean()
         && record.psf_a_px >= TRAIL_MIN_WIDTH_FRACTION * policy.psf_a_px
     {
-        stars.push(record, Carry::default());
+        stars.push_keyed(record, Carry::default(), key, motion);
         return true;
     }
     // A particle hit, or a star beside a hot pixel the table does not list yet (as sharp as
@@ -458,12 +502,14 @@ fn push_measured<const N: usize>(
     if m.record.psf_a_px > SMEARED_WIDTH_RATIO * policy.psf_a_px {
         m.record.flags |= StarFlags::TRAIL_UNKNOWN;
     }
-    stars.push(
+    stars.push_keyed(
         m.record,
         Carry {
             background: m.background,
             ..Carry::default()
         },
+        key,
+        motion,
     );
     true
 }

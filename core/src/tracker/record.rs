@@ -101,8 +101,12 @@ bitflags::bitflags! {
         /// the star moved at least `TRAIL_MIN_PX` since the last frame before two tracking
         /// frames measured its motion; acquisition: a star the trailed test does not call
         /// trailed whose fitted width exceeds the configured PSF's by
-        /// `SMEARED_WIDTH_RATIO`, or a trailed star whose fitted trail ends within
-        /// `TRAIL_END_MARGIN_PX` of its window's border (a trail the window may cut).
+        /// `SMEARED_WIDTH_RATIO`, a trailed star whose fitted trail ends within
+        /// `TRAIL_END_MARGIN_PX` of its window's border (a trail the window may cut), or,
+        /// in a frame whose stars share a common trail (`detect::CommonMotion`), a round
+        /// blob off it, brighter than the median of those on it and fitted narrower than
+        /// `OFF_MOTION_WIDTH_FRACTION` of the PSF (a proton hit: a star that bright would
+        /// show the frame's trail, and a trail only widens a star).
         const TRAIL_UNKNOWN = 1 << 25;
         /// Tracking: its trail during the exposure is longer than its tracking window holds
         /// (a component beyond the window's side less 1 px, the capture's largest window

@@ -1,18 +1,20 @@
 //! From a closed blob to a star candidate: the counting rules of the configuration (pixels,
 //! peak sigmas, saturation), the measured SNR (eq. 8), the shape test for blends, the flags,
-//! and the bounded list that keeps the `N` best ranked (round before elongated, then the
-//! brightest); plus the reporting of the candidates a
-//! line completed, for the firmware's acquisition centroiding.
+//! the blob's vote in the frame's common motion, and the bounded list that keeps the `N`
+//! best ranked ([`ranks_above`]); plus the reporting of the candidates a line completed,
+//! for the firmware's acquisition centroiding.
 //!
 //! # Cost
-//! Per closed blob one square root for the SNR and one for the covariance's eigenvalues; on
-//! a full list a scan for the faintest candidate (`N` compares). The `_closed` variants copy
+//! Per closed blob one square root for the SNR and one for the covariance's eigenvalues,
+//! and an elongated blob's key and vote ([`crate::detect::CommonMotion`]); on a full list a
+//! scan for the lowest ranked candidate (`N` compares, each two histogram lookups). The `_closed` variants copy
 //! the candidate list once per line.
 
 use super::{Blob, Detection, DetectionFlags, LineDetector};
 use crate::calib::PixelFlags;
 use crate::clamp::clamp;
 use crate::detect::DetectError;
+use crate::detect::motion::{CommonMotion, MotionKey};
 use crate::units::Electrons;
 
 impl<const N: usize> LineDetector<N> {
@@ -32,6 +34,7 @@ impl<const N: usize> LineDetector<N> {
         }
         let mut flags = b.flags;
         let mut moments_64ths = [0i16; 3];
+        let mut motion = MotionKey::ROUND;
         let (x, y) = match b.moments.shape() {
             Some(super::Shape {
                 mean: (mx, my),
@@ -40,6 +43,7 @@ impl<const N: usize> LineDetector<N> {
             }) => {
                 // Saturating float-to-int casts; NaN gives 0.
                 moments_64ths = cov.map(|m| (m * 64.0) as i16);
+                motion = MotionKey::of_covariance(cov);
                 // A single star is round to within noise; a pair is elongated along the line
                 // joining it (its variance grows by f (1 - f) d^2 for fluxes f, 1 - f and
                 // separation d).
@@ -71,16 +75,22 @@ impl<const N: usize> LineDetector<N> {
             flags,
             extent: [b.x_min, b.x_max, b.y_min, b.last_y],
             moments_64ths,
+            motion,
         };
+        // A blob the table overflow cut, or the edge clipped, has no trustworthy shape.
+        if !flags.intersects(DetectionFlags::TRUNCATED | DetectionFlags::EDGE) {
+            self.motion.vote(motion);
+        }
         if let Err(d) = self.candidates.push(d) {
             self.dropped += 1;
+            let m = &self.motion;
             let mut lowest: Option<(usize, &Detection)> = None;
             for (i, c) in self.candidates.iter().enumerate() {
-                if lowest.is_none_or(|(_, l)| ranks_above(l, c)) {
+                if lowest.is_none_or(|(_, l)| ranks_above(m, l, c)) {
                     lowest = Some((i, c));
                 }
             }
-            if let Some((i, _)) = lowest.filter(|(_, l)| ranks_above(&d, l))
+            if let Some((i, _)) = lowest.filter(|(_, l)| ranks_above(m, &d, l))
                 && let Some(slot) = self.candidates.get_mut(i)
             {
                 *slot = d;
@@ -89,12 +99,20 @@ impl<const N: usize> LineDetector<N> {
     }
 }
 
-/// True when candidate `a` ranks above `b` in a full list: a round blob above an elongated
-/// one ([`DetectionFlags::BLENDED`]: a pair, a trailed star, or a proton's track), then the
-/// larger flux. A solar flare's proton tracks, brighter than most stars and elongated,
-/// then take no place a round star could have.
-fn ranks_above(a: &Detection, b: &Detection) -> bool {
+/// True when candidate `a` ranks above `b` in a full list: by their agreement with the
+/// frame's common motion `m` as it stands ([`crate::detect::Agreement`]: a trailed star of a
+/// turning frame above a round hit above a track at another angle; every blob neutral
+/// without one), then a round blob above an elongated one ([`DetectionFlags::BLENDED`]: a
+/// pair, a trailed star, or a proton's track), then the larger flux. A solar flare's
+/// proton tracks, brighter than most stars and elongated, then take no place a star could
+/// have.
+fn ranks_above(m: &CommonMotion, a: &Detection, b: &Detection) -> bool {
     let long = |d: &Detection| d.flags.contains(DetectionFlags::BLENDED);
+    match m.agreement(a.motion).cmp(&m.agreement(b.motion)) {
+        core::cmp::Ordering::Greater => return true,
+        core::cmp::Ordering::Less => return false,
+        core::cmp::Ordering::Equal => {}
+    }
     match (long(a), long(b)) {
         (false, true) => true,
         (true, false) => false,

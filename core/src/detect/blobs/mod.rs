@@ -10,16 +10,18 @@
 //! affected candidates are flagged.
 //!
 //! Candidates live in a `heapless::Vec` of capacity `N`. When it is full, a new candidate
-//! replaces the lowest ranked one if it ranks above it (a round blob above an elongated
-//! one, then the brighter); either way one candidate is lost and counted in
-//! [`LineDetector::dropped`]: the list always holds the `N` best ranked.
+//! replaces the lowest ranked one if it ranks above it (one agreeing with the frame's
+//! common motion above a round one above one that disagrees, [`super::CommonMotion`]; with
+//! no common motion a round blob above an elongated one; then the brighter); either way one
+//! candidate is lost and counted in [`LineDetector::dropped`]: the list always holds the
+//! `N` best ranked by the histogram as it stands.
 //!
 //! Blob positions are means of the blob's pixels weighted by their positive signal: a seed for the centroid
 //! methods, not a measurement.
 //!
 //! # Cost
 //! State: ~12 KB (two run lists of [`MAX_RUNS`] 6-byte runs, [`MAX_OPEN`] blobs of ~70 bytes)
-//! plus the `N` candidates. Time: per pixel the threshold test, per run and per closed blob
+//! plus the `N` candidates and the common-motion histogram (228 bytes). Time: per pixel the threshold test, per run and per closed blob
 //! the work described in `label.rs` and `candidate.rs` (part of `scan_detect` in
 //! `cargo m7-bench`).
 
@@ -28,6 +30,7 @@ mod label;
 
 use super::DetectConfig;
 use super::background::BlockBackground;
+use super::motion::{CommonMotion, MotionKey};
 use crate::calib::PixelFlags;
 use crate::units::Electrons;
 
@@ -87,6 +90,9 @@ pub struct Detection {
     /// signal: `(xx, yy, xy)` in 1/64 px^2, saturating at +-512 px^2 (a trailed star's is
     /// stretched along its trail); [`Self::moments_px2`] in px^2.
     pub moments_64ths: [i16; 3],
+    /// The blob's trail axis and length bins in the frame's common-motion histogram
+    /// ([`MotionKey::ROUND`] for a round blob).
+    pub motion: MotionKey,
 }
 
 impl Detection {
@@ -223,6 +229,8 @@ pub struct LineDetector<const N: usize> {
     blobs: [Blob; MAX_OPEN],
     next_y: u16,
     candidates: heapless::Vec<Detection, N>,
+    /// The counted blobs' trails so far: the frame's common motion.
+    motion: CommonMotion,
     dropped: u32,
     dropped_pixels: u32,
     /// The background is updated on rows `y` with `y % bg_stride == 0` (1: every row).
@@ -246,6 +254,7 @@ impl<const N: usize> LineDetector<N> {
             blobs: [Blob::default(); MAX_OPEN],
             next_y: 0,
             candidates: heapless::Vec::new(),
+            motion: CommonMotion::EMPTY,
             dropped: 0,
             dropped_pixels: 0,
             bg_stride: 1,
@@ -292,6 +301,12 @@ impl<const N: usize> LineDetector<N> {
     /// The candidates found so far (complete after [`Self::finish`]), in no order.
     pub fn candidates(&self) -> &[Detection] {
         &self.candidates
+    }
+
+    /// The common motion of the blobs counted so far ([`CommonMotion`]), by which the
+    /// list ranks.
+    pub fn motion(&self) -> &CommonMotion {
+        &self.motion
     }
 
     /// Candidates lost because the list was full.
