@@ -21,14 +21,21 @@
 //! A star's angular sigma is its pixel sigma (the larger axis) scaled by the camera at its
 //! position: a pixel subtends `z^2 / f` rad radially and `z / f` across at `acos(z)` off the
 //! axis, and their geometric mean `z^1.5 / f` makes the isotropic sigma the identification and
-//! the q-method take.
+//! the q-method take. The identified attitude is then refined with each star's whole 2x2
+//! position covariance ([`attitude::refine`]: `sigma_x_px`, `sigma_y_px` and `cov_xy_px2`
+//! through the pinhole's Jacobian): a trailed star is known worse along its trail than
+//! across it, and one sigma a star (the larger) would give the attitude a bound too wide about
+//! the axis its trails do not cross (1.3 times the error at 3 deg/s across the boresight).
 //!
 //! Cost: what identification costs (docs/attitude.md: on the Cortex-M7 tracking and attitude
 //! about 0.67 M instructions a frame, lost in space 3.3 M median and 15.7 M at the 99th
-//! percentile) plus a sort of at most 32 stars; no allocation, about 1 KB of state beyond
-//! identification's stack.
+//! percentile) plus a sort of at most 32 stars and the refinement (~19,000 instructions
+//! for 30 stars, in `cargo m7-bench`'s `ident_confirm_p99`); no allocation, about 1 KB of
+//! state beyond identification's stack.
 
-use crate::attitude::{self, Attitude, AttitudeError, Camera, Observation, Quat, Rate, aberrate};
+use crate::attitude::{
+    self, Attitude, AttitudeError, Camera, ImageObservation, Observation, Quat, Rate, aberrate,
+};
 use crate::catalog::Catalog;
 use crate::ident::{self, FocalScale, IdentConfig, IdentError, Measured};
 use crate::predict::{self, PredictConfig, PredictError, PredictFrom};
@@ -294,10 +301,7 @@ impl<'c> Solver<'c> {
         // within its prediction's bound).
         let rank = |s: &StarRecord| (s.fit_is_clean(), s.flux_e);
         let above = |a: &(bool, f32), b: &(bool, f32)| (a.0, a.1) > (b.0, b.1);
-        let mut measured: heapless::Vec<
-            ((bool, f32), Measured, Option<u16>),
-            { ident::MAX_STARS },
-        > = heapless::Vec::new();
+        let mut measured: heapless::Vec<Ranked, { ident::MAX_STARS }> = heapless::Vec::new();
         for (k, s) in stars.iter().enumerate() {
             let id = identity(k)
                 .filter(|p| p.matches(s.x_px, s.y_px))
@@ -307,14 +311,15 @@ impl<'c> Solver<'c> {
             }
             // A position the camera model cannot invert (a fold) is not used.
             let Some(m) = self.measure(s) else { continue };
+            let cov = PixelCov::of(s);
             if measured.len() < ident::MAX_STARS {
-                let _ = measured.push((rank(s), m, id));
+                let _ = measured.push((rank(s), m, id, cov));
             } else if let Some(lowest) = measured
                 .iter_mut()
                 .min_by(|a, b| a.0.0.cmp(&b.0.0).then(a.0.1.total_cmp(&b.0.1)))
                 .filter(|d| above(&rank(s), &d.0))
             {
-                *lowest = (rank(s), m, id);
+                *lowest = (rank(s), m, id, cov);
             }
         }
         crate::small_sort::sort_by(&mut measured, |a, b| {
@@ -328,12 +333,16 @@ impl<'c> Solver<'c> {
             measured.truncate(clean);
         }
         let mut dirs: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
+        let mut dirs_cov: heapless::Vec<PixelCov, { ident::MAX_STARS }> = heapless::Vec::new();
         let mut known: heapless::Vec<Measured, { ident::MAX_STARS }> = heapless::Vec::new();
+        let mut known_cov: heapless::Vec<PixelCov, { ident::MAX_STARS }> = heapless::Vec::new();
         let mut known_ids: heapless::Vec<u16, { ident::MAX_STARS }> = heapless::Vec::new();
-        for (_, m, id) in &measured {
+        for (_, m, id, cov) in &measured {
             let _ = dirs.push(*m);
+            let _ = dirs_cov.push(*cov);
             if let Some(c) = id {
                 let _ = known.push(*m);
+                let _ = known_cov.push(*cov);
                 let _ = known_ids.push(*c);
             }
         }
@@ -372,13 +381,13 @@ impl<'c> Solver<'c> {
                 .ok()
             })
         };
-        let (solution, mode, basis) = match confirmed {
+        let (solution, mode, (basis, basis_cov)) = match confirmed {
             Some(s) => {
                 self.identified = s.matches.len() as u8;
-                (s, SolveMode::Tracking, &known)
+                (s, SolveMode::Tracking, (&known, &known_cov))
             }
             None => match tracked() {
-                Some(s) => (s, SolveMode::Tracking, &dirs),
+                Some(s) => (s, SolveMode::Tracking, (&dirs, &dirs_cov)),
                 None => (
                     ident::lost_in_space(&self.catalog, &dirs, &cfg.ident).map_err(|error| {
                         SolveError::Ident {
@@ -387,7 +396,7 @@ impl<'c> Solver<'c> {
                         }
                     })?,
                     SolveMode::LostInSpace,
-                    &dirs,
+                    (&dirs, &dirs_cov),
                 ),
             },
         };
@@ -399,6 +408,11 @@ impl<'c> Solver<'c> {
             attitude = a;
             *applied = true;
             self.prior_velocity = Some(v);
+        }
+        // Each star's whole image-plane covariance (a trailed star's along and across its
+        // trail), where identification and the q-method take one sigma a star.
+        if let Ok(a) = self.refined(basis, basis_cov, &solution, attitude.q) {
+            attitude = a;
         }
         self.prior = Some((attitude, time_us));
         self.scale = Some(solution.scale);
@@ -442,6 +456,44 @@ impl<'c> Solver<'c> {
         attitude::solve(&obs)
     }
 
+    /// `start` refined with the image-plane covariance of each of `solution`'s matches
+    /// ([`attitude::refine`]), the catalog directions aberrated for the velocity the prior
+    /// holds (the one [`Self::aberrated`] applied, if any). A star's pixel covariance is
+    /// scaled to the direction by `z k / f` (`k` the inverse of the fitted focal-length scale).
+    #[inline(never)]
+    fn refined(
+        &self,
+        dirs: &[Measured],
+        covs: &[PixelCov],
+        solution: &ident::Solution,
+        start: Quat,
+    ) -> Result<Attitude, AttitudeError> {
+        let k = 1.0 / solution.scale.value;
+        let f = self.config.camera.focal_length_px;
+        let mut obs: heapless::Vec<ImageObservation, { ident::MAX_STARS }> = heapless::Vec::new();
+        for m in &solution.matches {
+            let i = usize::from(m.star);
+            let (Some(s), Some(c), Some(r)) = (
+                dirs.get(i),
+                covs.get(i),
+                self.catalog.dir(usize::from(m.catalog)),
+            ) else {
+                continue;
+            };
+            let camera = ident::rescale_dir(s.dir, k);
+            let scale = camera[2] * k / f;
+            let o = ImageObservation {
+                camera,
+                icrs: self.prior_velocity.map_or(r, |v| aberrate(r, v)),
+                cov_rad2: c.0.map(|v| v * scale * scale),
+            };
+            if obs.push(o).is_err() {
+                break;
+            }
+        }
+        attitude::refine(start, &obs)
+    }
+
     /// The direction of a star (at the camera's reference colour: colours are known only
     /// once identified) and its isotropic angular sigma; `None` where the camera model has
     /// no inverse.
@@ -457,6 +509,34 @@ impl<'c> Solver<'c> {
             sigma_rad: sigma_px * z * libm::sqrt(z) / cam.focal_length_px,
             inst_mag: Measured::inst_mag_of(f64::from(s.flux_e)),
         })
+    }
+}
+
+/// A usable star as identification takes it: its rank (clean fit, flux), its direction,
+/// the catalog identity it was predicted to have, its position covariance.
+type Ranked = ((bool, f32), Measured, Option<u16>, PixelCov);
+
+/// A star's position covariance, px^2: `[xx, yy, xy]` from its record's sigmas and
+/// covariance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PixelCov([f64; 3]);
+
+impl PixelCov {
+    fn of(s: &StarRecord) -> Self {
+        let (sx, sy) = (f64::from(s.sigma_x_px), f64::from(s.sigma_y_px));
+        // A correlation within +-0.999: the record's covariance is bounded by its sigmas,
+        // and a singular 2x2 would give a direction no weight's inverse.
+        let m = 0.999 * sx * sy;
+        let c = f64::from(s.cov_xy_px2);
+        Self([
+            sx * sx,
+            sy * sy,
+            if c.is_finite() {
+                crate::clamp::clamp(c, -m, m)
+            } else {
+                0.0
+            },
+        ])
     }
 }
 

@@ -33,8 +33,14 @@
 //! returns the last estimate with `NOT_CONVERGED`. A non-finite trail gives `DEGENERATE`.
 //!
 //! # Error estimate
-//! `sigma_x_px`, `sigma_y_px` from `(J^T W J)^-1` at the solution, as the Gaussian fit's;
-//! `flux_e` is the fitted total flux `N` and `snr` is `N / sigma_N`.
+//! `sigma_x_px`, `sigma_y_px` from `(J^T W J)^-1` at the solution, as the Gaussian fit's, and
+//! the covariance of the two, [`TrailFit::cov_xy_px2`]: a trail spreads the light along
+//! itself, so the position is known worse along the trail than across it (along, the
+//! segment's ends carry the information; across, the PSF's width), and a trail at an angle
+//! to the rows correlates the column and row errors. The marginal sigmas alone would put the
+//! along-trail error on both axes (a diagonal trail) or lose which axis is which; the
+//! attitude takes the whole 2x2 ([`crate::attitude::refine`]). `flux_e` is the fitted total
+//! flux `N` and `snr` is `N / sigma_N`.
 //!
 //! # Cost
 //! Per step and pixel: two `erfc`-and-density evaluations (one exponential and one divide
@@ -54,7 +60,7 @@
 //!   the trail is set by the window's edges (choose the window from the predicted trail).
 
 use super::cog::{cog_in_box, usable_sigma_px};
-use super::gauss_fit::{Normal, solve, variance};
+use super::gauss_fit::{Normal, position_covariance, solve, variance};
 use super::math::{self, pos};
 use super::pixel_box::PixelBox;
 use super::prepared::{Measured, Prepared};
@@ -66,6 +72,29 @@ mod free;
 
 pub use accel::{ACCEL_OFFSET_SIGMA, accel_offset_fraction};
 pub use free::{FreeTrailParams, TRAIL_FALSE_ALARM, TrailedFit, trail_dchi2_limit, trail_fit_free};
+
+/// The result of [`trail_fit`]: the centroid at mid-exposure and the covariance of its column
+/// and row errors.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TrailFit {
+    /// Position at mid-exposure, flux, SNR, the marginal sigmas and the flags.
+    pub centroid: Centroid,
+    /// Covariance of the column and row errors, px^2 (`|cov| <= sigma_x sigma_y`; 0 when the
+    /// fit failed and the centroid is the window's CoG).
+    pub cov_xy_px2: f32,
+}
+
+/// `cov_xy` bounded by the centroid's marginal sigmas (a correlation within +-1 after their
+/// clamping), 0 when not finite.
+pub(crate) fn bounded_covariance(c: &Centroid, cov_xy: f32) -> f32 {
+    let m = c.sigma_x_px * c.sigma_y_px;
+    if cov_xy.is_finite() && m.is_finite() {
+        crate::clamp::clamp(cov_xy, -m, m)
+    } else {
+        0.0
+    }
+}
 
 /// Parameters of [`trail_fit`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -263,14 +292,18 @@ fn normal_equations(
 }
 
 /// The trailed-star fit of `input` (see the module docs).
-pub fn trail_fit(input: &CentroidInput<'_>, params: &TrailFitParams) -> Centroid {
+pub fn trail_fit(input: &CentroidInput<'_>, params: &TrailFitParams) -> TrailFit {
+    let uncorrelated = |centroid: Centroid| TrailFit {
+        centroid,
+        cov_xy_px2: 0.0,
+    };
     let p = match Prepared::new(input, params.background) {
         Ok(p) => p,
-        Err(c) => return c,
+        Err(c) => return uncorrelated(c),
     };
     let Some(trail) = Trail::new(params.psf_sigma_px, params.trail_dx_px, params.trail_dy_px)
     else {
-        return p.degenerate(CentroidFlags::empty());
+        return uncorrelated(p.degenerate(CentroidFlags::empty()));
     };
     let whole = PixelBox {
         col0: 0,
@@ -279,12 +312,12 @@ pub fn trail_fit(input: &CentroidInput<'_>, params: &TrailFitParams) -> Centroid
         row1: p.height - 1,
     };
     let Some(start) = cog_in_box(&p, whole, p.centre(), CogPower::One) else {
-        return p.degenerate(CentroidFlags::empty());
+        return uncorrelated(p.degenerate(CentroidFlags::empty()));
     };
     let total: f32 = p.box_pixels(whole).map(|(_, _, f)| f).sum();
     let mut theta = [start.col, start.row, total.max(start.flux_e), 0.0];
     let (wmax, hmax) = (f32::from(p.width) - 0.5, f32::from(p.height) - 0.5);
-    let give_up = || p.finish(start, CentroidFlags::NOT_CONVERGED);
+    let give_up = || uncorrelated(p.finish(start, CentroidFlags::NOT_CONVERGED));
     let mut converged = params.max_iterations == 0;
     let mut last_factor = None;
     for _ in 0..params.max_iterations {
@@ -326,13 +359,18 @@ pub fn trail_fit(input: &CentroidInput<'_>, params: &TrailFitParams) -> Centroid
         return give_up();
     };
     let [x, y, flux, _] = theta;
+    let (var_x, var_y, cov_xy) = position_covariance(&l, &d);
     let m = Measured {
         col: x,
         row: y,
         flux_e: flux,
         snr: flux / math::sqrt(variance(&l, &d, 2)).max(f32::MIN_POSITIVE),
-        sigma_col: math::sqrt(variance(&l, &d, 0)),
-        sigma_row: math::sqrt(variance(&l, &d, 1)),
+        sigma_col: math::sqrt(var_x),
+        sigma_row: math::sqrt(var_y),
     };
-    p.finish(m, extra)
+    let centroid = p.finish(m, extra);
+    TrailFit {
+        centroid,
+        cov_xy_px2: bounded_covariance(&centroid, cov_xy),
+    }
 }

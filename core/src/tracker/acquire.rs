@@ -427,6 +427,7 @@ fn measure_pending<const N: usize>(
             snr: d.snr,
             sigma_x_px: half,
             sigma_y_px: half,
+            cov_xy_px2: 0.0,
             flags: detected | lost,
             provenance: Provenance::empty(),
             psf_a_px: 0.0,

@@ -199,7 +199,8 @@ impl<'t> Policy<'t> {
     /// The star's record from the trailed-star fit of `input` (the trail `trail_px`, px
     /// from exposure start to end; the PSF at rest of the configured width; residual
     /// background fitted over the border median), CTI-corrected, `flags` and the window's
-    /// pixel flags added. Its `psf_a_px` and `chi2_dof` are 0 (not fitted).
+    /// pixel flags added, with the covariance of its column and row errors. Its `psf_a_px`
+    /// and `chi2_dof` are 0 (not fitted).
     pub(crate) fn trailed_record(
         &self,
         input: &CentroidInput<'_>,
@@ -210,12 +211,15 @@ impl<'t> Policy<'t> {
             .pixel_flags
             .iter()
             .fold(PixelFlags::empty(), |m, f| m | *f);
-        let c = trail_fit(
+        let f = trail_fit(
             input,
             &TrailFitParams::new(self.sigma_px, trail_px.0, trail_px.1),
         );
-        let c = self.cti.map_or(c, |k| k.corrected(c));
-        StarRecord::from_centroid(&c, flags | StarFlags::from_pixels(pixel_flags))
+        let c = self.cti.map_or(f.centroid, |k| k.corrected(f.centroid));
+        StarRecord {
+            cov_xy_px2: f.cov_xy_px2,
+            ..StarRecord::from_centroid(&c, flags | StarFlags::from_pixels(pixel_flags))
+        }
     }
 
     /// The star's record from the trailed-star fit with the trail unknown
@@ -263,6 +267,7 @@ impl<'t> Policy<'t> {
             flags |= StarFlags::TRAIL_UNKNOWN;
         }
         let mut record = StarRecord::from_centroid(&c, flags);
+        record.cov_xy_px2 = f.cov_xy_px2;
         record.provenance = super::Provenance::TRAILED;
         record.psf_a_px = f.psf_sigma_px / SIGMA_PER_A;
         record.chi2_dof = f.chi2_dof();

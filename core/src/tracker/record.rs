@@ -263,6 +263,11 @@ pub struct StarRecord {
     pub sigma_x_px: f32,
     /// Estimated 1-sigma error of `y_px`, px.
     pub sigma_y_px: f32,
+    /// Covariance of the errors of `x_px` and `y_px`, px^2: a trailed star's (the trailed fit
+    /// knows it worse along its trail than across, and a trail at an angle to the rows
+    /// correlates the two); 0 for the other methods (a round star's are independent).
+    /// Not carried by the link's star list.
+    pub cov_xy_px2: f32,
     /// Its quality (0: a clean measurement).
     pub flags: StarFlags,
     /// How it was found and measured.
@@ -300,6 +305,7 @@ impl StarRecord {
             snr: c.snr,
             sigma_x_px: c.sigma_x_px,
             sigma_y_px: c.sigma_y_px,
+            cov_xy_px2: 0.0,
             flags: flags | StarFlags::from_centroid(c.flags),
             provenance: Provenance::empty(),
             psf_a_px: 0.0,

@@ -38,6 +38,42 @@ pub fn blended(f: &SilFrame, t: &Star) -> bool {
         .any(|u| u != t && (u.x_px - t.x_px).hypot(u.y_px - t.y_px) < BLEND_PX)
 }
 
+/// A star's normalised errors squared along the major and the minor axis of its reported
+/// 2x2 position covariance (`sigma_x_px`, `sigma_y_px`, `cov_xy_px2`), against the true
+/// position `truth_px`: for a trailed star the axes are along and across its trail. Each has
+/// mean 1 over many stars when the covariance says what the errors are. `None` for a
+/// covariance that is not positive definite.
+pub fn principal_nees(
+    s: &startrack_core::tracker::StarRecord,
+    truth_px: [f64; 2],
+) -> Option<[f64; 2]> {
+    let (vx, vy) = (
+        f64::from(s.sigma_x_px).powi(2),
+        f64::from(s.sigma_y_px).powi(2),
+    );
+    let c = f64::from(s.cov_xy_px2);
+    let (mean, half) = (0.5 * (vx + vy), (0.25 * (vx - vy).powi(2) + c * c).sqrt());
+    let (major, minor) = (mean + half, mean - half);
+    if !(minor > 0.0 && major.is_finite()) {
+        return None;
+    }
+    // The major axis's direction: (c, major - vx), or the x axis when uncorrelated and
+    // vx is the larger.
+    let (ux, uy) = if c.abs() > 1e-30 || vy > vx {
+        (c, major - vx)
+    } else {
+        (1.0, 0.0)
+    };
+    let n = ux.hypot(uy);
+    let (ux, uy) = (ux / n, uy / n);
+    let (ex, ey) = (
+        f64::from(s.x_px) - truth_px[0],
+        f64::from(s.y_px) - truth_px[1],
+    );
+    let (ea, ec) = (ex * ux + ey * uy, -ex * uy + ey * ux);
+    Some([ea * ea / major, ec * ec / minor])
+}
+
 /// Tracking frames after an acquisition frame before a moving star's motion is measured
 /// (`TRAIL_SETTLE_FRAMES`): a star that moved is flagged `TRAIL_UNKNOWN` in them.
 pub const SETTLING_FRAMES: usize = startrack_core::tracker::TRAIL_SETTLE_FRAMES as usize;

@@ -155,13 +155,16 @@ fn measure(m: &str, input: &CentroidInput<'_>, star: &TrailedStar) -> Option<Cen
         f(&CentroidInput::new(Window::new(rect, &e)?).with_clipped(clipped))
     };
     let c = match m {
-        "trail-known" => trail_fit(
-            input,
-            &TrailFitParams {
-                background: bg,
-                ..TrailFitParams::new(sigma, star.trail_dx_px as f32, star.trail_dy_px as f32)
-            },
-        ),
+        "trail-known" => {
+            trail_fit(
+                input,
+                &TrailFitParams {
+                    background: bg,
+                    ..TrailFitParams::new(sigma, star.trail_dx_px as f32, star.trail_dy_px as f32)
+                },
+            )
+            .centroid
+        }
         "trail-free" => {
             // Started as acquisition starts it: the trail 30 % short and 10 degrees off (the
             // blob's moments), 1.5 px along the columns for a star that did not move.

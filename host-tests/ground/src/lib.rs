@@ -546,6 +546,7 @@ impl Ground {
                     snr: 0.0,
                     sigma_x_px: 0.0,
                     sigma_y_px: 0.0,
+                    cov_xy_px2: 0.0,
                     flags: Default::default(),
                     provenance: Default::default(),
                     psf_a_px: 0.0,

@@ -63,7 +63,7 @@ fn response(sigma_px: f64, flux_e: f64, l_px: f64, angle_deg: f64) -> f64 {
         },
         ..TrailFitParams::new(sigma_px as f32, (l_px * c) as f32, (l_px * s) as f32)
     };
-    let fit = trail_fit(&CentroidInput::new(Window { rect, pixels_e: &e }), &params);
+    let fit = trail_fit(&CentroidInput::new(Window { rect, pixels_e: &e }), &params).centroid;
     assert!(
         !fit.flags
             .intersects(CentroidFlags::NOT_CONVERGED | CentroidFlags::DEGENERATE),

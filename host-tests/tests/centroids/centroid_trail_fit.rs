@@ -93,7 +93,7 @@ fn noise_free_model_error_is_below_a_hundredth_of_a_pixel() {
             for offset in [(0.0, 0.0), (0.3, -0.2), (-0.45, 0.45)] {
                 let (w, h, star) = scene(l, angle, offset);
                 let mean = mean_window(w, h, &star, BACKGROUND_E);
-                let c = measure(w, h, &mean, |i| trail_fit(i, &params(&star)));
+                let c = measure(w, h, &mean, |i| trail_fit(i, &params(&star)).centroid);
                 assert!(
                     !c.flags
                         .intersects(CentroidFlags::NOT_CONVERGED | CentroidFlags::DEGENERATE),
@@ -140,7 +140,7 @@ fn monte_carlo(l: f64, angle: f64, stars: usize, seed: u64) -> McStats {
             bounds += 1;
         }
         let pixels = noisy_window(&mean, READ_NOISE_E, seed, k as u64);
-        let c = measure(w, h, &pixels, |i| trail_fit(i, &params(&star)));
+        let c = measure(w, h, &pixels, |i| trail_fit(i, &params(&star)).centroid);
         if c.flags
             .intersects(CentroidFlags::NOT_CONVERGED | CentroidFlags::DEGENERATE)
         {
@@ -219,7 +219,7 @@ fn the_plain_gaussian_fit_is_biased_or_flagged_on_long_trails() {
                     },
                 )
             });
-            let t = measure(w, h, &pixels, |i| trail_fit(i, &params(&star)));
+            let t = measure(w, h, &pixels, |i| trail_fit(i, &params(&star)).centroid);
             let (gx, gy) = error_px(&g, &star);
             let (tx, ty) = error_px(&t, &star);
             trail_worst =

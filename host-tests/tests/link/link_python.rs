@@ -69,6 +69,7 @@ fn spacepackets_decodes_the_telemetry() {
             snr: 40.0 + k as f32,
             sigma_x_px: 0.01,
             sigma_y_px: 0.02,
+            cov_xy_px2: 0.0,
             flags: StarFlags::from_bits_retain(1 << k),
             provenance: Provenance::from_bits_retain(k as u8 & 3),
             psf_a_px: 1.25 + k as f32 * 0.1,

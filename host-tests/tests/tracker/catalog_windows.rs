@@ -244,6 +244,7 @@ fn tracked(cat: &Catalog<'_>, q: Quat, seed: u64) -> (Vec<StarRecord>, Vec<Predi
                 snr: 200.0,
                 sigma_x_px: 0.05,
                 sigma_y_px: 0.05,
+                cov_xy_px2: 0.0,
                 flags: StarFlags::empty(),
                 provenance: Provenance::TRACKED,
                 psf_a_px: 1.2,

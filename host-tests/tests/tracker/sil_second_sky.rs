@@ -23,7 +23,7 @@ use startrack_core::link::LinkService;
 use startrack_core::solver::{Solver, SolverConfig};
 use startrack_core::table::CalibTable;
 use startrack_core::tracker::{
-    FixedTable, FixedTemperature, FrameSummary, Obstructions, Tracker, TrackerBuffers,
+    FixedTable, FixedTemperature, FrameSummary, Obstructions, Provenance, Tracker, TrackerBuffers,
     TrackerConfig,
 };
 use startrack_homes::home::{FrameTiming, ReadoutClock, Recorder, SimLines, block_on, host_health};
@@ -173,9 +173,6 @@ fn star_image(
 const PERIOD_US: u64 = 49_400;
 const EXPOSURE_US: u64 = 39_000;
 
-/// Runs the flight frame cycle for `frames` frames on this file's sky turning at `w_deg_s`
-/// (camera frame) from the seeded attitude of `seed`; per frame the attitude's error
-/// against the truth at mid-exposure and its bounds, `None` without an attitude.
 /// A frame's outcome on this file's sky.
 pub(crate) struct SecondFrame {
     /// The attitude's error against the truth (rad, camera frame), its cross-boresight and
@@ -185,17 +182,17 @@ pub(crate) struct SecondFrame {
     pub obstructions: Obstructions,
     /// The tracker's summary of the frame.
     pub summary: FrameSummary,
+    /// The normalised errors squared along and across the trail
+    /// ([`sil_rates::principal_nees`]) of each star measured as trailed, clean, within
+    /// [`sil::MATCH_PX`] of a true star at mid-exposure and with no other within
+    /// [`sil_rates::BLEND_PX`].
+    pub trailed: Vec<[f64; 2]>,
 }
 
-fn run(seed: u64, w_deg_s: [f64; 3], frames: u32) -> Vec<Option<([f64; 3], f64, f64)>> {
-    run_with(seed, w_deg_s, frames, &|_, _| Vec::new())
-        .into_iter()
-        .map(|f| f.fix)
-        .collect()
-}
-
-/// [`run`] with `extra(frame, sensor)`'s light (mean electrons before the flat) added to
-/// each frame's stars: another generator's bright objects.
+/// Runs the flight frame cycle for `frames` frames on this file's sky turning at `w_deg_s`
+/// (camera frame) from the seeded attitude of `seed`, with `extra(frame, sensor)`'s light
+/// (mean electrons before the flat) added to each frame's stars (another generator's bright
+/// objects; none: `&|_, _| Vec::new()`).
 pub(crate) fn run_with(
     seed: u64,
     w_deg_s: [f64; 3],
@@ -313,7 +310,34 @@ pub(crate) fn run_with(
             telemetry: &mut recorder,
         };
         let Ok(outcome) = block_on(cycle.run_frame(&mut source, &mut ports));
-        let truth = q_at(f64::from(k) * period_s + 0.5 * exposure_s);
+        let t_mid = f64::from(k) * period_s + 0.5 * exposure_s;
+        let truth = q_at(t_mid);
+        // The true stars at mid-exposure, and the trailed stars measured near one.
+        let true_px: Vec<[f64; 2]> = cat
+            .cone(
+                truth.rotate_inv([0.0, 0.0, 1.0]),
+                cat.field_radius_rad() + 0.02,
+            )
+            .filter_map(|(_, dir)| sky.pixel(dir, t_mid))
+            .collect();
+        let mut trailed = Vec::new();
+        for s in recorder.frames.last().map_or(&[][..], |f| &f.stars[..]) {
+            if !(s.is_centroid() && s.fit_is_clean() && s.provenance.contains(Provenance::TRAILED))
+            {
+                continue;
+            }
+            let d = |p: &[f64; 2]| (f64::from(s.x_px) - p[0]).hypot(f64::from(s.y_px) - p[1]);
+            let near: Vec<&[f64; 2]> = true_px
+                .iter()
+                .filter(|p| d(p) < sil_rates::BLEND_PX)
+                .collect();
+            if let [p] = near[..]
+                && d(p) < sil::MATCH_PX
+                && let Some(n) = sil_rates::principal_nees(s, *p)
+            {
+                trailed.push(n);
+            }
+        }
         out.push(SecondFrame {
             fix: outcome.attitude.and_then(|r| r.ok()).map(|fix| {
                 let a = fix.attitude;
@@ -325,6 +349,7 @@ pub(crate) fn run_with(
             }),
             obstructions: outcome.summary.obstructions,
             summary: outcome.summary,
+            trailed,
         });
     }
     out
@@ -333,9 +358,11 @@ pub(crate) fn run_with(
 /// On this file's sky at the flight timing, at rest, 1 and 2 deg/s across the boresight
 /// and 1 deg/s in roll (one seeded attitude, 40 frames each): every frame has an attitude,
 /// none is wrong ([`sil_rates::is_wrong`]), and the RMS cross-boresight error is within
-/// 1.25 times the RMS of its reported bound (the rate table's 1.1 on 3000 frames a rate,
-/// with room for 40 frames' scatter: the RMS of 40 frames' errors scatters by about 11 %).
-/// About a minute in the test profile.
+/// 0.8-1.25 times the RMS of its reported bound (the rate table's 1.1 on 3000 frames a rate,
+/// with room for 40 frames' scatter: the RMS of 40 frames' errors scatters by about 11 %;
+/// a bound with the along-trail sigma on both axes gave 0.74 at 1 deg/s); at 1 and 2 deg/s
+/// the trailed stars' mean normalised errors squared along and across their trails are
+/// within 0.85-1.25. About a minute in the test profile.
 #[test]
 fn a_second_sky_gives_no_wrong_attitude_and_errors_within_their_bound() {
     for w in [
@@ -344,7 +371,25 @@ fn a_second_sky_gives_no_wrong_attitude_and_errors_within_their_bound() {
         [0.0, 2.0, 0.0],
         [0.0, 0.0, 1.0],
     ] {
-        let frames = run(7, w, 40);
+        let run = run_with(7, w, 40, &|_, _| Vec::new());
+        let frames: Vec<_> = run.iter().map(|f| f.fix).collect();
+        if w[1] > 0.0 {
+            // The trailed stars' covariance on this sky, as on the SIL's
+            // (`sil_motion::trailed_stars_covariance_says_what_their_errors_are`).
+            let trailed: Vec<[f64; 2]> = run.iter().flat_map(|f| f.trailed.clone()).collect();
+            let n = trailed.len();
+            let mean = |i: usize| trailed.iter().map(|v| v[i]).sum::<f64>() / n.max(1) as f64;
+            let nees = [mean(0), mean(1)];
+            eprintln!(
+                "{w:?} deg/s: {n} trailed stars, NEES along {:.3}, across {:.3}",
+                nees[0], nees[1]
+            );
+            assert!(n >= 500, "{w:?}: {n} trailed stars");
+            assert!(
+                nees.iter().all(|v| (0.85..=1.25).contains(v)),
+                "{w:?}: {nees:?}"
+            );
+        }
         let (mut e2, mut b2) = (0.0, 0.0);
         for (k, f) in frames.iter().enumerate() {
             let (e, sc, sr) = f.unwrap_or_else(|| panic!("{w:?}: frame {k} has no attitude"));
@@ -357,6 +402,6 @@ fn a_second_sky_gives_no_wrong_attitude_and_errors_within_their_bound() {
         }
         let ratio = (e2 / b2).sqrt();
         eprintln!("{w:?} deg/s: cross-boresight error / bound {ratio:.3}");
-        assert!(ratio < 1.25, "{w:?}: error / bound {ratio}");
+        assert!((0.8..1.25).contains(&ratio), "{w:?}: error / bound {ratio}");
     }
 }

@@ -23,6 +23,7 @@ fn records(q: Quat, cat: &Catalog<'_>, seed: u64) -> Vec<StarRecord> {
             snr: 100.0,
             sigma_x_px: 0.1,
             sigma_y_px: 0.1,
+            cov_xy_px2: 0.0,
             flags: StarFlags::empty(),
             provenance: Provenance::empty(),
             psf_a_px: 1.0,

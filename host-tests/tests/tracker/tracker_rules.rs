@@ -243,7 +243,9 @@ fn bad_configurations_are_refused_with_their_reason() {
 
 /// The application's memory: the buffers a home places and the tracker itself, for the
 /// board's capacity (32 stars). Printed with `--nocapture`; the bounds keep them from
-/// growing unnoticed (the board's RAM is 512 KB of AXI SRAM).
+/// growing unnoticed (the board's RAM is 512 KB of AXI SRAM, 180 KB of it free:
+/// docs/hardware.md). The tracker's bound is 45 KB since each star record carries its x-y
+/// covariance (4 B a record, 128 B with the common motion's histogram over 44 KB).
 #[test]
 fn tracker_memory() {
     let buffers = std::mem::size_of::<TrackerBuffers>();
@@ -257,7 +259,7 @@ fn tracker_memory() {
         "TrackerBuffers {buffers} B (ring {ring}, capture {capture}, plans 32 x {plan}), Tracker<32> {tracker} B, of which the scan detector {scan} B (its line detector {detector} B)"
     );
     assert!(buffers <= 70 * 1024, "{buffers}");
-    assert!(tracker <= 44 * 1024, "{tracker}");
+    assert!(tracker <= 45 * 1024, "{tracker}");
 }
 
 /// One step of the random operation sequences below.

@@ -284,6 +284,29 @@ pub(in crate::centroid) fn variance<const K: usize>(
     vget(&z, i) * vget(d, i) * vget(d, i)
 }
 
+/// The position's covariance from the scaled factor, parameters 0 (`x`) and 1 (`y`):
+/// `(var_x, var_y, cov_xy)`, each `d_i d_j [(D A D)^-1]_ij` (two triangular solves, as two
+/// [`variance`] calls).
+pub(in crate::centroid) fn position_covariance<const K: usize>(
+    l: &[[f32; K]; K],
+    d: &[f32; K],
+) -> (f32, f32, f32) {
+    let column = |i: usize| {
+        let mut e = [0.0f32; K];
+        if let Some(v) = e.get_mut(i) {
+            *v = 1.0;
+        }
+        chol_solve(l, &e)
+    };
+    let (z0, z1) = (column(0), column(1));
+    let (d0, d1) = (vget(d, 0), vget(d, 1));
+    (
+        vget(&z0, 0) * d0 * d0,
+        vget(&z1, 1) * d1 * d1,
+        vget(&z0, 1) * d0 * d1,
+    )
+}
+
 /// The starting CoG on an already prepared window: the power-1 CoG of a
 /// `start_box` around the peak, and `EDGE_CLIPPED` when the box was clipped.
 fn start_cog(p: &Prepared<'_>, start_box: u8) -> Result<(Measured, CentroidFlags), Centroid> {

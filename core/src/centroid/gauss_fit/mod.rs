@@ -86,7 +86,7 @@ mod held;
 mod width;
 
 // The 4x4 Jacobi-scaled Cholesky solve, shared with the trailed-star fit.
-pub(super) use general::{Normal, solve, solve_k, variance};
+pub(super) use general::{Normal, position_covariance, solve, solve_k, variance};
 
 pub use width::{
     CHI2_FLAG_Z, MAX_WIDTH_FIT_SIDE, MIN_PRIOR_SCATTER_PX, MIN_SIGMA_PX, PSF_MISMATCH_Z, PsfFit,

@@ -38,8 +38,8 @@
 //! not positive definite, fails; running out of steps is `NOT_CONVERGED`.
 //!
 //! # Error estimate
-//! `sigma_x_px`, `sigma_y_px` from `(J^T W J)^-1` of the trailed model with every parameter
-//! free: the position's error with the trail and the width unknown. For a trail symmetric
+//! `sigma_x_px`, `sigma_y_px` and their covariance `cov_xy_px2` from `(J^T W J)^-1` of the
+//! trailed model with every parameter free: the position's error with the trail and the width unknown. For a trail symmetric
 //! about its midpoint the position's information is orthogonal to the trail's length and
 //! angle (the model is even in `(u, v) -> (-u, -v)`, its position derivatives odd), so the
 //! price is small: the bound of a trail whose length is known.
@@ -56,9 +56,9 @@
 //! trailed star for both fits, ~29 times the held trailed fit on 7x7; only the stars
 //! acquisition screens (an elongated blob) pay it.
 
-use super::{Along, FRAC_1_SQRT_2PI, Trail};
+use super::{Along, FRAC_1_SQRT_2PI, Trail, bounded_covariance};
 use crate::centroid::cog::cog_in_box;
-use crate::centroid::gauss_fit::{solve_k, variance};
+use crate::centroid::gauss_fit::{position_covariance, solve_k, variance};
 use crate::centroid::math::{self, pos};
 use crate::centroid::pixel_box::PixelBox;
 use crate::centroid::prepared::{Measured, Prepared};
@@ -114,6 +114,9 @@ pub struct TrailedFit {
     /// The trailed model's position at mid-exposure, flux, SNR and sigmas (every parameter
     /// free); `NOT_CONVERGED` (the window's CoG) when the trailed fit failed.
     pub centroid: Centroid,
+    /// The covariance of the position's column and row errors, px^2 (0 when the fit failed):
+    /// a trail at an angle to the rows correlates them ([`super::TrailFit`]).
+    pub cov_xy_px2: f32,
     /// The fitted trail over the exposure, column and row, px (its sign is arbitrary).
     pub trail_px: (f32, f32),
     /// The trail length's 1-sigma error, px.
@@ -172,12 +175,10 @@ pub fn trail_dchi2_limit(border: u16) -> f32 {
     }
 }
 
-/// Parameters in the normal equations' order: position, flux, background, width, trail
-/// length and angle.
+/// Parameters in the normal equations' order: position (`x`, `y`: 0 and 1, as
+/// [`position_covariance`] takes them), flux, background, width, trail length and angle.
 const K: usize = 7;
 const N_IX: usize = 2;
-const X_IX: usize = 0;
-const Y_IX: usize = 1;
 const L_IX: usize = 5;
 
 /// The fit's parameters (window-relative position, px; `s` with the pixel's variance).
@@ -388,6 +389,7 @@ fn fit(
 pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> TrailedFit {
     let failed = |c: Centroid, border: u16| TrailedFit {
         centroid: c,
+        cov_xy_px2: 0.0,
         trail_px: (0.0, 0.0),
         sigma_length_px: f32::NAN,
         psf_sigma_px: f32::NAN,
@@ -475,13 +477,14 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
     }
     let (d, l) = tr.factor;
     let th = tr.theta;
+    let (var_x, var_y, cov_xy) = position_covariance(&l, &d);
     let m = Measured {
         col: th.x,
         row: th.y,
         flux_e: th.flux,
         snr: th.flux / math::sqrt(variance(&l, &d, N_IX)).max(f32::MIN_POSITIVE),
-        sigma_col: math::sqrt(variance(&l, &d, X_IX)),
-        sigma_row: math::sqrt(variance(&l, &d, Y_IX)),
+        sigma_col: math::sqrt(var_x),
+        sigma_row: math::sqrt(var_y),
     };
     let extra = if tr.converged {
         CentroidFlags::empty()
@@ -489,8 +492,10 @@ pub fn trail_fit_free(input: &CentroidInput<'_>, params: &FreeTrailParams) -> Tr
         CentroidFlags::NOT_CONVERGED
     };
     let (c, s) = (th.ex, th.ey);
+    let centroid = p.finish(m, extra);
     TrailedFit {
-        centroid: p.finish(m, extra),
+        centroid,
+        cov_xy_px2: bounded_covariance(&centroid, cov_xy),
         trail_px: (th.l * c, th.l * s),
         sigma_length_px: math::sqrt(variance(&l, &d, L_IX)),
         psf_sigma_px: math::sqrt(pos(th.s * th.s - 1.0 / 12.0)),

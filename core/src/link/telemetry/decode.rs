@@ -129,6 +129,8 @@ pub fn decode_stars(d: &[u8], out: &mut [StarRecord]) -> Option<(u32, Mode, usiz
             snr: r.f32()?,
             sigma_x_px: r.f32()?,
             sigma_y_px: r.f32()?,
+            // Not on the link.
+            cov_xy_px2: 0.0,
             flags: StarFlags::from_bits_retain(r.u32()?),
             provenance: Provenance::from_bits_retain(r.u8()?),
             psf_a_px: f32::from(r.u16()?) * PSF_A_UNIT_PX,

@@ -183,14 +183,17 @@ fn run_method(m: usize, side: u8, input: &CentroidInput<'_>) -> f32 {
         }
         // The trailed-star fit, background given and held, a trail of (1.0, 0.5) px held (the
         // bench's star is not trailed: the cost per pixel and step does not depend on it).
-        7 => trail_fit(
-            input,
-            &TrailFitParams {
-                fit_background: false,
-                background: given,
-                ..TrailFitParams::new(PSF_SIGMA_PX, 1.0, 0.5)
-            },
-        ),
+        7 => {
+            trail_fit(
+                input,
+                &TrailFitParams {
+                    fit_background: false,
+                    background: given,
+                    ..TrailFitParams::new(PSF_SIGMA_PX, 1.0, 0.5)
+                },
+            )
+            .centroid
+        }
         // The near-CRLB method as `startrack accuracy` runs it: background given and held
         // (not fitted), start box the window's side capped at 5.
         _ => gauss_fit(

@@ -11,7 +11,9 @@
 //! stars predicted at the next frame (`core/src/predict.rs`: the field's attitude turning at
 //! 1 deg/s across the boresight, 0.1 s ahead, 100 ms exposures, the flight choice of 32
 //! stars), then `ident::confirm` on those stars measured with 0.3 px noise and their
-//! identities, from the propagated attitude.
+//! identities, from the propagated attitude, and its attitude refined with each star's 2x2
+//! covariance (`attitude::refine`, as the attitude stage does; the trailed stars'
+//! anisotropy costs the same as these round ones).
 //!
 //! Timed: `ident::lost_in_space` (or `ident::track`) on the measured directions; not timed:
 //! rendering the field. Also printed, as a `#` line: the stack each uses (high-water mark of
@@ -22,7 +24,7 @@ use crate::harness::{Bench, Out};
 use crate::inputs::Lcg;
 use core::fmt::Write as _;
 use core::hint::black_box;
-use startrack_core::attitude::{Attitude, Camera, Quat, Rate};
+use startrack_core::attitude::{self, Attitude, Camera, ImageObservation, Quat, Rate};
 use startrack_core::catalog::Catalog;
 use startrack_core::ident::{self, IdentConfig, MAX_STARS, Measured};
 use startrack_core::predict::{self, PredictConfig, PredictFrom, PredictedStars};
@@ -260,7 +262,9 @@ pub fn run(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'static s
                 1.0,
                 &cfg,
             ))
-            .is_ok()
+            .ok()
+            .and_then(|sol| refined(&cat, stars, &sol))
+            .is_some()
         });
         if !ok {
             return Err("a field's predicted identities did not confirm");
@@ -339,4 +343,21 @@ fn rate_filter(out: &mut Out, bench: &Bench, rng: &mut Lcg) -> Result<(), &'stat
     }
     bench.row(out, "rate_filter_push", "attitude", worst, 1);
     Ok(())
+}
+
+/// `sol`'s attitude refined with its matches' covariances (the attitude stage's last step,
+/// `Solver::refined`: isotropic here, the cost is the same).
+fn refined(cat: &Catalog<'_>, stars: &[Measured], sol: &ident::Solution) -> Option<Attitude> {
+    let mut obs: heapless::Vec<ImageObservation, MAX_STARS> = heapless::Vec::new();
+    for m in &sol.matches {
+        let s = stars.get(usize::from(m.star))?;
+        let v = s.sigma_rad * s.sigma_rad;
+        obs.push(ImageObservation {
+            camera: s.dir,
+            icrs: cat.dir(usize::from(m.catalog))?,
+            cov_rad2: [v, v, 0.0],
+        })
+        .ok()?;
+    }
+    attitude::refine(sol.attitude.q, &obs).ok()
 }
