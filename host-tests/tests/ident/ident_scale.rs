@@ -604,10 +604,7 @@ fn long_runs() {
         &d,
     );
     assert_eq!(d.wrong, 0);
-    let f = run_lis(fields / 10, 3061, &storm_spec(), 0.02, 99.0, None, None);
-    print("15 false stars, focal length off by up to 2 %", &f);
-    assert_eq!(f.wrong, 0);
-    assert_eq!(f.beyond_covariance, 0);
+    storm_case(fields / 10, 3061);
     let s = run_lis(
         fields,
         3051,
@@ -631,8 +628,13 @@ fn long_runs() {
 #[test]
 #[ignore]
 fn storm_long_run() {
-    let fields = count_from_env("IDENT_STORM_FIELDS", 100_000);
-    let f = run_lis(fields, 3071, &storm_spec(), 0.02, 99.0, None, None);
+    storm_case(count_from_env("IDENT_STORM_FIELDS", 100_000), 3071);
+}
+
+/// Lost in space on `fields` fields of fifteen false stars (seed `seed`): printed, none more
+/// than 1 mrad off nor beyond its covariance.
+fn storm_case(fields: usize, seed: u64) {
+    let f = run_lis(fields, seed, &storm_spec(), 0.02, 99.0, None, None);
     print("15 false stars, focal length off by up to 2 %", &f);
     assert_eq!(f.wrong, 0);
     assert_eq!(f.beyond_covariance, 0);
