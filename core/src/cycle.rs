@@ -355,14 +355,12 @@ impl<'t, 'b, 'c, 'l, const N: usize> FrameCycle<'t, 'b, 'c, 'l, N> {
         let exposure_us = u64::from(self.tracker.config().exposure_ms) * 1000;
         let integrated_us = self.last_exposure_us.unwrap_or(exposure_us);
         self.last_exposure_us = Some(exposure_us);
-        let mid_us = source.integration().map_or_else(
+        let integration = source.integration();
+        let mid_us = integration.map_or_else(
             || summary.start_us.saturating_sub(integrated_us / 2),
             |i| i.mid_us(),
         );
-        let integration_s = source
-            .integration()
-            .map_or(integrated_us, |i| i.duration_us()) as f64
-            * 1e-6;
+        let integration_s = integration.map_or(integrated_us, |i| i.duration_us()) as f64 * 1e-6;
         let mut report = None;
         let attitude = self.solver.as_mut().map(|solver| {
             let time = self.clock.time_of(mid_us);

@@ -451,15 +451,16 @@ impl RateFilter {
     /// significant) and the quadratic fit when there is one.
     #[inline(never)]
     fn chosen(&self) -> Option<(Fit, Option<Fit>)> {
-        let linear = self.fit(2)?;
         let quadratic = if self.samples.len() >= 4 {
             self.fit(3)
         } else {
             None
         };
         match quadratic {
+            // The constant rate's fit is not needed (its normal matrix is the quadratic's
+            // leading block: positive definite whenever the quadratic's is).
             Some(q) if q.wald().is_some_and(|w| w > Self::ACCEL_CHI2) => Some((q, Some(q))),
-            q => Some((linear, q)),
+            q => Some((self.fit(2)?, q)),
         }
     }
 
